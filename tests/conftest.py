@@ -1,0 +1,6 @@
+import jax
+
+
+# ppm-level work: float64 everywhere, and no silent dtype promotion.
+jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_numpy_dtype_promotion", "strict")
