@@ -1,0 +1,551 @@
+"""Scale-factor metrics: scale factor, bias, nonlinearity, asymmetry, repeatability and rate bandwidth.
+
+Every function takes NumPy or JAX arrays whose *last* axis runs over the points of one sweep; leading axes are
+batch axes, so the padded `(device, run, point)` arrays of [`gyrojax.SweepArrays`][] go straight in with their
+`mask`. They are pure `jax.numpy`, safe under `jit`, `vmap` and `grad` (masked entries never reach a division or
+a log).
+
+**Too few points.** A sweep with some but too few valid points is an error: a [`gyrojax.DataError`][] when the
+mask is concrete, an `eqx.error_if` runtime error under `jit`. A *fully* masked sweep is padding and gives NaN.
+[`gyrojax.metrics_report`][] checks the counts first and names the offending device, run and sweep.
+
+**Sources.** Terms follow IEEE Std 528 (inertial sensor terminology) and the rate-table practice of
+IEEE Std 952-1997 (single-axis FOG test procedure), which seed 000 (Ding & Zhou, Micromachines 16, 851, 2025)
+follows for its closed-loop MEMS gyro. Where a definition leaves a choice open (which "full scale", which
+standard deviation), the choice is gyrojax's and is written down here. (The wording of the standards is from
+memory of their definitions, not checked against their text here.)
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float
+
+from ._dataset import SWEEPS, DataError, Table
+
+
+FULL_SCALE_CONVENTIONS = ("half_range", "span", "output")
+"""Choices of the full scale that nonlinearity is divided by; see [`gyrojax.fit_scale_factor`][]."""
+
+MIN_POINTS_LINEAR = 3
+"""Points a sweep needs for a scale factor with a nonlinearity (two points always fit a line exactly)."""
+
+MIN_POINTS_BANDWIDTH = 2
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Helpers.
+
+
+def _f64(x) -> Array:
+    return jnp.asarray(x, dtype=jnp.float64)
+
+
+def _mask_like(mask, x) -> Array:
+    if mask is None:
+        return jnp.ones(jnp.shape(x), dtype=bool)
+    mask = jnp.asarray(mask)
+    if mask.dtype != jnp.bool_:
+        raise ValueError(f"mask must be boolean, got dtype {mask.dtype}.")
+    return jnp.broadcast_to(mask, jnp.shape(x))
+
+
+def _raise_if(x, bad, message: Callable[[tuple[int, ...] | None], str]):
+    """Raise when `bad` holds anywhere: a DataError if `bad` is concrete, else an eqx.error_if at run time.
+
+    `message(index)` gets the batch index of the first offender when it is known (concrete), else None.
+    """
+    if isinstance(bad, jax.core.Tracer):
+        return eqx.error_if(x, bad, message(None))
+    bad = np.asarray(bad)
+    if bad.any():
+        index = tuple(int(i) for i in np.argwhere(bad)[0]) if bad.ndim else ()
+        raise DataError(message(index))
+    return x
+
+
+def _at(index) -> str:
+    return "" if not index else f" at batch index {index}"
+
+
+def _weights(mask, sigmas, x) -> Array:
+    if sigmas is None:
+        return jnp.where(mask, 1.0, 0.0)
+    sigmas = jnp.broadcast_to(_f64(sigmas), jnp.shape(x))
+    bad = mask & ~(sigmas > 0)
+    sigmas = _raise_if(sigmas, jnp.any(bad, axis=-1),
+                       lambda i: f"weighted fit: an output_sigma{_at(i)} is zero, negative or NaN on a valid "
+                                 "point; weights are 1/sigma^2, so every sigma must be positive.")
+    safe = jnp.where(mask, sigmas, 1.0)
+    return jnp.where(mask, 1.0 / safe**2, 0.0)
+
+
+def _line(x, y, w):
+    """Weighted least-squares line (centred sums); NaN where fewer than two distinct weighted inputs."""
+    sw = jnp.sum(w, axis=-1)
+    ok = sw > 0
+    sw_safe = jnp.where(ok, sw, 1.0)
+    xm = jnp.sum(w * x, axis=-1) / sw_safe
+    ym = jnp.sum(w * y, axis=-1) / sw_safe
+    dx = jnp.where(w > 0, x - xm[..., None], 0.0)
+    sxx = jnp.sum(w * dx**2, axis=-1)
+    sxy = jnp.sum(w * dx * (y - ym[..., None]), axis=-1)
+    ok = ok & (sxx > 0)
+    k = jnp.where(ok, sxy / jnp.where(ok, sxx, 1.0), jnp.nan)
+    b = jnp.where(ok, ym - k * xm, jnp.nan)
+    return k, b
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Scale factor, bias, nonlinearity.
+
+
+class ScaleFactorFit(eqx.Module):
+    """Result of [`gyrojax.fit_scale_factor`][]; every field has the batch shape of the input (the point axis
+    removed), except `residuals` which keeps it (0 on masked points).
+
+    **Fields:** `scale_factor`, `bias`, `residuals`, `full_scale`, `nonlinearity_max_ppm`,
+    `nonlinearity_rms_ppm`, `n_points` (valid points per sweep).
+    """
+
+    scale_factor: Float[Array, "*batch"]
+    bias: Float[Array, "*batch"]
+    residuals: Float[Array, "*batch point"]
+    full_scale: Float[Array, "*batch"]
+    nonlinearity_max_ppm: Float[Array, "*batch"]
+    nonlinearity_rms_ppm: Float[Array, "*batch"]
+    n_points: Float[Array, "*batch"]
+
+
+def fit_scale_factor(inputs: Float[ArrayLike, "*batch point"], outputs: Float[ArrayLike, "*batch point"], *,
+                     mask: Bool[ArrayLike, "*batch point"] | None = None,
+                     sigmas: Float[ArrayLike, "*batch point"] | None = None,
+                     full_scale: str = "half_range") -> ScaleFactorFit:
+    r"""Scale factor, bias and scale-factor nonlinearity of a sweep.
+
+    **Scale factor and bias** (IEEE Std 528: scale factor is the ratio of a change in output to the change in
+    input, taken as the slope of the least-squares straight line; IEEE Std 952-1997 fits the rate-table points
+    the same way; seed 000 §5 computes one scale factor per run from its 22 rates): the least-squares line
+    $y_i \approx K x_i + B$ over the valid points, weighted by $1/\sigma_i^2$ when `sigmas` is given,
+    otherwise unweighted (the standard's fit). $K$ is the scale factor, $B$ the bias (the output at zero input).
+
+    **Nonlinearity** (IEEE Std 528: the systematic deviation from that least-squares line), with residuals
+    $r_i = y_i - (K x_i + B)$ over the $n$ valid points and a full scale $F$:
+
+    - `nonlinearity_max_ppm` $= 10^6 \max_i |r_i| / F$ (the usual specification figure, IEEE Std 952-1997 and
+      seed 000's "worst scale-factor nonlinearity");
+    - `nonlinearity_rms_ppm` $= 10^6 \sqrt{\tfrac1n \sum_i r_i^2} / F$ (population RMS: divided by $n$, not
+      $n-2$; the residual RMS is a property of the curve, so it is never weighted, even for a weighted fit).
+
+    The full scale $F$ (the definitions leave it open):
+
+    - `"half_range"` (default): $|K| \max_i |x_i|$, the straight-line output at the largest input magnitude,
+      i.e. full-scale output for a symmetric $\pm$ range. On seed 000 Table 2 against the rate this gives the
+      RMS 465 ppm that matches the paper's 460.679 ppm (see `experiments/seed000_table2_dac_nonlinearity.py`).
+    - `"span"`: $|K| (\max_i x_i - \min_i x_i)$, the full output span; half of `"half_range"` for a
+      symmetric sweep.
+    - `"output"`: $\max_i |y_i|$, the largest measured output magnitude.
+
+    **Arguments:**
+
+    - `inputs`, `outputs`: the sweep, points on the last axis.
+    - `mask`: True on valid points (default: all).
+    - `sigmas`: standard uncertainties of `outputs`; given, the fit is weighted by $1/\sigma^2$.
+    - `full_scale`: one of [`FULL_SCALE_CONVENTIONS`][].
+
+    **Returns:**
+
+    A [`gyrojax.ScaleFactorFit`][]. A sweep with 1 or 2 valid points is an error (a line through two points has
+    no nonlinearity); a fully masked one gives NaN.
+    """
+    if full_scale not in FULL_SCALE_CONVENTIONS:
+        raise ValueError(f"full_scale must be one of {', '.join(FULL_SCALE_CONVENTIONS)}, got {full_scale!r}.")
+    x, y = _f64(inputs), _f64(outputs)
+    x, y = jnp.broadcast_arrays(x, y)
+    if x.ndim < 1:
+        raise ValueError("inputs and outputs need a point axis (the last axis).")
+    mask = _mask_like(mask, x)
+    n = jnp.sum(mask, axis=-1).astype(jnp.float64)
+    x = _raise_if(x, (n > 0) & (n < MIN_POINTS_LINEAR),
+                  lambda i: f"fit_scale_factor: a sweep{_at(i)} has fewer than {MIN_POINTS_LINEAR} valid points; "
+                            "a scale factor with a nonlinearity needs at least 3 (fully masked sweeps are "
+                            "padding and give NaN).")
+    x = jnp.where(mask, x, 0.0)
+    y = jnp.where(mask, y, 0.0)
+    w = _weights(mask, sigmas, x)
+    k, b = _line(x, y, w)
+    r = jnp.where(mask, y - (k[..., None] * x + b[..., None]), 0.0)
+    if full_scale == "half_range":
+        fs = jnp.abs(k) * jnp.max(jnp.abs(x), axis=-1)
+    elif full_scale == "span":
+        hi = jnp.max(jnp.where(mask, x, -jnp.inf), axis=-1)
+        lo = jnp.min(jnp.where(mask, x, jnp.inf), axis=-1)
+        fs = jnp.abs(k) * jnp.where(n > 0, hi - lo, jnp.nan)
+    else:
+        fs = jnp.max(jnp.abs(y), axis=-1)
+    ok = (n > 0) & (fs > 0)
+    fs_safe = jnp.where(ok, fs, 1.0)
+    n_safe = jnp.where(n > 0, n, 1.0)
+    max_ppm = jnp.where(ok, 1e6 * jnp.max(jnp.abs(r), axis=-1) / fs_safe, jnp.nan)
+    rms_ppm = jnp.where(ok, 1e6 * jnp.sqrt(jnp.sum(r**2, axis=-1) / n_safe) / fs_safe, jnp.nan)
+    return ScaleFactorFit(scale_factor=k, bias=b, residuals=r, full_scale=jnp.where(n > 0, fs, jnp.nan),
+                          nonlinearity_max_ppm=max_ppm, nonlinearity_rms_ppm=rms_ppm, n_points=n)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Asymmetry.
+
+
+def asymmetry(inputs: Float[ArrayLike, "*batch point"], outputs: Float[ArrayLike, "*batch point"], *,
+              mask: Bool[ArrayLike, "*batch point"] | None = None,
+              sigmas: Float[ArrayLike, "*batch point"] | None = None,
+              common_bias: bool = True) -> Float[Array, "*batch"]:
+    r"""Scale-factor asymmetry in ppm.
+
+    IEEE Std 528 defines scale-factor asymmetry as the difference between the scale factors measured with
+    positive and with negative inputs, relative to the scale factor. Here
+
+    $$\text{asymmetry} = 10^6 \frac{K_+ - K_-}{(K_+ + K_-)/2},$$
+
+    positive when the positive-input slope is the larger in magnitude (for either sign of the scale factor).
+    The mean of $K_\pm$ as the reference differs from the full-range $K$ only at second order.
+
+    $K_\pm$ come from one least-squares fit (weighted by $1/\sigma^2$ if `sigmas` is given) of the continuous
+    two-slope line $y = K_+ \max(x, 0) + K_- \min(x, 0) + B$ with a *common* bias $B$ (default): the zero-rate
+    output does not depend on the sign of the rate, and sharing it keeps the bias from trading against the
+    slopes (zero-input points inform $B$). With `common_bias=False`, $K_+$ and $K_-$ are separate straight-line
+    fits (own intercepts) of the positive and of the negative points, zero inputs unused: the recipe of many
+    test reports. The two agree for a straight line with any bias; they differ when the curve bends.
+
+    **Arguments:** `inputs`, `outputs`, `mask`, `sigmas` as for [`gyrojax.fit_scale_factor`][];
+    `common_bias` as above.
+
+    **Returns:**
+
+    Asymmetry in ppm, batch shape. NaN where a sweep has no positive or no negative input (not applicable: an
+    asymmetry needs both signs) or is fully masked. An error where it has both signs but too few points
+    (common bias: fewer than 3 in all; separate fits: fewer than 2 on a side).
+    """
+    x, y = jnp.broadcast_arrays(_f64(inputs), _f64(outputs))
+    mask = _mask_like(mask, x)
+    pos, neg = mask & (x > 0), mask & (x < 0)
+    n_pos = jnp.sum(pos, axis=-1)
+    n_neg = jnp.sum(neg, axis=-1)
+    n = jnp.sum(mask, axis=-1)
+    both = (n_pos > 0) & (n_neg > 0)
+    few = (n_pos < 2) | (n_neg < 2) if not common_bias else n < 3
+    x = _raise_if(x, both & few,
+                  lambda i: f"asymmetry: a sweep{_at(i)} has too few points "
+                            + ("(need at least 3 with both signs for the common-bias fit)." if common_bias else
+                               "(need at least 2 positive and 2 negative inputs for separate fits)."))
+    x = jnp.where(mask, x, 0.0)
+    y = jnp.where(mask, y, 0.0)
+    w = _weights(mask, sigmas, x)
+    if common_bias:
+        # Scale the inputs to O(1) first: with DAC words (~1e6) the normal matrix would span 1e13.
+        s = jnp.max(jnp.abs(x), axis=-1, keepdims=True)
+        s = jnp.where(s > 0, s, 1.0)
+        u = x / s
+        phi = jnp.stack([jnp.maximum(u, 0.0), jnp.minimum(u, 0.0), jnp.ones_like(u)], axis=-1)
+        a = jnp.einsum("...p,...pi,...pj->...ij", w, phi, phi)
+        c = jnp.einsum("...p,...pi,...p->...i", w, phi, y)
+        ok = both & (n >= 3)
+        eye = jnp.broadcast_to(jnp.eye(3), a.shape)
+        a = jnp.where(ok[..., None, None], a, eye)
+        coef = jnp.linalg.solve(a, c[..., None])[..., 0]
+        k_pos, k_neg = coef[..., 0] / s[..., 0], coef[..., 1] / s[..., 0]
+    else:
+        k_pos, _ = _line(x, y, jnp.where(pos, w, 0.0))
+        k_neg, _ = _line(x, y, jnp.where(neg, w, 0.0))
+        ok = both & (n_pos >= 2) & (n_neg >= 2)
+    mean = 0.5 * (k_pos + k_neg)
+    ok = ok & (mean != 0)
+    return jnp.where(ok, 1e6 * (k_pos - k_neg) / jnp.where(ok, mean, 1.0), jnp.nan)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Repeatability.
+
+
+def repeatability(scale_factors: Float[ArrayLike, "*batch run"], *,
+                  mask: Bool[ArrayLike, "*batch run"] | None = None, ddof: int = 1) -> Float[Array, "*batch"]:
+    r"""Scale-factor repeatability in ppm: the standard deviation of the runs' scale factors over their mean.
+
+    $$10^6 \, \frac{\operatorname{std}_{\mathrm{ddof}}(K_1, \dots, K_R)}{|\bar K|}$$
+
+    Seed 000 §5: "three sets of repeated experiments ...; the scale factor was calculated based on the
+    measurement results from each group; then, the standard deviation of the scale factors obtained from the
+    three tests was computed; this value is defined as the repeatability error" (its Table 3 gives it in ppm,
+    so relative to the scale factor). The paper does not say which standard deviation; gyrojax uses the sample
+    standard deviation (`ddof=1`, unbiased variance), the usual choice for three runs; `ddof=0` gives the
+    population one (smaller by sqrt(2/3) for three runs). Seed 000's Table 3 values (1230.656 ppm etc.) cannot
+    be checked: the per-run scale factors are not published. IEEE Std 528 calls this the scale-factor
+    repeatability (agreement of repeated measurements under the same conditions, with changes in conditions or
+    off periods between them).
+
+    **Arguments:**
+
+    - `scale_factors`: one scale factor per run on the last axis.
+    - `mask`: True on runs that exist.
+    - `ddof`: delta degrees of freedom of the standard deviation.
+
+    **Returns:**
+
+    Repeatability in ppm; NaN where there are `ddof` runs or fewer (one run shows no repeatability).
+    """
+    k = _f64(scale_factors)
+    mask = _mask_like(mask, k)
+    n = jnp.sum(mask, axis=-1).astype(jnp.float64)
+    k = jnp.where(mask, k, 0.0)
+    ok = n > ddof
+    mean = jnp.sum(k, axis=-1) / jnp.where(n > 0, n, 1.0)
+    var = jnp.sum(jnp.where(mask, k - mean[..., None], 0.0) ** 2, axis=-1) / jnp.where(ok, n - ddof, 1.0)
+    ok = ok & (mean != 0)
+    return jnp.where(ok, 1e6 * jnp.sqrt(var) / jnp.abs(jnp.where(ok, mean, 1.0)), jnp.nan)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Rate bandwidth.
+
+
+class RateBandwidth(eqx.Module):
+    """Result of [`gyrojax.rate_bandwidth`][]: `bandwidth_hz` (the -3 dB frequency), `phase_deg` (the phase
+    there, NaN if no phase was given) and `low_frequency_gain` (the reference amplitude)."""
+
+    bandwidth_hz: Float[Array, "*batch"]
+    phase_deg: Float[Array, "*batch"]
+    low_frequency_gain: Float[Array, "*batch"]
+
+
+def rate_bandwidth(freqs_hz: Float[ArrayLike, "*batch point"], amplitudes: Float[ArrayLike, "*batch point"], *,
+                   mask: Bool[ArrayLike, "*batch point"] | None = None,
+                   phase_deg: Float[ArrayLike, "*batch point"] | None = None) -> RateBandwidth:
+    r"""Rate bandwidth (-3 dB) and the phase there, from a dynamic sweep (e.g. a `vcf_dynamic` sweep).
+
+    IEEE Std 528: bandwidth is the range of input frequency over which the amplitude response stays within
+    3 dB of its low-frequency value. Here the points are sorted by frequency; the low-frequency gain $G_0$ is
+    the amplitude at the lowest valid frequency; the bandwidth is the first downward crossing of
+    $G_0/\sqrt2$, interpolated linearly in (log frequency, dB) between the last point at or above and the
+    first point below it (a straight line on a Bode plot). A resonant peak before the roll-off (open-loop
+    gyros peak near the mode split) is passed over: only the first fall below $G_0/\sqrt2$ counts. The phase is
+    interpolated linearly in log frequency at the same place (unwrap it first if it wraps).
+
+    **Arguments:**
+
+    - `freqs_hz`: modulation frequencies (> 0), any order.
+    - `amplitudes`: output amplitudes (> 0).
+    - `mask`: True on valid points.
+    - `phase_deg`: optional phase of the output, degrees.
+
+    **Returns:**
+
+    A [`gyrojax.RateBandwidth`][]. An error where a sweep has a single point, a non-positive frequency or
+    amplitude, or never falls below $G_0/\sqrt2$ (extend the sweep to higher frequencies).
+    """
+    f, a = jnp.broadcast_arrays(_f64(freqs_hz), _f64(amplitudes))
+    mask = _mask_like(mask, f)
+    p = jnp.zeros_like(f) if phase_deg is None else jnp.broadcast_to(_f64(phase_deg), f.shape)
+    n = jnp.sum(mask, axis=-1)
+    f = _raise_if(f, (n > 0) & (n < MIN_POINTS_BANDWIDTH),
+                  lambda i: f"rate_bandwidth: a sweep{_at(i)} has a single valid point; a bandwidth needs at "
+                            "least 2.")
+    f = _raise_if(f, jnp.any(mask & ~((f > 0) & (a > 0)), axis=-1),
+                  lambda i: f"rate_bandwidth: a sweep{_at(i)} has a non-positive frequency or amplitude; both "
+                            "must be > 0 (the interpolation is in log frequency and dB).")
+    key = jnp.where(mask, f, jnp.inf)
+    order = jnp.argsort(key, axis=-1)
+    f = jnp.take_along_axis(jnp.where(mask, f, 1.0), order, axis=-1)
+    a = jnp.take_along_axis(jnp.where(mask, a, 1.0), order, axis=-1)
+    p = jnp.take_along_axis(jnp.where(mask, p, 0.0), order, axis=-1)
+    m = jnp.take_along_axis(mask, order, axis=-1)
+    g0 = a[..., 0]
+    target = g0 / math.sqrt(2.0)
+    below = m & (a < target[..., None])
+    crosses = jnp.any(below, axis=-1)
+    f = _raise_if(f, (n >= MIN_POINTS_BANDWIDTH) & ~crosses,
+                  lambda i: f"rate_bandwidth: a sweep{_at(i)} never falls below its low-frequency gain / sqrt(2) "
+                            "(-3 dB); extend the sweep to higher frequencies.")
+    i1 = jnp.argmax(below, axis=-1)  # first point below; >= 1 since point 0 is the reference
+    i0 = jnp.maximum(i1 - 1, 0)
+
+    def take(v, i):
+        return jnp.take_along_axis(v, i[..., None], axis=-1)[..., 0]
+
+    lf0, lf1 = jnp.log(take(f, i0)), jnp.log(take(f, i1))
+    db0, db1 = 20 * jnp.log10(take(a, i0)), 20 * jnp.log10(take(a, i1))
+    db_t = 20 * jnp.log10(target)
+    ok = crosses & (n >= MIN_POINTS_BANDWIDTH) & (db1 < db0)
+    t = jnp.where(ok, (db_t - db0) / jnp.where(ok, db1 - db0, 1.0), 0.0)
+    f3 = jnp.exp(lf0 + t * (lf1 - lf0))
+    ph = take(p, i0) + t * (take(p, i1) - take(p, i0))
+    nan = jnp.nan
+    return RateBandwidth(bandwidth_hz=jnp.where(ok, f3, nan),
+                         phase_deg=jnp.where(ok, ph, nan) if phase_deg is not None else jnp.full_like(f3, nan),
+                         low_frequency_gain=jnp.where(n > 0, g0, nan))
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Report.
+
+
+_SF_UNITS = {"rate_table": "LSB/(deg/s)", "vcf_static": "LSB/V", "dac": "V/word"}
+
+
+def _num(x) -> float | None:
+    v = float(np.asarray(x))
+    return None if math.isnan(v) else v
+
+
+def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bool = False,
+                   common_bias: bool = True, ddof: int = 1) -> dict[str, Any]:
+    """The `metrics` JSON of DESIGN.md §7 for a table: per-sweep metrics and per-device repeatability.
+
+    **Arguments:**
+
+    - `table`: a [`gyrojax.Table`][].
+    - `full_scale`: nonlinearity full scale, see [`gyrojax.fit_scale_factor`][].
+    - `weighted`: weight fits by `1/output_sigma**2` (the table must give `output_sigma` for every point of
+      the sweeps with a linear fit); default unweighted, as the standards do.
+    - `common_bias`: asymmetry model, see [`gyrojax.asymmetry`][].
+    - `ddof`: repeatability standard deviation, see [`gyrojax.repeatability`][].
+
+    **Returns:**
+
+    A JSON-ready dict (Python numbers, None for "not applicable"):
+
+    - `points`: one record per (device, run, sweep), in order of first appearance in the table: `device`,
+      `run`, `sweep`, `n_points`, `scale_factor`, `bias`, `nonlinearity_max_ppm`, `nonlinearity_rms_ppm`,
+      `asymmetry_ppm` (None when the sweep lacks positive or negative inputs). For `dac` sweeps with a
+      `rate_dps` column also `scale_factor_vs_rate`, `bias_vs_rate`, `nonlinearity_max_ppm_vs_rate`,
+      `nonlinearity_rms_ppm_vs_rate` (output against the rate the word stands for). For `vcf_dynamic` sweeps
+      the linear keys are None and `bandwidth_hz`, `phase_deg_at_bandwidth`, `low_frequency_gain` are given.
+    - `devices`: one record per (device, sweep) with a linear fit: `device`, `sweep`, `n_runs`,
+      `scale_factor_mean`, `repeatability_ppm` (None with a single run).
+    - `conventions`: the choices above and the unit of `scale_factor` per sweep kind.
+
+    Raises [`gyrojax.DataError`][] naming the device, run, sweep and rows when a sweep has too few points
+    (3 for a linear fit, 2 for a bandwidth), when `rate_dps` is given for some but not all points of a `dac`
+    sweep, when a weighted fit lacks a positive `output_sigma`, or when a dynamic sweep never reaches -3 dB.
+    """
+    if not isinstance(table, Table):
+        raise TypeError(f"metrics_report expects a gyrojax.Table, got {type(table).__name__}.")
+    if full_scale not in FULL_SCALE_CONVENTIONS:
+        raise ValueError(f"full_scale must be one of {', '.join(FULL_SCALE_CONVENTIONS)}, got {full_scale!r}.")
+    groups = table.groups()
+
+    def name(key, rows) -> str:
+        dev, run, sweep = key
+        first, last = table.locate(int(rows[0])), table.locate(int(rows[-1]))
+        span = first if len(rows) == 1 else f"{first} to {last.split(': ', 1)[1]}"
+        return f"device {dev!r}, run {run}, sweep {sweep!r} ({span})"
+
+    # Checks with names, before any arithmetic.
+    for key, rows in groups.items():
+        sweep = key[2]
+        need = MIN_POINTS_BANDWIDTH if sweep == "vcf_dynamic" else MIN_POINTS_LINEAR
+        what = "a rate bandwidth" if sweep == "vcf_dynamic" else "a scale factor with a nonlinearity"
+        if len(rows) < need:
+            raise DataError(f"{table.source}: {name(key, rows)} has {len(rows)} point{'s' * (len(rows) != 1)}; "
+                            f"{what} needs at least {need}.", source=table.source, row=int(rows[0]) + 1)
+        if weighted and sweep != "vcf_dynamic":
+            sig = table["output_sigma"] if "output_sigma" in table else None
+            bad = rows if sig is None else rows[~(sig[rows] > 0)]
+            if bad.size:
+                raise DataError(f"{table.locate(int(bad[0]), 'output_sigma')}: weighted=True needs a positive "
+                                f"output_sigma on every point; {name(key, rows)} lacks one.",
+                                source=table.source, row=int(bad[0]) + 1, column="output_sigma")
+        if sweep == "dac" and "rate_dps" in table:
+            given = ~np.isnan(table["rate_dps"][rows])
+            if given.any() and not given.all():
+                r = int(rows[~given][0])
+                raise DataError(f"{table.locate(r, 'rate_dps')}: rate_dps is given for some points of "
+                                f"{name(key, rows)} but not this one; give it for all or none.",
+                                source=table.source, row=r + 1, column="rate_dps")
+
+    records: dict[tuple, dict[str, Any]] = {}
+    device_records: list[dict[str, Any]] = []
+    for sweep in SWEEPS:
+        if not any(k[2] == sweep for k in groups):
+            continue
+        arr = table.to_arrays(sweep)
+        index = {(dev, r): (d, k) for d, dev in enumerate(arr.devices) for k, r in enumerate(arr.runs[d])}
+        sig = arr.sigmas if weighted else None
+        if sweep == "vcf_dynamic":
+            phase = arr.aux.get("phase_deg")
+            if phase is not None:
+                phase = jnp.where(jnp.isnan(phase), 0.0, phase)
+            try:
+                bw = rate_bandwidth(arr.inputs, arr.outputs, mask=arr.mask, phase_deg=phase)
+            except DataError as e:
+                key = _first_failing_bandwidth(arr, table, groups)
+                raise DataError(f"{table.source}: {name(key, groups[key])}: {e}", source=table.source) from None
+            for (dev, r), (d, k) in index.items():
+                has_phase = phase is not None and not np.isnan(
+                    np.asarray(arr.aux["phase_deg"])[d, k][np.asarray(arr.mask[d, k])]).any()
+                records[(dev, r, sweep)] = {
+                    "device": dev, "run": r, "sweep": sweep, "n_points": int(np.asarray(arr.mask[d, k]).sum()),
+                    "scale_factor": None, "bias": None, "nonlinearity_max_ppm": None,
+                    "nonlinearity_rms_ppm": None, "asymmetry_ppm": None,
+                    "bandwidth_hz": _num(bw.bandwidth_hz[d, k]),
+                    "phase_deg_at_bandwidth": _num(bw.phase_deg[d, k]) if has_phase else None,
+                    "low_frequency_gain": _num(bw.low_frequency_gain[d, k])}
+            continue
+        fit = fit_scale_factor(arr.inputs, arr.outputs, mask=arr.mask, sigmas=sig, full_scale=full_scale)
+        asym = asymmetry(arr.inputs, arr.outputs, mask=arr.mask, sigmas=sig, common_bias=common_bias)
+        vs_rate = None
+        if sweep == "dac" and "rate_dps" in arr.aux:
+            rate = arr.aux["rate_dps"]
+            has = arr.mask & ~jnp.isnan(rate)
+            vs_rate = fit_scale_factor(jnp.where(has, rate, 0.0), arr.outputs, mask=has, sigmas=sig,
+                                       full_scale=full_scale)
+        for (dev, r), (d, k) in index.items():
+            rec = {"device": dev, "run": r, "sweep": sweep, "n_points": int(np.asarray(arr.mask[d, k]).sum()),
+                   "scale_factor": _num(fit.scale_factor[d, k]), "bias": _num(fit.bias[d, k]),
+                   "nonlinearity_max_ppm": _num(fit.nonlinearity_max_ppm[d, k]),
+                   "nonlinearity_rms_ppm": _num(fit.nonlinearity_rms_ppm[d, k]),
+                   "asymmetry_ppm": _num(asym[d, k])}
+            if vs_rate is not None and _num(vs_rate.n_points[d, k]):
+                rec.update({"scale_factor_vs_rate": _num(vs_rate.scale_factor[d, k]),
+                            "bias_vs_rate": _num(vs_rate.bias[d, k]),
+                            "nonlinearity_max_ppm_vs_rate": _num(vs_rate.nonlinearity_max_ppm[d, k]),
+                            "nonlinearity_rms_ppm_vs_rate": _num(vs_rate.nonlinearity_rms_ppm[d, k])})
+            records[(dev, r, sweep)] = rec
+        run_mask = arr.run_mask
+        rep = repeatability(jnp.where(run_mask, fit.scale_factor, 0.0), mask=run_mask, ddof=ddof)
+        n_runs = np.asarray(run_mask).sum(axis=-1)
+        for d, dev in enumerate(arr.devices):
+            sf = np.asarray(fit.scale_factor[d])[np.asarray(run_mask[d])]
+            device_records.append({"device": dev, "sweep": sweep, "n_runs": int(n_runs[d]),
+                                   "scale_factor_mean": float(np.mean(sf)), "repeatability_ppm": _num(rep[d])})
+    order = {}
+    for dev, _, sweep in groups:
+        order.setdefault((dev, sweep), len(order))
+    device_records.sort(key=lambda rec: order[(rec["device"], rec["sweep"])])
+    return {
+        "points": [records[key] for key in groups],
+        "devices": device_records,
+        "conventions": {
+            "full_scale": full_scale, "weighted": weighted,
+            "asymmetry": "common_bias" if common_bias else "separate_fits", "repeatability_ddof": ddof,
+            "nonlinearity_rms": "population RMS of residuals (divided by n)",
+            "scale_factor_units": dict(_SF_UNITS, dac_vs_rate="V/(deg/s)"),
+        },
+    }
+
+
+def _first_failing_bandwidth(arr, table, groups):
+    """The (device, run, sweep) key of the first dynamic sweep that rate_bandwidth refuses."""
+    for d, dev in enumerate(arr.devices):
+        for k, r in enumerate(arr.runs[d]):
+            try:
+                rate_bandwidth(arr.inputs[d, k], arr.outputs[d, k], mask=arr.mask[d, k])
+            except DataError:
+                return (dev, r, arr.sweep)
+    return next(iter(groups))
