@@ -1,0 +1,1 @@
+"""Physics of the resonator, its electrodes and its thermal state."""

@@ -1,0 +1,1 @@
+"""Three simulation tiers over one physical model: full waveform, averaged and steady state."""

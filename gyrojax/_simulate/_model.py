@@ -1,0 +1,302 @@
+r"""The closed-loop gyroscope as ODEs: carrier-level (full waveform) and slow-flow (averaged) vector fields.
+
+Phasor convention: a carrier-frequency signal is x(t) = Re{X e^{j theta(t)}}, theta' = w the PLL's
+frequency. Substituting into seed 000 Eq. (1) and dropping X'' (first-order averaging) gives
+
+    X' = -(g_x - j d_x) X + (Ag Om - c/2 + j kap/(2w)) Y + F_x / (2 j w m)
+    Y' = -(g_y - j d_y) Y - (Ag Om + c/2 - j kap/(2w)) X + F_y / (2 j w m)
+
+with g_i = w_i / (2 Q_i), d_i = (w_i^2 - w^2) / (2 w). With X, Y constant the substitution is exact, so
+the steady states of the two tiers coincide except for what averaging drops: the harmonics of nonlinear
+forces and the carrier ripple of the demodulators. `tests/test_tiers.py` proves the signs and the
+agreement against the full waveform.
+
+Nonlinear forces enter the slow flow through their fundamental, taken by quadrature over
+`gyro.phase_points` carrier phases (the describing function), with the sense mass's DC deflection solved
+by a short fixed-point iteration (the DC force of push-pull mismatch shifts it).
+
+States are stored scaled to O(1) (see `state_scales`) so that scalar ODE tolerances mean the same for
+every state.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._gyroscope import Gyroscope
+from .._stimulus import Stimulus
+
+
+def _c(v):
+    return v[..., 0] + 1j * v[..., 1]
+
+
+def _r(z):
+    return jnp.stack([jnp.real(z), jnp.imag(z)], axis=-1)
+
+
+class Loops(eqx.Module):
+    """Controller states common to both tiers."""
+
+    pll: jax.Array  # PLL integrator, rad/s
+    agc: jax.Array  # AGC integrator, V
+    drive_lpf: jax.Array  # (order, re/im), drive demodulator LPF stages, LSB
+    sense_lpf: jax.Array  # (order, re/im), sense demodulator LPF stages, LSB
+    rebalance: jax.Array  # (re/im), rebalance integrator, word LSB
+
+
+class SlowState(eqx.Module):
+    """Averaged tier: drive and sense envelopes plus the loop states."""
+
+    drive: jax.Array  # X (re/im), m
+    sense: jax.Array  # Y (re/im), m
+    loops: Loops
+
+
+class WaveState(eqx.Module):
+    """Full-waveform tier: displacements and velocities, carrier phase, loop states."""
+
+    drive: jax.Array  # (x, x'), m and m/s
+    sense: jax.Array  # (y, y')
+    phase: jax.Array  # PLL carrier phase, rad
+    loops: Loops
+
+
+class Outputs(eqx.Module):
+    """Instantaneous readings, and (as an ODE state) their running integrals."""
+
+    rate: jax.Array  # rate output, LSB
+    quadrature: jax.Array  # quadrature word (closed loop) or quadrature channel (open loop), LSB
+    frequency: jax.Array  # PLL frequency, rad/s
+
+
+class Controls(eqx.Module):
+    omega: jax.Array
+    drive_voltage: jax.Array
+    word: jax.Array  # complex rebalance word, LSB (0 in open loop)
+    outputs: Outputs
+    d_pll: jax.Array
+    d_agc: jax.Array
+    d_rebalance: jax.Array
+
+
+def _controls(gyro: Gyroscope, loops: Loops) -> Controls:
+    dl = gyro.drive_loop
+    e_d = _c(loops.drive_lpf[-1]) * jnp.exp(-1j * dl.reference_phase)
+    omega, v_d, d_pll, d_agc = dl.control(e_d, loops.pll, loops.agc)
+    if gyro.closed_loop:
+        rl = gyro.rebalance_loop
+        e_s = _c(loops.sense_lpf[-1]) * jnp.exp(-1j * rl.reference_phase)
+        word, dz = rl.control(e_s, _c(loops.rebalance))
+        rate, quad = jnp.real(word), jnp.imag(word)
+        d_reb = _r(dz)
+    else:
+        ro = gyro.readout
+        e_s = _c(loops.sense_lpf[-1]) * jnp.exp(-1j * (ro.reference_phase + ro.phase_error))
+        word = jnp.zeros((), dtype=complex)
+        rate, quad = jnp.real(e_s), jnp.imag(e_s)
+        d_reb = jnp.zeros(2)
+    return Controls(omega, v_d, word, Outputs(rate, quad, omega), d_pll, d_agc, d_reb)
+
+
+def _lpf(cutoff, stages, signal):
+    """Cascaded first-order low-pass stages on a complex signal; `stages` is (order, re/im)."""
+    z = _c(stages)
+    inputs = jnp.concatenate([jnp.reshape(signal, (1,)), z[:-1]])
+    return _r(cutoff * (inputs - z))
+
+
+def _sense_demod(gyro):
+    """The loop or readout that owns the sense demodulator."""
+    return gyro.rebalance_loop if gyro.closed_loop else gyro.readout
+
+
+def _loop_derivatives(gyro, loops, ctl, drive_demod, sense_demod):
+    return Loops(
+        pll=ctl.d_pll,
+        agc=ctl.d_agc,
+        drive_lpf=_lpf(gyro.drive_loop.demod_cutoff, loops.drive_lpf, drive_demod),
+        sense_lpf=_lpf(_sense_demod(gyro).demod_cutoff, loops.sense_lpf, sense_demod),
+        rebalance=ctl.d_rebalance,
+    )
+
+
+def _dac_voltage(gyro, word, carrier_phase, omega):
+    """Instantaneous DAC output (after the hold's fundamental gain) for the carrier phase(s) given."""
+    dac = gyro.excitation.dac
+    hold_gain, hold_delay = dac.hold(omega)
+    sample = jnp.real(1j * word * jnp.exp(1j * (carrier_phase + gyro.rebalance_loop.carrier_phase - hold_delay)))
+    return dac(sample) * hold_gain
+
+
+def _sense_force(gyro, y, word, carrier_phase, omega):
+    """Sense-axis force (N) other than the linear mechanics: feedback combs and cubic stiffness."""
+    r = gyro.resonator
+    force = -r.mass * r.duffing_y * y**3
+    if gyro.closed_loop:
+        v_plus, v_minus = gyro.excitation.branch_voltages(_dac_voltage(gyro, word, carrier_phase, omega))
+        force = force + gyro.feedback_electrode.force(y, v_plus, v_minus)
+    return force
+
+
+def _phase_grid(n):
+    return 2.0 * jnp.pi * jnp.arange(n) / n
+
+
+def sense_force_fundamental(gyro, sense_phasor, word, omega, omega_y):
+    """Fundamental phasor (N) and DC deflection (m) of the sense force, by quadrature over the phase."""
+    theta = _phase_grid(gyro.phase_points)
+    wave = jnp.real(sense_phasor * jnp.exp(1j * theta))
+    stiffness = gyro.resonator.mass * omega_y**2
+
+    def deflect(y0, _):
+        return jnp.mean(_sense_force(gyro, y0 + wave, word, theta, omega)) / stiffness, None
+
+    y0, _ = jax.lax.scan(deflect, jnp.zeros(()), None, length=3)
+    force = _sense_force(gyro, y0 + wave, word, theta, omega)
+    return 2.0 * jnp.mean(force * jnp.exp(-1j * theta)), y0
+
+
+def averaged_field(t, state: SlowState, gyro: Gyroscope, stim: Stimulus):
+    """Slow-flow vector field; returns `(dstate, outputs)`."""
+    r = gyro.resonator
+    temp = gyro.temperature(stim.time + t)
+    wx, wy, qx, qy = r.at_temperature(temp)
+    ctl = _controls(gyro, state.loops)
+    w = ctl.omega
+    m = r.mass
+    X, Y = _c(state.drive), _c(state.sense)
+    om = stim.rate_at(t)
+    gx, gy = wx / (2 * qx), wy / (2 * qy)
+    dx, dy = (wx**2 - w**2) / (2 * w), (wy**2 - w**2) / (2 * w)
+    c, kap, ag = r.damping_coupling, r.stiffness_coupling, r.angular_gain
+
+    f_x = (1j * gyro.drive_electrode.force(ctl.drive_voltage)
+           - 0.75 * m * r.duffing_x * jnp.abs(X) ** 2 * X)
+    f_y, _ = sense_force_fundamental(gyro, Y, ctl.word, w, wy)
+    f_y = f_y - 1j * gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t)
+
+    dX = -(gx - 1j * dx) * X + (ag * om - c / 2 + 1j * kap / (2 * w)) * Y + f_x / (2j * w * m)
+    dY = -(gy - 1j * dy) * Y - (ag * om + c / 2 - 1j * kap / (2 * w)) * X + f_y / (2j * w * m)
+
+    drive_demod = gyro.drive_frontend.phasor_gain(w) * X
+    sense_demod = gyro.sense_frontend.phasor_gain(w) * Y
+    dloops = _loop_derivatives(gyro, state.loops, ctl, drive_demod, sense_demod)
+    return SlowState(_r(dX), _r(dY), dloops), ctl.outputs
+
+
+def full_field(t, state: WaveState, gyro: Gyroscope, stim: Stimulus):
+    """Carrier-level vector field; returns `(dstate, outputs)`."""
+    r = gyro.resonator
+    temp = gyro.temperature(stim.time + t)
+    wx, wy, qx, qy = r.at_temperature(temp)
+    ctl = _controls(gyro, state.loops)
+    m = r.mass
+    x, vx = state.drive[0], state.drive[1]
+    y, vy = state.sense[0], state.sense[1]
+    theta = state.phase
+    om = stim.rate_at(t)
+    c, kap, ag = r.damping_coupling, r.stiffness_coupling, r.angular_gain
+
+    f_x = gyro.drive_electrode.force(ctl.drive_voltage) * (-jnp.sin(theta)) - m * r.duffing_x * x**3
+    f_y = (_sense_force(gyro, y, ctl.word, theta, ctl.omega)
+           + gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t) * jnp.sin(theta))
+    ax = f_x / m - (wx / qx) * vx - wx**2 * x - c * vy - kap * y + 2 * ag * om * vy
+    ay = f_y / m - (wy / qy) * vy - wy**2 * y - c * vx - kap * x - 2 * ag * om * vx
+
+    # Demodulation: 2 v cos(theta) and -2 v sin(theta) are the phasor's re/im parts plus 2w ripple.
+    carrier = 2.0 * jnp.exp(-1j * theta)
+    drive_demod = gyro.drive_frontend.sample(x, vx) * carrier
+    sense_demod = gyro.sense_frontend.sample(y, vy) * carrier
+    dloops = _loop_derivatives(gyro, state.loops, ctl, drive_demod, sense_demod)
+    return (WaveState(jnp.stack([vx, ax]), jnp.stack([vy, ay]), ctl.omega, dloops), ctl.outputs)
+
+
+def operating_point(gyro: Gyroscope, stim: Stimulus):
+    """The linear, ideal operating point from physics alone (no tier solution): drive locked at its
+    resonance with the set-point amplitude, sense held at rest, words at their linear values.
+
+    Returns a `SlowState`. It is the starting point of every tier; the nonlinear and loop effects are
+    then settled by each tier on its own.
+    """
+    r = gyro.resonator
+    wx, wy, qx, qy = r.at_temperature(gyro.temperature(stim.time))
+    w = wx
+    m = r.mass
+    a = gyro.drive_amplitude(w)
+    X = a + 0j
+    om = stim.rate_at(0.0)
+    vcf = gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(0.0)
+    gx, gy = wx / (2 * qx), wy / (2 * qy)
+    dy = (wy**2 - w**2) / (2 * w)
+    coupling = (r.angular_gain * om + r.damping_coupling / 2 - 1j * r.stiffness_coupling / (2 * w)) * a
+    v_d = 2 * w * m * gx * a / gyro.drive_electrode.force_per_volt
+    drive_meas = gyro.drive_frontend.phasor_gain(w) * X
+    if gyro.closed_loop:
+        Y = jnp.zeros((), dtype=complex)
+        _, hold_delay = gyro.excitation.dac.hold(w)
+        needed = coupling + vcf / (2 * w * m)
+        word = (needed * 2 * w * m / gyro.rebalance_gain(w)
+                * jnp.exp(-1j * (gyro.rebalance_loop.carrier_phase - hold_delay)))
+        rebalance = _r(-word)
+    else:
+        Y = (-coupling - vcf / (2 * w * m)) / (gy - 1j * dy)
+        rebalance = jnp.zeros(2)
+    sense_meas = gyro.sense_frontend.phasor_gain(w) * Y
+    phase_meas = jnp.angle(drive_meas * jnp.exp(-1j * gyro.drive_loop.reference_phase))
+    loops = Loops(
+        pll=w - gyro.drive_loop.center_frequency - gyro.drive_loop.pll_kp * phase_meas,
+        agc=jnp.asarray(v_d, dtype=float),
+        drive_lpf=jnp.stack([_r(drive_meas)] * gyro.drive_loop.demod_order),
+        sense_lpf=jnp.stack([_r(sense_meas)] * _sense_demod(gyro).demod_order),
+        rebalance=rebalance,
+    )
+    return SlowState(_r(X), _r(Y), loops)
+
+
+def wave_from_slow(state: SlowState, omega):
+    """Carrier-level state at phase 0 with the envelopes of `state`."""
+    X, Y = _c(state.drive), _c(state.sense)
+    return WaveState(
+        drive=jnp.stack([jnp.real(X), jnp.real(1j * omega * X)]),
+        sense=jnp.stack([jnp.real(Y), jnp.real(1j * omega * Y)]),
+        phase=jnp.zeros(()),
+        loops=state.loops,
+    )
+
+
+def _loop_scales(gyro: Gyroscope, a, omega):
+    g_d = jnp.abs(gyro.drive_frontend.phasor_gain(omega))
+    g_s = jnp.abs(gyro.sense_frontend.phasor_gain(omega))
+    word = (2.0 ** (gyro.excitation.dac.word_bits - 1)) if gyro.closed_loop else 1.0
+    return Loops(
+        pll=jnp.ones(()),
+        agc=jnp.ones(()),
+        drive_lpf=jnp.full((gyro.drive_loop.demod_order, 2), g_d * a),
+        sense_lpf=jnp.full((_sense_demod(gyro).demod_order, 2), g_s * a * 1e-3),
+        rebalance=jnp.full((2,), word),
+    )
+
+
+def slow_scales(gyro: Gyroscope) -> SlowState:
+    """Characteristic size of each averaged-tier state: drive amplitude, 1e-3 of it for the sense, the
+    full-scale word, the demodulated LSB those mean."""
+    omega = gyro.resonator.omega_x
+    a = gyro.drive_amplitude(omega)
+    return SlowState(jnp.full((2,), a), jnp.full((2,), a * 1e-3), _loop_scales(gyro, a, omega))
+
+
+def wave_scales(gyro: Gyroscope) -> WaveState:
+    omega = gyro.resonator.omega_x
+    a = gyro.drive_amplitude(omega)
+    return WaveState(jnp.stack([a, a * omega]), jnp.stack([a, a * omega]) * 1e-3, jnp.ones(()),
+                     _loop_scales(gyro, a, omega))
+
+
+def output_scales(gyro: Gyroscope) -> Outputs:
+    omega = gyro.resonator.omega_x
+    if gyro.closed_loop:
+        word = 2.0 ** (gyro.excitation.dac.word_bits - 1)
+    else:
+        word = jnp.abs(gyro.sense_frontend.phasor_gain(omega)) * gyro.drive_amplitude(omega) * 1e-3
+    return Outputs(jnp.asarray(word, dtype=float), jnp.asarray(word, dtype=float), jnp.asarray(omega))

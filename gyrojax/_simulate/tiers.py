@@ -1,0 +1,211 @@
+"""The three tiers and the one entry point that settles a measurement point with any of them."""
+
+import abc
+import math
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+
+from .._checks import check_positive
+from .._gyroscope import Gyroscope
+from .._solution import RESULTS
+from .._stimulus import Stimulus
+from ._model import (
+    Outputs,
+    SlowState,
+    WaveState,
+    averaged_field,
+    full_field,
+    operating_point,
+    output_scales,
+    slow_scales,
+    wave_from_slow,
+    wave_scales,
+)
+
+
+def _mul(a, b):
+    return jax.tree.map(lambda x, y: x * y, a, b)
+
+
+def _div(a, b):
+    return jax.tree.map(lambda x, y: x / y, a, b)
+
+
+class Settled(eqx.Module):
+    """A settled measurement point.
+
+    **Fields:**
+
+    - `rate`: the rate output (closed loop: the rebalance word; open loop: the demodulated rate channel),
+      mean over the averaging window, LSB.
+    - `quadrature`: the quadrature word / channel, LSB.
+    - `frequency`: the PLL frequency, rad/s.
+    - `state`: the final state of the tier (`SlowState` or `WaveState`).
+    - `result`: a `gyrojax.RESULTS` code; check `result == RESULTS.successful` or call `.check()`.
+    - `num_steps`: solver steps (ODE steps or Newton iterations).
+    """
+
+    rate: jax.Array
+    quadrature: jax.Array
+    frequency: jax.Array
+    state: SlowState | WaveState
+    result: RESULTS
+    num_steps: jax.Array
+
+    def check(self):
+        """Raise if the point did not settle (eager use only; under jit use `eqx.error_if`)."""
+        return self.result.error_if(self, self.result != RESULTS.successful)
+
+
+class AbstractTier(eqx.Module):
+    """How to compute a settled point. Subclasses: `Steady`, `Averaged`, `FullWaveform`."""
+
+    @abc.abstractmethod
+    def settle(self, gyro: Gyroscope, stimulus: Stimulus) -> Settled:
+        """Settle `gyro` under a constant `stimulus`."""
+
+
+def _finalise(rate, quad, freq, state, result, steps):
+    bad = ~(jnp.isfinite(rate) & jnp.isfinite(quad) & jnp.isfinite(freq))
+    result = RESULTS.where(bad & (result == RESULTS.successful), RESULTS.nonfinite, result)
+    return Settled(rate, quad, freq, state, result, steps)
+
+
+class Steady(AbstractTier):
+    """The averaged equations at equilibrium, by Newton's method (optimistix), differentiated implicitly.
+
+    Only constant stimuli have an equilibrium: a modulated rate or VCF is refused.
+    """
+
+    rtol: float = 1e-12
+    atol: float = 1e-12
+    max_steps: int = eqx.field(static=True, default=40)
+
+    def settle(self, gyro, stimulus):
+        for name in ("rate_frequency", "vcf_frequency"):
+            value = getattr(stimulus, name)
+            if not isinstance(value, jax.core.Tracer) and float(value) != 0.0:
+                raise ValueError(f"Steady tier: stimulus.{name} must be 0 (a constant input has an "
+                                 f"equilibrium; a modulated one does not), got {value!r}. Use the "
+                                 "averaged or full tier, or gyrojax.frequency_response.")
+        scales = slow_scales(gyro)
+
+        def residual(z, _):
+            d, _ = averaged_field(0.0, _mul(z, scales), gyro, stimulus)
+            return _div(d, scales)
+
+        y0 = _div(operating_point(gyro, stimulus), scales)
+        sol = optx.root_find(residual, optx.Newton(rtol=self.rtol, atol=self.atol), y0,
+                             max_steps=self.max_steps, throw=False)
+        state = _mul(sol.value, scales)
+        _, out = averaged_field(0.0, state, gyro, stimulus)
+        result = RESULTS.where(sol.result == optx.RESULTS.successful, RESULTS.successful,
+                               RESULTS.root_find_failed)
+        return _finalise(out.rate, out.quadrature, out.frequency, state, result, sol.stats["num_steps"])
+
+
+def _ode_settle(tier, field, y0, scales, gyro, stimulus, average_time):
+    out_scales = output_scales(gyro)
+
+    def vector_field(t, z, _):
+        d, out = field(t, _mul(z[0], scales), gyro, stimulus)
+        return _div(d, scales), _div(out, out_scales)
+
+    zero = Outputs(jnp.zeros(()), jnp.zeros(()), jnp.zeros(()))
+    t1 = tier.settle_time + average_time
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(vector_field),
+        tier.solver,
+        t0=0.0,
+        t1=t1,
+        dt0=tier.dt0,
+        y0=(_div(y0, scales), zero),
+        saveat=diffrax.SaveAt(ts=jnp.stack([jnp.asarray(tier.settle_time, dtype=float), t1])),
+        stepsize_controller=diffrax.PIDController(rtol=tier.rtol, atol=tier.atol),
+        max_steps=tier.max_steps,
+        adjoint=tier.adjoint,
+        throw=False,
+    )
+    state = jax.tree.map(lambda s, x: s[-1] * x, sol.ys[0], scales)
+    mean = jax.tree.map(lambda acc, s: (acc[1] - acc[0]) / average_time * s, sol.ys[1], out_scales)
+    result = RESULTS.where(
+        sol.result == diffrax.RESULTS.successful,
+        RESULTS.successful,
+        RESULTS.where(sol.result == diffrax.RESULTS.max_steps_reached, RESULTS.max_steps_reached,
+                      RESULTS.solver_failed),
+    )
+    return _finalise(mean.rate, mean.quadrature, mean.frequency, state, result, sol.stats["num_steps"])
+
+
+class Averaged(AbstractTier):
+    """The slow-flow (envelope) ODE with describing functions, integrated with diffrax from the ideal
+    operating point for `settle_time`, then averaged over `average_time`.
+
+    For `jax.jacfwd` / Levenberg-Marquardt pass `adjoint=diffrax.ForwardMode()` (or `DirectAdjoint()`).
+    """
+
+    settle_time: float = 0.12
+    average_time: float = 0.01
+    solver: diffrax.AbstractSolver = diffrax.Tsit5()
+    rtol: float = 1e-10
+    atol: float = 1e-10
+    dt0: float = 1e-5
+    max_steps: int = eqx.field(static=True, default=100_000)
+    adjoint: diffrax.AbstractAdjoint = diffrax.RecursiveCheckpointAdjoint()
+
+    def __check_init__(self):
+        check_positive("Averaged", "settle_time", self.settle_time)
+        check_positive("Averaged", "average_time", self.average_time)
+
+    def settle(self, gyro, stimulus):
+        y0 = operating_point(gyro, stimulus)
+        return _ode_settle(self, averaged_field, y0, slow_scales(gyro), gyro, stimulus, self.average_time)
+
+
+class FullWaveform(AbstractTier):
+    """The carrier-level ODE of resonator and loops, integrated with diffrax: the ground truth.
+
+    Starts from the ideal operating point, settles for `settle_time`, then averages the outputs over
+    `average_periods` whole carrier periods (so the demodulators' 2w ripple averages out).
+    """
+
+    settle_time: float = 0.12
+    average_periods: int = eqx.field(static=True, default=40)
+    solver: diffrax.AbstractSolver = diffrax.Tsit5()
+    rtol: float = 1e-10
+    atol: float = 1e-10
+    dt0: float = 1e-6
+    max_steps: int = eqx.field(static=True, default=400_000)
+    adjoint: diffrax.AbstractAdjoint = diffrax.RecursiveCheckpointAdjoint()
+
+    def __check_init__(self):
+        check_positive("FullWaveform", "settle_time", self.settle_time)
+        if self.average_periods < 1:
+            raise ValueError(f"FullWaveform.average_periods must be >= 1, got {self.average_periods!r}.")
+
+    def settle(self, gyro, stimulus):
+        slow = operating_point(gyro, stimulus)
+        omega = gyro.drive_loop.center_frequency
+        period = 2.0 * math.pi / omega
+        return _ode_settle(self, full_field, wave_from_slow(slow, omega), wave_scales(gyro), gyro, stimulus,
+                           self.average_periods * period)
+
+
+def settle(gyro: Gyroscope, stimulus: Stimulus, tier: AbstractTier = Steady()) -> Settled:
+    """Settle `gyro` under a constant `stimulus` with the given tier (default: `Steady()`).
+
+    **Arguments:**
+
+    - `gyro`: the device.
+    - `stimulus`: a `Stimulus` (rate in rad/s, VCF voltages, time since power-on).
+    - `tier`: `Steady()`, `Averaged()` or `FullWaveform()`.
+
+    **Returns:** a `Settled` solution; its `result` says whether the point settled.
+    """
+    if not isinstance(tier, AbstractTier):
+        raise ValueError(f"tier must be Steady(), Averaged() or FullWaveform(), got {tier!r}.")
+    return tier.settle(gyro, stimulus)
