@@ -782,6 +782,8 @@ def _read_parquet(source: str) -> dict[str, Any]:
         col = table.column(name)
         if name in REQUIRED_COLUMNS or name in OPTIONAL_COLUMNS:
             columns[name] = col.to_pylist()  # None for nulls, so empty cells are told from NaN values
+        elif (pa.types.is_string(col.type) or pa.types.is_large_string(col.type)) and col.null_count == 0:
+            columns[name] = np.array(col.to_pylist(), dtype=str)  # as text read from a CSV
         else:
             columns[name] = col.to_numpy(zero_copy_only=False)
     if not columns:
@@ -937,7 +939,7 @@ def aggregate_samples(device: str, run: int, sweep: str, input: Any, samples: An
         raise DataError(f"{label}: samples must be one-dimensional, got shape {x.shape}.", source=label)
     bad = np.flatnonzero(~np.isfinite(x))
     if bad.size:
-        raise DataError(f"{label}: sample {bad[0]} (0-based) is {x[bad[0]]!r}; every sample must be finite "
+        raise DataError(f"{label}: sample {bad[0]} (0-based) is {float(x[bad[0]])!r}; every sample must be finite "
                         f"({bad.size} are not).", source=label)
     drop = math.ceil(discard_s * sample_rate_hz - 1e-9)
     kept = x[drop:]
