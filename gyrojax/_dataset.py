@@ -497,10 +497,11 @@ class Table:
     def __repr__(self) -> str:
         return f"Table({len(self)} rows, columns={list(self._columns)}, source={self._source!r})"
 
-    def locate(self, row: int, column: str | None = None) -> str:
+    def locate(self, row: int, column: str | None = None, *, with_source: bool = True) -> str:
         """Describe 0-based row index `row` as a user sees it: "<source>: data row N (line L)[, column 'c']"."""
         where = _Where(self._source, self._lines)
-        return where.cell(row, column) if column is not None else f"{self._source}: {where.row(row)}"
+        text = where.row(row) + ("" if column is None else f", column {column!r}")
+        return f"{self._source}: {text}" if with_source else text
 
     def equals(self, other: "Table") -> bool:
         """Exact equality of column names, order, dtypes kinds and values (NaN equal to NaN)."""
@@ -560,6 +561,15 @@ class Table:
         A [`gyrojax.SweepArrays`][]. `SweepArrays.to_table()` gives back exactly these rows (same column
         order, values and, for a table grouped by device and run, row order).
         """
+        p = self._padded(sweep)
+        return SweepArrays(
+            inputs=jnp.asarray(p["inputs"]), outputs=jnp.asarray(p["outputs"]),
+            sigmas=None if p["sigmas"] is None else jnp.asarray(p["sigmas"]), mask=jnp.asarray(p["mask"]),
+            aux={c: jnp.asarray(v) for c, v in p["aux"].items()}, sweep=sweep, devices=p["devices"],
+            runs=p["runs"], column_order=p["column_order"])
+
+    def _padded(self, sweep: str) -> dict[str, Any]:
+        """The padded NumPy arrays and metadata behind `to_arrays` (also used by the metrics report)."""
         _check_sweep_name(sweep)
         groups = self.groups(sweep)
         if not groups:
@@ -591,12 +601,9 @@ class Table:
                 sigmas[d, k, :m] = self._columns["output_sigma"][rows]
             for c in aux_names:
                 aux[c][d, k, :m] = self._columns[c][rows]
-        return SweepArrays(
-            inputs=jnp.asarray(inputs), outputs=jnp.asarray(outputs),
-            sigmas=jnp.asarray(sigmas) if has_sigma else None, mask=jnp.asarray(mask),
-            aux={c: jnp.asarray(v) for c, v in aux.items()}, sweep=sweep, devices=tuple(devices),
-            runs=tuple(tuple(runs[d]) for d in devices), column_order=tuple(
-                c for c in self._columns if c in REQUIRED_COLUMNS or c in OPTIONAL_COLUMNS))
+        return {"inputs": inputs, "outputs": outputs, "sigmas": sigmas if has_sigma else None, "mask": mask,
+                "aux": aux, "sweep": sweep, "devices": tuple(devices), "runs": tuple(tuple(runs[d]) for d in devices),
+                "column_order": tuple(c for c in self._columns if c in REQUIRED_COLUMNS or c in OPTIONAL_COLUMNS)}
 
 
 def _check_sweep_name(sweep: str):

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from types import SimpleNamespace
 from typing import Any
 
 import equinox as eqx
@@ -44,17 +45,23 @@ MIN_POINTS_BANDWIDTH = 2
 # Helpers.
 
 
-def _f64(x) -> Array:
-    return jnp.asarray(x, dtype=jnp.float64)
+def _xp(*arrays):
+    """jax.numpy if any argument is a JAX array or tracer, else NumPy: traceable with JAX inputs, and no
+    compilation (seconds for a first call) when a report runs on host data."""
+    return jnp if any(isinstance(a, jax.Array) for a in arrays) else np
 
 
-def _mask_like(mask, x) -> Array:
+def _f64(x, xp) -> Array:
+    return xp.asarray(x, dtype=xp.float64)
+
+
+def _mask_like(mask, x, xp) -> Array:
     if mask is None:
-        return jnp.ones(jnp.shape(x), dtype=bool)
-    mask = jnp.asarray(mask)
-    if mask.dtype != jnp.bool_:
+        return xp.ones(xp.shape(x), dtype=bool)
+    mask = xp.asarray(mask)
+    if mask.dtype != xp.bool_:
         raise ValueError(f"mask must be boolean, got dtype {mask.dtype}.")
-    return jnp.broadcast_to(mask, jnp.shape(x))
+    return xp.broadcast_to(mask, xp.shape(x))
 
 
 def _raise_if(x, bad, message: Callable[[tuple[int, ...] | None], str]):
@@ -75,31 +82,31 @@ def _at(index) -> str:
     return "" if not index else f" at batch index {index}"
 
 
-def _weights(mask, sigmas, x) -> Array:
+def _weights(mask, sigmas, x, xp) -> Array:
     if sigmas is None:
-        return jnp.where(mask, 1.0, 0.0)
-    sigmas = jnp.broadcast_to(_f64(sigmas), jnp.shape(x))
+        return xp.where(mask, 1.0, 0.0)
+    sigmas = xp.broadcast_to(_f64(sigmas, xp), xp.shape(x))
     bad = mask & ~(sigmas > 0)
-    sigmas = _raise_if(sigmas, jnp.any(bad, axis=-1),
+    sigmas = _raise_if(sigmas, xp.any(bad, axis=-1),
                        lambda i: f"weighted fit: an output_sigma{_at(i)} is zero, negative or NaN on a valid "
                                  "point; weights are 1/sigma^2, so every sigma must be positive.")
-    safe = jnp.where(mask, sigmas, 1.0)
-    return jnp.where(mask, 1.0 / safe**2, 0.0)
+    safe = xp.where(mask, sigmas, 1.0)
+    return xp.where(mask, 1.0 / safe**2, 0.0)
 
 
-def _line(x, y, w):
+def _line(x, y, w, xp):
     """Weighted least-squares line (centred sums); NaN where fewer than two distinct weighted inputs."""
-    sw = jnp.sum(w, axis=-1)
+    sw = xp.sum(w, axis=-1)
     ok = sw > 0
-    sw_safe = jnp.where(ok, sw, 1.0)
-    xm = jnp.sum(w * x, axis=-1) / sw_safe
-    ym = jnp.sum(w * y, axis=-1) / sw_safe
-    dx = jnp.where(w > 0, x - xm[..., None], 0.0)
-    sxx = jnp.sum(w * dx**2, axis=-1)
-    sxy = jnp.sum(w * dx * (y - ym[..., None]), axis=-1)
+    sw_safe = xp.where(ok, sw, 1.0)
+    xm = xp.sum(w * x, axis=-1) / sw_safe
+    ym = xp.sum(w * y, axis=-1) / sw_safe
+    dx = xp.where(w > 0, x - xm[..., None], 0.0)
+    sxx = xp.sum(w * dx**2, axis=-1)
+    sxy = xp.sum(w * dx * (y - ym[..., None]), axis=-1)
     ok = ok & (sxx > 0)
-    k = jnp.where(ok, sxy / jnp.where(ok, sxx, 1.0), jnp.nan)
-    b = jnp.where(ok, ym - k * xm, jnp.nan)
+    k = xp.where(ok, sxy / xp.where(ok, sxx, 1.0), xp.nan)
+    b = xp.where(ok, ym - k * xm, xp.nan)
     return k, b
 
 
@@ -167,35 +174,36 @@ def fit_scale_factor(inputs: Float[ArrayLike, "*batch point"], outputs: Float[Ar
     """
     if full_scale not in FULL_SCALE_CONVENTIONS:
         raise ValueError(f"full_scale must be one of {', '.join(FULL_SCALE_CONVENTIONS)}, got {full_scale!r}.")
-    x, y = _f64(inputs), _f64(outputs)
-    x, y = jnp.broadcast_arrays(x, y)
+    xp = _xp(inputs, outputs, mask, sigmas)
+    x, y = _f64(inputs, xp), _f64(outputs, xp)
+    x, y = xp.broadcast_arrays(x, y)
     if x.ndim < 1:
         raise ValueError("inputs and outputs need a point axis (the last axis).")
-    mask = _mask_like(mask, x)
-    n = jnp.sum(mask, axis=-1).astype(jnp.float64)
+    mask = _mask_like(mask, x, xp)
+    n = xp.sum(mask, axis=-1).astype(xp.float64)
     x = _raise_if(x, (n > 0) & (n < MIN_POINTS_LINEAR),
                   lambda i: f"fit_scale_factor: a sweep{_at(i)} has fewer than {MIN_POINTS_LINEAR} valid points; "
                             "a scale factor with a nonlinearity needs at least 3 (fully masked sweeps are "
                             "padding and give NaN).")
-    x = jnp.where(mask, x, 0.0)
-    y = jnp.where(mask, y, 0.0)
-    w = _weights(mask, sigmas, x)
-    k, b = _line(x, y, w)
-    r = jnp.where(mask, y - (k[..., None] * x + b[..., None]), 0.0)
+    x = xp.where(mask, x, 0.0)
+    y = xp.where(mask, y, 0.0)
+    w = _weights(mask, sigmas, x, xp)
+    k, b = _line(x, y, w, xp)
+    r = xp.where(mask, y - (k[..., None] * x + b[..., None]), 0.0)
     if full_scale == "half_range":
-        fs = jnp.abs(k) * jnp.max(jnp.abs(x), axis=-1)
+        fs = xp.abs(k) * xp.max(xp.abs(x), axis=-1)
     elif full_scale == "span":
-        hi = jnp.max(jnp.where(mask, x, -jnp.inf), axis=-1)
-        lo = jnp.min(jnp.where(mask, x, jnp.inf), axis=-1)
-        fs = jnp.abs(k) * jnp.where(n > 0, hi - lo, jnp.nan)
+        hi = xp.max(xp.where(mask, x, -xp.inf), axis=-1)
+        lo = xp.min(xp.where(mask, x, xp.inf), axis=-1)
+        fs = xp.abs(k) * xp.where(n > 0, hi - lo, xp.nan)
     else:
-        fs = jnp.max(jnp.abs(y), axis=-1)
+        fs = xp.max(xp.abs(y), axis=-1)
     ok = (n > 0) & (fs > 0)
-    fs_safe = jnp.where(ok, fs, 1.0)
-    n_safe = jnp.where(n > 0, n, 1.0)
-    max_ppm = jnp.where(ok, 1e6 * jnp.max(jnp.abs(r), axis=-1) / fs_safe, jnp.nan)
-    rms_ppm = jnp.where(ok, 1e6 * jnp.sqrt(jnp.sum(r**2, axis=-1) / n_safe) / fs_safe, jnp.nan)
-    return ScaleFactorFit(scale_factor=k, bias=b, residuals=r, full_scale=jnp.where(n > 0, fs, jnp.nan),
+    fs_safe = xp.where(ok, fs, 1.0)
+    n_safe = xp.where(n > 0, n, 1.0)
+    max_ppm = xp.where(ok, 1e6 * xp.max(xp.abs(r), axis=-1) / fs_safe, xp.nan)
+    rms_ppm = xp.where(ok, 1e6 * xp.sqrt(xp.sum(r**2, axis=-1) / n_safe) / fs_safe, xp.nan)
+    return ScaleFactorFit(scale_factor=k, bias=b, residuals=r, full_scale=xp.where(n > 0, fs, xp.nan),
                           nonlinearity_max_ppm=max_ppm, nonlinearity_rms_ppm=rms_ppm, n_points=n)
 
 
@@ -233,41 +241,42 @@ def asymmetry(inputs: Float[ArrayLike, "*batch point"], outputs: Float[ArrayLike
     asymmetry needs both signs) or is fully masked. An error where it has both signs but too few points
     (common bias: fewer than 3 in all; separate fits: fewer than 2 on a side).
     """
-    x, y = jnp.broadcast_arrays(_f64(inputs), _f64(outputs))
-    mask = _mask_like(mask, x)
+    xp = _xp(inputs, outputs, mask, sigmas)
+    x, y = xp.broadcast_arrays(_f64(inputs, xp), _f64(outputs, xp))
+    mask = _mask_like(mask, x, xp)
     pos, neg = mask & (x > 0), mask & (x < 0)
-    n_pos = jnp.sum(pos, axis=-1)
-    n_neg = jnp.sum(neg, axis=-1)
-    n = jnp.sum(mask, axis=-1)
+    n_pos = xp.sum(pos, axis=-1)
+    n_neg = xp.sum(neg, axis=-1)
+    n = xp.sum(mask, axis=-1)
     both = (n_pos > 0) & (n_neg > 0)
     few = (n_pos < 2) | (n_neg < 2) if not common_bias else n < 3
     x = _raise_if(x, both & few,
                   lambda i: f"asymmetry: a sweep{_at(i)} has too few points "
                             + ("(need at least 3 with both signs for the common-bias fit)." if common_bias else
                                "(need at least 2 positive and 2 negative inputs for separate fits)."))
-    x = jnp.where(mask, x, 0.0)
-    y = jnp.where(mask, y, 0.0)
-    w = _weights(mask, sigmas, x)
+    x = xp.where(mask, x, 0.0)
+    y = xp.where(mask, y, 0.0)
+    w = _weights(mask, sigmas, x, xp)
     if common_bias:
         # Scale the inputs to O(1) first: with DAC words (~1e6) the normal matrix would span 1e13.
-        s = jnp.max(jnp.abs(x), axis=-1, keepdims=True)
-        s = jnp.where(s > 0, s, 1.0)
+        s = xp.max(xp.abs(x), axis=-1, keepdims=True)
+        s = xp.where(s > 0, s, 1.0)
         u = x / s
-        phi = jnp.stack([jnp.maximum(u, 0.0), jnp.minimum(u, 0.0), jnp.ones_like(u)], axis=-1)
-        a = jnp.einsum("...p,...pi,...pj->...ij", w, phi, phi)
-        c = jnp.einsum("...p,...pi,...p->...i", w, phi, y)
+        phi = xp.stack([xp.maximum(u, 0.0), xp.minimum(u, 0.0), xp.ones_like(u)], axis=-1)
+        a = xp.einsum("...p,...pi,...pj->...ij", w, phi, phi)
+        c = xp.einsum("...p,...pi,...p->...i", w, phi, y)
         ok = both & (n >= 3)
-        eye = jnp.broadcast_to(jnp.eye(3), a.shape)
-        a = jnp.where(ok[..., None, None], a, eye)
-        coef = jnp.linalg.solve(a, c[..., None])[..., 0]
+        eye = xp.broadcast_to(xp.eye(3), a.shape)
+        a = xp.where(ok[..., None, None], a, eye)
+        coef = xp.linalg.solve(a, c[..., None])[..., 0]
         k_pos, k_neg = coef[..., 0] / s[..., 0], coef[..., 1] / s[..., 0]
     else:
-        k_pos, _ = _line(x, y, jnp.where(pos, w, 0.0))
-        k_neg, _ = _line(x, y, jnp.where(neg, w, 0.0))
+        k_pos, _ = _line(x, y, xp.where(pos, w, 0.0), xp)
+        k_neg, _ = _line(x, y, xp.where(neg, w, 0.0), xp)
         ok = both & (n_pos >= 2) & (n_neg >= 2)
     mean = 0.5 * (k_pos + k_neg)
     ok = ok & (mean != 0)
-    return jnp.where(ok, 1e6 * (k_pos - k_neg) / jnp.where(ok, mean, 1.0), jnp.nan)
+    return xp.where(ok, 1e6 * (k_pos - k_neg) / xp.where(ok, mean, 1.0), xp.nan)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -300,15 +309,16 @@ def repeatability(scale_factors: Float[ArrayLike, "*batch run"], *,
 
     Repeatability in ppm; NaN where there are `ddof` runs or fewer (one run shows no repeatability).
     """
-    k = _f64(scale_factors)
-    mask = _mask_like(mask, k)
-    n = jnp.sum(mask, axis=-1).astype(jnp.float64)
-    k = jnp.where(mask, k, 0.0)
+    xp = _xp(scale_factors, mask)
+    k = _f64(scale_factors, xp)
+    mask = _mask_like(mask, k, xp)
+    n = xp.sum(mask, axis=-1).astype(xp.float64)
+    k = xp.where(mask, k, 0.0)
     ok = n > ddof
-    mean = jnp.sum(k, axis=-1) / jnp.where(n > 0, n, 1.0)
-    var = jnp.sum(jnp.where(mask, k - mean[..., None], 0.0) ** 2, axis=-1) / jnp.where(ok, n - ddof, 1.0)
+    mean = xp.sum(k, axis=-1) / xp.where(n > 0, n, 1.0)
+    var = xp.sum(xp.where(mask, k - mean[..., None], 0.0) ** 2, axis=-1) / xp.where(ok, n - ddof, 1.0)
     ok = ok & (mean != 0)
-    return jnp.where(ok, 1e6 * jnp.sqrt(var) / jnp.abs(jnp.where(ok, mean, 1.0)), jnp.nan)
+    return xp.where(ok, 1e6 * xp.sqrt(var) / xp.abs(xp.where(ok, mean, 1.0)), xp.nan)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -349,46 +359,47 @@ def rate_bandwidth(freqs_hz: Float[ArrayLike, "*batch point"], amplitudes: Float
     A [`gyrojax.RateBandwidth`][]. An error where a sweep has a single point, a non-positive frequency or
     amplitude, or never falls below $G_0/\sqrt2$ (extend the sweep to higher frequencies).
     """
-    f, a = jnp.broadcast_arrays(_f64(freqs_hz), _f64(amplitudes))
-    mask = _mask_like(mask, f)
-    p = jnp.zeros_like(f) if phase_deg is None else jnp.broadcast_to(_f64(phase_deg), f.shape)
-    n = jnp.sum(mask, axis=-1)
+    xp = _xp(freqs_hz, amplitudes, mask, phase_deg)
+    f, a = xp.broadcast_arrays(_f64(freqs_hz, xp), _f64(amplitudes, xp))
+    mask = _mask_like(mask, f, xp)
+    p = xp.zeros_like(f) if phase_deg is None else xp.broadcast_to(_f64(phase_deg, xp), f.shape)
+    n = xp.sum(mask, axis=-1)
     f = _raise_if(f, (n > 0) & (n < MIN_POINTS_BANDWIDTH),
                   lambda i: f"rate_bandwidth: a sweep{_at(i)} has a single valid point; a bandwidth needs at "
                             "least 2.")
-    f = _raise_if(f, jnp.any(mask & ~((f > 0) & (a > 0)), axis=-1),
+    f = _raise_if(f, xp.any(mask & ~((f > 0) & (a > 0)), axis=-1),
                   lambda i: f"rate_bandwidth: a sweep{_at(i)} has a non-positive frequency or amplitude; both "
                             "must be > 0 (the interpolation is in log frequency and dB).")
-    key = jnp.where(mask, f, jnp.inf)
-    order = jnp.argsort(key, axis=-1)
-    f = jnp.take_along_axis(jnp.where(mask, f, 1.0), order, axis=-1)
-    a = jnp.take_along_axis(jnp.where(mask, a, 1.0), order, axis=-1)
-    p = jnp.take_along_axis(jnp.where(mask, p, 0.0), order, axis=-1)
-    m = jnp.take_along_axis(mask, order, axis=-1)
+    key = xp.where(mask, f, xp.inf)
+    order = xp.argsort(key, axis=-1)
+    f = xp.take_along_axis(xp.where(mask, f, 1.0), order, axis=-1)
+    a = xp.take_along_axis(xp.where(mask, a, 1.0), order, axis=-1)
+    p = xp.take_along_axis(xp.where(mask, p, 0.0), order, axis=-1)
+    m = xp.take_along_axis(mask, order, axis=-1)
     g0 = a[..., 0]
     target = g0 / math.sqrt(2.0)
     below = m & (a < target[..., None])
-    crosses = jnp.any(below, axis=-1)
+    crosses = xp.any(below, axis=-1)
     f = _raise_if(f, (n >= MIN_POINTS_BANDWIDTH) & ~crosses,
                   lambda i: f"rate_bandwidth: a sweep{_at(i)} never falls below its low-frequency gain / sqrt(2) "
                             "(-3 dB); extend the sweep to higher frequencies.")
-    i1 = jnp.argmax(below, axis=-1)  # first point below; >= 1 since point 0 is the reference
-    i0 = jnp.maximum(i1 - 1, 0)
+    i1 = xp.argmax(below, axis=-1)  # first point below; >= 1 since point 0 is the reference
+    i0 = xp.maximum(i1 - 1, 0)
 
     def take(v, i):
-        return jnp.take_along_axis(v, i[..., None], axis=-1)[..., 0]
+        return xp.take_along_axis(v, i[..., None], axis=-1)[..., 0]
 
-    lf0, lf1 = jnp.log(take(f, i0)), jnp.log(take(f, i1))
-    db0, db1 = 20 * jnp.log10(take(a, i0)), 20 * jnp.log10(take(a, i1))
-    db_t = 20 * jnp.log10(target)
+    lf0, lf1 = xp.log(take(f, i0)), xp.log(take(f, i1))
+    db0, db1 = 20 * xp.log10(take(a, i0)), 20 * xp.log10(take(a, i1))
+    db_t = 20 * xp.log10(target)
     ok = crosses & (n >= MIN_POINTS_BANDWIDTH) & (db1 < db0)
-    t = jnp.where(ok, (db_t - db0) / jnp.where(ok, db1 - db0, 1.0), 0.0)
-    f3 = jnp.exp(lf0 + t * (lf1 - lf0))
+    t = xp.where(ok, (db_t - db0) / xp.where(ok, db1 - db0, 1.0), 0.0)
+    f3 = xp.exp(lf0 + t * (lf1 - lf0))
     ph = take(p, i0) + t * (take(p, i1) - take(p, i0))
-    nan = jnp.nan
-    return RateBandwidth(bandwidth_hz=jnp.where(ok, f3, nan),
-                         phase_deg=jnp.where(ok, ph, nan) if phase_deg is not None else jnp.full_like(f3, nan),
-                         low_frequency_gain=jnp.where(n > 0, g0, nan))
+    nan = xp.nan
+    return RateBandwidth(bandwidth_hz=xp.where(ok, f3, nan),
+                         phase_deg=xp.where(ok, ph, nan) if phase_deg is not None else xp.full_like(f3, nan),
+                         low_frequency_gain=xp.where(n > 0, g0, nan))
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -442,8 +453,9 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
 
     def name(key, rows) -> str:
         dev, run, sweep = key
-        first, last = table.locate(int(rows[0])), table.locate(int(rows[-1]))
-        span = first if len(rows) == 1 else f"{first} to {last.split(': ', 1)[1]}"
+        first = table.locate(int(rows[0]), with_source=False)
+        last = table.locate(int(rows[-1]), with_source=False)
+        span = first if len(rows) == 1 else f"{first} to {last}"
         return f"device {dev!r}, run {run}, sweep {sweep!r} ({span})"
 
     # Checks with names, before any arithmetic.
@@ -474,23 +486,22 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
     for sweep in SWEEPS:
         if not any(k[2] == sweep for k in groups):
             continue
-        arr = table.to_arrays(sweep)
+        arr = SimpleNamespace(**table._padded(sweep))  # NumPy: no compilation for a report
         index = {(dev, r): (d, k) for d, dev in enumerate(arr.devices) for k, r in enumerate(arr.runs[d])}
         sig = arr.sigmas if weighted else None
         if sweep == "vcf_dynamic":
             phase = arr.aux.get("phase_deg")
             if phase is not None:
-                phase = jnp.where(jnp.isnan(phase), 0.0, phase)
+                phase = np.where(np.isnan(phase), 0.0, phase)
             try:
                 bw = rate_bandwidth(arr.inputs, arr.outputs, mask=arr.mask, phase_deg=phase)
             except DataError as e:
                 key = _first_failing_bandwidth(arr, table, groups)
                 raise DataError(f"{table.source}: {name(key, groups[key])}: {e}", source=table.source) from None
             for (dev, r), (d, k) in index.items():
-                has_phase = phase is not None and not np.isnan(
-                    np.asarray(arr.aux["phase_deg"])[d, k][np.asarray(arr.mask[d, k])]).any()
+                has_phase = phase is not None and not np.isnan(arr.aux["phase_deg"][d, k][arr.mask[d, k]]).any()
                 records[(dev, r, sweep)] = {
-                    "device": dev, "run": r, "sweep": sweep, "n_points": int(np.asarray(arr.mask[d, k]).sum()),
+                    "device": dev, "run": r, "sweep": sweep, "n_points": int(arr.mask[d, k].sum()),
                     "scale_factor": None, "bias": None, "nonlinearity_max_ppm": None,
                     "nonlinearity_rms_ppm": None, "asymmetry_ppm": None,
                     "bandwidth_hz": _num(bw.bandwidth_hz[d, k]),
@@ -502,11 +513,11 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
         vs_rate = None
         if sweep == "dac" and "rate_dps" in arr.aux:
             rate = arr.aux["rate_dps"]
-            has = arr.mask & ~jnp.isnan(rate)
-            vs_rate = fit_scale_factor(jnp.where(has, rate, 0.0), arr.outputs, mask=has, sigmas=sig,
+            has = arr.mask & ~np.isnan(rate)
+            vs_rate = fit_scale_factor(np.where(has, rate, 0.0), arr.outputs, mask=has, sigmas=sig,
                                        full_scale=full_scale)
         for (dev, r), (d, k) in index.items():
-            rec = {"device": dev, "run": r, "sweep": sweep, "n_points": int(np.asarray(arr.mask[d, k]).sum()),
+            rec = {"device": dev, "run": r, "sweep": sweep, "n_points": int(arr.mask[d, k].sum()),
                    "scale_factor": _num(fit.scale_factor[d, k]), "bias": _num(fit.bias[d, k]),
                    "nonlinearity_max_ppm": _num(fit.nonlinearity_max_ppm[d, k]),
                    "nonlinearity_rms_ppm": _num(fit.nonlinearity_rms_ppm[d, k]),
@@ -517,11 +528,11 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
                             "nonlinearity_max_ppm_vs_rate": _num(vs_rate.nonlinearity_max_ppm[d, k]),
                             "nonlinearity_rms_ppm_vs_rate": _num(vs_rate.nonlinearity_rms_ppm[d, k])})
             records[(dev, r, sweep)] = rec
-        run_mask = arr.run_mask
-        rep = repeatability(jnp.where(run_mask, fit.scale_factor, 0.0), mask=run_mask, ddof=ddof)
-        n_runs = np.asarray(run_mask).sum(axis=-1)
+        run_mask = arr.mask.any(axis=-1)
+        rep = repeatability(np.where(run_mask, fit.scale_factor, 0.0), mask=run_mask, ddof=ddof)
+        n_runs = run_mask.sum(axis=-1)
         for d, dev in enumerate(arr.devices):
-            sf = np.asarray(fit.scale_factor[d])[np.asarray(run_mask[d])]
+            sf = fit.scale_factor[d][run_mask[d]]
             device_records.append({"device": dev, "sweep": sweep, "n_runs": int(n_runs[d]),
                                    "scale_factor_mean": float(np.mean(sf)), "repeatability_ppm": _num(rep[d])})
     order = {}
