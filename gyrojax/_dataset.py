@@ -128,6 +128,9 @@ def _parse_float(cell: Any, where: _Where, i: int, column: str) -> float:
                                   "decimal number such as 12.5 or -3e-4.")
         else:
             value = float(text)
+            if not math.isfinite(value):
+                raise where.error(i, column, f"{_show(cell)} overflows float64; expected a finite number (a hex "
+                                  "DAC word belongs in a dac sweep).")
     else:
         raise where.error(i, column, f"got {type(cell).__name__} {_show(cell)}; expected a finite number.")
     if not math.isfinite(value):
@@ -735,6 +738,16 @@ def read_table(path: str | os.PathLike) -> Table:
 
 
 def _read_csv(source: str) -> tuple[dict[str, list], list[int]]:
+    try:
+        return _read_csv_text(source)
+    except UnicodeDecodeError as e:
+        raise DataError(f"{source}: not UTF-8 text (byte {e.start}: {e.reason}); save the CSV as UTF-8.",
+                        source=source) from None
+    except csv.Error as e:
+        raise DataError(f"{source}: not a readable CSV file: {e}.", source=source) from None
+
+
+def _read_csv_text(source: str) -> tuple[dict[str, list], list[int]]:
     with open(source, newline="", encoding="utf-8-sig") as f:
         reader = csv.reader(f)
         header = None
@@ -828,11 +841,21 @@ def write_table(table: Table, path: str | os.PathLike) -> None:
         else:
             os.close(fd)
             _write_parquet(table, tmp)
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the usual permissions
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def _read_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _read_umask()
 
 
 def _csv_cells(name: str, arr: np.ndarray, table: Table) -> list[str]:

@@ -408,3 +408,22 @@ def test_aggregate_refuses_too_few_and_nan():
         aggregate_samples("A", 0, "rate_table", 1.0, [0.0, 1.0, 2.0, np.nan] * 20, sample_rate_hz=10.0)
     with pytest.raises(DataError, match="unknown sweep 'rate'"):
         aggregate_samples("A", 0, "rate", 1.0, np.zeros(100), sample_rate_hz=10.0)
+
+
+def test_not_utf8(tmp_path):
+    path = tmp_path / "latin1.csv"
+    path.write_bytes((HEADER + "\nA\xb5,0,rate_table,1,2\n").encode("latin-1"))
+    with pytest.raises(DataError, match="not UTF-8 text"):
+        read_table(path)
+
+
+def test_hex_word_in_a_rate_table_row(tmp_path):
+    path = write_csv(tmp_path, [HEADER, "A,0,rate_table,29E345,1.0"])
+    with pytest.raises(DataError, match=cell(1, 2, "input") + ".*overflows float64.*belongs in a dac sweep"):
+        read_table(path)
+
+
+def test_written_file_is_readable_by_others(tmp_path):
+    path = tmp_path / "lot.parquet"
+    write_table(full_table(), path)
+    assert path.stat().st_mode & 0o777 == 0o666 & ~_dataset._UMASK
