@@ -2,8 +2,10 @@
 
 Every function takes NumPy or JAX arrays whose *last* axis runs over the points of one sweep; leading axes are
 batch axes, so the padded `(device, run, point)` arrays of [`gyrojax.SweepArrays`][] go straight in with their
-`mask`. They are pure `jax.numpy`, safe under `jit`, `vmap` and `grad` (masked entries never reach a division or
-a log).
+`mask`. They are pure functions written once for both array libraries: given any JAX array (or tracer) they
+run in `jax.numpy` and are safe under `jit`, `vmap` and `grad` (masked entries never reach a division or a log);
+given only NumPy arrays they run in NumPy, which spares a host-side report the seconds of first-call
+compilation. Results come back in the library that went in.
 
 **Too few points.** A sweep with some but too few valid points is an error: a [`gyrojax.DataError`][] when the
 mask is concrete, an `eqx.error_if` runtime error under `jit`. A *fully* masked sweep is padding and gives NaN.
