@@ -95,7 +95,7 @@ def _controls(gyro: Gyroscope, loops: Loops) -> Controls:
         e_s = _c(loops.sense_lpf[-1]) * jnp.exp(-1j * (ro.reference_phase + ro.phase_error))
         word = jnp.zeros((), dtype=complex)
         rate, quad = jnp.real(e_s), jnp.imag(e_s)
-        d_reb = jnp.zeros(2)
+        d_reb = -loops.rebalance  # unused state: relax it to zero so the steady Jacobian stays regular
     return Controls(omega, v_d, word, Outputs(rate, quad, omega), d_pll, d_agc, d_reb)
 
 
@@ -240,8 +240,15 @@ def operating_point(gyro: Gyroscope, stim: Stimulus):
                 * jnp.exp(-1j * (gyro.rebalance_loop.carrier_phase - hold_delay)))
         rebalance = _r(-word)
     else:
+        # Open loop: the sense answers quasi-statically, and its Coriolis back-action pulls the drive
+        # resonance by (Ag Om)^2 / d_y (level repulsion); start there, since a high-Q sense rings for
+        # seconds after any frequency step.
+        w = wx - (r.angular_gain * om) ** 2 / dy
+        dy = (wy**2 - w**2) / (2 * w)
+        coupling = (r.angular_gain * om + r.damping_coupling / 2 - 1j * r.stiffness_coupling / (2 * w)) * a
         Y = (-coupling - vcf / (2 * w * m)) / (gy - 1j * dy)
         rebalance = jnp.zeros(2)
+        drive_meas = gyro.drive_frontend.phasor_gain(w) * X
     sense_meas = gyro.sense_frontend.phasor_gain(w) * Y
     phase_meas = jnp.angle(drive_meas * jnp.exp(-1j * gyro.drive_loop.reference_phase))
     loops = Loops(
