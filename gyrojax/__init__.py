@@ -10,9 +10,22 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 from . import _units as units  # noqa: E402
+from ._campaign import SIMULATED_SWEEPS as SIMULATED_SWEEPS, simulate_table as simulate_table  # noqa: E402
 from ._control.drive import DriveLoop as DriveLoop  # noqa: E402
 from ._control.openloop import OpenLoopReadout as OpenLoopReadout  # noqa: E402
 from ._control.rebalance import RebalanceLoop as RebalanceLoop  # noqa: E402
+from ._dataset import (  # noqa: E402
+    OPTIONAL_COLUMNS as OPTIONAL_COLUMNS,
+    REQUIRED_COLUMNS as REQUIRED_COLUMNS,
+    SWEEPS as SWEEPS,
+    DataError as DataError,
+    SweepArrays as SweepArrays,
+    Table as Table,
+    aggregate_samples as aggregate_samples,
+    decode_dac_word as decode_dac_word,
+    read_table as read_table,
+    write_table as write_table,
+)
 from ._effects.base import AbstractEffect as AbstractEffect  # noqa: E402
 from ._effects.dac_inl import DacInl as DacInl  # noqa: E402
 from ._effects.registry import EFFECTS as EFFECTS, add_effect as add_effect, effect as effect  # noqa: E402
@@ -24,6 +37,18 @@ from ._gyroscope import (  # noqa: E402
     design_drive_loop as design_drive_loop,
     design_rebalance_loop as design_rebalance_loop,
 )
+from ._lot import ProcessSpread as ProcessSpread, make_lot as make_lot  # noqa: E402
+from ._metrics import (  # noqa: E402
+    FULL_SCALE_CONVENTIONS as FULL_SCALE_CONVENTIONS,
+    RateBandwidth as RateBandwidth,
+    ScaleFactorFit as ScaleFactorFit,
+    asymmetry as asymmetry,
+    fit_scale_factor as fit_scale_factor,
+    metrics_report as metrics_report,
+    rate_bandwidth as rate_bandwidth,
+    repeatability as repeatability,
+)
+from ._noise import RateNoise as RateNoise  # noqa: E402
 from ._physics.electrodes import (  # noqa: E402
     DriveElectrode as DriveElectrode,
     FeedbackElectrode as FeedbackElectrode,
@@ -52,6 +77,11 @@ from ._simulate.tiers import (  # noqa: E402
 )
 from ._solution import RESULTS as RESULTS  # noqa: E402
 from ._stimulus import Stimulus as Stimulus  # noqa: E402
-from ._sweeps import SEED000_RATES_DPS as SEED000_RATES_DPS, rate_sweep as rate_sweep, seed000_rates as seed000_rates  # noqa: E402
+from ._sweeps import (  # noqa: E402
+    SEED000_RATES_DPS as SEED000_RATES_DPS,
+    dac_sweep as dac_sweep,
+    rate_sweep as rate_sweep,
+    seed000_rates as seed000_rates,
+)
 
 __version__ = "0.1.0"

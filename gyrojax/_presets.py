@@ -12,6 +12,7 @@ from ._electronics.dac import DAC
 from ._electronics.excitation import FTRExcitation
 from ._electronics.frontend import FrontEnd
 from ._gyroscope import Gyroscope, design_drive_loop, design_rebalance_loop
+from ._lot import as_arrays
 from ._physics.electrodes import DriveElectrode, FeedbackElectrode, VirtualCoriolisElectrode
 from ._physics.resonator import Resonator
 from ._units import DEG, hz_to_rad_s
@@ -94,7 +95,7 @@ def paper_qmg(**resonator_overrides) -> Gyroscope:
                                    demod_cutoff=hz_to_rad_s(1000.0))
     rebalance = design_rebalance_loop(resonator, feedback, excitation, sense_frontend,
                                       bandwidth=hz_to_rad_s(100.0), demod_cutoff=hz_to_rad_s(1000.0))
-    return Gyroscope(
+    return as_arrays(Gyroscope(
         resonator=resonator,
         drive_electrode=drive_electrode,
         drive_frontend=drive_frontend,
@@ -104,7 +105,7 @@ def paper_qmg(**resonator_overrides) -> Gyroscope:
         excitation=excitation,
         rebalance_loop=rebalance,
         name="paper-qmg",
-    )
+    ))
 
 
 # --- seed 003 (vcf-2018) ------------------------------------------------------------------------------
@@ -152,7 +153,7 @@ def vcf_2018(**resonator_overrides) -> Gyroscope:
     # ASSUMPTION: the 2 kHz output LPF as two first-order stages.
     readout = OpenLoopReadout(demod_cutoff=hz_to_rad_s(VCF_LPF_HZ), reference_phase=coriolis_phase,
                               demod_order=2)
-    return Gyroscope(
+    return as_arrays(Gyroscope(
         resonator=resonator,
         drive_electrode=drive_electrode,
         drive_frontend=drive_frontend,
@@ -161,7 +162,7 @@ def vcf_2018(**resonator_overrides) -> Gyroscope:
         readout=readout,
         vcf_electrode=VirtualCoriolisElectrode(VCF_KSVF),
         name="vcf-2018",
-    )
+    ))
 
 
 PRESETS = {"paper-qmg": paper_qmg, "vcf-2018": vcf_2018}

@@ -46,3 +46,22 @@ def rate_sweep(gyro: Gyroscope, rates, *, tier: AbstractTier = Steady(), times=N
 def seed000_rates():
     """Seed 000's 22 table rates in rad/s."""
     return jnp.asarray(SEED000_RATES_DPS) * DEG
+
+
+def _dac_fundamental(gyro, word):
+    """Signed carrier-fundamental amplitude (V) of the DAC output for a sine of amplitude `word` LSB."""
+    dac = gyro.excitation.dac
+    n = max(gyro.phase_points, 256)
+    theta = 2.0 * jnp.pi * jnp.arange(n) / n
+    hold_gain, _ = dac.hold(gyro.resonator.omega_x)
+    v = dac(word * jnp.sin(theta)) * hold_gain
+    return 2.0 * jnp.mean(v * jnp.sin(theta))
+
+
+def dac_sweep(gyro: Gyroscope, words):
+    """Seed 000 Table 2's experiment: the FTR DAC fed with carrier sines of the given word amplitudes
+    (LSB of the 24-bit word, signed), returning the measured AC amplitude (V) at the DAC output: the
+    signed fundamental, including the hold's gain. Closed-loop devices only."""
+    if not gyro.closed_loop:
+        raise ValueError(f"dac_sweep needs a closed-loop device with an FTR DAC; {gyro.name!r} is open loop.")
+    return jax.vmap(lambda w: _dac_fundamental(gyro, w))(jnp.asarray(words, dtype=float))

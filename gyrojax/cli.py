@@ -1,0 +1,133 @@
+"""The `gyrojax` command line (DESIGN.md §7).
+
+Exit codes: 0 success; 1 a computation failed (a point did not settle, a fit did not converge);
+2 a usage or data error (bad argument, unreadable or invalid file) - reported without a traceback.
+"""
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+
+
+def _write_json(obj, path):
+    """Write JSON atomically: a temporary file beside `path`, then os.replace."""
+    directory = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{os.path.basename(path)}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(obj, f, indent=2, allow_nan=False, default=float)
+            f.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _parse_effect(text):
+    name, _, scale = text.partition("=")
+    if not name:
+        raise argparse.ArgumentTypeError(f"--effect expects NAME or NAME=SCALE, got {text!r}")
+    try:
+        return name, float(scale) if scale else 1.0
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--effect {text!r}: SCALE must be a number, got {scale!r}") from None
+
+
+def _sweep_list(text):
+    return tuple(s.strip() for s in text.split(",") if s.strip())
+
+
+def _cmd_simulate(args):
+    import gyrojax as gj
+    from ._campaign import simulate_table
+    from ._dataset import write_table
+
+    tiers = {"steady": gj.Steady(), "averaged": gj.Averaged(), "full": gj.FullWaveform()}
+    gyro = gj.preset(args.preset)
+    for name, scale in args.effect:
+        gyro = gj.add_effect(gyro, name, scale)
+    table = simulate_table(gyro, devices=args.devices, runs=args.runs, sweeps=args.sweeps,
+                           tier=tiers[args.tier], noise_free=args.noise_free, seed=args.seed)
+    write_table(table, args.out)
+    print(f"wrote {len(table)} points ({args.devices} device(s) x {args.runs} run(s), sweeps "
+          f"{', '.join(args.sweeps)}, tier {args.tier}) to {args.out}")
+    return EXIT_OK
+
+
+def _cmd_metrics(args):
+    from ._dataset import read_table
+    from ._metrics import metrics_report
+
+    report = metrics_report(read_table(args.data))
+    for p in report["points"]:
+        if p.get("scale_factor") is None:
+            continue
+        print(f"{p['device']:>16} run {p['run']:<3} {p['sweep']:<11} SF {p['scale_factor']:.6g}  "
+              f"NL max {p['nonlinearity_max_ppm']:.1f} ppm  rms {p['nonlinearity_rms_ppm']:.1f} ppm")
+    for d in report["devices"]:
+        if d.get("repeatability_ppm") is not None:
+            print(f"{d['device']:>16} {d['sweep']:<11} repeatability {d['repeatability_ppm']:.2f} ppm "
+                  f"over {d['n_runs']} runs")
+    if args.json:
+        _write_json(report, args.json)
+        print(f"wrote {args.json}")
+    return EXIT_OK
+
+
+def build_parser():
+    from ._presets import PRESETS
+
+    parser = argparse.ArgumentParser(
+        prog="gyrojax",
+        description="Differentiable simulation and identification of MEMS Coriolis vibratory gyroscopes. "
+                    "Data files are the tidy table of DESIGN.md §6 (CSV or Parquet): rates in deg/s, "
+                    "gyro outputs in LSB, DAC amplitudes in V.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    sim = sub.add_parser("simulate", help="simulate a lot of devices on rate-table / DAC sweeps",
+                         description="Simulate sweeps of a preset device (or a lot around it) and write "
+                                     "them in the tidy data format.")
+    sim.add_argument("--preset", required=True, choices=sorted(PRESETS),
+                     help="paper-qmg: seed 000's closed-loop QMG; vcf-2018: seed 003's open-loop gyro")
+    sim.add_argument("--devices", type=int, default=1, help="lot size (default 1: the nominal device)")
+    sim.add_argument("--runs", type=int, default=1, help="repeated runs per device (default 1)")
+    sim.add_argument("--sweeps", type=_sweep_list, default=("rate_table",),
+                     help="comma-separated: rate_table, dac (default rate_table)")
+    sim.add_argument("--tier", choices=("steady", "averaged", "full"), default="steady",
+                     help="simulation tier for settled points (default steady; full is the slow ground truth)")
+    sim.add_argument("--effect", type=_parse_effect, action="append", default=[], metavar="NAME[=SCALE]",
+                     help="add a physical effect at its typical size times SCALE (repeatable); e.g. dac_inl=2")
+    sim.add_argument("--noise-free", action="store_true", help="no measurement noise, no turn-on bias")
+    sim.add_argument("--seed", type=int, default=0, help="PRNG seed for the lot and the noise (default 0)")
+    sim.add_argument("--out", required=True, help="output file, .csv or .parquet")
+    sim.set_defaults(func=_cmd_simulate)
+
+    met = sub.add_parser("metrics", help="scale factor, nonlinearity, asymmetry, repeatability of a data file",
+                         description="Scale-factor metrics of every device/run/sweep of a data file.")
+    met.add_argument("data", help="a tidy data file (.csv or .parquet)")
+    met.add_argument("--json", help="write the report as JSON here")
+    met.set_defaults(func=_cmd_metrics)
+    return parser
+
+
+def main(argv=None):
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except (ValueError, FileNotFoundError, IsADirectoryError, PermissionError) as e:
+        print(f"gyrojax {args.command}: error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except RuntimeError as e:
+        print(f"gyrojax {args.command}: failed: {e}", file=sys.stderr)
+        return EXIT_FAILED
+
+
+if __name__ == "__main__":
+    sys.exit(main())
