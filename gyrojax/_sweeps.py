@@ -52,7 +52,7 @@ def _dac_fundamental(gyro, word):
     """Signed carrier-fundamental amplitude (V) of the DAC output for a sine of amplitude `word` LSB."""
     dac = gyro.excitation.dac
     n = max(gyro.phase_points, 256)
-    theta = 2.0 * jnp.pi * jnp.arange(n) / n
+    theta = 2.0 * jnp.pi * jnp.arange(n, dtype=float) / n
     hold_gain, _ = dac.hold(gyro.resonator.omega_x)
     v = dac(word * jnp.sin(theta)) * hold_gain
     return 2.0 * jnp.mean(v * jnp.sin(theta))

@@ -1,6 +1,7 @@
 """Force-to-rebalance loop: a complex PI that nulls both the rate and the quadrature sense motion."""
 
 import equinox as eqx
+import jax.numpy as jnp
 
 from .._checks import check_finite, check_nonnegative, check_positive
 
@@ -42,4 +43,5 @@ class RebalanceLoop(eqx.Module):
 
     def control(self, e_s, z):
         """`(word, dz)` from the sense phasor and the (complex) integrator state."""
-        return -(self.kp * e_s + z), self.ki * e_s - self.leak * z
+        kp, ki, leak = (jnp.asarray(v).astype(e_s.dtype) for v in (self.kp, self.ki, self.leak))
+        return -(kp * e_s + z), ki * e_s - leak * z

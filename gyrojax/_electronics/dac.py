@@ -67,7 +67,7 @@ class DAC(eqx.Module):
 
     def inl_lsb(self, u):
         """INL in DAC LSB at normalised code u = c / 2^(bits-1)."""
-        powers = jnp.arange(self.inl.shape[0]) + 2
+        powers = jnp.arange(self.inl.shape[0], dtype=float) + 2.0
         return jnp.sum(self.inl * jnp.asarray(u)[..., None] ** powers, axis=-1)
 
     def _dnl_lsb(self, code):

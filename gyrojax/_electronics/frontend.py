@@ -38,8 +38,8 @@ class FrontEnd(eqx.Module):
         """Complex LSB per metre of displacement phasor at angular frequency `omega`."""
         g = self.gain * self.current_per_velocity / self.adc_lsb
         if self.kind == "charge":
-            return jnp.asarray(g, dtype=complex) + 0.0 * omega
-        return 1j * omega * g
+            return jnp.asarray(g * jnp.ones_like(omega), dtype=complex)
+        return jnp.asarray(omega * g, dtype=complex) * 1j
 
     def sample(self, displacement, velocity):
         """Instantaneous output, LSB."""

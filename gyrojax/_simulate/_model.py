@@ -28,7 +28,20 @@ from .._stimulus import Stimulus
 
 
 def _c(v):
-    return v[..., 0] + 1j * v[..., 1]
+    return jax.lax.complex(v[..., 0], v[..., 1])
+
+
+def _cx(x):
+    """A real array as complex (gyrojax runs with strict dtype promotion)."""
+    return jnp.asarray(x).astype(jnp.complex128)
+
+
+def _cj(re, im):
+    return jax.lax.complex(jnp.asarray(re, dtype=float), jnp.asarray(im, dtype=float))
+
+
+def _expj(phase):
+    return jax.lax.complex(jnp.cos(phase), jnp.sin(phase))
 
 
 def _r(z):
@@ -82,17 +95,17 @@ class Controls(eqx.Module):
 
 def _controls(gyro: Gyroscope, loops: Loops) -> Controls:
     dl = gyro.drive_loop
-    e_d = _c(loops.drive_lpf[-1]) * jnp.exp(-1j * dl.reference_phase)
+    e_d = _c(loops.drive_lpf[-1]) * _expj(-dl.reference_phase)
     omega, v_d, d_pll, d_agc = dl.control(e_d, loops.pll, loops.agc)
     if gyro.closed_loop:
         rl = gyro.rebalance_loop
-        e_s = _c(loops.sense_lpf[-1]) * jnp.exp(-1j * rl.reference_phase)
+        e_s = _c(loops.sense_lpf[-1]) * _expj(-rl.reference_phase)
         word, dz = rl.control(e_s, _c(loops.rebalance))
         rate, quad = jnp.real(word), jnp.imag(word)
         d_reb = _r(dz)
     else:
         ro = gyro.readout
-        e_s = _c(loops.sense_lpf[-1]) * jnp.exp(-1j * (ro.reference_phase + ro.phase_error))
+        e_s = _c(loops.sense_lpf[-1]) * _expj(-(ro.reference_phase + ro.phase_error))
         word = jnp.zeros((), dtype=complex)
         rate, quad = jnp.real(e_s), jnp.imag(e_s)
         d_reb = -loops.rebalance  # unused state: relax it to zero so the steady Jacobian stays regular
@@ -103,7 +116,7 @@ def _lpf(cutoff, stages, signal):
     """Cascaded first-order low-pass stages on a complex signal; `stages` is (order, re/im)."""
     z = _c(stages)
     inputs = jnp.concatenate([jnp.reshape(signal, (1,)), z[:-1]])
-    return _r(cutoff * (inputs - z))
+    return _r(_cx(cutoff) * (inputs - z))
 
 
 def _sense_demod(gyro):
@@ -125,7 +138,7 @@ def _dac_voltage(gyro, word, carrier_phase, omega):
     """Instantaneous DAC output (after the hold's fundamental gain) for the carrier phase(s) given."""
     dac = gyro.excitation.dac
     hold_gain, hold_delay = dac.hold(omega)
-    sample = jnp.real(1j * word * jnp.exp(1j * (carrier_phase + gyro.rebalance_loop.carrier_phase - hold_delay)))
+    sample = jnp.real(1j * word * _expj(carrier_phase + gyro.rebalance_loop.carrier_phase - hold_delay))
     return dac(sample) * hold_gain
 
 
@@ -140,13 +153,13 @@ def _sense_force(gyro, y, word, carrier_phase, omega):
 
 
 def _phase_grid(n):
-    return 2.0 * jnp.pi * jnp.arange(n) / n
+    return 2.0 * jnp.pi * jnp.arange(n, dtype=float) / n
 
 
 def sense_force_fundamental(gyro, sense_phasor, word, omega, omega_y):
     """Fundamental phasor (N) and DC deflection (m) of the sense force, by quadrature over the phase."""
     theta = _phase_grid(gyro.phase_points)
-    wave = jnp.real(sense_phasor * jnp.exp(1j * theta))
+    wave = jnp.real(sense_phasor * _expj(theta))
     stiffness = gyro.resonator.mass * omega_y**2
 
     def deflect(y0, _):
@@ -154,7 +167,7 @@ def sense_force_fundamental(gyro, sense_phasor, word, omega, omega_y):
 
     y0, _ = jax.lax.scan(deflect, jnp.zeros(()), None, length=3)
     force = _sense_force(gyro, y0 + wave, word, theta, omega)
-    return 2.0 * jnp.mean(force * jnp.exp(-1j * theta)), y0
+    return 2.0 * jnp.mean(_cx(force) * _expj(-theta)), y0
 
 
 def averaged_field(t, state: SlowState, gyro: Gyroscope, stim: Stimulus):
@@ -171,13 +184,14 @@ def averaged_field(t, state: SlowState, gyro: Gyroscope, stim: Stimulus):
     dx, dy = (wx**2 - w**2) / (2 * w), (wy**2 - w**2) / (2 * w)
     c, kap, ag = r.damping_coupling, r.stiffness_coupling, r.angular_gain
 
-    f_x = (1j * gyro.drive_electrode.force(ctl.drive_voltage)
-           - 0.75 * m * r.duffing_x * jnp.abs(X) ** 2 * X)
+    f_x = (_cj(0.0, gyro.drive_electrode.force(ctl.drive_voltage))
+           - _cx(0.75 * m * r.duffing_x * jnp.abs(X) ** 2) * X)
     f_y, _ = sense_force_fundamental(gyro, Y, ctl.word, w, wy)
-    f_y = f_y - 1j * gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t)
+    f_y = f_y - _cj(0.0, gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t))
 
-    dX = -(gx - 1j * dx) * X + (ag * om - c / 2 + 1j * kap / (2 * w)) * Y + f_x / (2j * w * m)
-    dY = -(gy - 1j * dy) * Y - (ag * om + c / 2 - 1j * kap / (2 * w)) * X + f_y / (2j * w * m)
+    force_gain = _cj(0.0, 2 * w * m)
+    dX = -_cj(gx, -dx) * X + _cj(ag * om - c / 2, kap / (2 * w)) * Y + f_x / force_gain
+    dY = -_cj(gy, -dy) * Y - _cj(ag * om + c / 2, -kap / (2 * w)) * X + f_y / force_gain
 
     drive_demod = gyro.drive_frontend.phasor_gain(w) * X
     sense_demod = gyro.sense_frontend.phasor_gain(w) * Y
@@ -205,9 +219,9 @@ def full_field(t, state: WaveState, gyro: Gyroscope, stim: Stimulus):
     ay = f_y / m - (wy / qy) * vy - wy**2 * y - c * vx - kap * x - 2 * ag * om * vx
 
     # Demodulation: 2 v cos(theta) and -2 v sin(theta) are the phasor's re/im parts plus 2w ripple.
-    carrier = 2.0 * jnp.exp(-1j * theta)
-    drive_demod = gyro.drive_frontend.sample(x, vx) * carrier
-    sense_demod = gyro.sense_frontend.sample(y, vy) * carrier
+    carrier = 2.0 * _expj(-theta)
+    drive_demod = _cx(gyro.drive_frontend.sample(x, vx)) * carrier
+    sense_demod = _cx(gyro.sense_frontend.sample(y, vy)) * carrier
     dloops = _loop_derivatives(gyro, state.loops, ctl, drive_demod, sense_demod)
     return (WaveState(jnp.stack([vx, ax]), jnp.stack([vy, ay]), ctl.omega, dloops), ctl.outputs)
 
@@ -224,20 +238,20 @@ def operating_point(gyro: Gyroscope, stim: Stimulus):
     w = wx
     m = r.mass
     a = gyro.drive_amplitude(w)
-    X = a + 0j
+    X = _cx(a)
     om = stim.rate_at(0.0)
     vcf = gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(0.0)
     gx, gy = wx / (2 * qx), wy / (2 * qy)
     dy = (wy**2 - w**2) / (2 * w)
-    coupling = (r.angular_gain * om + r.damping_coupling / 2 - 1j * r.stiffness_coupling / (2 * w)) * a
+    coupling = _cj((r.angular_gain * om + r.damping_coupling / 2) * a, -r.stiffness_coupling * a / (2 * w))
     v_d = 2 * w * m * gx * a / gyro.drive_electrode.force_per_volt
     drive_meas = gyro.drive_frontend.phasor_gain(w) * X
     if gyro.closed_loop:
         Y = jnp.zeros((), dtype=complex)
         _, hold_delay = gyro.excitation.dac.hold(w)
-        needed = coupling + vcf / (2 * w * m)
-        word = (needed * 2 * w * m / gyro.rebalance_gain(w)
-                * jnp.exp(-1j * (gyro.rebalance_loop.carrier_phase - hold_delay)))
+        needed = coupling + _cx(vcf / (2 * w * m))
+        word = (needed * _cx(2 * w * m / gyro.rebalance_gain(w))
+                * _expj(-(gyro.rebalance_loop.carrier_phase - hold_delay)))
         rebalance = _r(-word)
     else:
         # Open loop: the sense answers quasi-statically, and its Coriolis back-action pulls the drive
@@ -245,12 +259,12 @@ def operating_point(gyro: Gyroscope, stim: Stimulus):
         # seconds after any frequency step.
         w = wx - (r.angular_gain * om) ** 2 / dy
         dy = (wy**2 - w**2) / (2 * w)
-        coupling = (r.angular_gain * om + r.damping_coupling / 2 - 1j * r.stiffness_coupling / (2 * w)) * a
-        Y = (-coupling - vcf / (2 * w * m)) / (gy - 1j * dy)
+        coupling = _cj((r.angular_gain * om + r.damping_coupling / 2) * a, -r.stiffness_coupling * a / (2 * w))
+        Y = (-coupling - _cx(vcf / (2 * w * m))) / _cj(gy, -dy)
         rebalance = jnp.zeros(2)
         drive_meas = gyro.drive_frontend.phasor_gain(w) * X
     sense_meas = gyro.sense_frontend.phasor_gain(w) * Y
-    phase_meas = jnp.angle(drive_meas * jnp.exp(-1j * gyro.drive_loop.reference_phase))
+    phase_meas = jnp.angle(drive_meas * _expj(-gyro.drive_loop.reference_phase))
     loops = Loops(
         pll=w - gyro.drive_loop.center_frequency - gyro.drive_loop.pll_kp * phase_meas,
         agc=jnp.asarray(v_d, dtype=float),
@@ -265,8 +279,8 @@ def wave_from_slow(state: SlowState, omega):
     """Carrier-level state at phase 0 with the envelopes of `state`."""
     X, Y = _c(state.drive), _c(state.sense)
     return WaveState(
-        drive=jnp.stack([jnp.real(X), jnp.real(1j * omega * X)]),
-        sense=jnp.stack([jnp.real(Y), jnp.real(1j * omega * Y)]),
+        drive=jnp.stack([jnp.real(X), -omega * jnp.imag(X)]),
+        sense=jnp.stack([jnp.real(Y), -omega * jnp.imag(Y)]),
         phase=jnp.zeros(()),
         loops=state.loops,
     )

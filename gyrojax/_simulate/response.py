@@ -30,7 +30,9 @@ class StateSpace(eqx.Module):
         eye = jnp.eye(self.a.shape[0])
 
         def one(wi):
-            return self.c @ jnp.linalg.solve(1j * wi * eye - self.a, self.b.astype(complex)) + self.d
+            lhs = jax.lax.complex(-self.a, wi * eye)
+            rhs = self.b.astype(jnp.complex128)
+            return self.c.astype(jnp.complex128) @ jnp.linalg.solve(lhs, rhs) + self.d.astype(jnp.complex128)
 
         return jax.vmap(one)(jnp.ravel(w)).reshape(w.shape)
 
