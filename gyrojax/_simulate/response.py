@@ -38,11 +38,17 @@ class StateSpace(eqx.Module):
 
 
 def linearise(gyro: Gyroscope, stimulus: Stimulus = Stimulus(), *, input: str = "rate") -> StateSpace:
+    """Linearise the averaged model at the steady state under `stimulus` (see `frequency_response`)."""
+    if input not in _INPUTS:
+        raise ValueError(f"input must be one of {_INPUTS}, got {input!r}.")
+    return _linearise(gyro, stimulus, input)
+
+
+@eqx.filter_jit
+def _linearise(gyro, stimulus, input):
     """Linearise the averaged model at the steady state under `stimulus`, with respect to a small extra
     table rate (`input="rate"`, per rad/s) or virtual-Coriolis drive (`input="vcf"`, per V^2 of
     V_ac V_fc), with the rate output in LSB."""
-    if input not in _INPUTS:
-        raise ValueError(f"input must be one of {_INPUTS}, got {input!r}.")
     settled = Steady().settle(gyro, stimulus)
     scales = slow_scales(gyro)
     z0, unravel = ravel_pytree(jax.tree.map(lambda s, x: s / x, settled.state, scales))
@@ -87,9 +93,12 @@ def bandwidth(gyro: Gyroscope, stimulus: Stimulus = Stimulus(), *, input: str = 
     refines it by bisection. Raises if the response never falls that far.
     """
     ss = linearise(gyro, stimulus, input=input)
+    a, b, c, d = (np.asarray(m) for m in (ss.a, ss.b, ss.c, ss.d))
+    eye = np.eye(a.shape[0])
 
     def gain(f_hz):
-        return np.abs(np.asarray(ss.response(2 * np.pi * np.asarray(f_hz, dtype=float))))
+        w = 2 * np.pi * np.atleast_1d(np.asarray(f_hz, dtype=float))
+        return np.abs(np.array([c @ np.linalg.solve(1j * wi * eye - a, b) + d for wi in w]))
 
     f = np.geomspace(0.1, f_max_hz, 4000)
     h = gain(f)
