@@ -13,16 +13,14 @@ Seed 003 (open-loop gyro):
 """
 
 import argparse
-import json
 import math
-import os
 import sys
-import tempfile
 
 import numpy as np
 
 import gyrojax as gj
 from gyrojax import _presets as P
+from gyrojax._io import atomic_write_json
 from gyrojax._units import DEG, hz_to_rad_s
 
 
@@ -80,14 +78,6 @@ def seed003():
     }
 
 
-def _write_json(obj, path):
-    d = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=d, suffix=".tmp")
-    with os.fdopen(fd, "w") as f:
-        json.dump(obj, f, indent=2)
-    os.replace(tmp, path)
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", help="also write the numbers here")
@@ -116,7 +106,7 @@ def main(argv=None):
     print(f"  Eq. (7) virtual rate at V_ac = 20 mV, V_fc = 1 V: {s3['vcf_equivalent_rate_dps_20mV_kg']:.0f} deg/s "
           f"with m_d in kg ({s3['vcf_equivalent_rate_dps_20mV_if_mass_in_grams']:.3g} deg/s if 'g' were meant)")
     if args.json:
-        _write_json({"seed000": s0, "seed003": s3, "versions": {"gyrojax": gj.__version__}}, args.json)
+        atomic_write_json({"seed000": s0, "seed003": s3, "versions": {"gyrojax": gj.__version__}}, args.json)
     return {"seed000": s0, "seed003": s3}
 
 

@@ -12,24 +12,12 @@ Writes `report.md`, `summary.json` and PNG plots into the output folder (each fi
 
 import json
 import os
-import tempfile
 import time
 from importlib import resources
 
 import numpy as np
 
-
-def _atomic_write(path, data: bytes):
-    d = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=d, prefix=f".{os.path.basename(path)}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+from ._io import atomic_write_bytes
 
 
 def _save_figure(fig, path):
@@ -37,7 +25,7 @@ def _save_figure(fig, path):
 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-    _atomic_write(path, buf.getvalue())
+    atomic_write_bytes(path, buf.getvalue())
 
 
 def table2_path():
@@ -139,8 +127,8 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print) -> dict:
     plt.close(fig)
 
     summary["seconds"] = time.perf_counter() - t0
-    _atomic_write(os.path.join(out_dir, "summary.json"), json.dumps(summary, indent=2).encode())
-    _atomic_write(os.path.join(out_dir, "report.md"), _report(summary).encode())
+    atomic_write_bytes(os.path.join(out_dir, "summary.json"), json.dumps(summary, indent=2).encode())
+    atomic_write_bytes(os.path.join(out_dir, "report.md"), _report(summary).encode())
     log(f"wrote report.md, summary.json and 2 plots to {out_dir} in {summary['seconds']:.0f} s")
     return summary
 

@@ -5,28 +5,12 @@ Exit codes: 0 success; 1 a computation failed (a point did not settle, a fit did
 """
 
 import argparse
-import json
-import os
 import sys
-import tempfile
+
+from ._io import atomic_write_json
 
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
-
-
-def _write_json(obj, path):
-    """Write JSON atomically: a temporary file beside `path`, then os.replace."""
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{os.path.basename(path)}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(obj, f, indent=2, allow_nan=False, default=float)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def _parse_effect(text):
@@ -75,7 +59,7 @@ def _cmd_metrics(args):
             print(f"{d['device']:>16} {d['sweep']:<11} repeatability {d['repeatability_ppm']:.2f} ppm "
                   f"over {d['n_runs']} runs")
     if args.json:
-        _write_json(report, args.json)
+        atomic_write_json(report, args.json)
         print(f"wrote {args.json}")
     return EXIT_OK
 

@@ -52,3 +52,15 @@ def test_user_errors_exit_2_without_traceback(tmp_path, monkeypatch, capsys, arg
     assert message in err
     assert "Traceback" not in err
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_demo_writes_its_report(tmp_path):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--no-full"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["table2"]["rate"]["rms_ppm"] == pytest.approx(465.3, abs=0.5)
+    tiers = summary["tiers"]
+    assert abs(tiers["averaged"]["scale_factor_lsb_per_dps"] / tiers["steady"]["scale_factor_lsb_per_dps"] - 1) < 1e-6
+    assert summary["seed003"]["bandwidth_model_hz"] == pytest.approx(96.8, abs=0.5)
+    for name in ("report.md", "nonlinearity_tiers.png", "vcf2018_rate_response.png"):
+        assert (out / name).stat().st_size > 0
