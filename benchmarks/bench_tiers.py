@@ -23,12 +23,10 @@ Timings are best-of-N wall clock after compilation (compile time reported on its
 import argparse
 import cmath
 import datetime
-import json
 import math
 import os
 import platform
 import sys
-import tempfile
 import time
 
 import jax
@@ -46,6 +44,7 @@ import scipy  # noqa: E402
 from jax.flatten_util import ravel_pytree  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
+from gyrojax._io import atomic_write_json  # noqa: E402
 from gyrojax._physics.thermal import ConstantTemperature  # noqa: E402
 from gyrojax._presets import paper_qmg  # noqa: E402
 from gyrojax._simulate._model import (  # noqa: E402
@@ -126,19 +125,9 @@ def _compile(fn, *args):
 
 
 def _write_json(path, payload):
-    """Atomic write: a temporary file in the target folder, then os.replace."""
-    folder = os.path.dirname(os.path.abspath(path))
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".bench_tiers.", suffix=".json.tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(payload, f, indent=2, sort_keys=False)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    """Atomic write (gyrojax's own helper): a temporary file in the target folder, then os.replace."""
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    atomic_write_json(payload, path)
 
 
 def _table(rows, headers):
