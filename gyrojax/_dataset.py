@@ -23,7 +23,6 @@ import os
 import re
 import tempfile
 from collections.abc import Iterable, Mapping, Sequence
-from types import MappingProxyType
 from typing import Any, final
 
 import equinox as eqx

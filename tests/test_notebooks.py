@@ -1,6 +1,5 @@
 """The research notebooks run end to end at small sizes."""
 
-import os
 import pathlib
 
 import nbformat

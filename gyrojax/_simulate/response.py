@@ -36,6 +36,25 @@ class StateSpace(eqx.Module):
 
         return jax.vmap(one)(jnp.ravel(w)).reshape(w.shape)
 
+    def bandwidth(self, f_max_hz: float = 5000.0) -> float:
+        """-3 dB bandwidth (Hz) relative to the DC response.
+
+        Scans a log grid from 0.1 Hz to `f_max_hz` for the first crossing below 1/sqrt(2) of the DC gain and
+        refines it by bisection. Raises if the response never falls that far.
+        """
+        f = np.geomspace(0.1, f_max_hz, 4000)
+        h = np.asarray(_gain_hz(self, jnp.asarray(f)))
+        level = float(_gain_hz(self, jnp.zeros(1))[0]) / np.sqrt(2.0)
+        below = np.nonzero(h < level)[0]
+        if below.size == 0:
+            raise ValueError(f"bandwidth: the response never falls 3 dB below DC up to {f_max_hz} Hz; "
+                             "raise f_max_hz.")
+        lo, hi = (f[below[0] - 1], f[below[0]]) if below[0] > 0 else (0.0, f[0])
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if float(_gain_hz(self, jnp.full((1,), mid))[0]) >= level else (lo, mid)
+        return 0.5 * (lo + hi)
+
 
 def linearise(gyro: Gyroscope, stimulus: Stimulus = Stimulus(), *, input: str = "rate") -> StateSpace:
     """Linearise the averaged model at the steady state under `stimulus` (see `frequency_response`)."""
@@ -87,28 +106,10 @@ def frequency_response(gyro: Gyroscope, frequencies, stimulus: Stimulus = Stimul
 
 def bandwidth(gyro: Gyroscope, stimulus: Stimulus = Stimulus(), *, input: str = "rate",
               f_max_hz: float = 5000.0) -> float:
-    """-3 dB bandwidth (Hz) of the rate output relative to its DC response.
+    """-3 dB bandwidth (Hz) of the rate output relative to its DC response (see `StateSpace.bandwidth`)."""
+    return linearise(gyro, stimulus, input=input).bandwidth(f_max_hz)
 
-    Scans a log grid from 0.1 Hz to `f_max_hz` for the first crossing below 1/sqrt(2) of the DC gain and
-    refines it by bisection. Raises if the response never falls that far.
-    """
-    ss = linearise(gyro, stimulus, input=input)
-    a, b, c, d = (np.asarray(m) for m in (ss.a, ss.b, ss.c, ss.d))
-    eye = np.eye(a.shape[0])
 
-    def gain(f_hz):
-        w = 2 * np.pi * np.atleast_1d(np.asarray(f_hz, dtype=float))
-        return np.abs(np.array([c @ np.linalg.solve(1j * wi * eye - a, b) + d for wi in w]))
-
-    f = np.geomspace(0.1, f_max_hz, 4000)
-    h = gain(f)
-    h0 = float(gain(np.zeros(1))[0])
-    below = np.nonzero(h < h0 / np.sqrt(2.0))[0]
-    if below.size == 0:
-        raise ValueError(f"bandwidth: the {input} response never falls 3 dB below DC up to {f_max_hz} Hz; "
-                         "raise f_max_hz.")
-    lo, hi = (f[below[0] - 1], f[below[0]]) if below[0] > 0 else (0.0, f[0])
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if gain(np.array([mid]))[0] >= h0 / np.sqrt(2.0) else (lo, mid)
-    return 0.5 * (lo + hi)
+@eqx.filter_jit
+def _gain_hz(ss: StateSpace, f_hz):
+    return jnp.abs(ss.response(2 * jnp.pi * f_hz))
