@@ -1,0 +1,70 @@
+"""The measurement model: what each sweep kind of DESIGN.md §6 reads from a device.
+
+One function per sweep, for one device and a vector of points, noise-free and without the per-run bias (the
+turn-on bias belongs to the run, not to the device). The simulator (`simulate_table`) adds noise to these
+predictions and identification fits them, so data and model can never disagree about what a column means.
+
+Each point is evaluated at its own die temperature (the `temperature_c` column): the device's temperature
+history is replaced by a constant at that temperature, since a settled point sees the temperature of its
+dwell. A NaN temperature means "not recorded" and falls back to the device's own history at power-on.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ._gyroscope import Gyroscope
+from ._physics.thermal import ConstantTemperature
+from ._simulate.response import _linearise
+from ._simulate.tiers import AbstractTier, Settled, Steady
+from ._stimulus import Stimulus
+from ._units import DEG
+
+
+VCF_CARRIER_V = 1.0
+"""V, seed 003 §3: "Vfc = 1 V", the fixed carrier of the virtual-Coriolis multiplier."""
+
+VCF_DYNAMIC_AMPLITUDE_V = 0.02
+"""V, seed 003 §3: "Vac = 20 mV", the virtual-rate voltage of the dynamic (swept-frequency) test."""
+
+
+def at_temperature(gyro: Gyroscope, temperature) -> Gyroscope:
+    """`gyro` held at `temperature` (deg C); NaN keeps the device's own temperature at power-on."""
+    t = jnp.asarray(temperature, dtype=float)
+    t = jnp.where(jnp.isnan(t), gyro.temperature(0.0), t)
+    return eqx.tree_at(lambda g: g.temperature, gyro, ConstantTemperature(t))
+
+
+def rate_table_points(gyro: Gyroscope, rates_dps, temperatures, tier: AbstractTier = Steady()) -> Settled:
+    """Settled rate-table points: table rates in deg/s, one die temperature (deg C) per point."""
+    def one(rate, temp):
+        return tier.settle(at_temperature(gyro, temp), Stimulus(rate=rate * DEG))
+
+    return jax.vmap(one)(jnp.asarray(rates_dps, dtype=float), jnp.asarray(temperatures, dtype=float))
+
+
+def vcf_static_points(gyro: Gyroscope, amplitudes_v, temperatures, tier: AbstractTier = Steady(),
+                      carrier_v=VCF_CARRIER_V) -> Settled:
+    """Settled static virtual-Coriolis points (seed 003 Eq. 7): the virtual-rate voltage V_ac (V, signed)
+    times the fixed carrier V_fc, one die temperature per point."""
+    def one(v, temp):
+        return tier.settle(at_temperature(gyro, temp), Stimulus(vcf_ac=v, vcf_fc=carrier_v))
+
+    return jax.vmap(one)(jnp.asarray(amplitudes_v, dtype=float), jnp.asarray(temperatures, dtype=float))
+
+
+def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz, temperature, amplitude_v=VCF_DYNAMIC_AMPLITUDE_V,
+                       carrier_v=VCF_CARRIER_V):
+    """Dynamic virtual-Coriolis test (seed 003 Eq. 6): the rate output's amplitude (LSB) and phase (deg)
+    for V_ac = `amplitude_v` modulated at each frequency (Hz), from the averaged model linearised at rest at
+    one die `temperature` (deg C)."""
+    ss = _linearise(at_temperature(gyro, temperature), Stimulus(), "vcf")
+    h = ss.response(2.0 * jnp.pi * jnp.asarray(frequencies_hz, dtype=float)) * (amplitude_v * carrier_v)
+    return jnp.abs(h), jnp.rad2deg(jnp.angle(h))
+
+
+def dac_points(gyro: Gyroscope, words):
+    """Seed 000 Table 2's DAC sweep: signed carrier-fundamental amplitude (V) for each word (LSB)."""
+    from ._sweeps import dac_sweep
+
+    return dac_sweep(gyro, words)
