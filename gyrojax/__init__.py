@@ -11,6 +11,26 @@ _jax.config.update("jax_enable_x64", True)
 
 from . import _units as units  # noqa: E402
 from ._campaign import SIMULATED_SWEEPS as SIMULATED_SWEEPS, simulate_table as simulate_table  # noqa: E402
+from ._compensate.base import (  # noqa: E402
+    AbstractCompensation as AbstractCompensation,
+    AbstractCompensator as AbstractCompensator,
+)
+from ._compensate.compensate import (  # noqa: E402
+    COMPENSATORS as COMPENSATORS,
+    CompensationResult as CompensationResult,
+    compensate as compensate,
+    rate_points as rate_points,
+)
+from ._compensate.composite import (  # noqa: E402
+    CompositeCompensation as CompositeCompensation,
+    CompositeCompensator as CompositeCompensator,
+)
+from ._compensate.model import ModelCompensation as ModelCompensation, ModelCompensator as ModelCompensator  # noqa: E402
+from ._compensate.points import RatePoints as RatePoints  # noqa: E402
+from ._compensate.polynomial import (  # noqa: E402
+    PolynomialCompensation as PolynomialCompensation,
+    PolynomialCompensator as PolynomialCompensator,
+)
 from ._control.drive import DriveLoop as DriveLoop  # noqa: E402
 from ._control.openloop import OpenLoopReadout as OpenLoopReadout  # noqa: E402
 from ._control.rebalance import RebalanceLoop as RebalanceLoop  # noqa: E402

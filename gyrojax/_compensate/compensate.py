@@ -1,0 +1,221 @@
+"""`compensate`: fit a compensator on training runs, judge it on held-out runs (seed 000's metrics)."""
+
+import math
+from typing import Any
+
+import equinox as eqx
+import numpy as np
+
+from .._dataset import DataError, Table
+from .._metrics import FULL_SCALE_CONVENTIONS, MIN_POINTS_LINEAR, fit_scale_factor, repeatability
+from .base import AbstractCompensation, AbstractCompensator
+from .composite import CompositeCompensator
+from .model import ModelCompensator
+from .points import RatePoints
+from .polynomial import PolynomialCompensator
+
+
+COMPENSATORS: dict[str, type[AbstractCompensator]] = {
+    cls.name: cls for cls in (PolynomialCompensator, CompositeCompensator, ModelCompensator)}
+"""Compensation methods by name, each at its default settings."""
+
+
+def rate_points(table: Table, device: str) -> RatePoints:
+    """The `rate_table` points of one device of `table` as [`gyrojax.RatePoints`][], in file order."""
+    rows = np.flatnonzero((table["device"] == device) & (table["sweep"] == "rate_table"))
+    if rows.size == 0:
+        raise DataError(f"{table.source}: no rate_table rows for device {device!r}.", source=table.source)
+
+    def col(name):
+        return table[name][rows] if name in table else None
+
+    return RatePoints(table["input"][rows], table["output"][rows], drive_freq_hz=col("drive_freq_hz"),
+                      temperature_c=col("temperature_c"), output_sigma=col("output_sigma"), run=table["run"][rows])
+
+
+class CompensationResult(eqx.Module):
+    """What [`gyrojax.compensate`][] returns.
+
+    **Fields:**
+
+    - `method`: the method's name.
+    - `runs`: one record per (device, run): `device`, `run`, `used_for_training`, `n_points`,
+      `scale_factor_before` (LSB per deg/s), `scale_factor_after` (compensated deg/s per table deg/s),
+      `nonlinearity_max_ppm_before` / `_after`, `nonlinearity_rms_ppm_before` / `_after`, and the curve:
+      `rates_dps`, `residuals_ppm_before` / `_after` (residual from the run's own straight line over its full
+      scale, ppm, signed: the worst |.| is the max nonlinearity).
+    - `devices`: one record per device: `device`, `train_runs`, `held_out_runs`, `repeatability_ppm_before`
+      / `_after` over all its runs, the same over the held-out runs only (`..._held_out`, None with fewer
+      than two), `worst_nonlinearity_max_ppm_held_out_before` / `_after`, and `compensator` (the fitted
+      coefficients, method-specific).
+    - `solutions`: the fitted compensators by device, to apply to new data
+      (`solution.rate(output, drive_freq_hz=...)`).
+    - `full_scale`: the nonlinearity full-scale convention (see [`gyrojax.fit_scale_factor`][]).
+    """
+
+    method: str = eqx.field(static=True)
+    runs: tuple[dict[str, Any], ...]
+    devices: tuple[dict[str, Any], ...]
+    solutions: dict[str, AbstractCompensation]
+    full_scale: str = eqx.field(static=True, default="half_range")
+
+    def to_json(self) -> dict[str, Any]:
+        """The `compensate` JSON of DESIGN.md §7 (Python numbers, None for "not applicable")."""
+        return {"method": self.method, "runs": [dict(r) for r in self.runs],
+                "devices": [dict(d) for d in self.devices],
+                "conventions": {
+                    "full_scale": self.full_scale,
+                    "nonlinearity": "residual from each run's own least-squares line over its full scale (ppm)",
+                    "repeatability": "sample std (ddof=1) of the runs' scale factors over their mean (ppm), "
+                                     "seed 000 §5",
+                    "scale_factor_after_units": "compensated deg/s per table deg/s"}}
+
+
+def _num(v) -> float | None:
+    v = float(v)
+    return None if math.isnan(v) else v
+
+
+def _resolve_method(method) -> AbstractCompensator:
+    if isinstance(method, AbstractCompensator):
+        return method
+    if isinstance(method, str) and method in COMPENSATORS:
+        return COMPENSATORS[method]()
+    raise ValueError(f"method must be one of {', '.join(COMPENSATORS)} (or a gyrojax compensator), got {method!r}.")
+
+
+def _resolve_train_runs(train_runs, devices, runs_of) -> dict[str, tuple[int, ...]]:
+    if train_runs is None:
+        return {d: (runs_of[d][0],) for d in devices}
+    if isinstance(train_runs, (int, np.integer)) and not isinstance(train_runs, bool):
+        train_runs = (train_runs,)
+    try:
+        items = list(train_runs)
+    except TypeError:
+        items = []
+    if not items or any(isinstance(r, bool) or not isinstance(r, (int, np.integer)) for r in items):
+        raise ValueError(f"train_runs must be a non-empty list of run ids (integers), got {train_runs!r}.")
+    wanted = tuple(dict.fromkeys(int(r) for r in items))
+    out = {}
+    for d in devices:
+        missing = [r for r in wanted if r not in runs_of[d]]
+        if missing:
+            raise DataError(f"train_runs names run {missing[0]}, which device {d!r} does not have (its rate_table "
+                            f"runs: {', '.join(map(str, runs_of[d]))}).")
+        out[d] = wanted
+    return out
+
+
+def compensate(table: Table, *, method: str | AbstractCompensator = "composite", train_runs=None,
+               full_scale: str = "half_range") -> CompensationResult:
+    """Fit a scale-factor compensator on each device's training runs and judge it on its held-out runs.
+
+    Only the `rate_table` rows are used. For each device the compensator is fitted on the points of its
+    training runs and applied to every run; every run is then judged by seed 000's metrics on the
+    compensated output against the table rate: the worst nonlinearity (max residual from the run's own
+    straight line over full scale) and, per device, the repeatability (std of the runs' scale factors over
+    their mean). Runs used for training are flagged: only the held-out ones say how the compensation does
+    on new data.
+
+    **Arguments:**
+
+    - `table`: a [`gyrojax.Table`][] with `rate_table` rows; `composite` and `model` need `drive_freq_hz`
+      on every rate_table row; `model` uses `temperature_c` (for the TCF) and `output_sigma` (weights) when
+      given.
+    - `method`: `"polynomial"`, `"composite"` (default, seed 000's method) or `"model"`, at their default
+      settings, or a configured compensator (e.g. `gj.PolynomialCompensator(order=5)`).
+    - `train_runs`: run ids to fit on, the same for every device (default: each device's first run, as a
+      factory calibration followed by use). Every device must have them.
+    - `full_scale`: nonlinearity full-scale convention of [`gyrojax.fit_scale_factor`][].
+
+    **Returns:** a [`gyrojax.CompensationResult`][].
+
+    Raises [`gyrojax.DataError`][] naming the device, run and row where the data cannot support the method
+    (no rate_table rows, a run with fewer than 3 points, a training run the device lacks, a missing
+    `drive_freq_hz`), `ValueError` for a bad argument.
+    """
+    if not isinstance(table, Table):
+        raise TypeError(f"compensate expects a gyrojax.Table, got {type(table).__name__}.")
+    if full_scale not in FULL_SCALE_CONVENTIONS:
+        raise ValueError(f"full_scale must be one of {', '.join(FULL_SCALE_CONVENTIONS)}, got {full_scale!r}.")
+    compensator = _resolve_method(method)
+    groups = table.groups("rate_table")
+    if not groups:
+        present = sorted(set(table["sweep"].tolist()))
+        raise DataError(f"{table.source}: no rate_table rows to compensate; the table has {', '.join(present)}.",
+                        source=table.source, column="sweep")
+    devices: list[str] = []
+    runs_of: dict[str, list[int]] = {}
+    for dev, run, _ in groups:
+        if dev not in runs_of:
+            devices.append(dev)
+            runs_of[dev] = []
+        runs_of[dev].append(run)
+    for (dev, run, _), rows in groups.items():
+        if len(rows) < MIN_POINTS_LINEAR:
+            raise DataError(f"{table.locate(int(rows[0]))}: device {dev!r}, run {run} has {len(rows)} rate_table "
+                            f"point(s); judging a compensation needs at least {MIN_POINTS_LINEAR}.",
+                            source=table.source, row=int(rows[0]) + 1)
+        for name in compensator.requires:
+            values = table[name][rows] if name in table else np.full(len(rows), np.nan)
+            bad = rows[~np.isfinite(values)]
+            if bad.size:
+                raise DataError(f"{table.locate(int(bad[0]), name)}: {compensator.name} compensation needs "
+                                f"{name} on every rate_table point; device {dev!r}, run {run} lacks it.",
+                                source=table.source, row=int(bad[0]) + 1, column=name)
+    train = _resolve_train_runs(train_runs, devices, runs_of)
+
+    run_records, device_records, solutions = [], [], {}
+    for dev in devices:
+        pts = rate_points(table, dev)
+        is_train = np.isin(pts.run, train[dev])
+        try:
+            solution = compensator.fit(pts.select(is_train))
+        except ValueError as e:
+            raise ValueError(f"device {dev!r}, training runs {list(train[dev])}: {e}") from None
+        solutions[dev] = solution
+        estimate = np.asarray(solution.rate(pts.output, drive_freq_hz=pts.drive_freq_hz,
+                                            temperature_c=pts.temperature_c))
+        sf_before, sf_after, held = [], [], []
+        worst_before, worst_after = [], []
+        for run in runs_of[dev]:
+            sel = pts.run == run
+            x = pts.rate_dps[sel]
+            before = fit_scale_factor(x, pts.output[sel], full_scale=full_scale)
+            after = fit_scale_factor(x, estimate[sel], full_scale=full_scale)
+            trained = run in train[dev]
+            sf_before.append(float(before.scale_factor))
+            sf_after.append(float(after.scale_factor))
+            held.append(not trained)
+            if not trained:
+                worst_before.append(float(before.nonlinearity_max_ppm))
+                worst_after.append(float(after.nonlinearity_max_ppm))
+            run_records.append({
+                "device": dev, "run": int(run), "used_for_training": bool(trained), "n_points": int(sel.sum()),
+                "scale_factor_before": _num(before.scale_factor), "scale_factor_after": _num(after.scale_factor),
+                "nonlinearity_max_ppm_before": _num(before.nonlinearity_max_ppm),
+                "nonlinearity_max_ppm_after": _num(after.nonlinearity_max_ppm),
+                "nonlinearity_rms_ppm_before": _num(before.nonlinearity_rms_ppm),
+                "nonlinearity_rms_ppm_after": _num(after.nonlinearity_rms_ppm),
+                "rates_dps": [float(v) for v in x],
+                "residuals_ppm_before": [float(v) for v in 1e6 * before.residuals / before.full_scale],
+                "residuals_ppm_after": [float(v) for v in 1e6 * after.residuals / after.full_scale],
+            })
+        sf_before, sf_after, held = np.asarray(sf_before), np.asarray(sf_after), np.asarray(held)
+
+        def rep(sf, mask=None):
+            return _num(repeatability(sf if mask is None else sf[mask])) if (mask is None or mask.sum() > 1) \
+                else None
+
+        device_records.append({
+            "device": dev, "method": compensator.name, "train_runs": [int(r) for r in train[dev]],
+            "held_out_runs": [int(r) for r, h in zip(runs_of[dev], held) if h], "n_runs": len(runs_of[dev]),
+            "repeatability_ppm_before": rep(sf_before), "repeatability_ppm_after": rep(sf_after),
+            "repeatability_ppm_before_held_out": rep(sf_before, held),
+            "repeatability_ppm_after_held_out": rep(sf_after, held),
+            "worst_nonlinearity_max_ppm_held_out_before": max(worst_before) if worst_before else None,
+            "worst_nonlinearity_max_ppm_held_out_after": max(worst_after) if worst_after else None,
+            "compensator": solution.summary(),
+        })
+    return CompensationResult(method=compensator.name, runs=tuple(run_records), devices=tuple(device_records),
+                              solutions=solutions, full_scale=full_scale)

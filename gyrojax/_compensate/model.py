@@ -1,0 +1,318 @@
+r"""`model`: model-based compensation: invert an identified physical model of the closed-loop output.
+
+**The model** (DESIGN.md §2, seed 000 Eq. 2 and §3.3). In force-to-rebalance operation the rate loop
+settles the word $W$ (the gyro output, LSB) where the carrier fundamental of the FTR DAC's output balances the
+Coriolis force. With the DAC's integral nonlinearity acting on the instantaneous carrier samples
+$W \sin\theta$, that balance reads
+
+$$ D(W) \equiv W + L \sum_{n} \rho_n\, c_n \left(\frac{W}{H}\right)^n = K(f)\,\Omega,
+   \qquad K(f) = K_{ref} \left(\frac{f}{f_{ref}}\right)^{\beta}, \qquad y = W + b_r, $$
+
+- $c_n$: the DAC INL in DAC LSB as the coefficient of $u^n$, $u = $ code / $2^{bits-1}$ (the convention of
+  `gyrojax.DacInl`), $L = 2^{word\_bits - bits}$ word LSB per DAC LSB, $H = 2^{word\_bits-1}$;
+- $\rho_n$: the describing-function weight of $u^n$ for a sine, $\binom{n}{(n-1)/2} 2^{1-n}$ for odd $n$
+  ($\rho_3 = 3/4$, $\rho_5 = 5/8$) and 0 for even $n$: even INL terms do not reach the carrier
+  fundamental, so a rate table cannot see them (they are reported as unidentifiable, never guessed);
+- $K(f)$: the scale factor tracking the thermal state through the measured drive frequency $f$;
+  $K_{ref}$ at $f_{ref}$, the mean training drive frequency. Eq. 2 gives $SF \propto \omega_d$ when the AGC
+  holds the displacement amplitude ($\beta = 1$, the default, as seed 000's initial calibration assumes);
+  with `frequency_exponent=None` $\beta$ is identified instead, which needs training runs that span the
+  drive frequencies the compensation will meet (its standard error says whether they did);
+- $b_r$: a bias per training run (turn-on bias); applying the model uses their mean.
+
+When the points carry `temperature_c`, the drive frequency's temperature coefficient is identified jointly:
+$f = f_{ref} (1 + \phi + \mathrm{TCF}\,(T - T_{ref}))$, so the scale factor's temperature coefficient is
+$\beta\,\mathrm{TCF}$ (silicon: about -30 ppm/K). That block shares no parameter with the rate block; it
+explains the repeatability in physical units.
+
+**Identification.** All coefficients are fitted at once by Levenberg-Marquardt (optimistix) to the outputs of
+the training runs (output error, weighted by `output_sigma` when every training point has a positive one).
+The predicted output needs $W$ from the balance at a given rate: a few Newton steps from $W_0 = K\Omega$
+(quadratic convergence, $D'(W) \approx 1$). The fit is one traceable function of the data, so the
+coefficients are differentiable in the measurements (implicit differentiation through the optimum).
+
+**Compensation** inverts the model: the same balance solved by Newton steps for the rate $\Omega$ at the
+measured $W = y - \bar b$ and $f$. The balance is linear in $\Omega$ here (every nonlinearity of this model
+sits on the word side), so the first step is already exact and no polynomial is refitted anywhere.
+"""
+
+import math
+from typing import Any, ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, ArrayLike, Bool, Float
+
+from .base import AbstractCompensation, AbstractCompensator, check_side, require_side
+from .points import RatePoints
+
+
+FREQ_SIGMA_REL = 1e-7
+"""ASSUMPTION: relative standard uncertainty of a drive-frequency reading (0.46 mHz at 4634 Hz) because a PLL
+frequency averaged over a 2-minute dwell resolves far below 1 mHz. It only weights the TCF block against the
+rate block; the two share no parameter, so it changes neither fit, only the reported chi2."""
+
+
+def describing_weight(n: int) -> float:
+    r"""Carrier-fundamental weight of $u^n$ for a sine: $\sin^n\theta = \rho_n \sin\theta + \ldots$."""
+    return 0.0 if n % 2 == 0 else math.comb(n, (n - 1) // 2) / 2.0 ** (n - 1)
+
+
+def _fundamental(word, inl, orders, word_bits, dac_bits):
+    """D(W): carrier fundamental of the DAC output per word LSB, for a carrier of amplitude `word` (LSB)."""
+    lsb = 2.0 ** (word_bits - dac_bits)
+    u = word / 2.0 ** (word_bits - 1)
+    acc = word
+    for i, n in enumerate(orders):
+        rho = describing_weight(n)
+        if rho:
+            acc = acc + lsb * rho * inl[i] * u**n
+    return acc
+
+
+def _newton(g, z0, steps):
+    """`steps` Newton steps on the elementwise equation g(z) = 0 (derivative by forward mode)."""
+    def step(_, z):
+        value, slope = jax.jvp(g, (z,), (jnp.ones_like(z),))
+        return z - value / slope
+
+    return jax.lax.fori_loop(0, steps, step, z0)
+
+
+class ModelCompensation(AbstractCompensation):
+    r"""The identified physical model (see the module docstring), ready to invert.
+
+    **Fields:** `sf_ref` (LSB per deg/s at `f_ref_hz`), `f_ref_hz`, `frequency_exponent` ($\beta$),
+    `inl_lsb` (DAC LSB, one per order of `inl_orders`), `bias_lsb` (mean training bias), `run_bias_lsb` (one
+    per `train_runs`), `tcf_per_k` and `t_ref_c` (NaN when the training points have no temperatures),
+    `stderr` (standard errors of the fitted parameters, same keys as `summary()["parameters"]`),
+    `chi2_red`, `converged`, `num_steps`, and static `inl_orders`, `word_bits`, `dac_bits`,
+    `newton_steps`, `train_runs`, `unidentifiable` (names of parameters the data cannot determine, held at
+    their prior values: even INL orders, $\beta$ without a drive-frequency spread), `weighted`.
+    """
+
+    sf_ref: Float[Array, ""]
+    f_ref_hz: Float[Array, ""]
+    frequency_exponent: Float[Array, ""]
+    inl_lsb: Float[Array, " orders"]
+    bias_lsb: Float[Array, ""]
+    run_bias_lsb: Float[Array, " runs"]
+    tcf_per_k: Float[Array, ""]
+    t_ref_c: Float[Array, ""]
+    stderr: dict[str, Float[Array, ""]]
+    chi2_red: Float[Array, ""]
+    converged: Bool[Array, ""]
+    num_steps: Array
+    inl_orders: tuple[int, ...] = eqx.field(static=True)
+    word_bits: int = eqx.field(static=True)
+    dac_bits: int = eqx.field(static=True)
+    newton_steps: int = eqx.field(static=True)
+    train_runs: tuple[int, ...] = eqx.field(static=True)
+    unidentifiable: tuple[str, ...] = eqx.field(static=True)
+    weighted: bool = eqx.field(static=True)
+
+    def scale_factor(self, drive_freq_hz):
+        """$K(f)$, LSB per deg/s at drive frequency `drive_freq_hz` (Hz)."""
+        f = jnp.asarray(drive_freq_hz, dtype=jnp.float64)
+        return self.sf_ref * (f / self.f_ref_hz) ** self.frequency_exponent
+
+    def fundamental(self, word):
+        """$D(W)$ in word LSB: what the DAC puts on the carrier fundamental for a carrier of amplitude `word`."""
+        return _fundamental(jnp.asarray(word, dtype=jnp.float64), self.inl_lsb, self.inl_orders, self.word_bits,
+                            self.dac_bits)
+
+    def output(self, rate_dps, *, drive_freq_hz, bias_lsb=None) -> Float[Array, " n"]:
+        """The model's output (LSB) at table rate `rate_dps` and drive frequency `drive_freq_hz`: the word
+        solving the balance by Newton steps, plus `bias_lsb` (default the mean training bias)."""
+        v = self.scale_factor(drive_freq_hz) * jnp.asarray(rate_dps, dtype=jnp.float64)
+        w = _newton(lambda w: self.fundamental(w) - v, v, self.newton_steps)
+        return w + (self.bias_lsb if bias_lsb is None else bias_lsb)
+
+    def rate(self, output, *, drive_freq_hz=None, temperature_c=None) -> Float[Array, " n"]:
+        """The rate estimate (deg/s): the balance solved for the rate by Newton steps; needs `drive_freq_hz`."""
+        f = check_side("model", "drive_freq_hz", drive_freq_hz)
+        d = self.fundamental(jnp.asarray(output, dtype=jnp.float64) - self.bias_lsb)
+        k = jnp.broadcast_to(self.scale_factor(f), d.shape)
+        return _newton(lambda x: d - k * x, jnp.zeros_like(d), self.newton_steps)
+
+    def summary(self) -> dict[str, Any]:
+        def num(v):
+            v = float(v)
+            return None if math.isnan(v) else v
+
+        params = {"sf_ref_lsb_per_dps": self.sf_ref, "frequency_exponent": self.frequency_exponent,
+                  **{f"inl_u{n}_lsb": self.inl_lsb[i] for i, n in enumerate(self.inl_orders)},
+                  "tcf_ppm_per_k": 1e6 * self.tcf_per_k}
+        return {
+            "parameters": {k: {"value": num(v), "stderr": num(self.stderr[k]) if k in self.stderr else None}
+                           for k, v in params.items()},
+            "f_ref_hz": float(self.f_ref_hz), "t_ref_c": num(self.t_ref_c),
+            "sf_tempco_ppm_per_k": num(1e6 * self.frequency_exponent * self.tcf_per_k),
+            "bias_lsb": float(self.bias_lsb),
+            "run_bias_lsb": {str(r): float(b) for r, b in zip(self.train_runs, np.asarray(self.run_bias_lsb))},
+            "unidentifiable": list(self.unidentifiable), "chi2_red": num(self.chi2_red),
+            "weighted": self.weighted, "converged": bool(self.converged), "num_steps": int(self.num_steps),
+            "inl_orders": list(self.inl_orders), "dac_bits": self.dac_bits, "word_bits": self.word_bits,
+        }
+
+
+class ModelCompensator(AbstractCompensator):
+    r"""Model-based compensation: identify the physical output model of the module docstring on the
+    training runs (Levenberg-Marquardt), then invert it by Newton steps.
+
+    **Arguments:**
+
+    - `inl_orders`: the powers $n$ of the INL polynomial (default (3, 5): the odd terms a rate table can
+      see, to fifth order; even orders may be listed and are reported unidentifiable).
+    - `dac_bits`, `word_bits`: DAC resolution and controller word width (seed 000 §5 and Table 2: a 16-bit
+      DAC fed from a 24-bit word).
+    - `frequency_exponent`: $\beta$ held at this value (default 1.0, Eq. 2), or None to identify it.
+    - `newton_steps`: Newton steps per balance solve (default 4: from $W_0 = K\Omega$ the error falls as
+      $(D'-1)^{2^k}$, below 1e-15 relative after 3 for INLs of thousands of LSB).
+    - `rtol`, `atol`, `max_steps`: Levenberg-Marquardt settings (optimistix).
+    """
+
+    inl_orders: tuple[int, ...] = eqx.field(static=True, default=(3, 5))
+    dac_bits: int = eqx.field(static=True, default=16)
+    word_bits: int = eqx.field(static=True, default=24)
+    frequency_exponent: float | None = eqx.field(static=True, default=1.0)
+    newton_steps: int = eqx.field(static=True, default=4)
+    rtol: float = eqx.field(static=True, default=1e-10)
+    atol: float = eqx.field(static=True, default=1e-10)
+    max_steps: int = eqx.field(static=True, default=256)
+
+    name: ClassVar[str] = "model"
+    requires: ClassVar[tuple[str, ...]] = ("drive_freq_hz",)
+
+    def __check_init__(self):
+        orders = self.inl_orders
+        if (not isinstance(orders, tuple) or not orders
+                or any(not isinstance(n, int) or isinstance(n, bool) or n < 2 for n in orders)
+                or len(set(orders)) != len(orders)):
+            raise ValueError("ModelCompensator.inl_orders must be a non-empty tuple of distinct integers >= 2 "
+                             f"(orders 0 and 1 are the bias and the scale factor), got {orders!r}.")
+        for name, low in (("dac_bits", 1), ("newton_steps", 1), ("max_steps", 1)):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or v < low:
+                raise ValueError(f"ModelCompensator.{name} must be an integer >= {low}, got {v!r}.")
+        if not isinstance(self.word_bits, int) or self.word_bits < self.dac_bits:
+            raise ValueError(f"ModelCompensator.word_bits must be an integer >= dac_bits ({self.dac_bits}), got "
+                             f"{self.word_bits!r}.")
+
+    def fit(self, points: RatePoints) -> ModelCompensation:
+        require_side(points, "drive_freq_hz", "model")
+        runs = points.runs
+        run_index = np.asarray([runs.index(int(r)) for r in points.run], dtype=np.int64)
+        n_par = 2 + len(self.inl_orders) + len(runs)
+        sig = points.output_sigma
+        weighted = bool(np.all(np.isfinite(sig) & (sig > 0)))
+        temps = points.temperature_c
+        with_tcf = bool(np.all(np.isfinite(temps)) and np.ptp(temps) > 0)
+        f = points.drive_freq_hz
+        free = np.ones(n_par + 2 * with_tcf, dtype=bool)
+        names = ["sf_ref_lsb_per_dps", "frequency_exponent"] + [f"inl_u{n}_lsb" for n in self.inl_orders]
+        unidentifiable = []
+        if self.frequency_exponent is not None:
+            free[1] = False
+        elif np.ptp(f) <= 1e-9 * np.mean(f):
+            free[1] = False
+            unidentifiable.append("frequency_exponent")
+        for i, n in enumerate(self.inl_orders):
+            if describing_weight(n) == 0.0:
+                free[2 + i] = False
+                unidentifiable.append(names[2 + i])
+        n_rates, n_shape = np.unique(points.rate_dps).size, int(free[2:2 + len(self.inl_orders)].sum())
+        if n_rates < 3 + n_shape:
+            raise ValueError(f"model compensation with {n_shape} identifiable INL term(s) needs at least "
+                             f"{3 + n_shape} distinct training rates (a line, one per term, one to spare), got "
+                             f"{n_rates}; use more rates or fewer inl_orders.")
+        data = dict(x=jnp.asarray(points.rate_dps), y=jnp.asarray(points.output), f=jnp.asarray(f),
+                    temp=jnp.asarray(np.where(np.isfinite(temps), temps, 0.0)),
+                    sigma=jnp.asarray(sig if weighted else np.ones_like(sig)),
+                    run_index=jnp.asarray(run_index), free=jnp.asarray(free),
+                    beta0=jnp.asarray(1.0 if self.frequency_exponent is None else float(self.frequency_exponent)))
+        out = _fit_arrays(self, len(runs), with_tcf, data)
+        bal = float(out["balance_residual"])
+        if not bal < 1e-9:
+            raise RuntimeError(f"model compensation: the balance D(W) = K Omega did not converge in "
+                               f"{self.newton_steps} Newton steps (relative residual {bal:.3g}); raise "
+                               "newton_steps, or the INL is so large that D is not monotone.")
+        theta, stderr = np.asarray(out["theta"]), np.asarray(out["stderr"])
+        k = len(self.inl_orders)
+        all_names = names + [f"bias_run{r}_lsb" for r in runs] + (["freq_offset", "tcf_ppm_per_k"] if with_tcf else [])
+        err = {nm: jnp.asarray(stderr[i]) for i, nm in enumerate(all_names) if free[i]}
+        if with_tcf:
+            err["tcf_ppm_per_k"] = jnp.asarray(1e6 * stderr[-1])
+        biases = theta[2 + k:2 + k + len(runs)]
+        nan = jnp.asarray(np.nan)
+        return ModelCompensation(
+            sf_ref=jnp.asarray(theta[0]), f_ref_hz=out["f_ref"], frequency_exponent=jnp.asarray(theta[1]),
+            inl_lsb=jnp.asarray(theta[2:2 + k]), bias_lsb=jnp.asarray(float(np.mean(biases))),
+            run_bias_lsb=jnp.asarray(biases), tcf_per_k=jnp.asarray(theta[-1]) if with_tcf else nan,
+            t_ref_c=out["t_ref"] if with_tcf else nan, stderr=err, chi2_red=out["chi2_red"],
+            converged=out["converged"], num_steps=out["num_steps"], inl_orders=self.inl_orders,
+            word_bits=self.word_bits, dac_bits=self.dac_bits, newton_steps=self.newton_steps,
+            train_runs=tuple(runs), unidentifiable=tuple(unidentifiable), weighted=weighted)
+
+
+@eqx.filter_jit
+def _fit_arrays(cfg: ModelCompensator, n_runs: int, with_tcf: bool, data: dict[str, Array]) -> dict[str, Array]:
+    """The whole identification as one traceable function of the data (jitted; differentiable in `data`)."""
+    x, y, f, temp, sigma = data["x"], data["y"], data["f"], data["temp"], data["sigma"]
+    run_index, free = data["run_index"], data["free"]
+    k = len(cfg.inl_orders)
+    f_ref = jnp.mean(f)
+    t_ref = jnp.mean(temp)
+    onehot = (run_index[:, None] == jnp.arange(n_runs)[None, :]).astype(jnp.float64)
+    # Start: the straight line at the starting beta and no INL (linear least squares, exact for a linear device).
+    lin, *_ = jnp.linalg.lstsq(jnp.concatenate([(x * (f / f_ref) ** data["beta0"])[:, None], onehot], axis=1), y)
+    parts = [lin[:1], data["beta0"][None], jnp.zeros(k), lin[1:]]
+    if with_tcf:
+        ft, *_ = jnp.linalg.lstsq(jnp.stack([jnp.ones_like(temp), temp - t_ref], axis=1), f / f_ref - 1.0)
+        parts.append(ft)
+    theta0 = jnp.concatenate(parts)
+
+    def residuals(theta):
+        sf, beta, inl = theta[0], theta[1], theta[2:2 + k]
+        bias = theta[2 + k:2 + k + n_runs]
+        v = sf * (f / f_ref) ** beta * x
+        w = _newton(lambda w: _fundamental(w, inl, cfg.inl_orders, cfg.word_bits, cfg.dac_bits) - v, v,
+                    cfg.newton_steps)
+        r = (w + bias[run_index] - y) / sigma
+        if not with_tcf:
+            return r
+        off, tcf = theta[-2], theta[-1]
+        rf = (f / f_ref - 1.0 - off - tcf * (temp - t_ref)) / FREQ_SIGMA_REL
+        return jnp.concatenate([r, rf])
+
+    # Jacobi preconditioning: unit residual sensitivity per fitted unknown; frozen parameters get scale 0.
+    norms = jnp.linalg.norm(jax.jacfwd(residuals)(theta0), axis=0)
+    scale = jnp.where(free & (norms > 0), 1.0 / jnp.where(norms > 0, norms, 1.0), 0.0)
+
+    def fn(z, args):
+        t0, s = args
+        return residuals(t0 + z * s)
+
+    sol = optx.least_squares(fn, optx.LevenbergMarquardt(rtol=cfg.rtol, atol=cfg.atol), jnp.zeros_like(theta0),
+                             args=(theta0, scale), max_steps=cfg.max_steps, throw=False)
+    theta = theta0 + sol.value * scale
+    r = residuals(theta)
+    jz = jax.jacfwd(residuals)(theta) * scale
+    n_free = jnp.sum(free)
+    dof = jnp.maximum(r.shape[0] - n_free, 1)
+    chi2_red = jnp.sum(r**2) / dof
+    cov_z = jnp.linalg.pinv(jz.T @ jz, hermitian=True)
+    stderr = jnp.sqrt(jnp.abs(jnp.diag(cov_z)) * chi2_red) * scale
+    # How well the last Newton solve closed the balance, relative to the largest word.
+    sf, beta, inl = theta[0], theta[1], theta[2:2 + k]
+    v = sf * (f / f_ref) ** beta * x
+    w = _newton(lambda w: _fundamental(w, inl, cfg.inl_orders, cfg.word_bits, cfg.dac_bits) - v, v,
+                cfg.newton_steps)
+    bal = jnp.max(jnp.abs(_fundamental(w, inl, cfg.inl_orders, cfg.word_bits, cfg.dac_bits) - v)) / jnp.max(
+        jnp.abs(v))
+    return {"theta": theta, "stderr": stderr, "chi2_red": chi2_red, "f_ref": f_ref, "t_ref": t_ref,
+            "converged": sol.result == optx.RESULTS.successful, "num_steps": sol.stats["num_steps"],
+            "balance_residual": bal}
