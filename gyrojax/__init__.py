@@ -46,9 +46,23 @@ from ._dataset import (  # noqa: E402
     read_table as read_table,
     write_table as write_table,
 )
+from ._effects.agc_finite_gain import AgcFiniteGain as AgcFiniteGain  # noqa: E402
 from ._effects.base import AbstractEffect as AbstractEffect  # noqa: E402
+from ._effects.comb_gap import CombGap as CombGap  # noqa: E402
 from ._effects.dac_inl import DacInl as DacInl  # noqa: E402
-from ._effects.registry import EFFECTS as EFFECTS, add_effect as add_effect, effect as effect  # noqa: E402
+from ._effects.damping_coupling import DampingCoupling as DampingCoupling  # noqa: E402
+from ._effects.duffing_drive import DuffingDrive as DuffingDrive  # noqa: E402
+from ._effects.duffing_sense import DuffingSense as DuffingSense  # noqa: E402
+from ._effects.pushpull_mismatch import PushPullMismatch as PushPullMismatch  # noqa: E402
+from ._effects.quadrature_phase import QuadraturePhase as QuadraturePhase  # noqa: E402
+from ._effects.registry import (  # noqa: E402
+    EFFECTS as EFFECTS,
+    add_effect as add_effect,
+    effect as effect,
+    supported_effects as supported_effects,
+)
+from ._effects.thermal_drift import ThermalDrift as ThermalDrift  # noqa: E402
+from ._effects.vref_drift import VrefDrift as VrefDrift  # noqa: E402
 from ._electronics.dac import DAC as DAC  # noqa: E402
 from ._electronics.excitation import FTRExcitation as FTRExcitation  # noqa: E402
 from ._electronics.frontend import FrontEnd as FrontEnd  # noqa: E402

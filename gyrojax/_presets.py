@@ -7,6 +7,8 @@ Seed 003 = the virtual-Coriolis-force batch calibration paper (open-loop z-axis 
 import cmath
 import math
 
+import jax.numpy as jnp
+
 from ._control.openloop import OpenLoopReadout
 from ._electronics.dac import DAC
 from ._electronics.excitation import FTRExcitation
@@ -38,7 +40,20 @@ QMG_GAP = 2.0e-6  # m, ASSUMPTION: finger-tip gap d0 of the FTR combs (Eq. 5-7; 
 QMG_CHARGE_GAIN = 1.0e11  # V/C, ASSUMPTION: 1/C_f with C_f = 10 pF (a charge-sensing front end, see below)
 QMG_ADC_LSB = 5.0 / 2**24  # V, ASSUMPTION: the "24-bit high-precision ADC" of §5 on a +/-2.5 V range
 QMG_DAC_UPDATE_RATE = 1.0e6  # Hz, ASSUMPTION: DAC update rate (not printed)
+QMG_INL_TERMS = 4  # ASSUMPTION: an ideal DAC with four zero INL terms (u^2..u^5), so that the dac_inl effect
+#                    adds into them without changing the leaf's shape (one compiled function for both)
+QMG_QUADRATURE_DPS = 10.0  # deg/s, ASSUMPTION: residual quadrature of a symmetric QMG, expressed as the rate
+#                            whose Coriolis force it equals: kap = 2 Ag w_x x 10 deg/s. Seed 000 runs a
+#                            quadrature loop (Fig. 8) but prints no level; every real device has some, and a
+#                            phase error of the rate channel (quadrature_phase) needs it to act on
+QMG_VCF_DPS_PER_V2 = 100.0  # deg/s per V^2 of V_ac V_fc, ASSUMPTION: seed 000 has no virtual-Coriolis
+#                             electrode; a self-test electrode like seed 003's, sized so that V_fc = 1 V and
+#                             V_ac = +/-2 V span +/-200 deg/s. Closed-loop VCF sweeps separate a drift of
+#                             the feedback gain (vref_drift) from one of the drive frequency (thermal_drift)
 SILICON_TCF = -30e-6  # 1/K, silicon resonators, about -30 ppm/K (DESIGN.md §2)
+SILICON_TCQ = -3e-3  # 1/K, ASSUMPTION: Q ~ 1/T_abs near room temperature (thermoelastic and gas damping both
+#                      grow with temperature): -1/(298 K) = -3.4e-3/K, rounded. It moves no settled output of
+#                      the ideal loops; a finite-gain AGC (agc_finite_gain) turns it into a gain drift
 
 # The closed-loop scale factor is SF = 2 Ag m a w / (K_vf K_a kappa) with kappa = 5 V / 2^23 per word LSB
 # (Table 2: 0x29E345 = 2,745,157 LSB -> 1.637 V). Keeping the measured SF (13,709.853 LSB/(deg/s)) and the
@@ -71,22 +86,27 @@ def paper_qmg(**resonator_overrides) -> Gyroscope:
     if the AGC holds a, not a w.
     """
     omega_x = hz_to_rad_s(QMG_FX)
-    resonator = Resonator(
+    resonator_args = dict(
         mass=QMG_MASS,
         omega_x=omega_x,
         omega_y=hz_to_rad_s(QMG_FX + QMG_RESIDUAL_SPLIT),
         q_x=QMG_QX,
         q_y=QMG_QY,
         angular_gain=QMG_ANGULAR_GAIN,
+        stiffness_coupling=2.0 * QMG_ANGULAR_GAIN * omega_x * QMG_QUADRATURE_DPS * DEG,
         tcf=SILICON_TCF,
-        **resonator_overrides,
+        tcq=SILICON_TCQ,
     )
+    resonator = Resonator(**(resonator_args | resonator_overrides))
     drive_electrode = DriveElectrode(QMG_KDX)
     drive_frontend = FrontEnd(QMG_KVI_X, QMG_CHARGE_GAIN, QMG_ADC_LSB, kind="charge")
     sense_frontend = FrontEnd(QMG_KVI_Y, QMG_CHARGE_GAIN, QMG_ADC_LSB, kind="charge")
     feedback = FeedbackElectrode(k_vf=_qmg_kvf(), v_dc=QMG_VDC, gap=QMG_GAP)
-    excitation = FTRExcitation(DAC(full_scale=5.0, bits=16, word_bits=24, update_rate=QMG_DAC_UPDATE_RATE),
+    excitation = FTRExcitation(DAC(full_scale=5.0, bits=16, word_bits=24, update_rate=QMG_DAC_UPDATE_RATE,
+                                   inl=jnp.zeros(QMG_INL_TERMS)),
                                amplifier_gain=QMG_AMPLIFIER_GAIN)
+    vcf = VirtualCoriolisElectrode(2.0 * QMG_MASS * QMG_ANGULAR_GAIN * QMG_AMPLITUDE * omega_x
+                                   * QMG_VCF_DPS_PER_V2 * DEG)
     # ASSUMPTION: loop designs (not printed): PLL and AGC at 20 Hz (critically damped), FTR at 100 Hz
     # (zeta 0.7), demodulator LPFs four first-order stages at 1 kHz: the 2w ripple is -78 dB. What is left
     # of it, through the AGC's proportional gain, puts a 2w ripple on the drive voltage whose product with
@@ -107,6 +127,7 @@ def paper_qmg(**resonator_overrides) -> Gyroscope:
         feedback_electrode=feedback,
         excitation=excitation,
         rebalance_loop=rebalance,
+        vcf_electrode=vcf,
         name="paper-qmg",
     ))
 
@@ -135,8 +156,8 @@ def vcf_2018(**resonator_overrides) -> Gyroscope:
     simulated rate bandwidth; the model with Table 2's numbers gives about 97 Hz (1.55 x the 62 Hz
     split); see `experiments/seed003_bandwidth.py`.
     """
-    resonator = Resonator(mass=VCF_MASS, omega_x=VCF_WD, omega_y=VCF_WS, q_x=VCF_QD, q_y=VCF_QS,
-                          angular_gain=1.0, tcf=SILICON_TCF, **resonator_overrides)
+    resonator = Resonator(**(dict(mass=VCF_MASS, omega_x=VCF_WD, omega_y=VCF_WS, q_x=VCF_QD, q_y=VCF_QS,
+                                  angular_gain=1.0, tcf=SILICON_TCF, tcq=SILICON_TCQ) | resonator_overrides))
     a = VCF_DRIVE_VELOCITY / VCF_WD
     gy = VCF_WS / (2 * VCF_QS)
     dy = (VCF_WS**2 - VCF_WD**2) / (2 * VCF_WD)

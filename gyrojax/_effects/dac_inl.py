@@ -5,6 +5,7 @@ import jax.numpy as jnp
 
 from .._checks import check_finite
 from .._gyroscope import Gyroscope
+from ._support import require
 from .base import AbstractEffect
 
 
@@ -20,21 +21,27 @@ class DacInl(AbstractEffect):
 
     `coefficients[k]` is the INL in DAC LSB of the term u^(k+2), u = code / 2^(bits-1); they add to the
     DAC's own INL. Odd terms bend the scale factor (an S-curve), even terms do not reach the carrier
-    fundamental at all.
+    fundamental at all (so they have no first-order fingerprint on any sweep: identifiability reports them).
+
+    The device's INL array keeps its shape when it has at least as many terms as `coefficients` (the
+    presets carry four zero terms for this); a shorter one is zero-padded, which changes the leaf's shape.
     """
 
     coefficients: jnp.ndarray
 
     name = "dac_inl"
     description = "INL profile of the force-to-rebalance DAC (odd S-curve and even bow, in LSB)"
+    plugs_into = "excitation.dac.inl"
 
     def __check_init__(self):
         check_finite("DacInl", "coefficients", self.coefficients)
 
+    @classmethod
+    def supports(cls, gyro: Gyroscope) -> bool:
+        return gyro.closed_loop
+
     def apply(self, gyro: Gyroscope) -> Gyroscope:
-        if not gyro.closed_loop:
-            raise ValueError("effect 'dac_inl' needs a closed-loop device (an FTR DAC); "
-                             f"{gyro.name!r} is open loop.")
+        require(self.name, gyro, self.supports(gyro), "a closed-loop device (an FTR DAC); it is open loop")
         inl = gyro.excitation.dac.inl
         n = max(inl.shape[0], self.coefficients.shape[0])
         total = jnp.pad(inl, (0, n - inl.shape[0])) + jnp.pad(self.coefficients,

@@ -36,24 +36,32 @@ class FeedbackElectrode(eqx.Module):
     contains it. With rho = 0 the force is exactly linear in v (plus K_vf (v+^2 - v-^2) / (4 V_dc), a DC
     force when the branches differ): the model nests at zero.
 
+    The bias comes from a voltage reference: at a die temperature dT kelvin above the reference temperature
+    (the resonator's `t_ref`) it is V_dc (1 + `v_dc_tc` dT), and that bias is the V_dc in the force above
+    (a is geometry and stays put; the removed spring stays the one at the nominal bias), so the feedback
+    gain K_vf and the push-pull terms follow the reference (the `vref_drift` effect).
+
     **Arguments:**
 
     - `k_vf`: force per volt of AC feedback voltage at rest, N/V.
     - `v_dc`: DC bias of the feedback combs, V.
     - `gap`: finger-tip gap d0, m.
     - `gap_fraction`: rho, share of the force gradient from the gap-dependent finger-tip term (0 <= rho < 1).
+    - `v_dc_tc`: relative change of the bias V_dc per kelvin of die temperature, 1/K.
     """
 
     k_vf: float
     v_dc: float
     gap: float
     gap_fraction: float = 0.0
+    v_dc_tc: float = 0.0
 
     def __check_init__(self):
         check_positive("FeedbackElectrode", "k_vf", self.k_vf)
         check_positive("FeedbackElectrode", "v_dc", self.v_dc)
         check_positive("FeedbackElectrode", "gap", self.gap)
         check_range("FeedbackElectrode", "gap_fraction", self.gap_fraction, 0.0, 1.0)
+        check_finite("FeedbackElectrode", "v_dc_tc", self.v_dc_tc)
 
     @classmethod
     def from_geometry(cls, *, fingers, thickness, gap, tip_width, v_dc):
@@ -73,12 +81,18 @@ class FeedbackElectrode(eqx.Module):
         minus = (1.0 - rho) + rho * d0**2 / (d0 + y) ** 2
         return plus, minus
 
-    def force(self, y, v_plus, v_minus):
-        """Sense-axis force (N) at displacement `y` (m) with AC branch voltages `v_plus`, `v_minus` (V)."""
+    def bias(self, dt=0.0):
+        """The bias V_dc (V) at a die temperature `dt` kelvin above the reference temperature."""
+        return self.v_dc * (1.0 + self.v_dc_tc * dt)
+
+    def force(self, y, v_plus, v_minus, dt=0.0):
+        """Sense-axis force (N) at displacement `y` (m) with AC branch voltages `v_plus`, `v_minus` (V), at a
+        die temperature `dt` kelvin above the reference temperature (it sets the bias)."""
         a = self.k_vf / (2.0 * self.v_dc)
+        v_dc = self.bias(dt)
         plus, minus = self._gradient_shape(y)
         spring = 2.0 * a * self.v_dc**2 * self.gap_fraction / self.gap
-        return (0.5 * a * (plus * (self.v_dc + v_plus) ** 2 - minus * (self.v_dc - v_minus) ** 2)
+        return (0.5 * a * (plus * (v_dc + v_plus) ** 2 - minus * (v_dc - v_minus) ** 2)
                 - spring * y)
 
 

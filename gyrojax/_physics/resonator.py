@@ -28,6 +28,8 @@ class Resonator(eqx.Module):
     - `duffing_x`, `duffing_y`: cubic stiffness per unit mass, 1/(m^2 s^2); zero for a linear resonator.
     - `tcf`: relative frequency change per kelvin of both modes (silicon: about -30e-6/K).
     - `tcq`: relative Q change per kelvin.
+    - `tcf_split`: extra relative change per kelvin of the sense resonance only (the sense mode's TCF is
+      `tcf + tcf_split`): the mode split drifts with temperature, which an open-loop gyro amplifies by w/dw.
     - `t_ref`: temperature of the nominal values, deg C.
     """
 
@@ -43,18 +45,20 @@ class Resonator(eqx.Module):
     duffing_y: float = 0.0
     tcf: float = 0.0
     tcq: float = 0.0
+    tcf_split: float = 0.0
     t_ref: float = 25.0
 
     def __check_init__(self):
         for name in ("mass", "omega_x", "omega_y", "q_x", "q_y", "angular_gain"):
             check_positive("Resonator", name, getattr(self, name))
         for name in ("damping_coupling", "stiffness_coupling", "duffing_x", "duffing_y", "tcf", "tcq",
-                     "t_ref"):
+                     "tcf_split", "t_ref"):
             check_finite("Resonator", name, getattr(self, name))
 
     def at_temperature(self, temperature):
         """Resonances and Q's at `temperature` (deg C): `(omega_x, omega_y, q_x, q_y)`."""
         dt = jnp.asarray(temperature, dtype=float) - self.t_ref
         f = 1.0 + self.tcf * dt
+        f_y = 1.0 + (self.tcf + self.tcf_split) * dt
         q = 1.0 + self.tcq * dt
-        return self.omega_x * f, self.omega_y * f, self.q_x * q, self.q_y * q
+        return self.omega_x * f, self.omega_y * f_y, self.q_x * q, self.q_y * q

@@ -142,13 +142,14 @@ def _dac_voltage(gyro, word, carrier_phase, omega):
     return dac(sample) * hold_gain
 
 
-def _sense_force(gyro, y, word, carrier_phase, omega):
-    """Sense-axis force (N) other than the linear mechanics: feedback combs and cubic stiffness."""
+def _sense_force(gyro, y, word, carrier_phase, omega, temperature):
+    """Sense-axis force (N) other than the linear mechanics: feedback combs (biased at the die
+    `temperature`, deg C) and cubic stiffness."""
     r = gyro.resonator
     force = -r.mass * r.duffing_y * y**3
     if gyro.closed_loop:
         v_plus, v_minus = gyro.excitation.branch_voltages(_dac_voltage(gyro, word, carrier_phase, omega))
-        force = force + gyro.feedback_electrode.force(y, v_plus, v_minus)
+        force = force + gyro.feedback_electrode.force(y, v_plus, v_minus, temperature - r.t_ref)
     return force
 
 
@@ -156,17 +157,19 @@ def _phase_grid(n):
     return 2.0 * jnp.pi * jnp.arange(n, dtype=float) / n
 
 
-def sense_force_fundamental(gyro, sense_phasor, word, omega, omega_y):
-    """Fundamental phasor (N) and DC deflection (m) of the sense force, by quadrature over the phase."""
+def sense_force_fundamental(gyro, sense_phasor, word, omega, omega_y, temperature=None):
+    """Fundamental phasor (N) and DC deflection (m) of the sense force, by quadrature over the phase, at
+    the die `temperature` (deg C; default the reference temperature)."""
+    temperature = gyro.resonator.t_ref if temperature is None else temperature
     theta = _phase_grid(gyro.phase_points)
     wave = jnp.real(sense_phasor * _expj(theta))
     stiffness = gyro.resonator.mass * omega_y**2
 
     def deflect(y0, _):
-        return jnp.mean(_sense_force(gyro, y0 + wave, word, theta, omega)) / stiffness, None
+        return jnp.mean(_sense_force(gyro, y0 + wave, word, theta, omega, temperature)) / stiffness, None
 
     y0, _ = jax.lax.scan(deflect, jnp.zeros(()), None, length=3)
-    force = _sense_force(gyro, y0 + wave, word, theta, omega)
+    force = _sense_force(gyro, y0 + wave, word, theta, omega, temperature)
     return 2.0 * jnp.mean(_cx(force) * _expj(-theta)), y0
 
 
@@ -186,7 +189,7 @@ def averaged_field(t, state: SlowState, gyro: Gyroscope, stim: Stimulus):
 
     f_x = (_cj(0.0, gyro.drive_electrode.force(ctl.drive_voltage))
            - _cx(0.75 * m * r.duffing_x * jnp.abs(X) ** 2) * X)
-    f_y, _ = sense_force_fundamental(gyro, Y, ctl.word, w, wy)
+    f_y, _ = sense_force_fundamental(gyro, Y, ctl.word, w, wy, temp)
     f_y = f_y - _cj(0.0, gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t))
 
     force_gain = _cj(0.0, 2 * w * m)
@@ -213,7 +216,7 @@ def full_field(t, state: WaveState, gyro: Gyroscope, stim: Stimulus):
     c, kap, ag = r.damping_coupling, r.stiffness_coupling, r.angular_gain
 
     f_x = gyro.drive_electrode.force(ctl.drive_voltage) * (-jnp.sin(theta)) - m * r.duffing_x * x**3
-    f_y = (_sense_force(gyro, y, ctl.word, theta, ctl.omega)
+    f_y = (_sense_force(gyro, y, ctl.word, theta, ctl.omega, temp)
            + gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t) * jnp.sin(theta))
     ax = f_x / m - (wx / qx) * vx - wx**2 * x - c * vy - kap * y + 2 * ag * om * vy
     ay = f_y / m - (wy / qy) * vy - wy**2 * y - c * vx - kap * x - 2 * ag * om * vx
