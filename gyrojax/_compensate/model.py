@@ -6,7 +6,7 @@ Coriolis force. With the DAC's integral nonlinearity acting on the instantaneous
 $W \sin\theta$, that balance reads
 
 $$ D(W) \equiv W + L \sum_{n} \rho_n\, c_n \left(\frac{W}{H}\right)^n = K(f)\,\Omega,
-   \qquad K(f) = K_{ref} \left(\frac{f}{f_{ref}}\right)^{\beta}, \qquad y = W + b_r, $$
+   \qquad K(f) = K_{ref} \left(\frac{f}{f_{ref}}\right)^{\beta}, \qquad y = W + b_r + d\,(f/f_{ref}-1), $$
 
 - $c_n$: the DAC INL in DAC LSB as the coefficient of $u^n$, $u = $ code / $2^{bits-1}$ (the convention of
   `gyrojax.DacInl`), $L = 2^{word\_bits - bits}$ word LSB per DAC LSB, $H = 2^{word\_bits-1}$;
@@ -18,7 +18,9 @@ $$ D(W) \equiv W + L \sum_{n} \rho_n\, c_n \left(\frac{W}{H}\right)^n = K(f)\,\O
   holds the displacement amplitude ($\beta = 1$, the default, as seed 000's initial calibration assumes);
   with `frequency_exponent=None` $\beta$ is identified instead, which needs training runs that span the
   drive frequencies the compensation will meet (its standard error says whether they did);
-- $b_r$: a bias per training run (turn-on bias); applying the model uses their mean.
+- $b_r + d\,(f/f_{ref} - 1)$: a bias per training run (turn-on bias; applying the model uses their mean) plus
+  its thermal drift, again through the drive frequency (quadrature times a demodulation phase that moves
+  with temperature is the classic source); $d$ in LSB per ppm of drive frequency.
 
 When the points carry `temperature_c`, the drive frequency's temperature coefficient is identified jointly:
 $f = f_{ref} (1 + \phi + \mathrm{TCF}\,(T - T_{ref}))$, so the scale factor's temperature coefficient is
@@ -61,15 +63,19 @@ def describing_weight(n: int) -> float:
     return 0.0 if n % 2 == 0 else math.comb(n, (n - 1) // 2) / 2.0 ** (n - 1)
 
 
-def _fundamental(word, inl, orders, word_bits, dac_bits):
-    """D(W): carrier fundamental of the DAC output per word LSB, for a carrier of amplitude `word` (LSB)."""
-    lsb = 2.0 ** (word_bits - dac_bits)
-    u = word / 2.0 ** (word_bits - 1)
+def _fundamental(word, inl, spec):
+    """D(W): the in-phase carrier fundamental of the DAC output, in word LSB, for a carrier of in-phase amplitude
+    `word` (LSB) and quadrature amplitude `spec.quadrature_lsb`; `spec` carries `inl_orders`, `word_bits`,
+    `dac_bits`. The sample is W sin + Q cos = A sin(. + phi) with A^2 = W^2 + Q^2, so the in-phase fundamental
+    of u^n is rho_n A^(n-1) W / H^n."""
+    lsb = 2.0 ** (spec.word_bits - spec.dac_bits)
+    h = 2.0 ** (spec.word_bits - 1)
+    a2 = word**2 + float(spec.quadrature_lsb) ** 2
     acc = word
-    for i, n in enumerate(orders):
+    for i, n in enumerate(spec.inl_orders):
         rho = describing_weight(n)
         if rho:
-            acc = acc + lsb * rho * inl[i] * u**n
+            acc = acc + lsb * rho * inl[i] * word * a2 ** ((n - 1) // 2) / h**n
     return acc
 
 
@@ -82,12 +88,23 @@ def _newton(g, z0, steps):
     return jax.lax.fori_loop(0, steps, step, z0)
 
 
+def _balance_word(v, inl, spec, steps):
+    """The word W with D(W) = v: Newton steps on constants, then one more step that carries the derivatives
+    (the implicit function theorem, dW = (dv - dD/dc dc) / D'(W)), so no derivative passes through the loop."""
+    sg = jax.lax.stop_gradient
+    c, target = sg(inl), sg(v)
+    w = _newton(lambda w: _fundamental(w, c, spec) - target, target, steps)
+    value, slope = jax.jvp(lambda w: _fundamental(w, inl, spec) - v, (w,),
+                           (jnp.ones_like(w),))
+    return w - value / sg(slope)
+
+
 class ModelCompensation(AbstractCompensation):
     r"""The identified physical model (see the module docstring), ready to invert.
 
     **Fields:** `sf_ref` (LSB per deg/s at `f_ref_hz`), `f_ref_hz`, `frequency_exponent` ($\beta$),
     `inl_lsb` (DAC LSB, one per order of `inl_orders`), `bias_lsb` (mean training bias), `run_bias_lsb` (one
-    per `train_runs`), `tcf_per_k` and `t_ref_c` (NaN when the training points have no temperatures),
+    per `train_runs`), `bias_drift_lsb_per_ppm` ($d$), `tcf_per_k` and `t_ref_c` (NaN when the training points have no temperatures),
     `stderr` (standard errors of the fitted parameters, same keys as `summary()["parameters"]`),
     `chi2_red`, `converged`, `num_steps`, and static `inl_orders`, `word_bits`, `dac_bits`,
     `newton_steps`, `train_runs`, `unidentifiable` (names of parameters the data cannot determine, held at
@@ -100,6 +117,7 @@ class ModelCompensation(AbstractCompensation):
     inl_lsb: Float[Array, " orders"]
     bias_lsb: Float[Array, ""]
     run_bias_lsb: Float[Array, " runs"]
+    bias_drift_lsb_per_ppm: Float[Array, ""]
     tcf_per_k: Float[Array, ""]
     t_ref_c: Float[Array, ""]
     stderr: dict[str, Float[Array, ""]]
@@ -109,6 +127,7 @@ class ModelCompensation(AbstractCompensation):
     inl_orders: tuple[int, ...] = eqx.field(static=True)
     word_bits: int = eqx.field(static=True)
     dac_bits: int = eqx.field(static=True)
+    quadrature_lsb: float = eqx.field(static=True)
     newton_steps: int = eqx.field(static=True)
     train_runs: tuple[int, ...] = eqx.field(static=True)
     unidentifiable: tuple[str, ...] = eqx.field(static=True)
@@ -119,22 +138,26 @@ class ModelCompensation(AbstractCompensation):
         f = jnp.asarray(drive_freq_hz, dtype=jnp.float64)
         return self.sf_ref * (f / self.f_ref_hz) ** self.frequency_exponent
 
+    def bias(self, drive_freq_hz):
+        """The bias (LSB) at drive frequency `drive_freq_hz`: mean training bias plus its thermal drift."""
+        f = jnp.asarray(drive_freq_hz, dtype=jnp.float64)
+        return self.bias_lsb + self.bias_drift_lsb_per_ppm * 1e6 * (f / self.f_ref_hz - 1.0)
+
     def fundamental(self, word):
         """$D(W)$ in word LSB: what the DAC puts on the carrier fundamental for a carrier of amplitude `word`."""
-        return _fundamental(jnp.asarray(word, dtype=jnp.float64), self.inl_lsb, self.inl_orders, self.word_bits,
-                            self.dac_bits)
+        return _fundamental(jnp.asarray(word, dtype=jnp.float64), self.inl_lsb, self)
 
     def output(self, rate_dps, *, drive_freq_hz, bias_lsb=None) -> Float[Array, " n"]:
         """The model's output (LSB) at table rate `rate_dps` and drive frequency `drive_freq_hz`: the word
-        solving the balance by Newton steps, plus `bias_lsb` (default the mean training bias)."""
+        solving the balance by Newton steps, plus the bias (default: `bias(drive_freq_hz)`)."""
         v = self.scale_factor(drive_freq_hz) * jnp.asarray(rate_dps, dtype=jnp.float64)
-        w = _newton(lambda w: self.fundamental(w) - v, v, self.newton_steps)
-        return w + (self.bias_lsb if bias_lsb is None else bias_lsb)
+        w = _balance_word(v, self.inl_lsb, self, self.newton_steps)
+        return w + (self.bias(drive_freq_hz) if bias_lsb is None else bias_lsb)
 
     def rate(self, output, *, drive_freq_hz=None, temperature_c=None) -> Float[Array, " n"]:
         """The rate estimate (deg/s): the balance solved for the rate by Newton steps; needs `drive_freq_hz`."""
         f = check_side("model", "drive_freq_hz", drive_freq_hz)
-        d = self.fundamental(jnp.asarray(output, dtype=jnp.float64) - self.bias_lsb)
+        d = self.fundamental(jnp.asarray(output, dtype=jnp.float64) - self.bias(f))
         k = jnp.broadcast_to(self.scale_factor(f), d.shape)
         return _newton(lambda x: d - k * x, jnp.zeros_like(d), self.newton_steps)
 
@@ -145,6 +168,7 @@ class ModelCompensation(AbstractCompensation):
 
         params = {"sf_ref_lsb_per_dps": self.sf_ref, "frequency_exponent": self.frequency_exponent,
                   **{f"inl_u{n}_lsb": self.inl_lsb[i] for i, n in enumerate(self.inl_orders)},
+                  "bias_drift_lsb_per_ppm": self.bias_drift_lsb_per_ppm,
                   "tcf_ppm_per_k": 1e6 * self.tcf_per_k}
         return {
             "parameters": {k: {"value": num(v), "stderr": num(self.stderr[k]) if k in self.stderr else None}
@@ -156,6 +180,7 @@ class ModelCompensation(AbstractCompensation):
             "unidentifiable": list(self.unidentifiable), "chi2_red": num(self.chi2_red),
             "weighted": self.weighted, "converged": bool(self.converged), "num_steps": int(self.num_steps),
             "inl_orders": list(self.inl_orders), "dac_bits": self.dac_bits, "word_bits": self.word_bits,
+            "quadrature_lsb": self.quadrature_lsb,
         }
 
 
@@ -170,6 +195,11 @@ class ModelCompensator(AbstractCompensator):
     - `dac_bits`, `word_bits`: DAC resolution and controller word width (seed 000 §5 and Table 2: a 16-bit
       DAC fed from a 24-bit word).
     - `frequency_exponent`: $\beta$ held at this value (default 1.0, Eq. 2), or None to identify it.
+    - `quadrature_lsb`: the quadrature word $Q$ the DAC carries beside the rate word (LSB; default 0). The DAC
+      sees the amplitude $\sqrt{W^2+Q^2}$, so the in-phase fundamental of $u^n$ is
+      $\rho_n (W^2+Q^2)^{(n-1)/2} W / H^n$. Left at 0 with a steady $Q$ the fit absorbs it (the $u^5$ term
+      shifts the $u^3$ coefficient by $2 (\rho_5/\rho_3) c_5 (Q/H)^2$, 1.5 LSB for paper-qmg's 10 deg/s)
+      and the compensation is unchanged; give it to read the INL in the DAC's own terms.
     - `newton_steps`: Newton steps per balance solve (default 4: from $W_0 = K\Omega$ the error falls as
       $(D'-1)^{2^k}$, below 1e-15 relative after 3 for INLs of thousands of LSB).
     - `rtol`, `atol`, `max_steps`: Levenberg-Marquardt settings (optimistix).
@@ -179,6 +209,7 @@ class ModelCompensator(AbstractCompensator):
     dac_bits: int = eqx.field(static=True, default=16)
     word_bits: int = eqx.field(static=True, default=24)
     frequency_exponent: float | None = eqx.field(static=True, default=1.0)
+    quadrature_lsb: float = eqx.field(static=True, default=0.0)
     newton_steps: int = eqx.field(static=True, default=4)
     rtol: float = eqx.field(static=True, default=1e-10)
     atol: float = eqx.field(static=True, default=1e-10)
@@ -201,12 +232,20 @@ class ModelCompensator(AbstractCompensator):
         if not isinstance(self.word_bits, int) or self.word_bits < self.dac_bits:
             raise ValueError(f"ModelCompensator.word_bits must be an integer >= dac_bits ({self.dac_bits}), got "
                              f"{self.word_bits!r}.")
+        if isinstance(self.quadrature_lsb, bool) or not isinstance(self.quadrature_lsb, (int, float)) \
+                or not math.isfinite(self.quadrature_lsb):
+            raise ValueError(f"ModelCompensator.quadrature_lsb must be a finite number (LSB), got "
+                             f"{self.quadrature_lsb!r}.")
+        if self.frequency_exponent is not None and (isinstance(self.frequency_exponent, bool) or not isinstance(
+                self.frequency_exponent, (int, float)) or not math.isfinite(self.frequency_exponent)):
+            raise ValueError(f"ModelCompensator.frequency_exponent must be a finite number or None, got "
+                             f"{self.frequency_exponent!r}.")
 
     def fit(self, points: RatePoints) -> ModelCompensation:
         require_side(points, "drive_freq_hz", "model")
         runs = points.runs
         run_index = np.asarray([runs.index(int(r)) for r in points.run], dtype=np.int64)
-        n_par = 2 + len(self.inl_orders) + len(runs)
+        n_par = 2 + len(self.inl_orders) + len(runs) + 1
         sig = points.output_sigma
         weighted = bool(np.all(np.isfinite(sig) & (sig > 0)))
         temps = points.temperature_c
@@ -215,11 +254,15 @@ class ModelCompensator(AbstractCompensator):
         free = np.ones(n_par + 2 * with_tcf, dtype=bool)
         names = ["sf_ref_lsb_per_dps", "frequency_exponent"] + [f"inl_u{n}_lsb" for n in self.inl_orders]
         unidentifiable = []
+        no_spread = np.ptp(f) <= 1e-9 * np.mean(f)
         if self.frequency_exponent is not None:
             free[1] = False
-        elif np.ptp(f) <= 1e-9 * np.mean(f):
+        elif no_spread:
             free[1] = False
             unidentifiable.append("frequency_exponent")
+        if no_spread:
+            free[n_par - 1] = False
+            unidentifiable.append("bias_drift_lsb_per_ppm")
         for i, n in enumerate(self.inl_orders):
             if describing_weight(n) == 0.0:
                 free[2 + i] = False
@@ -232,9 +275,9 @@ class ModelCompensator(AbstractCompensator):
         data = dict(x=jnp.asarray(points.rate_dps), y=jnp.asarray(points.output), f=jnp.asarray(f),
                     temp=jnp.asarray(np.where(np.isfinite(temps), temps, 0.0)),
                     sigma=jnp.asarray(sig if weighted else np.ones_like(sig)),
-                    run_index=jnp.asarray(run_index), free=jnp.asarray(free),
+                    run_index=jnp.asarray(run_index),
                     beta0=jnp.asarray(1.0 if self.frequency_exponent is None else float(self.frequency_exponent)))
-        out = _fit_arrays(self, len(runs), with_tcf, data)
+        out = _fit_arrays(self, len(runs), with_tcf, tuple(bool(b) for b in free), data)
         bal = float(out["balance_residual"])
         if not bal < 1e-9:
             raise RuntimeError(f"model compensation: the balance D(W) = K Omega did not converge in "
@@ -242,7 +285,8 @@ class ModelCompensator(AbstractCompensator):
                                "newton_steps, or the INL is so large that D is not monotone.")
         theta, stderr = np.asarray(out["theta"]), np.asarray(out["stderr"])
         k = len(self.inl_orders)
-        all_names = names + [f"bias_run{r}_lsb" for r in runs] + (["freq_offset", "tcf_ppm_per_k"] if with_tcf else [])
+        all_names = (names + [f"bias_run{r}_lsb" for r in runs] + ["bias_drift_lsb_per_ppm"]
+                     + (["freq_offset", "tcf_ppm_per_k"] if with_tcf else []))
         err = {nm: jnp.asarray(stderr[i]) for i, nm in enumerate(all_names) if free[i]}
         if with_tcf:
             err["tcf_ppm_per_k"] = jnp.asarray(1e6 * stderr[-1])
@@ -251,68 +295,77 @@ class ModelCompensator(AbstractCompensator):
         return ModelCompensation(
             sf_ref=jnp.asarray(theta[0]), f_ref_hz=out["f_ref"], frequency_exponent=jnp.asarray(theta[1]),
             inl_lsb=jnp.asarray(theta[2:2 + k]), bias_lsb=jnp.asarray(float(np.mean(biases))),
-            run_bias_lsb=jnp.asarray(biases), tcf_per_k=jnp.asarray(theta[-1]) if with_tcf else nan,
+            run_bias_lsb=jnp.asarray(biases), bias_drift_lsb_per_ppm=jnp.asarray(theta[n_par - 1]),
+            tcf_per_k=jnp.asarray(theta[-1]) if with_tcf else nan,
             t_ref_c=out["t_ref"] if with_tcf else nan, stderr=err, chi2_red=out["chi2_red"],
             converged=out["converged"], num_steps=out["num_steps"], inl_orders=self.inl_orders,
-            word_bits=self.word_bits, dac_bits=self.dac_bits, newton_steps=self.newton_steps,
+            word_bits=self.word_bits, dac_bits=self.dac_bits, quadrature_lsb=self.quadrature_lsb,
+            newton_steps=self.newton_steps,
             train_runs=tuple(runs), unidentifiable=tuple(unidentifiable), weighted=weighted)
 
 
+def _lsq(a, b):
+    """Least squares by QR (full column rank; cheaper to compile than an SVD)."""
+    q, r = jnp.linalg.qr(a)
+    return jax.scipy.linalg.solve_triangular(r, q.T @ b)
+
+
 @eqx.filter_jit
-def _fit_arrays(cfg: ModelCompensator, n_runs: int, with_tcf: bool, data: dict[str, Array]) -> dict[str, Array]:
-    """The whole identification as one traceable function of the data (jitted; differentiable in `data`)."""
+def _fit_arrays(cfg: ModelCompensator, n_runs: int, with_tcf: bool, free: tuple[bool, ...],
+                data: dict[str, Array]) -> dict[str, Array]:
+    """The whole identification as one traceable function of the data (jitted; differentiable in `data`).
+
+    `free` (static) says which entries of the parameter vector are fitted; the others stay at their start."""
     x, y, f, temp, sigma = data["x"], data["y"], data["f"], data["temp"], data["sigma"]
-    run_index, free = data["run_index"], data["free"]
+    run_index = data["run_index"]
+    idx = jnp.asarray([i for i, b in enumerate(free) if b])
     k = len(cfg.inl_orders)
     f_ref = jnp.mean(f)
     t_ref = jnp.mean(temp)
     onehot = (run_index[:, None] == jnp.arange(n_runs)[None, :]).astype(jnp.float64)
     # Start: the straight line at the starting beta and no INL (linear least squares, exact for a linear device).
-    lin, *_ = jnp.linalg.lstsq(jnp.concatenate([(x * (f / f_ref) ** data["beta0"])[:, None], onehot], axis=1), y)
-    parts = [lin[:1], data["beta0"][None], jnp.zeros(k), lin[1:]]
+    lin = _lsq(jnp.concatenate([(x * (f / f_ref) ** data["beta0"])[:, None], onehot], axis=1), y)
+    parts = [lin[:1], data["beta0"][None], jnp.zeros(k), lin[1:], jnp.zeros(1)]
     if with_tcf:
-        ft, *_ = jnp.linalg.lstsq(jnp.stack([jnp.ones_like(temp), temp - t_ref], axis=1), f / f_ref - 1.0)
+        ft = _lsq(jnp.stack([jnp.ones_like(temp), temp - t_ref], axis=1), f / f_ref - 1.0)
         parts.append(ft)
     theta0 = jnp.concatenate(parts)
 
     def residuals(theta):
         sf, beta, inl = theta[0], theta[1], theta[2:2 + k]
-        bias = theta[2 + k:2 + k + n_runs]
+        bias, drift = theta[2 + k:2 + k + n_runs], theta[2 + k + n_runs]
         v = sf * (f / f_ref) ** beta * x
-        w = _newton(lambda w: _fundamental(w, inl, cfg.inl_orders, cfg.word_bits, cfg.dac_bits) - v, v,
-                    cfg.newton_steps)
-        r = (w + bias[run_index] - y) / sigma
+        w = _balance_word(v, inl, cfg, cfg.newton_steps)
+        r = (w + bias[run_index] + drift * 1e6 * (f / f_ref - 1.0) - y) / sigma
         if not with_tcf:
             return r
         off, tcf = theta[-2], theta[-1]
         rf = (f / f_ref - 1.0 - off - tcf * (temp - t_ref)) / FREQ_SIGMA_REL
         return jnp.concatenate([r, rf])
 
-    # Jacobi preconditioning: unit residual sensitivity per fitted unknown; frozen parameters get scale 0.
-    norms = jnp.linalg.norm(jax.jacfwd(residuals)(theta0), axis=0)
-    scale = jnp.where(free & (norms > 0), 1.0 / jnp.where(norms > 0, norms, 1.0), 0.0)
+    def theta_of(z, t0, s):
+        return t0.at[idx].add(z * s)
+
+    # Jacobi preconditioning: the solver's unknowns z move the residuals by one unit each.
+    norms = jnp.linalg.norm(jax.jacfwd(residuals)(theta0)[:, idx], axis=0)
+    scale = 1.0 / jnp.where(norms > 0, norms, 1.0)
 
     def fn(z, args):
-        t0, s = args
-        return residuals(t0 + z * s)
+        return residuals(theta_of(z, *args))
 
-    sol = optx.least_squares(fn, optx.LevenbergMarquardt(rtol=cfg.rtol, atol=cfg.atol), jnp.zeros_like(theta0),
+    sol = optx.least_squares(fn, optx.LevenbergMarquardt(rtol=cfg.rtol, atol=cfg.atol), jnp.zeros(len(idx)),
                              args=(theta0, scale), max_steps=cfg.max_steps, throw=False)
-    theta = theta0 + sol.value * scale
+    theta = theta_of(sol.value, theta0, scale)
     r = residuals(theta)
-    jz = jax.jacfwd(residuals)(theta) * scale
-    n_free = jnp.sum(free)
-    dof = jnp.maximum(r.shape[0] - n_free, 1)
-    chi2_red = jnp.sum(r**2) / dof
+    jz = jax.jacfwd(residuals)(theta)[:, idx] * scale
+    chi2_red = jnp.sum(r**2) / max(r.shape[0] - len(idx), 1)
     cov_z = jnp.linalg.pinv(jz.T @ jz, hermitian=True)
-    stderr = jnp.sqrt(jnp.abs(jnp.diag(cov_z)) * chi2_red) * scale
+    stderr = jnp.zeros_like(theta).at[idx].set(jnp.sqrt(jnp.abs(jnp.diag(cov_z)) * chi2_red) * scale)
     # How well the last Newton solve closed the balance, relative to the largest word.
     sf, beta, inl = theta[0], theta[1], theta[2:2 + k]
     v = sf * (f / f_ref) ** beta * x
-    w = _newton(lambda w: _fundamental(w, inl, cfg.inl_orders, cfg.word_bits, cfg.dac_bits) - v, v,
-                cfg.newton_steps)
-    bal = jnp.max(jnp.abs(_fundamental(w, inl, cfg.inl_orders, cfg.word_bits, cfg.dac_bits) - v)) / jnp.max(
-        jnp.abs(v))
+    w = _newton(lambda w: _fundamental(w, inl, cfg) - v, v, cfg.newton_steps)  # without _balance_word's last step
+    bal = jnp.max(jnp.abs(_fundamental(w, inl, cfg) - v)) / jnp.max(jnp.abs(v))
     return {"theta": theta, "stderr": stderr, "chi2_red": chi2_red, "f_ref": f_ref, "t_ref": t_ref,
             "converged": sol.result == optx.RESULTS.successful, "num_steps": sol.stats["num_steps"],
             "balance_residual": bal}
