@@ -15,7 +15,6 @@ from gyrojax._compensate.model import _fit_arrays, _fundamental, describing_weig
 from gyrojax._presets import QMG_QUADRATURE_DPS
 from gyrojax.cli import main
 
-
 TYPICAL_INL = {3: -1063.6, 5: 3418.6}  # gyrojax.DacInl.typical(): LSB coefficients of u^3 and u^5
 TCF = -30e-6  # paper_qmg's silicon TCF, 1/K
 
@@ -211,13 +210,13 @@ def test_model_fit_is_differentiable_in_the_data(warmup_table):
     pts = gj.rate_points(warmup_table, _device(warmup_table))
     pts = pts.select(np.isin(pts.run, [0, 1]))
     n = len(pts)
-    data = dict(x=jnp.asarray(pts.rate_dps), y=jnp.asarray(pts.output), f=jnp.asarray(pts.drive_freq_hz),
-                temp=jnp.asarray(pts.temperature_c), sigma=jnp.ones(n),
-                run_index=jnp.asarray(np.repeat([0, 1], n // 2)), beta0=jnp.asarray(1.0))
+    data = {"x": jnp.asarray(pts.rate_dps), "y": jnp.asarray(pts.output), "f": jnp.asarray(pts.drive_freq_hz),
+            "temp": jnp.asarray(pts.temperature_c), "sigma": jnp.ones(n),
+            "run_index": jnp.asarray(np.repeat([0, 1], n // 2)), "beta0": jnp.asarray(1.0)}
     free = (True, False) + (True,) * 7  # the default: beta held at 1, everything else fitted
 
     def inl3(y):
-        return _fit_arrays(gj.ModelCompensator(), 2, True, free, dict(data, y=y))["theta"][2]
+        return _fit_arrays(gj.ModelCompensator(), 2, True, free, {**data, "y": y})["theta"][2]
 
     direction = jnp.asarray(np.random.default_rng(3).normal(size=n))  # LSB
     _, tangent = jax.jvp(inl3, (data["y"],), (direction,))

@@ -5,6 +5,7 @@ import abc
 from typing import Any
 
 import equinox as eqx
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .points import RatePoints
@@ -44,8 +45,7 @@ class AbstractCompensator(eqx.Module):
 
 def require_side(points: RatePoints, name: str, method: str):
     """ValueError unless `points.<name>` is given (finite) on every point."""
-    values = getattr(points, name)
-    bad = ~(values == values) | ~(abs(values) < float("inf"))
+    bad = ~np.isfinite(getattr(points, name))
     if bad.any():
         raise ValueError(f"{method} compensation needs {name} on every point; {int(bad.sum())} of {len(points)} "
                          "points lack it.")

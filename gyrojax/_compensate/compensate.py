@@ -7,13 +7,17 @@ import equinox as eqx
 import numpy as np
 
 from .._dataset import DataError, Table
-from .._metrics import FULL_SCALE_CONVENTIONS, MIN_POINTS_LINEAR, fit_scale_factor, repeatability
+from .._metrics import (
+    FULL_SCALE_CONVENTIONS,
+    MIN_POINTS_LINEAR,
+    fit_scale_factor,
+    repeatability,
+)
 from .base import AbstractCompensation, AbstractCompensator
 from .composite import CompositeCompensator
 from .model import ModelCompensator
 from .points import RatePoints
 from .polynomial import PolynomialCompensator
-
 
 COMPENSATORS: dict[str, type[AbstractCompensator]] = {
     cls.name: cls for cls in (PolynomialCompensator, CompositeCompensator, ModelCompensator)}

@@ -36,6 +36,7 @@ The compensated rate is then $\hat\Omega = (u - f(u)) / K$ with $u = y\,k_t/f_d 
 training bias) and $f$ the piecewise error curve.
 """
 
+import itertools
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -203,7 +204,7 @@ class CompositeCompensator(AbstractCompensator):
             if side.size == 0:
                 continue
             starts = side_segment_starts(e_mean[side], self.threshold) + [side.size]
-            groups = [list(side[a:b]) for a, b in zip(starts[:-1], starts[1:])]
+            groups = [list(side[a:b]) for a, b in itertools.pairwise(starts)]
             segments += _merge_small(groups, need)
 
         fitted = []  # (lo_u, hi_u, center, width, coefficients, rates) per segment
@@ -218,7 +219,7 @@ class CompositeCompensator(AbstractCompensator):
             coef, *_ = np.linalg.lstsq(t[:, None] ** np.arange(deg + 1), e[sel], rcond=None)
             fitted.append((lo, hi, center, width, coef, tuple(float(r) for r in np.sort(seg_rates))))
         fitted.sort(key=lambda item: item[0])
-        for a, b in zip(fitted[:-1], fitted[1:]):
+        for a, b in itertools.pairwise(fitted):
             if b[0] <= a[1]:
                 raise ValueError("composite compensation: the calibrated output is not monotone in the rate "
                                  f"(segments of rates {a[5]} and {b[5]} overlap in output); a piecewise curve "

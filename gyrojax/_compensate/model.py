@@ -46,11 +46,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-from jaxtyping import Array, ArrayLike, Bool, Float
+from jaxtyping import Array, Bool, Float
 
 from .base import AbstractCompensation, AbstractCompensator, check_side, require_side
 from .points import RatePoints
-
 
 FREQ_SIGMA_REL = 1e-7
 """ASSUMPTION: relative standard uncertainty of a drive-frequency reading (0.46 mHz at 4634 Hz) because a PLL
@@ -272,11 +271,10 @@ class ModelCompensator(AbstractCompensator):
             raise ValueError(f"model compensation with {n_shape} identifiable INL term(s) needs at least "
                              f"{3 + n_shape} distinct training rates (a line, one per term, one to spare), got "
                              f"{n_rates}; use more rates or fewer inl_orders.")
-        data = dict(x=jnp.asarray(points.rate_dps), y=jnp.asarray(points.output), f=jnp.asarray(f),
-                    temp=jnp.asarray(np.where(np.isfinite(temps), temps, 0.0)),
-                    sigma=jnp.asarray(sig if weighted else np.ones_like(sig)),
-                    run_index=jnp.asarray(run_index),
-                    beta0=jnp.asarray(1.0 if self.frequency_exponent is None else float(self.frequency_exponent)))
+        data = {"x": jnp.asarray(points.rate_dps), "y": jnp.asarray(points.output), "f": jnp.asarray(f),
+                "temp": jnp.asarray(np.where(np.isfinite(temps), temps, 0.0)),
+                "sigma": jnp.asarray(sig if weighted else np.ones_like(sig)), "run_index": jnp.asarray(run_index),
+                "beta0": jnp.asarray(1.0 if self.frequency_exponent is None else float(self.frequency_exponent))}
         out = _fit_arrays(self, len(runs), with_tcf, tuple(bool(b) for b in free), data)
         bal = float(out["balance_residual"])
         if not bal < 1e-9:
