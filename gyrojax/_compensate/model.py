@@ -6,7 +6,7 @@ Coriolis force. With the DAC's integral nonlinearity acting on the instantaneous
 $W \sin\theta$, that balance reads
 
 $$ D(W) \equiv W + L \sum_{n} \rho_n\, c_n \left(\frac{W}{H}\right)^n = K(f)\,\Omega,
-   \qquad K(f) = K_{ref} \left(\frac{f}{f_{ref}}\right)^{\beta}, \qquad y = W + b_r + d\,(f/f_{ref}-1), $$
+   \qquad K(f) = K_{ref} \left(\frac{f}{f_{ref}}\right)^{\beta}, \qquad y = W + b_r + 10^6 d\,(f/f_{ref}-1), $$
 
 - $c_n$: the DAC INL in DAC LSB as the coefficient of $u^n$, $u = $ code / $2^{bits-1}$ (the convention of
   `gyrojax.DacInl`), $L = 2^{word\_bits - bits}$ word LSB per DAC LSB, $H = 2^{word\_bits-1}$;
@@ -18,9 +18,10 @@ $$ D(W) \equiv W + L \sum_{n} \rho_n\, c_n \left(\frac{W}{H}\right)^n = K(f)\,\O
   holds the displacement amplitude ($\beta = 1$, the default, as seed 000's initial calibration assumes);
   with `frequency_exponent=None` $\beta$ is identified instead, which needs training runs that span the
   drive frequencies the compensation will meet (its standard error says whether they did);
-- $b_r + d\,(f/f_{ref} - 1)$: a bias per training run (turn-on bias; applying the model uses their mean) plus
-  its thermal drift, again through the drive frequency (quadrature times a demodulation phase that moves
-  with temperature is the classic source); $d$ in LSB per ppm of drive frequency.
+- $b_r + 10^6 d\,(f/f_{ref} - 1)$: a bias per training run (turn-on bias; applying the model uses their mean)
+  plus its thermal drift, again through the drive frequency (quadrature times a demodulation phase that moves
+  with temperature is the classic source); $d$ in LSB per ppm of drive frequency, identifiable only when the
+  drive frequency moves within a training run (otherwise it is one more per-run constant).
 
 When the points carry `temperature_c`, the drive frequency's temperature coefficient is identified jointly:
 $f = f_{ref} (1 + \phi + \mathrm{TCF}\,(T - T_{ref}))$, so the scale factor's temperature coefficient is
@@ -259,7 +260,8 @@ class ModelCompensator(AbstractCompensator):
         elif no_spread:
             free[1] = False
             unidentifiable.append("frequency_exponent")
-        if no_spread:
+        within = max(float(np.ptp(f[points.run == r])) for r in runs)
+        if within <= 1e-9 * np.mean(f):
             free[n_par - 1] = False
             unidentifiable.append("bias_drift_lsb_per_ppm")
         for i, n in enumerate(self.inl_orders):
@@ -276,6 +278,10 @@ class ModelCompensator(AbstractCompensator):
                 "sigma": jnp.asarray(sig if weighted else np.ones_like(sig)), "run_index": jnp.asarray(run_index),
                 "beta0": jnp.asarray(1.0 if self.frequency_exponent is None else float(self.frequency_exponent))}
         out = _fit_arrays(self, len(runs), with_tcf, tuple(bool(b) for b in free), data)
+        if not bool(out["converged"]):
+            raise RuntimeError(f"model compensation: Levenberg-Marquardt did not converge in {self.max_steps} steps; "
+                               "raise max_steps or loosen rtol/atol (ModelCompensator), or check the training "
+                               "data for outliers.")
         bal = float(out["balance_residual"])
         if not bal < 1e-9:
             raise RuntimeError(f"model compensation: the balance D(W) = K Omega did not converge in "
