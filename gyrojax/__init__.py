@@ -10,7 +10,12 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 from . import _units as units  # noqa: E402
-from ._campaign import SIMULATED_SWEEPS as SIMULATED_SWEEPS, simulate_table as simulate_table  # noqa: E402
+from ._campaign import (  # noqa: E402
+    CAMPAIGN_TIER as CAMPAIGN_TIER,
+    SIMULATED_SWEEPS as SIMULATED_SWEEPS,
+    campaign_lot as campaign_lot,
+    simulate_table as simulate_table,
+)
 from ._compensate.base import (  # noqa: E402
     AbstractCompensation as AbstractCompensation,
     AbstractCompensator as AbstractCompensator,
@@ -113,6 +118,10 @@ from ._solution import RESULTS as RESULTS  # noqa: E402
 from ._stimulus import Stimulus as Stimulus  # noqa: E402
 from ._sweeps import (  # noqa: E402
     SEED000_RATES_DPS as SEED000_RATES_DPS,
+    VCF_DYNAMIC_FREQUENCIES_HZ as VCF_DYNAMIC_FREQUENCIES_HZ,
+    VCF_STATIC_RATES_DPS as VCF_STATIC_RATES_DPS,
+    Protocol as Protocol,
+    RunWarmup as RunWarmup,
     dac_sweep as dac_sweep,
     rate_sweep as rate_sweep,
     seed000_rates as seed000_rates,

@@ -1,4 +1,13 @@
-"""Simulated measurement campaigns: a lot, repeated runs, several sweeps -> a tidy `Table`."""
+"""Simulated measurement campaigns: a lot, repeated runs, several sweeps -> a tidy `Table`.
+
+Every output is computed by the measurement model of `gyrojax/_observe.py` (`rate_table_points`,
+`vcf_static_points`, `vcf_dynamic_points`, `dac_points`) - the functions identification fits - vmapped over
+the devices of the lot, the runs and the points, one compiled call per sweep kind. The campaign adds what
+belongs to a run rather than to a device: its temperature history (`Protocol.warmup`), its turn-on bias and
+its noise (`RateNoise`).
+"""
+
+import dataclasses
 
 import equinox as eqx
 import jax
@@ -8,27 +17,60 @@ import numpy as np
 from ._dataset import Table
 from ._gyroscope import Gyroscope
 from ._lot import ProcessSpread, as_arrays, make_lot
-from ._noise import RateNoise
+from ._noise import DAC_VOLTMETER_SIGMA_V, RateNoise
+from ._observe import dac_points, rate_table_points, vcf_dynamic_points, vcf_static_points
 from ._simulate.tiers import AbstractTier, Steady
 from ._solution import RESULTS
-from ._sweeps import SEED000_RATES_DPS, _rate_sweep, dac_sweep
+from ._sweeps import Protocol
 from ._units import DEG
 
 
-SIMULATED_SWEEPS = ("rate_table", "dac")
-"""Sweeps `simulate_table` can produce so far."""
+SIMULATED_SWEEPS = ("rate_table", "vcf_static", "vcf_dynamic", "dac")
+"""Sweeps `simulate_table` can produce (DESIGN.md §6)."""
 
-DAC_VOLTMETER_SIGMA = 2e-5  # V, ASSUMPTION: 1-sigma reading noise of the AC amplitude in a DAC sweep
+CAMPAIGN_TIER = Steady(rtol=1e-10, atol=1e-10)
+"""The default tier of `simulate_table`: `Steady` at 1e-10 (1e-4 ppm of the O(1)-scaled states). Measured:
+`Steady()`'s 1e-11 sits at round-off for open-loop points at high rates - Newton stops shrinking its steps and
+runs out of its 40 - on 20 of the 858 rate-table points (and 9 of 858 static-VCF points) of a 13-device
+vcf-2018 lot with seed 003's spread; at 1e-10 every point converges in 2 Newton steps."""
+
+DAC_VOLTMETER_SIGMA = DAC_VOLTMETER_SIGMA_V  # V, the default of simulate_table(voltmeter_sigma_v=...)
 
 
 @eqx.filter_jit
-def _lot_rate_sweep(lot, rates, times, tier):
-    return eqx.filter_vmap(lambda g: _rate_sweep(g, rates, times, tier))(lot)
+def _lot_rate_table(lot, rates_dps, temperatures, tier):
+    """`rate_table_points` for every device (axis 0) and run (axis 1); temperatures (device, run, point)."""
+    def device(g, temps):
+        return jax.vmap(lambda t: rate_table_points(g, rates_dps, t, tier))(temps)
+
+    return eqx.filter_vmap(device)(lot, temperatures)
 
 
 @eqx.filter_jit
-def _lot_dac_sweep(lot, words):
-    return eqx.filter_vmap(lambda g, w: dac_sweep(g, w))(lot, words)
+def _lot_vcf_static(lot, amplitudes_v, temperatures, tier):
+    """`vcf_static_points` for every device and run."""
+    def device(g, temps):
+        return jax.vmap(lambda t: vcf_static_points(g, amplitudes_v, t, tier))(temps)
+
+    return eqx.filter_vmap(device)(lot, temperatures)
+
+
+@eqx.filter_jit
+def _lot_vcf_dynamic(lot, frequencies_hz, temperatures, amplitude_v):
+    """`vcf_dynamic_points` for every device, run and point, each point at its own temperature."""
+    def point(g, f, t):
+        amp, phase = vcf_dynamic_points(g, f[None], t, amplitude_v)
+        return amp[0], phase[0]
+
+    def device(g, temps):
+        return jax.vmap(lambda t_run: jax.vmap(lambda f, t: point(g, f, t))(frequencies_hz, t_run))(temps)
+
+    return eqx.filter_vmap(device)(lot, temperatures)
+
+
+@eqx.filter_jit
+def _lot_dac(lot, words):
+    return eqx.filter_vmap(dac_points)(lot, words)
 
 
 @eqx.filter_jit
@@ -42,83 +84,199 @@ def _raise_unsettled(result, what):
         codes = np.asarray(result._value)[bad]
         raise RuntimeError(
             f"{int(bad.sum())} of {bad.size} {what} points did not settle (result code "
-            f"{sorted(set(codes.tolist()))}). Try another tier (averaged/full show the transient), longer "
-            "settle_time, or check the device's loop gains.")
+            f"{sorted(set(codes.tolist()))}). Steady() at rtol = atol = 1e-11 can stall at round-off (use "
+            "gyrojax.CAMPAIGN_TIER, Steady at 1e-10); otherwise try the averaged tier to see the transient, "
+            "smaller inputs, or check the device's loop gains.")
+
+
+def _slope(x, y):
+    """Least-squares slope of y (..., point) against x (point)."""
+    xc = x - x.mean()
+    return np.sum((y - y.mean(axis=-1, keepdims=True)) * xc, axis=-1) / np.sum(xc**2)
+
+
+def _rng(seed, sweep):
+    """An independent NumPy generator per sweep kind: adding a sweep leaves the others' noise unchanged."""
+    return np.random.default_rng([int(seed) % 2**63, SIMULATED_SWEEPS.index(sweep)])
+
+
+def campaign_lot(gyro: Gyroscope, *, devices: int = 1, seed: int = 0,
+                 spread: ProcessSpread = ProcessSpread()) -> Gyroscope:
+    """The devices that `simulate_table` simulates for these arguments: one Gyroscope whose array leaves
+    have a leading device axis (device i is the table's `{prefix}-{i:03d}`). With `devices=1` it is `gyro`
+    itself; otherwise `make_lot(gyro, devices, key, spread)` with the key derived from `seed`."""
+    if not isinstance(devices, int) or isinstance(devices, bool) or devices < 1:
+        raise ValueError(f"devices must be an integer >= 1, got {devices!r}.")
+    if devices == 1:
+        return jax.tree.map(lambda x: x[None], as_arrays(gyro))
+    key_lot, _ = jax.random.split(jax.random.PRNGKey(seed))
+    return make_lot(gyro, devices, key_lot, spread)
 
 
 def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=("rate_table",),
-                   tier: AbstractTier = Steady(), rates_dps=SEED000_RATES_DPS, noise: RateNoise = RateNoise(),
+                   tier: AbstractTier = CAMPAIGN_TIER, rates_dps=None, noise: RateNoise = RateNoise(),
                    noise_free: bool = False, seed: int = 0, spread: ProcessSpread = ProcessSpread(),
-                   device_prefix: str | None = None) -> Table:
+                   device_prefix: str | None = None, protocol: Protocol = Protocol(),
+                   voltmeter_sigma_v: float = DAC_VOLTMETER_SIGMA_V) -> Table:
     """Simulate a measurement campaign and return it in the tidy format of DESIGN.md §6.
 
     **Arguments:**
 
     - `gyro`: the nominal device (with any effects already added).
     - `devices`: lot size; with more than one, devices are drawn around `gyro` with `spread`.
-    - `runs`: repeated runs per device (each with its own turn-on bias and noise).
-    - `sweeps`: any of `SIMULATED_SWEEPS`.
-    - `tier`: simulation tier for rate-table points.
-    - `rates_dps`: table rates, deg/s (default seed 000's 22 rates).
-    - `noise`, `noise_free`: the noise model, or none at all.
-    - `seed`: the PRNG seed (the lot and the noise both derive from it).
+    - `runs`: repeated runs per device; each (run, sweep) is a power-on session with its own warm-up,
+      turn-on bias and noise.
+    - `sweeps`: any of `SIMULATED_SWEEPS`, in the order the table lists them.
+    - `tier`: simulation tier of the settled sweeps (`rate_table`, `vcf_static`), default `CAMPAIGN_TIER`
+      (`Steady` at 1e-10); the dynamic sweep is the averaged model linearised at rest, the DAC sweep the
+      DAC's describing function.
+    - `rates_dps`: table rates, deg/s; shorthand for `protocol` with these `rates_dps`.
+    - `noise`: the rate-output noise (`RateNoise`, in deg/s); each device's share in LSB is its noise-free
+      rate-table scale factor (least-squares slope of run 0) times the noise in deg/s.
+    - `noise_free`: no noise, no turn-on bias (then `output_sigma` is 0).
+    - `seed`: the PRNG seed (the lot and the noise both derive from it; each sweep kind draws its own
+      stream).
+    - `spread`: process spread of the lot.
+    - `device_prefix`: device ids are `{prefix}-{i:03d}` (default the device's name).
+    - `protocol`: inputs, timing and warm-up of each sweep kind (`gyrojax.Protocol`).
+    - `voltmeter_sigma_v`: reading noise of the DAC sweep's AC voltmeter, V.
 
-    **Returns:** a `gyrojax.Table` with `output_sigma`, `temperature_c`, `drive_freq_hz` and, for `dac`
-    sweeps, `rate_dps`.
+    **Returns:** a `gyrojax.Table` with `output_sigma` (the standard uncertainty of each point about its
+    run's constant bias), `n_samples`, `temperature_c` (die temperature at the middle of the dwell),
+    `drive_freq_hz` (settled PLL frequency; not given for vcf_dynamic and dac rows), `phase_deg`
+    (vcf_dynamic sweeps) and `rate_dps` (dac sweeps: the rate the word stands for, seed 000 Table 2).
     """
-    unknown = [s for s in sweeps if s not in SIMULATED_SWEEPS]
-    if unknown:
-        raise ValueError(f"cannot simulate sweep(s) {unknown}; available: {list(SIMULATED_SWEEPS)}.")
-    if not isinstance(devices, int) or devices < 1:
+    sweeps = tuple(sweeps)
+    for s in sweeps:
+        if s not in SIMULATED_SWEEPS:
+            raise ValueError(f"cannot simulate sweep {s!r}; choose from {', '.join(SIMULATED_SWEEPS)}.")
+    repeated = sorted({s for s in sweeps if sweeps.count(s) > 1})
+    if repeated:
+        raise ValueError(f"sweeps lists {', '.join(map(repr, repeated))} more than once; give each sweep once "
+                         "(repeats are runs).")
+    if not sweeps:
+        raise ValueError(f"sweeps is empty; choose from {', '.join(SIMULATED_SWEEPS)}.")
+    if not isinstance(devices, int) or isinstance(devices, bool) or devices < 1:
         raise ValueError(f"devices must be an integer >= 1, got {devices!r}.")
-    if not isinstance(runs, int) or runs < 1:
+    if not isinstance(runs, int) or isinstance(runs, bool) or runs < 1:
         raise ValueError(f"runs must be an integer >= 1, got {runs!r}.")
-    key_lot, key_noise = jax.random.split(jax.random.PRNGKey(seed))
-    if devices == 1:
-        lot = jax.tree.map(lambda x: x[None], as_arrays(gyro))
-    else:
-        lot = make_lot(gyro, devices, key_lot, spread)
+    if not isinstance(protocol, Protocol):
+        raise ValueError(f"protocol must be a gyrojax.Protocol, got {protocol!r}.")
+    if not isinstance(noise, RateNoise):
+        raise ValueError(f"noise must be a gyrojax.RateNoise, got {noise!r}.")
+    if not voltmeter_sigma_v >= 0:
+        raise ValueError(f"voltmeter_sigma_v must be >= 0 V, got {voltmeter_sigma_v!r}.")
+    if rates_dps is not None:
+        protocol = dataclasses.replace(protocol, rates_dps=rates_dps)
+    if "dac" in sweeps and not gyro.closed_loop:
+        raise ValueError(f"a dac sweep needs a closed-loop device; {gyro.name!r} is open loop.")
+    vcf_amplitudes = protocol.inputs("vcf_static", gyro) if "vcf_static" in sweeps else None
+    if "vcf_dynamic" in sweeps and float(np.asarray(gyro.vcf_electrode.force_per_volt2)) == 0.0:
+        raise ValueError(f"a vcf_dynamic sweep needs a virtual-Coriolis electrode; {gyro.name!r} has "
+                         "vcf_electrode.force_per_volt2 = 0.")
+
+    lot = campaign_lot(gyro, devices=devices, seed=seed, spread=spread)
     prefix = device_prefix or gyro.name
-    names = [f"{prefix}-{i:03d}" for i in range(devices)]
-    rates_dps = np.asarray(rates_dps, dtype=float)
-    rates = jnp.asarray(rates_dps * DEG)
-    times = noise.warmup_s + (np.arange(rates_dps.size) + 0.5) * noise.dwell_s
-    rng = np.random.default_rng(np.asarray(jax.random.key_data(key_noise)).ravel()[-1].item())
-    cols = {k: [] for k in ("device", "run", "sweep", "input", "output", "output_sigma", "temperature_c",
-                            "drive_freq_hz", "rate_dps")}
+    names = np.asarray([f"{prefix}-{i:03d}" for i in range(devices)])
+    shape_runs = (devices, runs)
 
-    def add(dev, run, sweep, x, y, sig, temp, freq, rate):
-        n = len(x)
-        cols["device"] += [dev] * n
-        cols["run"] += [run] * n
-        cols["sweep"] += [sweep] * n
-        for k, v in (("input", x), ("output", y), ("output_sigma", sig), ("temperature_c", temp),
-                     ("drive_freq_hz", freq), ("rate_dps", rate)):
-            cols[k] += list(np.broadcast_to(np.asarray(v, dtype=float), (n,)))
+    def temperatures(sweep):
+        return np.broadcast_to(protocol.temperatures(gyro, runs, sweep), shape_runs + (protocol.n_points(sweep),))
 
-    if "rate_table" in sweeps:
-        settled = _lot_rate_sweep(lot, rates, jnp.asarray(times), tier)
-        _raise_unsettled(settled.result, "rate-table")
-        sf = np.abs(np.asarray(settled.rate[:, -1] - settled.rate[:, 0])) / (rates_dps[-1] - rates_dps[0])
-        temps = np.asarray(gyro.temperature(jnp.asarray(times)))
-        for d, name in enumerate(names):
-            sigma = 0.0 if noise_free else noise.point_sigma_dps() * sf[d]
-            for r in range(runs):
-                out = np.asarray(settled.rate[d], dtype=float).copy()
-                if not noise_free:
-                    out += rng.normal() * noise.turn_on_bias_dps * sf[d]
-                    out += rng.normal(size=out.shape) * sigma
-                add(name, r, "rate_table", rates_dps, out, sigma, temps,
-                    np.asarray(settled.frequency[d]) / (2 * np.pi), np.nan)
-    if "dac" in sweeps:
-        if not gyro.closed_loop:
-            raise ValueError(f"a dac sweep needs a closed-loop device; {gyro.name!r} is open loop.")
-        sf_ideal = np.asarray(_lot_ideal_sf(lot))  # LSB per rad/s
-        words = np.round(-rates_dps[None, :] * DEG * sf_ideal[:, None])  # seed 000 Table 2: word = -SF x rate
-        volts = np.asarray(_lot_dac_sweep(lot, jnp.asarray(words)))
-        for d, name in enumerate(names):
-            sigma = 0.0 if noise_free else DAC_VOLTMETER_SIGMA
-            for r in range(runs):
-                out = volts[d] + (0.0 if noise_free else rng.normal(size=volts[d].shape) * sigma)
-                add(name, r, "dac", words[d], out, sigma, np.nan, np.nan, rates_dps)
-    return Table.from_columns({k: np.asarray(v) for k, v in cols.items()}, source="<simulated>")
+    rates = np.asarray(protocol.rates_dps)
+    rate_settled = None
+    if "rate_table" in sweeps or (not noise_free and {"vcf_static", "vcf_dynamic"} & set(sweeps)):
+        # The rate-table sweep: an output, and each device's scale factor for the noise in LSB.
+        rate_tier = tier if "rate_table" in sweeps else CAMPAIGN_TIER
+        rate_settled = _lot_rate_table(lot, jnp.asarray(rates), jnp.asarray(temperatures("rate_table")),
+                                       rate_tier)
+        _raise_unsettled(rate_settled.result, "rate-table")
+    lsb_per_dps = (np.zeros(devices) if rate_settled is None
+                   else np.abs(_slope(rates, np.asarray(rate_settled.rate[:, 0], dtype=float))))
+
+    columns = []
+    for sweep in sweeps:
+        temps = temperatures(sweep)
+        rng = _rng(seed, sweep)
+        n = protocol.n_points(sweep)
+        full = shape_runs + (n,)
+        extra = {}
+        if sweep in ("rate_table", "vcf_static"):
+            if sweep == "rate_table":
+                inputs, settled = rates, rate_settled
+            else:
+                inputs = vcf_amplitudes
+                settled = _lot_vcf_static(lot, jnp.asarray(inputs), jnp.asarray(temps), tier)
+                _raise_unsettled(settled.result, "vcf-static")
+            out = np.asarray(settled.rate, dtype=float)
+            dwell = protocol.dwell(sweep)
+            if noise_free:
+                sigma = np.zeros(full)
+            else:
+                bias, wobble = noise.sample_point_means(rng, shape_runs, n, dwell)
+                out = out + (bias[..., None] + wobble) * lsb_per_dps[:, None, None]
+                sigma = np.broadcast_to((noise.point_sigma_dps(dwell) * lsb_per_dps)[:, None, None], full)
+            freq = np.asarray(settled.frequency, dtype=float) / (2.0 * np.pi)
+            n_samples = np.full(full, float(protocol.n_samples(sweep)))
+        elif sweep == "vcf_dynamic":
+            inputs = np.asarray(protocol.vcf_frequencies_hz)
+            amp, phase = _lot_vcf_dynamic(lot, jnp.asarray(inputs), jnp.asarray(temps),
+                                          float(protocol.vcf_dynamic_amplitude_v))
+            amp, phase = np.asarray(amp, dtype=float), np.asarray(phase, dtype=float)
+            if not (np.all(np.isfinite(amp)) and np.all(np.isfinite(phase))):
+                raise RuntimeError("the vcf-dynamic response is not finite for some points; the device has no "
+                                   "stable equilibrium at rest (check its loop gains).")
+            out = amp
+            if noise_free:
+                sigma = np.zeros(full)
+            else:
+                # Lock-in over whole cycles: each quadrature component carries sqrt(G(f) / T) (see RateNoise).
+                sigma = (noise.amplitude_sigma_dps(inputs, protocol.dynamic_dwell_s)[None, None, :]
+                         * lsb_per_dps[:, None, None]) * np.ones(full)
+                z = rng.standard_normal(full + (2,))
+                reading = 1.0 + sigma * (z[..., 0] + 1j * z[..., 1]) / amp
+                out = amp * np.abs(reading)
+                phase = phase + np.rad2deg(np.angle(reading))
+            extra["phase_deg"] = phase
+            freq = np.full(full, np.nan)
+            n_samples = np.full(full, float(protocol.n_samples(sweep)))
+        else:  # dac
+            sf_ideal = np.asarray(_lot_ideal_sf(lot), dtype=float)  # LSB per rad/s
+            words = np.round(-rates[None, :] * DEG * sf_ideal[:, None])  # seed 000 Table 2: word = -SF x rate
+            volts = np.asarray(_lot_dac(lot, jnp.asarray(words)), dtype=float)
+            inputs = np.broadcast_to(words[:, None, :], full)
+            out = np.broadcast_to(volts[:, None, :], full)
+            sigma = np.full(full, 0.0 if noise_free else float(voltmeter_sigma_v))
+            if not noise_free:
+                out = out + sigma * rng.standard_normal(full)
+            extra["rate_dps"] = np.broadcast_to(rates, full)
+            temps = np.full(full, np.nan)  # a bench measurement of the DAC alone
+            freq = np.full(full, np.nan)
+            n_samples = np.full(full, np.nan)
+        columns.append({
+            "device": np.broadcast_to(names[:, None, None], full),
+            "run": np.broadcast_to(np.arange(runs)[None, :, None], full),
+            "sweep": np.full(full, sweep),
+            "input": np.broadcast_to(inputs, full),
+            "output": out,
+            "output_sigma": sigma,
+            "n_samples": n_samples,
+            "temperature_c": temps,
+            "drive_freq_hz": freq,
+            **extra,
+        })
+
+    order = ["device", "run", "sweep", "input", "output", "output_sigma", "n_samples", "phase_deg",
+             "temperature_c", "drive_freq_hz", "rate_dps"]
+    present = [c for c in order if any(c in cols for cols in columns)]
+    table = {}
+    for c in present:
+        parts = []
+        for cols in columns:
+            if c in cols:
+                parts.append(np.ravel(cols[c]))
+            else:
+                parts.append(np.full(cols["output"].size, np.nan))
+        table[c] = np.concatenate(parts)
+    table["run"] = table["run"].astype(np.int64)
+    return Table.from_columns(table, source="<simulated>")

@@ -23,10 +23,18 @@ def as_arrays(tree):
 class ProcessSpread(eqx.Module):
     """Relative (1-sigma) device-to-device spread of a lot, Gaussian.
 
-    Defaults are ASSUMPTIONS typical of one MEMS wafer lot: resonances +/-0.3 % (etch variation of spring
-    width), Q +/-10 % (vacuum and anchor loss), mass +/-0.5 %, feedback and drive electrode factors +/-1 %
-    (gap), angular gain +/-0.2 %, absolute couplings from their own spread. Seed 003 §3 names Q and the
-    resonant frequencies as the main differences between devices of one batch.
+    - `omega`: both resonances together (etch variation of the spring width).
+    - `split`: the sense resonance relative to the drive's (the mode split moves by `split` x omega_y).
+    - `q`: each quality factor.
+    - `mass`, `angular_gain`: the modal mass and Ag.
+    - `electrode`: the drive and feedback electrode factors (gap).
+    - `vcf_electrode`: the virtual-Coriolis electrode factor K_svf.
+    - `stiffness_coupling` (rad^2/s^2), `damping_coupling` (1/s): absolute spreads.
+
+    Defaults are ASSUMPTIONS typical of one MEMS wafer lot: resonances +/-0.3 %, split +/-0.03 % of omega_y,
+    Q +/-10 % (vacuum and anchor loss), mass +/-0.5 %, electrode factors +/-1 % (the VCF electrode is etched
+    with the same gap), angular gain +/-0.2 %, no coupling spread. Seed 003 §3 names Q and the resonant
+    frequencies as the main differences between devices of one batch, with K_svf and m_d "very close".
     """
 
     omega: float = 3e-3
@@ -36,10 +44,12 @@ class ProcessSpread(eqx.Module):
     angular_gain: float = 2e-3
     stiffness_coupling: float = 0.0  # rad^2/s^2, absolute
     damping_coupling: float = 0.0  # 1/s, absolute
+    split: float = 3e-4
+    vcf_electrode: float = 1e-2
 
     def __check_init__(self):
         for name in ("omega", "q", "mass", "electrode", "angular_gain", "stiffness_coupling",
-                     "damping_coupling"):
+                     "damping_coupling", "split", "vcf_electrode"):
             check_nonnegative("ProcessSpread", name, getattr(self, name))
 
 
@@ -57,12 +67,13 @@ def make_lot(gyro: Gyroscope, n: int, key, spread: ProcessSpread = ProcessSpread
         return 1.0 + sigma * jax.random.normal(k, (n,))
 
     common = rel(keys[0], spread.omega)  # both modes move together with the etch
-    split = rel(keys[1], spread.omega * 0.1)
+    split = rel(keys[1], spread.split)
     fb = batched.feedback_electrode
     return eqx.tree_at(
         lambda g: (g.resonator.omega_x, g.resonator.omega_y, g.resonator.q_x, g.resonator.q_y,
                    g.resonator.mass, g.resonator.angular_gain, g.resonator.stiffness_coupling,
-                   g.resonator.damping_coupling, g.drive_electrode.force_per_volt)
+                   g.resonator.damping_coupling, g.drive_electrode.force_per_volt,
+                   g.vcf_electrode.force_per_volt2)
         + ((g.feedback_electrode.k_vf,) if g.feedback_electrode is not None else ()),
         batched,
         (r.omega_x * common, r.omega_y * common * split, r.q_x * rel(keys[2], spread.q),
@@ -70,6 +81,7 @@ def make_lot(gyro: Gyroscope, n: int, key, spread: ProcessSpread = ProcessSpread
          r.angular_gain * rel(keys[5], spread.angular_gain),
          r.stiffness_coupling + spread.stiffness_coupling * jax.random.normal(keys[6], (n,)),
          r.damping_coupling + spread.damping_coupling * jax.random.normal(keys[7], (n,)),
-         batched.drive_electrode.force_per_volt * rel(keys[8], spread.electrode))
+         batched.drive_electrode.force_per_volt * rel(keys[8], spread.electrode),
+         batched.vcf_electrode.force_per_volt2 * rel(jax.random.fold_in(keys[8], 2), spread.vcf_electrode))
         + ((fb.k_vf * rel(jax.random.fold_in(keys[8], 1), spread.electrode),) if fb is not None else ()),
     )

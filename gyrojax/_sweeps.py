@@ -1,10 +1,22 @@
-"""Experiment protocols as functions of a device: rate-table sweeps (seed 000 §5)."""
+"""Experiment protocols: what is applied to a device, in which order, for how long (seed 000 §5, seed 003 §3).
+
+A `Protocol` holds the inputs of each sweep kind (table rates, virtual-Coriolis voltages and modulation
+frequencies), the timing of a run (warm-up, dwell per point, sampling rate) and the die's warm-up after
+power-on (`RunWarmup`). `gyrojax.simulate_table` runs it; the helpers `rate_sweep` and `dac_sweep` evaluate
+one device directly.
+"""
+
+import math
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from ._checks import check_nonnegative, check_positive
 from ._gyroscope import Gyroscope
+from ._observe import VCF_CARRIER_V, VCF_DYNAMIC_AMPLITUDE_V
+from ._physics.thermal import AbstractTemperature, WarmupTemperature
 from ._simulate.tiers import AbstractTier, Settled, Steady
 from ._stimulus import Stimulus
 from ._units import DEG
@@ -13,6 +25,228 @@ from ._units import DEG
 SEED000_RATES_DPS = (-200.0, -100.0, -50.0, -20.0, -10.0, -5.0, -2.0, -1.0, -0.5, -0.2, -0.1,
                      0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0)
 """Seed 000 §5: the 22 table rates, deg/s."""
+
+RATE_TABLE_WARMUP_S = 60.0
+"""s, seed 000 §5: "after powering the gyroscope and allowing a 1 min warm-up"."""
+
+RATE_TABLE_DWELL_S = 120.0
+"""s, seed 000 §5: "data were collected continuously for 2 min" per rate."""
+
+RATE_TABLE_SAMPLE_RATE_HZ = 100.0
+"""Hz, seed 000 §5: "at a sampling rate of 100 Hz"."""
+
+VCF_STATIC_RATES_DPS = SEED000_RATES_DPS
+"""deg/s, the static virtual-Coriolis sweep as a "virtual rate table" (seed 003 Fig. 4b): V_ac is set so that
+seed 003 Eq. (7), Om = K_svf V_fc V_ac / (2 m Ag a w_d), with the device's design values gives these rates
+(seed 000's 22). Seed 003 prints no static voltages. With Table 1's values (vcf-2018) 200 deg/s is
+V_ac = 6.546 mV at V_fc = 1 V; on paper-qmg's electrode (`gyrojax/_presets.py`) it is 2 V."""
+
+VCF_DYNAMIC_FREQUENCIES_HZ = tuple(10.0 * k for k in range(1, 51))
+"""Hz, seed 003 §3: "we measured the dynamic response from 10Hz to 500Hz"; the 10 Hz step is an ASSUMPTION
+(not printed), fine enough to place vcf-2018's 62 Hz peak and its -3 dB point by interpolation."""
+
+VCF_DYNAMIC_DWELL_S = 10.0
+"""s, ASSUMPTION: lock-in time per modulation frequency (not printed in seed 003); 100 whole cycles at the
+lowest frequency."""
+
+VCF_DYNAMIC_SAMPLE_RATE_HZ = 10_000.0
+"""Hz, ASSUMPTION: output sampling of the dynamic test, 20x the highest modulation frequency; seed 003 §3
+samples with an NI-DAQ 6366 (up to 2 MS/s), its rate is not printed."""
+
+WARMUP_RISE_K = 2.0
+"""K, ASSUMPTION: die self-heating after power-on ("a couple of kelvin"; neither seed gives a figure)."""
+
+WARMUP_TIME_CONSTANT_S = 120.0
+"""s, ASSUMPTION: self-heating time constant of a run that starts with the fixture already warm (settled
+within the first few points)."""
+
+FIRST_RUN_TIME_CONSTANT_S = 600.0
+"""s, ASSUMPTION: the first run of a session stabilises slower (fixture and table warm from cold too):
+seed 000 §5, "due to the longer time required for temperature stabilization during the first set of
+repeated experiments ... discrepancies were observed between the first set and the subsequent second and
+third sets"."""
+
+
+def _float_tuple(values):
+    return tuple(float(v) for v in np.ravel(np.asarray(values, dtype=float)))
+
+
+def _optional_float_tuple(values):
+    return None if values is None else _float_tuple(values)
+
+
+class RunWarmup(eqx.Module):
+    """The die temperature of each run after power-on: a first-order warm-up from the device's own
+    temperature at power-on,
+
+        T_r(t) = T_device(0) + rise_r (1 - exp(-t / tau_r)),
+
+    with the first run (run index 0) slower than the others (seed 000 §5).
+
+    **Arguments:**
+
+    - `rise_k`, `time_constant_s`: rise (K) and time constant (s) of runs 1, 2, ...
+    - `first_rise_k`, `first_time_constant_s`: the same for run 0.
+    """
+
+    rise_k: float = WARMUP_RISE_K
+    time_constant_s: float = WARMUP_TIME_CONSTANT_S
+    first_rise_k: float = WARMUP_RISE_K
+    first_time_constant_s: float = FIRST_RUN_TIME_CONSTANT_S
+
+    def __check_init__(self):
+        for name in ("rise_k", "first_rise_k"):
+            value = getattr(self, name)
+            if not math.isfinite(float(value)):
+                raise ValueError(f"RunWarmup.{name} must be finite, got {value!r}.")
+        check_positive("RunWarmup", "time_constant_s", self.time_constant_s)
+        check_positive("RunWarmup", "first_time_constant_s", self.first_time_constant_s)
+
+    def history(self, gyro: Gyroscope, run: int) -> AbstractTemperature:
+        """Temperature history (deg C vs s since power-on) of run `run` of `gyro` (a single device)."""
+        first = run == 0
+        return WarmupTemperature(
+            ambient=float(np.asarray(gyro.temperature(0.0))),
+            rise=float(self.first_rise_k if first else self.rise_k),
+            time_constant=float(self.first_time_constant_s if first else self.time_constant_s))
+
+
+class Protocol(eqx.Module):
+    """How each sweep kind is measured: its inputs, the timing of a run and the die's warm-up.
+
+    Every (run, sweep) is its own power-on session (seed 003 Fig. 3 uses separate set-ups for the rate table
+    and the virtual rate table): a warm-up of `warmup_s`, then the points back to back, each averaged over
+    its dwell. A point's `temperature_c` is the die temperature at the middle of its dwell.
+
+    **Arguments:**
+
+    - `rates_dps`: rate-table rates, deg/s, in the order applied (default seed 000's 22); the `dac` sweep
+      uses the words that stand for these rates (seed 000 Table 2).
+    - `vcf_rates_dps`: the static virtual-Coriolis sweep as virtual rates, deg/s, in order: V_ac is set from
+      them with seed 003 Eq. (7) and the nominal device's own m, Ag, a, w_d and K_svf at V_fc = 1 V (what a
+      test engineer does with the design values; see `vcf_static_amplitudes`).
+    - `vcf_amplitudes_v`: explicit static voltages V_ac, V, in order; when given they replace
+      `vcf_rates_dps`.
+    - `vcf_frequencies_hz`: modulation frequencies of the dynamic test, Hz, in order.
+    - `vcf_dynamic_amplitude_v`: V_ac of the dynamic test, V (seed 003: 20 mV).
+    - `warmup_s`: time from power-on to the first point, s.
+    - `dwell_s`, `sample_rate_hz`: averaging time and sampling rate of a settled point (rate_table,
+      vcf_static).
+    - `dynamic_dwell_s`, `dynamic_sample_rate_hz`: the same for a dynamic (lock-in) point.
+    - `warmup`: the die's warm-up per run (`RunWarmup`), or None to use the device's own `temperature`
+      history for every run.
+
+    Defaults: seed 000 §5 for the rate table (1 min warm-up, 2 min per rate at 100 Hz); seed 003 §3 for the
+    virtual-Coriolis tests; the static VCF sweep reuses the rate table's timing (ASSUMPTION: seed 003 prints
+    none). See the module's constants for each number's source.
+    """
+
+    rates_dps: tuple = eqx.field(converter=_float_tuple, default=SEED000_RATES_DPS)
+    vcf_rates_dps: tuple = eqx.field(converter=_float_tuple, default=VCF_STATIC_RATES_DPS)
+    vcf_amplitudes_v: tuple | None = eqx.field(converter=_optional_float_tuple, default=None)
+    vcf_frequencies_hz: tuple = eqx.field(converter=_float_tuple, default=VCF_DYNAMIC_FREQUENCIES_HZ)
+    vcf_dynamic_amplitude_v: float = VCF_DYNAMIC_AMPLITUDE_V
+    warmup_s: float = RATE_TABLE_WARMUP_S
+    dwell_s: float = RATE_TABLE_DWELL_S
+    sample_rate_hz: float = RATE_TABLE_SAMPLE_RATE_HZ
+    dynamic_dwell_s: float = VCF_DYNAMIC_DWELL_S
+    dynamic_sample_rate_hz: float = VCF_DYNAMIC_SAMPLE_RATE_HZ
+    warmup: RunWarmup | None = RunWarmup()
+
+    def __check_init__(self):
+        for name, what in (("rates_dps", "table rates (deg/s)"), ("vcf_rates_dps", "virtual rates (deg/s)"),
+                           ("vcf_amplitudes_v", "voltages (V)"), ("vcf_frequencies_hz", "frequencies (Hz)")):
+            if getattr(self, name) is None:
+                continue
+            values = np.asarray(getattr(self, name))
+            if values.size < 2 or not np.all(np.isfinite(values)):
+                raise ValueError(f"Protocol.{name} must hold at least 2 finite {what}, got {values.tolist()}.")
+            if np.unique(values).size != values.size:
+                dup = sorted({v for v in values.tolist() if values.tolist().count(v) > 1})
+                raise ValueError(f"Protocol.{name} repeats {dup}; each point is applied once (give repeats as "
+                                 "more runs).")
+        f = np.asarray(self.vcf_frequencies_hz)
+        if np.any(f <= 0):
+            raise ValueError(f"Protocol.vcf_frequencies_hz must be > 0 Hz, got {f.tolist()}.")
+        if self.vcf_dynamic_amplitude_v == 0 or not math.isfinite(self.vcf_dynamic_amplitude_v):
+            raise ValueError("Protocol.vcf_dynamic_amplitude_v must be finite and non-zero, got "
+                             f"{self.vcf_dynamic_amplitude_v!r}.")
+        check_nonnegative("Protocol", "warmup_s", self.warmup_s)
+        for name in ("dwell_s", "sample_rate_hz", "dynamic_dwell_s", "dynamic_sample_rate_hz"):
+            check_positive("Protocol", name, getattr(self, name))
+        if f.max() >= self.dynamic_sample_rate_hz / 2:
+            raise ValueError(f"Protocol.dynamic_sample_rate_hz = {self.dynamic_sample_rate_hz} Hz does not sample "
+                             f"the highest modulation frequency {f.max()} Hz (Nyquist: more than 2x).")
+        for dwell, rate, name in ((self.dwell_s, self.sample_rate_hz, "dwell_s x sample_rate_hz"),
+                                  (self.dynamic_dwell_s, self.dynamic_sample_rate_hz,
+                                   "dynamic_dwell_s x dynamic_sample_rate_hz")):
+            if round(dwell * rate) < 1:
+                raise ValueError(f"Protocol: {name} = {dwell * rate:g} gives no sample per point.")
+        if self.warmup is not None and not isinstance(self.warmup, RunWarmup):
+            raise ValueError(f"Protocol.warmup must be a RunWarmup or None, got {self.warmup!r}.")
+
+    def vcf_static_amplitudes(self, gyro: Gyroscope) -> np.ndarray:
+        """V_ac of each static virtual-Coriolis point, V: `vcf_amplitudes_v` if given, else `vcf_rates_dps`
+        through seed 003 Eq. (7) inverted with `gyro`'s nominal values (a single device):
+        V_ac = Om 2 m Ag a w_d / (K_svf V_fc), a the AGC's amplitude and w_d the drive resonance at t_ref,
+        rounded to 12 significant digits."""
+        if self.vcf_amplitudes_v is not None:
+            return np.asarray(self.vcf_amplitudes_v)
+        r = gyro.resonator
+        k_svf = float(np.asarray(gyro.vcf_electrode.force_per_volt2))
+        if k_svf == 0.0:
+            raise ValueError(f"a vcf sweep needs a virtual-Coriolis electrode; {gyro.name!r} has "
+                             "vcf_electrode.force_per_volt2 = 0.")
+        coriolis = 2.0 * r.mass * r.angular_gain * gyro.drive_amplitude(r.omega_x) * r.omega_x
+        volts_per_rad_s = float(np.asarray(coriolis)) / (k_svf * VCF_CARRIER_V)
+        volts = np.asarray(self.vcf_rates_dps) * DEG * volts_per_rad_s
+        return np.asarray([float(f"{v:.12g}") for v in volts])  # a generator's setting; clean numbers in files
+
+    def inputs(self, sweep: str, gyro: Gyroscope | None = None) -> np.ndarray:
+        """The `input` column of a sweep kind (for `dac`: the rates the words stand for, deg/s); `vcf_static`
+        needs the nominal device (see `vcf_static_amplitudes`)."""
+        if sweep in ("rate_table", "dac"):
+            return np.asarray(self.rates_dps)
+        if sweep == "vcf_static":
+            if self.vcf_amplitudes_v is not None:
+                return np.asarray(self.vcf_amplitudes_v)
+            if gyro is None:
+                raise ValueError("Protocol.inputs('vcf_static') needs the device to turn vcf_rates_dps into "
+                                 "volts; pass gyro=.")
+            return self.vcf_static_amplitudes(gyro)
+        if sweep == "vcf_dynamic":
+            return np.asarray(self.vcf_frequencies_hz)
+        raise ValueError(f"sweep must be rate_table, vcf_static, vcf_dynamic or dac, got {sweep!r}.")
+
+    def n_points(self, sweep: str) -> int:
+        """Number of points of a sweep kind."""
+        if sweep == "vcf_static":
+            return len(self.vcf_amplitudes_v if self.vcf_amplitudes_v is not None else self.vcf_rates_dps)
+        return self.inputs(sweep).size
+
+    def dwell(self, sweep: str) -> float:
+        """Averaging time of one point of `sweep`, s."""
+        return self.dynamic_dwell_s if sweep == "vcf_dynamic" else self.dwell_s
+
+    def n_samples(self, sweep: str) -> int:
+        """Samples averaged per point of `sweep`."""
+        rate = self.dynamic_sample_rate_hz if sweep == "vcf_dynamic" else self.sample_rate_hz
+        return int(round(self.dwell(sweep) * rate))
+
+    def point_times(self, sweep: str) -> np.ndarray:
+        """Time since power-on of the middle of each point's dwell, s: warmup + (i + 1/2) dwell."""
+        n = self.n_points(sweep)
+        return self.warmup_s + (np.arange(n) + 0.5) * self.dwell(sweep)
+
+    def run_history(self, gyro: Gyroscope, run: int) -> AbstractTemperature:
+        """The die-temperature history of run `run` (the device's own when `warmup` is None)."""
+        return gyro.temperature if self.warmup is None else self.warmup.history(gyro, run)
+
+    def temperatures(self, gyro: Gyroscope, runs: int, sweep: str) -> np.ndarray:
+        """Die temperature (deg C) at the middle of each point's dwell, shape (runs, points)."""
+        t = self.point_times(sweep)
+        return np.stack([np.broadcast_to(np.asarray(self.run_history(gyro, r)(t), dtype=float), t.shape)
+                         for r in range(runs)])
 
 
 @eqx.filter_jit

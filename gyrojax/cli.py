@@ -32,7 +32,7 @@ def _cmd_simulate(args):
     from ._campaign import simulate_table
     from ._dataset import write_table
 
-    tiers = {"steady": gj.Steady(), "averaged": gj.Averaged(), "full": gj.FullWaveform()}
+    tiers = {"steady": gj.CAMPAIGN_TIER, "averaged": gj.Averaged(), "full": gj.FullWaveform()}
     gyro = gj.preset(args.preset)
     for name, scale in args.effect:
         gyro = gj.add_effect(gyro, name, scale)
@@ -111,7 +111,7 @@ def build_parser():
                     "gyro outputs in LSB, DAC amplitudes in V.")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    sim = sub.add_parser("simulate", help="simulate a lot of devices on rate-table / DAC sweeps",
+    sim = sub.add_parser("simulate", help="simulate a lot of devices on rate-table, virtual-Coriolis and DAC sweeps",
                          description="Simulate sweeps of a preset device (or a lot around it) and write "
                                      "them in the tidy data format.")
     sim.add_argument("--preset", required=True, choices=sorted(PRESETS),
@@ -119,7 +119,9 @@ def build_parser():
     sim.add_argument("--devices", type=int, default=1, help="lot size (default 1: the nominal device)")
     sim.add_argument("--runs", type=int, default=1, help="repeated runs per device (default 1)")
     sim.add_argument("--sweeps", type=_sweep_list, default=("rate_table",),
-                     help="comma-separated: rate_table, dac (default rate_table)")
+                     help="comma-separated, any of rate_table, vcf_static, vcf_dynamic, dac (default rate_table); "
+                          "the protocols are seed 000 §5's rate table and seed 003's virtual-Coriolis tests, see "
+                          "gyrojax.Protocol")
     sim.add_argument("--tier", choices=("steady", "averaged", "full"), default="steady",
                      help="simulation tier for settled points (default steady; full is the slow ground truth)")
     sim.add_argument("--effect", type=_parse_effect, action="append", default=[], metavar="NAME[=SCALE]",
