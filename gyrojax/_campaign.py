@@ -126,7 +126,8 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     - `devices`: lot size; with more than one, devices are drawn around `gyro` with `spread`.
     - `runs`: repeated runs per device; each (run, sweep) is a power-on session with its own warm-up,
       turn-on bias and noise.
-    - `sweeps`: any of `SIMULATED_SWEEPS`, in the order the table lists them.
+    - `sweeps`: any of `SIMULATED_SWEEPS` (a sequence, or one comma-separated string), in the order the
+      table lists them.
     - `tier`: simulation tier of the settled sweeps (`rate_table`, `vcf_static`), default `CAMPAIGN_TIER`
       (`Steady` at 1e-10); the dynamic sweep is the averaged model linearised at rest, the DAC sweep the
       DAC's describing function.
@@ -146,7 +147,7 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     `drive_freq_hz` (settled PLL frequency; not given for vcf_dynamic and dac rows), `phase_deg`
     (vcf_dynamic sweeps) and `rate_dps` (dac sweeps: the rate the word stands for, seed 000 Table 2).
     """
-    sweeps = tuple(sweeps)
+    sweeps = tuple(x.strip() for x in sweeps.split(",")) if isinstance(sweeps, str) else tuple(sweeps)
     for s in sweeps:
         if s not in SIMULATED_SWEEPS:
             raise ValueError(f"cannot simulate sweep {s!r}; choose from {', '.join(SIMULATED_SWEEPS)}.")
@@ -190,7 +191,8 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
         rate_tier = tier if "rate_table" in sweeps else CAMPAIGN_TIER
         rate_settled = _lot_rate_table(lot, jnp.asarray(rates), jnp.asarray(temperatures("rate_table")),
                                        rate_tier)
-        _raise_unsettled(rate_settled.result, "rate-table")
+        _raise_unsettled(rate_settled.result, "rate-table" if "rate_table" in sweeps
+                         else "rate-table (the noise-free sweep whose scale factor converts the noise to LSB)")
     lsb_per_dps = (np.zeros(devices) if rate_settled is None
                    else np.abs(_slope(rates, np.asarray(rate_settled.rate[:, 0], dtype=float))))
 
