@@ -1,0 +1,577 @@
+"""`identify`: fit a model's free parameters to every sweep of a lot at once, with uncertainties.
+
+The fit minimises chi2 = sum r^2 over all standardised residuals (see `_residuals.py`; the run biases are
+projected out exactly) with optimistix, per device in one vmapped, compiled call, or jointly for the whole lot
+when some parameters are shared. Before solving, the weighted Jacobian at the start is decomposed: a
+direction of parameter space the data cannot fix to better than its natural size (singular value below
+`identifiability_threshold` in internal units) is named, and the parameter of it that comes last in
+`gyrojax.PARAMETERS`' order of preference is held at its start value, so the fit does not wander along it.
+"""
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from ._dataset import Table
+from ._fitdata import FitData, fit_data
+from ._gyroscope import Gyroscope
+from ._observe import rate_table_points
+from ._parameters import (
+    DEFAULT_FREE,
+    PARAMETERS,
+    Entry,
+    Model,
+    apply_u,
+    build_entries,
+    read_values,
+)
+from ._residuals import device_residuals, num_biases, num_points, predict_block, run_biases
+from ._simulate.tiers import Steady
+
+
+SOLVERS = ("levenberg-marquardt", "gauss-newton", "bfgs")
+
+
+def _solver(solver, rtol, atol):
+    if not isinstance(solver, str):
+        return solver
+    if solver == "levenberg-marquardt":
+        return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    if solver == "gauss-newton":
+        return optx.GaussNewton(rtol=rtol, atol=atol)
+    if solver == "bfgs":
+        return optx.BFGS(rtol=rtol, atol=atol)
+    raise ValueError(f"solver must be one of {SOLVERS} or an optimistix solver, got {solver!r}.")
+
+
+class Unidentifiable(eqx.Module):
+    """A direction of parameter space the data cannot fix: `parameters` (names) take part in it,
+    `held` was held at its start value, `singular_value` is its size in internal units (< threshold)."""
+
+    parameters: tuple[str, ...]
+    held: str
+    singular_value: float
+
+
+class Fit(eqx.Module):
+    """The solution of `identify`.
+
+    **Fields** (device axis first where per device):
+
+    - `model`: the fitted `Model` (device batched, effects included).
+    - `names`: per-device parameter names (flattened, effect arrays element-wise); `lot_names` shared ones.
+    - `values`, `stderr`: (device, n) physical values and standard errors; NaN stderr for held parameters.
+    - `lot_values`, `lot_stderr`: (n_lot,).
+    - `free`: (n,) bool, False for parameters held because the data cannot determine them.
+    - `covariance`: (device, n, n) covariance of the internal coordinates (zero rows for held ones);
+      `correlation` likewise.
+    - `u`, `u_lot`: the internal coordinates (0 = start).
+    - `residuals`: dict sweep -> (device, run, point) standardised residuals; `predictions`, `biases`
+      (dict sweep -> (device, run)).
+    - `chi2`, `dof`, `chi2_red`: per device; `chi2_total`, `dof_total`, `chi2_red_total` for the lot.
+    - `converged`: (device,) bool; `result_message`: (device,) text; `num_steps`: solver steps;
+      `unsettled`: points whose steady state failed at the solution.
+    - `unidentifiable`: tuple of `Unidentifiable`.
+    - `scale_factor`, `scale_factor_stderr`: (device,) LSB per deg/s of the fitted model at zero rate.
+    - `devices`: names; `data`: the `FitData`.
+    """
+
+    model: Model
+    names: tuple[str, ...] = eqx.field(static=True)
+    lot_names: tuple[str, ...] = eqx.field(static=True)
+    values: jax.Array
+    stderr: jax.Array
+    lot_values: jax.Array
+    lot_stderr: jax.Array
+    free: np.ndarray = eqx.field(static=True)
+    covariance: jax.Array
+    u: jax.Array
+    u_lot: jax.Array
+    residuals: dict
+    predictions: dict
+    biases: dict
+    chi2: jax.Array
+    dof: jax.Array
+    converged: jax.Array
+    result_message: tuple[str, ...] = eqx.field(static=True)
+    num_steps: jax.Array
+    unsettled: jax.Array
+    unidentifiable: tuple = eqx.field(static=True)
+    scale_factor: jax.Array
+    scale_factor_stderr: jax.Array
+    devices: tuple[str, ...] = eqx.field(static=True)
+    data: FitData
+    entries: tuple[Entry, ...] = eqx.field(static=True)
+    weighted: bool = eqx.field(static=True)
+
+    @property
+    def chi2_red(self):
+        return self.chi2 / jnp.maximum(self.dof, 1)
+
+    @property
+    def chi2_total(self):
+        return float(jnp.sum(self.chi2))
+
+    @property
+    def dof_total(self):
+        return int(jnp.sum(self.dof)) - len(self.lot_names)
+
+    @property
+    def chi2_red_total(self):
+        return self.chi2_total / max(self.dof_total, 1)
+
+    @property
+    def correlation(self):
+        sd = jnp.sqrt(jnp.diagonal(self.covariance, axis1=-2, axis2=-1))
+        sd = jnp.where(sd > 0, sd, jnp.inf)
+        return self.covariance / (sd[..., :, None] * sd[..., None, :])
+
+    @property
+    def all_converged(self) -> bool:
+        return bool(np.all(np.asarray(self.converged)))
+
+    def value(self, name: str, device: int | None = None):
+        """Fitted physical value of a parameter (all devices, or one)."""
+        if name in self.lot_names:
+            return self.lot_values[self.lot_names.index(name)]
+        if name not in self.names:
+            raise KeyError(f"no fitted parameter {name!r}; the fit has {', '.join(self.names + self.lot_names)}.")
+        v = self.values[:, self.names.index(name)]
+        return v if device is None else v[device]
+
+    def check(self) -> "Fit":
+        """Raise a RuntimeError naming the devices whose fit did not converge, and what to try."""
+        if not self.all_converged:
+            bad = [f"{d}: {m}" for d, m, ok in zip(self.devices, self.result_message, np.asarray(self.converged))
+                   if not ok]
+            raise RuntimeError("the fit did not converge for " + "; ".join(bad))
+        return self
+
+    def summary(self) -> str:
+        """A few lines for a terminal."""
+        lines = [f"fit of {len(self.devices)} device(s) from {self.data.source}: chi2_red "
+                 f"{self.chi2_red_total:.3f} (chi2 {self.chi2_total:.1f} / dof {self.dof_total})"]
+        for i, d in enumerate(self.devices):
+            ok = "converged" if bool(self.converged[i]) else f"NOT CONVERGED ({self.result_message[i]})"
+            lines.append(f"  {d}: chi2_red {float(self.chi2_red[i]):.3f}, SF {float(self.scale_factor[i]):.6f} "
+                         f"+/- {float(self.scale_factor_stderr[i]):.2g} LSB/(deg/s), {ok}")
+        for u in self.unidentifiable:
+            lines.append(f"  unidentifiable: {' x '.join(u.parameters)} (held {u.held}, s = {u.singular_value:.2g})")
+        return "\n".join(lines)
+
+
+def _message(converged, result_text, unsettled):
+    if unsettled > 0:
+        return (f"{unsettled} point(s) had no steady state at the solution; check the loop design, or fit "
+                "fewer parameters")
+    if converged:
+        return "converged"
+    return (f"{result_text}. Try: more starts (starts=8), a larger max_steps, another solver "
+            "(solver='gauss-newton' or 'bfgs'), holding a parameter (free=...), or priors on the design values")
+
+
+class _Problem(eqx.Module):
+    """Everything one device's residual function needs besides the internal vector."""
+
+    model: Model
+    start: list
+    data: FitData
+    free_index: jax.Array
+    n_dev: int = eqx.field(static=True)
+    entries: tuple = eqx.field(static=True)
+    tier: Steady
+    prior_index: jax.Array
+    prior_mean: jax.Array
+    prior_sigma: jax.Array
+
+    def _evaluate(self, u_free, u_lot):
+        u = jnp.zeros(self.n_dev).at[self.free_index].set(u_free)
+        model = apply_u(self.model, self.entries, self.start, u, u_lot)
+        r, failed = device_residuals(model.gyroscope(), self.data, self.tier)
+        prior = (u[self.prior_index] - self.prior_mean) / self.prior_sigma
+        return jnp.concatenate([r, prior]), failed
+
+    def residuals(self, u_free, u_lot):
+        """Standardised residuals (data, then priors) and the count of points that did not settle."""
+        return _residuals(self, u_free, u_lot), self._evaluate(u_free, u_lot)[1]
+
+
+@jax.custom_jvp
+def _residuals(problem, u_free, u_lot):
+    return problem._evaluate(u_free, u_lot)[0]
+
+
+@_residuals.defjvp
+def _residuals_jvp(primals, tangents):
+    # The JVP as a materialised Jacobian times the tangent. Optimistix linearises the residual function and,
+    # on its first (discarded) step, evaluates the linearisation with zeroed constants; through the steady
+    # state's implicit differentiation that would feed NaNs to a linear solve that raises. A dense Jacobian
+    # has no such solve, and is what Levenberg-Marquardt builds anyway. The problem's own tangents (data,
+    # start values) are not parameters and are ignored.
+    problem, u_free, u_lot = primals
+    _, t_free, t_lot = tangents
+    r = problem._evaluate(u_free, u_lot)[0]
+    j_free, j_lot = jax.jacfwd(lambda a, b: problem._evaluate(a, b)[0], argnums=(0, 1))(u_free, u_lot)
+    return r, j_free @ t_free + j_lot @ t_lot
+
+
+def _unbatched_problem(model, start, data, free_index, n_dev, entries, tier, priors):
+    return _Problem(model, start, data, free_index, n_dev, entries, tier, *priors)
+
+
+@eqx.filter_jit
+def _jacobians(problem_batch, u_free, u_lot):
+    def one(problem, uf):
+        return jax.jacfwd(lambda x: problem.residuals(x, u_lot)[0])(uf)
+
+    return eqx.filter_vmap(one)(problem_batch, u_free)
+
+
+@eqx.filter_jit
+def _solve_independent(problem_batch, u0, u_lot, solver, max_steps):
+    def one(problem, y0):
+        def fn(y, _):
+            return problem.residuals(y, u_lot)[0]
+
+        sol = optx.least_squares(fn, solver, y0, max_steps=max_steps, throw=False)
+        r, failed = problem.residuals(sol.value, u_lot)
+        return sol.value, sol.result, sol.stats["num_steps"], jnp.sum(r**2), failed
+
+    return eqx.filter_vmap(one)(problem_batch, u0)
+
+
+@eqx.filter_jit
+def _solve_joint(problem_batch, u0, u_lot0, solver, max_steps):
+    def fn(y, _):
+        u_free, u_lot = y
+        r, _ = eqx.filter_vmap(lambda p, x: p.residuals(x, u_lot))(problem_batch, u_free)
+        return r
+
+    sol = optx.least_squares(fn, solver, (u0, u_lot0), max_steps=max_steps, throw=False)
+    u_free, u_lot = sol.value
+    r, failed = eqx.filter_vmap(lambda p, x: p.residuals(x, u_lot))(problem_batch, u_free)
+    n = u0.shape[0]
+    return (u_free, u_lot, jnp.broadcast_to(sol.result._value, (n,)), jnp.broadcast_to(sol.stats["num_steps"], (n,)),
+            jnp.sum(r**2, axis=-1), failed)
+
+
+@eqx.filter_jit
+def _lot_jacobian(problem_batch, u_free, u_lot):
+    def fn(y):
+        uf, ul = y
+        r, _ = eqx.filter_vmap(lambda p, x: p.residuals(x, ul))(problem_batch, uf)
+        return r
+
+    return jax.jacfwd(fn)((u_free, u_lot))
+
+
+@eqx.filter_jit
+def _scale_factor(problem_batch, u_free, u_lot, temperature):
+    """Linear SF (LSB per deg/s) at zero rate and its gradient with respect to (u_free, u_lot)."""
+    def sf(problem, uf, ul, temp):
+        u = jnp.zeros(problem.n_dev).at[problem.free_index].set(uf)
+        gyro = apply_u(problem.model, problem.entries, problem.start, u, ul).gyroscope()
+
+        def out(rate):
+            return rate_table_points(gyro, rate[None], temp[None], problem.tier).rate[0]
+
+        return jax.jvp(out, (jnp.zeros(()),), (jnp.ones(()),))[1]
+
+    def one(problem, uf, temp):
+        value, grads = jax.value_and_grad(sf, argnums=(1, 2))(problem, uf, u_lot, temp)
+        return value, grads
+
+    return eqx.filter_vmap(one)(problem_batch, u_free, temperature)
+
+
+@eqx.filter_jit
+def _predictions(problem_batch, u_free, u_lot):
+    def one(problem, uf):
+        u = jnp.zeros(problem.n_dev).at[problem.free_index].set(uf)
+        gyro = apply_u(problem.model, problem.entries, problem.start, u, u_lot).gyroscope()
+        out = {}
+        for sweep in problem.data.sweeps:
+            block = problem.data.blocks[sweep]
+            pred, _ = predict_block(gyro, sweep, block, problem.tier)
+            out[sweep] = (pred, run_biases(sweep, block, pred))
+        return out
+
+    return eqx.filter_vmap(one)(problem_batch, u_free)
+
+
+def _hold_unidentifiable(jac, names_free, threshold):
+    """Indices (into the free list) to hold, and the reports. `jac` is (device, residual, free)."""
+    normal = jnp.mean(jnp.einsum("dri,drj->dij", jac, jac), axis=0)
+    keep = list(range(len(names_free)))
+    reports = []
+    while keep:
+        sub = np.asarray(normal)[np.ix_(keep, keep)]
+        evals, evecs = np.linalg.eigh(sub)
+        s = np.sqrt(np.clip(evals, 0.0, None))
+        i = int(np.argmin(s))
+        if s[i] >= threshold and s[i] >= 1e-7 * s.max():
+            break
+        v = np.abs(evecs[:, i])
+        involved = [keep[j] for j in np.nonzero(v > 0.3 * v.max())[0]]
+        held = max(involved)  # the last in order of preference
+        reports.append(Unidentifiable(tuple(names_free[j] for j in involved), names_free[held], float(s[i])))
+        keep.remove(held)
+    return keep, tuple(reports)
+
+
+def _batched(model: Model, n: int) -> Model:
+    def lead(x):
+        x = jnp.asarray(x, dtype=x.dtype if hasattr(x, "dtype") else float)
+        return x if (x.ndim >= 1 and x.shape[0] == n) else jnp.broadcast_to(x, (n,) + x.shape)
+
+    # Effects are per device: broadcast their leaves; the device is batched already (a lot) or broadcast.
+    dev_leaves = jax.tree.leaves(model.device)
+    lot = bool(dev_leaves) and all(jnp.ndim(x) >= 1 and jnp.shape(x)[0] == n for x in dev_leaves
+                                   if eqx.is_array(x))
+    device = model.device if lot else jax.tree.map(lambda x: jnp.broadcast_to(x, (n,) + jnp.shape(x))
+                                                    if eqx.is_array(x) else x, model.device)
+    effects = tuple(jax.tree.map(lead, e) for e in model.effects)
+    return Model(device, effects)
+
+
+def _to_model(model) -> Model:
+    if isinstance(model, Model):
+        return model
+    if isinstance(model, Gyroscope):
+        return Model(model)
+    if isinstance(model, str):
+        from ._presets import preset
+
+        return Model(preset(model))
+    raise TypeError(f"model must be a gyrojax.Model, a Gyroscope or a preset name, got {type(model).__name__}.")
+
+
+def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="levenberg-marquardt",
+             starts: int = 1, start_spread: float = 0.05, seed: int = 0, rtol: float = 1e-8, atol: float = 1e-8,
+             max_steps: int = 200, identifiability_threshold: float = 1.0, hold=(), tier=Steady()) -> Fit:
+    r"""Fit the free parameters of `model` to every sweep in `data`, per device (vmapped) or jointly.
+
+    **Arguments:**
+
+    - `model`: a `gyrojax.Model` (a device and effects), a `Gyroscope`, or a preset name. A single device is
+      the start for every device of the data; a lot (leading device axis) gives one start per device.
+    - `data`: a `gyrojax.Table` or `FitData`.
+    - `free`: names of `gyrojax.PARAMETERS` to fit per device (those the device lacks are skipped). Every
+      parameter of every effect in the model is fitted too.
+    - `shared`: names (physical, or effect fields like `"dac_inl.coefficients"`) fitted as one value for the
+      whole lot: the lot is then fitted jointly.
+    - `priors`: `{name: (value, sigma)}` Gaussian priors in physical units (design values with tolerances);
+      only for per-device physical parameters.
+    - `solver`: `"levenberg-marquardt"` (default), `"gauss-newton"`, `"bfgs"`, or an optimistix solver.
+    - `starts`, `start_spread`, `seed`: multi-start: `starts` starts per device, the first at the model, the
+      others perturbed by `start_spread` in internal units; the lowest chi2 wins.
+    - `identifiability_threshold`: directions with a singular value of the weighted Jacobian below this (in
+      internal units: relative change for positive parameters, typical size for effects) are held.
+    - `hold`: names held at their start values regardless.
+    - `tier`: the settling tier for rate-table and static-VCF points (`Steady()`).
+
+    **Returns:** a `Fit`. It never raises on non-convergence: check `fit.converged` or call `fit.check()`.
+    """
+    model = _to_model(model)
+    if isinstance(data, Table):
+        data = fit_data(data)
+    if not isinstance(data, FitData):
+        raise TypeError(f"data must be a gyrojax.Table or FitData, got {type(data).__name__}.")
+    if not isinstance(starts, int) or starts < 1:
+        raise ValueError(f"starts must be an integer >= 1, got {starts!r}.")
+    n = len(data.devices)
+    model = _batched(model, n)
+    one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, model)
+    free = tuple(name for name in free if PARAMETERS.get(name) is None or PARAMETERS[name].exists_on(one.device))
+    for name in free:
+        if name not in PARAMETERS:
+            raise ValueError(f"unknown parameter {name!r} in free; expected one of {', '.join(PARAMETERS)}.")
+    entries = build_entries(one, free, tuple(shared))
+    known = {e.label for e in entries}
+    for name in tuple(shared) + tuple(hold) + tuple(priors or {}):
+        if name not in known:
+            raise ValueError(f"{name!r} (in shared, hold or priors) is not a parameter of this fit; the fit has "
+                             f"{', '.join(sorted(known))}.")
+    dev_entries = [e for e in entries if not e.shared]
+    lot_entries = [e for e in entries if e.shared]
+    names_dev = tuple(nm for e in dev_entries for nm in e.names())
+    names_lot = tuple(nm for e in lot_entries for nm in e.names())
+    n_dev, n_lot = len(names_dev), len(names_lot)
+    start = eqx.filter_vmap(lambda m: read_values(m, entries))(model)
+    # Priors: residuals (u - mu) / s in internal coordinates of per-device physical parameters.
+    prior_idx, prior_mu, prior_sd = [], [], []
+    for name, (value, sigma) in (priors or {}).items():
+        e = next(e for e in dev_entries if e.label == name)
+        p0 = np.asarray(start[entries.index(e)])
+        if e.transform == "log":
+            mu, sd = np.log(value / p0), sigma / value * np.ones(n)
+        else:
+            mu, sd = (value - p0) / e.scale[0], sigma / e.scale[0] * np.ones(n)
+        prior_idx.append(names_dev.index(name))
+        prior_mu.append(mu)
+        prior_sd.append(sd)
+
+    def problem_for(free_index):
+        pri = (jnp.asarray(prior_idx, dtype=int), jnp.asarray(np.stack(prior_mu, -1) if prior_mu else np.zeros((n, 0))),
+               jnp.asarray(np.stack(prior_sd, -1) if prior_sd else np.ones((n, 0))))
+        pri = (jnp.broadcast_to(pri[0], (n, len(prior_idx))), pri[1], pri[2])
+        return _Problem(model, start, data, jnp.broadcast_to(jnp.asarray(free_index, dtype=int), (n, len(free_index))),
+                        n_dev, entries, tier, *pri)
+
+    # Identifiability at the start: hold what the data cannot see.
+    free_index = [i for i, nm in enumerate(names_dev) if not any(nm == h or nm.startswith(h + "[") for h in hold)]
+    held_reports = ()
+    if free_index:
+        problem = problem_for(free_index)
+        jac = _jacobians(problem, jnp.zeros((n, len(free_index))), jnp.zeros(n_lot))
+        keep, held_reports = _hold_unidentifiable(jac, [names_dev[i] for i in free_index], identifiability_threshold)
+        free_index = [free_index[k] for k in keep]
+    problem = problem_for(free_index)
+    solver_ = _solver(solver, rtol, atol)
+    rng = np.random.default_rng(seed)
+    best = None
+    for k in range(starts):
+        u0 = np.zeros((n, len(free_index)))
+        if k > 0:
+            u0 = rng.normal(scale=start_spread, size=u0.shape)
+        if n_lot:
+            res = _solve_joint(problem, jnp.asarray(u0), jnp.zeros(n_lot), solver_, max_steps)
+        else:
+            v, r_, steps, chi2, failed = _solve_independent(problem, jnp.asarray(u0), jnp.zeros(0), solver_, max_steps)
+            res = (v, jnp.zeros(0), r_._value, steps, chi2, failed)
+        if best is None:
+            best = res
+        else:
+            better = np.asarray(res[4]) < np.asarray(best[4]) if not n_lot else (
+                np.full(n, float(jnp.sum(res[4])) < float(jnp.sum(best[4]))))
+            best = tuple(jnp.where(better.reshape((n,) + (1,) * (jnp.ndim(b) - 1)), a, b) if jnp.ndim(b) and
+                         jnp.shape(b)[0] == n else (a if better.all() else b) for a, b in zip(res, best))
+    u_free, u_lot, result_code, steps, chi2, failed = best
+    return _finish(problem, data, entries, names_dev, names_lot, free_index, u_free, u_lot, result_code, steps, chi2,
+                   failed, held_reports, n_lot)
+
+
+def _finish(problem, data, entries, names_dev, names_lot, free_index, u_free, u_lot, result_code, steps, chi2,
+            failed, held_reports, n_lot):
+    import optimistix as optx_
+
+    n = len(data.devices)
+    n_free = len(free_index)
+    # Covariance from the Jacobian at the solution: (J^T J)^-1, scaled by chi2_red when unweighted.
+    if n_lot:
+        jac_dev, jac_lot = _lot_jacobian(problem, u_free, u_lot)  # (d, r, d, f) and (d, r, l)
+        full = jnp.concatenate([jnp.reshape(jac_dev, (jac_dev.shape[0] * jac_dev.shape[1], -1)),
+                                jnp.reshape(jac_lot, (jac_lot.shape[0] * jac_lot.shape[1], -1))], axis=1)
+        cov_all = jnp.linalg.pinv(full.T @ full)
+        cov_dev = jnp.stack([cov_all[d * n_free:(d + 1) * n_free, d * n_free:(d + 1) * n_free] for d in range(n)])
+        cov_lot = cov_all[n * n_free:, n * n_free:]
+    else:
+        jac = _jacobians(problem, u_free, u_lot)
+        cov_dev = jax.vmap(lambda j: jnp.linalg.pinv(j.T @ j))(jac)
+        cov_lot = jnp.zeros((0, 0))
+    points = num_points(data)
+    dof = points - num_biases(data) - n_free
+    if not data.weighted:
+        scale = chi2 / jnp.maximum(dof, 1)
+        cov_dev = cov_dev * scale[:, None, None]
+        cov_lot = cov_lot * (jnp.sum(chi2) / max(int(jnp.sum(dof)) - n_lot, 1))
+    # Full per-device covariance in the order of names_dev (zeros where held).
+    idx = jnp.asarray(free_index, dtype=int)
+    cov_full = jnp.zeros((n, len(names_dev), len(names_dev))).at[:, idx[:, None], idx[None, :]].set(cov_dev)
+    u_full = jnp.zeros((n, len(names_dev))).at[:, idx].set(u_free)
+    values, stderr = _physical(problem, entries, u_full, u_lot, cov_full, cov_lot, free_index, len(names_dev))
+    lot_values, lot_stderr = _physical_lot(problem, entries, u_lot, cov_lot)
+    fitted = eqx.filter_vmap(lambda p, u: apply_u(p.model, p.entries, p.start, u, u_lot))(problem, u_full)
+    preds = _predictions(problem, u_free, u_lot)
+    residuals, predictions, biases = {}, {}, {}
+    from ._residuals import block_residuals
+
+    for sweep in data.sweeps:
+        pred, b = preds[sweep]
+        block = data.blocks[sweep]
+        residuals[sweep] = jax.vmap(lambda bl, p: block_residuals(sweep, bl, p))(block, pred)
+        predictions[sweep] = pred
+        biases[sweep] = b
+    temps = data.blocks["rate_table"].temperatures if "rate_table" in data.blocks else None
+    if temps is not None:
+        mask = data.blocks["rate_table"].mask
+        t_sf = jnp.sum(jnp.where(mask, temps, 0.0), axis=(1, 2)) / jnp.maximum(jnp.sum(mask, axis=(1, 2)), 1)
+    else:
+        t_sf = jnp.full((n,), 25.0)
+    sf, (g_dev, g_lot) = _scale_factor(problem, u_free, u_lot, t_sf)
+    var = jnp.einsum("di,dij,dj->d", g_dev, cov_dev, g_dev)
+    if n_lot:
+        var = var + jnp.einsum("di,ij,dj->d", g_lot, cov_lot, g_lot)
+    ok = np.asarray(result_code) == optx_.RESULTS.successful._value
+    failed_np = np.asarray(failed)
+    messages = tuple(_message(bool(o), optx_.RESULTS[int(c)] if not o else "", int(f))
+                     for o, c, f in zip(ok, np.asarray(result_code), failed_np))
+    converged = jnp.asarray(ok & (failed_np == 0))
+    free_mask = np.zeros(len(names_dev), dtype=bool)
+    free_mask[np.asarray(free_index, dtype=int)] = True
+    return Fit(model=fitted, names=names_dev, lot_names=names_lot, values=values, stderr=stderr,
+               lot_values=lot_values, lot_stderr=lot_stderr, free=free_mask, covariance=cov_full, u=u_full,
+               u_lot=u_lot, residuals=residuals, predictions=predictions, biases=biases, chi2=chi2, dof=dof,
+               converged=converged, result_message=messages, num_steps=steps, unsettled=jnp.asarray(failed),
+               unidentifiable=held_reports, scale_factor=sf, scale_factor_stderr=jnp.sqrt(jnp.maximum(var, 0.0)),
+               devices=data.devices, data=data, entries=entries, weighted=data.weighted)
+
+
+def _physical(problem, entries, u_full, u_lot, cov_full, cov_lot, free_index, n_names):
+    values, ses = [], []
+    k = 0
+    start = problem.start
+    for e, p0 in zip(entries, start):
+        if e.shared:
+            continue
+        u = u_full[:, k:k + e.size]
+        var = jnp.diagonal(cov_full, axis1=1, axis2=2)[:, k:k + e.size]
+        p0 = jnp.reshape(p0, (p0.shape[0], -1))
+        if e.transform == "log":
+            v = p0 * jnp.exp(u)
+            s = v * jnp.sqrt(var)
+        else:
+            sc = jnp.asarray(e.scale)
+            v = p0 + sc * u
+            s = sc * jnp.sqrt(var)
+        held = ~np.isin(np.arange(k, k + e.size), np.asarray(free_index, dtype=int))
+        s = jnp.where(jnp.asarray(held)[None, :], jnp.nan, s)
+        values.append(v)
+        ses.append(s)
+        k += e.size
+    if not values:
+        n = u_full.shape[0]
+        return jnp.zeros((n, 0)), jnp.zeros((n, 0))
+    return jnp.concatenate(values, axis=1), jnp.concatenate(ses, axis=1)
+
+
+def _physical_lot(problem, entries, u_lot, cov_lot):
+    values, ses = [], []
+    k = 0
+    for e, p0 in zip(entries, problem.start):
+        if not e.shared:
+            continue
+        u = u_lot[k:k + e.size]
+        var = jnp.diagonal(cov_lot)[k:k + e.size]
+        p0 = jnp.reshape(p0[0], (-1,))
+        if e.transform == "log":
+            v = p0 * jnp.exp(u)
+            s = v * jnp.sqrt(var)
+        else:
+            sc = jnp.asarray(e.scale)
+            v, s = p0 + sc * u, sc * jnp.sqrt(var)
+        values.append(v)
+        ses.append(s)
+        k += e.size
+    if not values:
+        return jnp.zeros(0), jnp.zeros(0)
+    return jnp.concatenate(values), jnp.concatenate(ses)
+
+
+def lot_jacobian_rank(fit: Fit) -> int:
+    """Numerical rank of the per-device weighted Jacobian at the solution (for reports)."""
+    return int(math.fsum(np.asarray(fit.free)))

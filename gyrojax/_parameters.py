@@ -1,0 +1,223 @@
+"""What a fit may move: named physical parameters of a device, effect parameters, and their transforms.
+
+A fit works in internal coordinates u, one float per scalar parameter, chosen so that u = 0 is the start
+value and u = 1 is a change of natural size:
+
+- `"log"` (positive quantities: frequencies, Q, masses, gains): p = p0 exp(u), so u is the relative change;
+- `"linear"` (signed quantities: couplings, gain errors, effect parameters): p = p0 + scale u.
+
+Effect parameters are nested at zero and scaled by the effect's typical size (`typical(1.0)`), so u = 1
+means "the effect at its typical size".
+"""
+
+import dataclasses
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._effects.base import AbstractEffect
+from ._effects.registry import EFFECTS
+from ._gyroscope import Gyroscope
+
+
+class Parameter(eqx.Module):
+    """One named physical parameter of a device.
+
+    **Fields:**
+
+    - `name`: the name used in specs and reports.
+    - `where`: a function from the `Gyroscope` to the leaf (as for `eqx.tree_at`).
+    - `transform`: `"log"` or `"linear"` (see the module docstring).
+    - `scale`: natural size of a change for `"linear"` parameters (in `unit`); unused for `"log"`.
+    - `unit`, `description`: for reports.
+    - `closed_loop_only`, `open_loop_only`: which devices have it.
+    """
+
+    name: str = eqx.field(static=True)
+    where: Callable = eqx.field(static=True)
+    transform: str = eqx.field(static=True)
+    scale: float = eqx.field(static=True, default=1.0)
+    unit: str = eqx.field(static=True, default="")
+    description: str = eqx.field(static=True, default="")
+    closed_loop_only: bool = eqx.field(static=True, default=False)
+    open_loop_only: bool = eqx.field(static=True, default=False)
+
+    def __check_init__(self):
+        if self.transform not in ("log", "linear"):
+            raise ValueError(f"Parameter {self.name!r}: transform must be 'log' or 'linear', got {self.transform!r}.")
+
+    def exists_on(self, gyro: Gyroscope) -> bool:
+        return not ((self.closed_loop_only and not gyro.closed_loop)
+                    or (self.open_loop_only and gyro.closed_loop))
+
+
+def _p(name, where, transform, *, scale=1.0, unit="", description="", closed=False, opened=False):
+    return Parameter(name, where, transform, scale, unit, description, closed, opened)
+
+
+PARAMETERS: dict[str, Parameter] = {p.name: p for p in (
+    # The order is the order of preference when a combination is unidentifiable: earlier names stay free,
+    # later ones are held (e.g. a rate table alone sees only Ag m a w / K_vf: K_vf is fitted, Ag held).
+    _p("k_vf", lambda g: g.feedback_electrode.k_vf, "log", unit="N/V", closed=True,
+       description="force per volt of the FTR feedback combs (seed 000 Eq. 2)"),
+    _p("sense_gain", lambda g: g.sense_frontend.gain, "log", unit="V/C or V/A", opened=True,
+       description="gain of the sense front end (open-loop scale factor)"),
+    _p("vcf_gain", lambda g: g.vcf_electrode.force_per_volt2, "log", unit="N/V^2",
+       description="virtual-Coriolis electrode factor K_svf (seed 003 Eq. 7)"),
+    _p("dac_gain_error", lambda g: g.excitation.dac.gain_error, "linear", scale=1e-3, closed=True,
+       description="relative gain error of the FTR DAC"),
+    _p("omega_y", lambda g: g.resonator.omega_y, "log", unit="rad/s", description="sense resonance"),
+    _p("q_y", lambda g: g.resonator.q_y, "log", description="sense quality factor"),
+    _p("omega_x", lambda g: g.resonator.omega_x, "log", unit="rad/s", description="drive resonance"),
+    _p("q_x", lambda g: g.resonator.q_x, "log", description="drive quality factor"),
+    _p("angular_gain", lambda g: g.resonator.angular_gain, "log", description="angular gain Ag"),
+    _p("mass", lambda g: g.resonator.mass, "log", unit="kg", description="modal mass"),
+    _p("drive_force_per_volt", lambda g: g.drive_electrode.force_per_volt, "log", unit="N/V",
+       description="drive comb force per volt"),
+    _p("stiffness_coupling", lambda g: g.resonator.stiffness_coupling, "linear", scale=1e3, unit="rad^2/s^2",
+       description="stiffness (quadrature) coupling kap"),
+)}
+"""The named physical parameters a fit can free, in order of preference."""
+
+
+DEFAULT_FREE = ("k_vf", "sense_gain", "vcf_gain", "dac_gain_error", "omega_y", "q_y")
+"""What the baseline frees per device before the identifiability check holds what the data cannot see."""
+
+
+class Model(eqx.Module):
+    """A device and the effects added to it: what `identify` fits and `diagnose` extends.
+
+    `device` may be a lot (leaves with a leading device axis); `effects` then carry the same axis.
+    """
+
+    device: Gyroscope
+    effects: tuple[AbstractEffect, ...] = ()
+
+    def gyroscope(self) -> Gyroscope:
+        """The device with every effect applied."""
+        gyro = self.device
+        for eff in self.effects:
+            gyro = eff.apply(gyro)
+        return gyro
+
+    @property
+    def effect_names(self) -> tuple[str, ...]:
+        return tuple(e.name for e in self.effects)
+
+
+def effect_leaves(eff: AbstractEffect) -> tuple[str, ...]:
+    """Names of the array fields of an effect (its parameters)."""
+    return tuple(f.name for f in dataclasses.fields(eff)
+                 if not f.metadata.get("static", False) and isinstance(getattr(eff, f.name), (jax.Array, np.ndarray, float)))
+
+
+def zero_effect(name: str) -> AbstractEffect:
+    """The named effect with all its parameters zero (the model without it, in its shape)."""
+    if name not in EFFECTS:
+        raise ValueError(f"unknown effect {name!r}; expected one of {sorted(EFFECTS)}.")
+    typical = EFFECTS[name].typical(1.0)
+    return jax.tree.map(lambda x: jnp.zeros_like(jnp.asarray(x, dtype=float)), typical)
+
+
+class Entry(eqx.Module):
+    """One block of the internal vector: a physical parameter or one array field of an effect."""
+
+    label: str = eqx.field(static=True)  # "k_vf" or "dac_inl.coefficients"
+    size: int = eqx.field(static=True)
+    shape: tuple[int, ...] = eqx.field(static=True)
+    transform: str = eqx.field(static=True)
+    effect_index: int | None = eqx.field(static=True)  # None: physical
+    field: str | None = eqx.field(static=True)
+    shared: bool = eqx.field(static=True)
+    scale: tuple[float, ...] = eqx.field(static=True)  # per element (linear), flattened
+
+    def names(self) -> tuple[str, ...]:
+        if self.size == 1 and self.shape == ():
+            return (self.label,)
+        return tuple(f"{self.label}[{i}]" for i in range(self.size))
+
+    def getter(self):
+        if self.effect_index is None:
+            return PARAMETERS[self.label].where
+        i, f = self.effect_index, self.field
+        return lambda g, i=i, f=f: getattr(g, f)  # applied to the effect module
+
+
+def _effect_scale(eff_name: str, field: str) -> np.ndarray:
+    typ = np.asarray(getattr(EFFECTS[eff_name].typical(1.0), field), dtype=float).ravel()
+    fallback = np.max(np.abs(typ)) if np.any(typ != 0) else 1.0
+    return np.where(typ != 0, np.abs(typ), fallback)
+
+
+def build_entries(model: Model, free: tuple[str, ...], shared: tuple[str, ...] = ()) -> tuple[Entry, ...]:
+    """Entries for the physical parameters in `free` (names of `PARAMETERS`) and every field of every
+    effect in the model (effects are always free: they were added to be fitted). `shared` names are one
+    value for the whole lot."""
+    entries = []
+    for name in free:
+        if name not in PARAMETERS:
+            raise ValueError(f"unknown parameter {name!r} in free; expected names of gyrojax.PARAMETERS: "
+                             f"{', '.join(PARAMETERS)}.")
+        p = PARAMETERS[name]
+        entries.append(Entry(name, 1, (), p.transform, None, None, name in shared, (float(p.scale),)))
+    for i, eff in enumerate(model.effects):
+        for f in effect_leaves(eff):
+            shape = tuple(np.shape(getattr(EFFECTS[eff.name].typical(1.0), f)))
+            label = f"{eff.name}.{f}"
+            entries.append(Entry(label, int(np.prod(shape, dtype=int)), shape, "linear", i, f, label in shared,
+                                 tuple(float(x) for x in _effect_scale(eff.name, f))))
+    return tuple(entries)
+
+
+def read_values(model: Model, entries) -> list:
+    """Current values of the entries' leaves, for one device (unbatched model)."""
+    out = []
+    for e in entries:
+        if e.effect_index is None:
+            out.append(jnp.asarray(e.getter()(model.device), dtype=float))
+        else:
+            out.append(jnp.asarray(getattr(model.effects[e.effect_index], e.field), dtype=float))
+    return out
+
+
+def apply_u(model: Model, entries, start: list, u_dev, u_lot):
+    """The model with internal coordinates applied: `start` holds the u = 0 values of each entry (one
+    device), `u_dev` and `u_lot` the flat per-device and lot-shared vectors."""
+    k_dev = k_lot = 0
+    new_phys, phys_where, new_eff = [], [], {}
+    for e, p0 in zip(entries, start):
+        if e.shared:
+            u = u_lot[k_lot:k_lot + e.size]
+            k_lot += e.size
+        else:
+            u = u_dev[k_dev:k_dev + e.size]
+            k_dev += e.size
+        u = jnp.reshape(u, e.shape)
+        if e.transform == "log":
+            value = p0 * jnp.exp(u)
+        else:
+            value = p0 + jnp.reshape(jnp.asarray(e.scale), e.shape) * u
+        if e.effect_index is None:
+            new_phys.append(value)
+            phys_where.append(e.getter())
+        else:
+            new_eff[(e.effect_index, e.field)] = value
+    device = model.device
+    if phys_where:
+        device = eqx.tree_at(lambda g: [w(g) for w in phys_where], device, new_phys)
+    effects = list(model.effects)
+    for (i, f), value in new_eff.items():
+        effects[i] = eqx.tree_at(lambda e, f=f: getattr(e, f), effects[i], value)
+    return Model(device, tuple(effects))
+
+
+def sizes(entries) -> tuple[int, int]:
+    """(per-device, lot-shared) lengths of the internal vector."""
+    return (sum(e.size for e in entries if not e.shared), sum(e.size for e in entries if e.shared))
+
+
+def names(entries, shared: bool) -> tuple[str, ...]:
+    return tuple(n for e in entries if e.shared == shared for n in e.names())
