@@ -64,6 +64,7 @@ from ._effects.registry import (  # noqa: E402
     EFFECTS as EFFECTS,
     add_effect as add_effect,
     effect as effect,
+    register_effect as register_effect,
     supported_effects as supported_effects,
 )
 from ._effects.thermal_drift import ThermalDrift as ThermalDrift  # noqa: E402

@@ -43,7 +43,9 @@ def _central_difference(f, p, dev, rel):
 
 CASES = {
     "steady": (gj.Steady(), 1e-4, 1e-6),
-    "averaged": (gj.Averaged(settle_time=0.06, adjoint=diffrax.RecursiveCheckpointAdjoint()), 1e-4, 1e-5),
+    # FD step 1e-3: with the preset's residual quadrature the adaptive steps of the short averaged settle
+    # make a 1e-4 central difference noisy at 1e-5 (1e-3 agrees with the gradient to 4e-7)
+    "averaged": (gj.Averaged(settle_time=0.06, adjoint=diffrax.RecursiveCheckpointAdjoint()), 1e-3, 1e-5),
     "full": (gj.FullWaveform(settle_time=0.04, average_periods=20), 1e-4, 1e-4),
 }
 

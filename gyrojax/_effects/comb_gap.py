@@ -11,9 +11,10 @@ from .base import AbstractEffect
 
 # ASSUMPTION: seed 000 prints no comb geometry. By `FeedbackElectrode.from_geometry` (Eq. 5-7) the tip share
 # of the force gradient is about (b/d0) / (1 + b/d0) for many fingers; a finger-tip width b of half the gap
-# gives rho = 1/3, rounded to 0.3. On paper-qmg with a proportional-only rebalance loop (leak -> inf, the
-# largest residual sense motion its gains allow: 19 nm at 200 deg/s) this is about 5 ppm of odd cubic
-# nonlinearity and a 15 ppm gain change; with the preset's ideal integrator it is exactly nothing.
+# gives rho = 1/3, rounded to 0.3. On paper-qmg with a proportional-only rebalance loop (leak 1e4/s, the
+# largest residual sense motion its gains allow: 19 nm at 200 deg/s) this is a few ppm of odd cubic
+# nonlinearity, a 15 ppm gain change and, through the residual quadrature motion, a few ppm of even term;
+# with the preset's ideal integrator it is exactly nothing.
 _TYPICAL_GAP_FRACTION = 0.3
 
 
@@ -25,7 +26,8 @@ class CombGap(AbstractEffect):
 
     The pair's gain is even in the sense displacement: with a residual sense motion y = Y cos(theta) and the
     rate carrier v = V sin(theta) the feedback gain changes by (3/4) rho (Y/d0)^2, and Y grows with the rate:
-    an odd cubic in the scale factor, first order in rho. The residual motion needs a finite DC gain of the
+    an odd cubic in the scale factor, first order in rho (with a residual quadrature motion too, its cross
+    term with the rate motion adds an even term). The residual motion needs a finite DC gain of the
     rebalance loop (`RebalanceLoop.leak` > 0): with an ideal integrator the settled sense mass is exactly at
     rest (seed 000 §3.2: "the sensing force-feedback comb electrodes do not introduce nonlinearity"), so
     `supports` says no for such devices, the presets included. Closed loop only.

@@ -1,4 +1,7 @@
-"""Effects by name, and `add_effect`."""
+"""Effects by name, `add_effect`, and registering a new one."""
+
+import jax
+import numpy as np
 
 from .._gyroscope import Gyroscope
 from .agc_finite_gain import AgcFiniteGain
@@ -19,6 +22,29 @@ EFFECTS: dict[str, type[AbstractEffect]] = {cls.name: cls for cls in (
     QuadraturePhase, DampingCoupling, VrefDrift,
 )}
 """The candidate effects by name, in the order of DESIGN.md §2's table."""
+
+
+def register_effect(cls: type[AbstractEffect]) -> type[AbstractEffect]:
+    """Add a user-written effect class to `EFFECTS` under `cls.name` (also usable as a class decorator).
+
+    Checks the interface: a subclass of `AbstractEffect` with string `name`, `description` and `plugs_into`,
+    whose `typical(0.0)` has all-zero array leaves. A name already taken by another class is refused.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, AbstractEffect)):
+        raise ValueError(f"register_effect expects a subclass of gyrojax.AbstractEffect, got {cls!r}.")
+    for attr in ("name", "description", "plugs_into"):
+        if not isinstance(getattr(cls, attr, None), str) or not getattr(cls, attr):
+            raise ValueError(f"effect class {cls.__qualname__}: class attribute {attr!r} must be a non-empty "
+                             f"string, got {getattr(cls, attr, None)!r}.")
+    taken = EFFECTS.get(cls.name)
+    if taken is not None and taken is not cls:
+        raise ValueError(f"effect name {cls.name!r} is already registered by {taken.__qualname__}.")
+    zero = cls.typical(0.0)
+    if not isinstance(zero, cls) or any(np.any(np.asarray(x) != 0) for x in jax.tree.leaves(zero)):
+        raise ValueError(f"effect class {cls.__qualname__}: typical(0.0) must be an instance with all-zero "
+                         "parameters (the effect must be nested at zero).")
+    EFFECTS[cls.name] = cls
+    return cls
 
 
 def effect(name: str, scale: float = 1.0) -> AbstractEffect:

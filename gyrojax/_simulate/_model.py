@@ -230,48 +230,66 @@ def full_field(t, state: WaveState, gyro: Gyroscope, stim: Stimulus):
 
 
 def operating_point(gyro: Gyroscope, stim: Stimulus):
-    """The linear, ideal operating point from physics alone (no tier solution): drive locked at its
-    resonance with the set-point amplitude, sense held at rest, words at their linear values.
+    """The operating point from physics alone (no tier solution): drive locked at its resonance with the
+    set-point amplitude, sense held at rest, words at their linear values.
+
+    Closed forms for what would otherwise ring for seconds in a high-Q open-loop sense are included: the
+    amplitude sag of a leaky AGC integrator, the drive resonance moved by its cubic stiffness, the sense
+    split moved by the sense's cubic stiffness, and the feedback bias at the die temperature. All of them
+    are exactly the linear point when those parameters are zero.
 
     Returns a `SlowState`. It is the starting point of every tier; the nonlinear and loop effects are
     then settled by each tier on its own.
     """
     r = gyro.resonator
-    wx, wy, qx, qy = r.at_temperature(gyro.temperature(stim.time))
+    dl = gyro.drive_loop
+    temp = gyro.temperature(stim.time)
+    wx, wy, qx, qy = r.at_temperature(temp)
     w = wx
     m = r.mass
     a = gyro.drive_amplitude(w)
+    gx, gy = wx / (2 * qx), wy / (2 * qy)
+    v_d = 2 * w * m * gx * a / gyro.drive_electrode.force_per_volt
+    # A leaky AGC integrator settles with err = V_d / (kp + ki / leak), V_d proportional to the amplitude.
+    err = v_d * dl.agc_leak / (dl.agc_leak * (dl.agc_kp + v_d / dl.amplitude_setpoint) + dl.agc_ki)
+    sag = 1.0 - err / dl.amplitude_setpoint
+    a, v_d = a * sag, v_d * sag
+    # The drive's cubic stiffness moves the resonance the PLL locks to: w^2 = w_x^2 + 3/4 duffing_x a^2.
+    w = wx * jnp.sqrt(1.0 + 0.75 * r.duffing_x * a**2 / wx**2)
     X = _cx(a)
     om = stim.rate_at(0.0)
     vcf = gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(0.0)
-    gx, gy = wx / (2 * qx), wy / (2 * qy)
     dy = (wy**2 - w**2) / (2 * w)
     coupling = _cj((r.angular_gain * om + r.damping_coupling / 2) * a, -r.stiffness_coupling * a / (2 * w))
-    v_d = 2 * w * m * gx * a / gyro.drive_electrode.force_per_volt
     drive_meas = gyro.drive_frontend.phasor_gain(w) * X
     if gyro.closed_loop:
         Y = jnp.zeros((), dtype=complex)
         _, hold_delay = gyro.excitation.dac.hold(w)
+        fb = gyro.feedback_electrode
+        bias_ratio = fb.bias(temp - r.t_ref) / fb.v_dc
         needed = coupling + _cx(vcf / (2 * w * m))
-        word = (needed * _cx(2 * w * m / gyro.rebalance_gain(w))
+        word = (needed * _cx(2 * w * m / gyro.rebalance_gain(w)) / _cx(bias_ratio)
                 * _expj(-(gyro.rebalance_loop.carrier_phase - hold_delay)))
         rebalance = _r(-word)
     else:
         # Open loop: the sense answers quasi-statically, and its Coriolis back-action pulls the drive
         # resonance by (Ag Om)^2 / d_y (level repulsion); start there, since a high-Q sense rings for
         # seconds after any frequency step.
-        w = wx - (r.angular_gain * om) ** 2 / dy
+        w = w - (r.angular_gain * om) ** 2 / dy
         dy = (wy**2 - w**2) / (2 * w)
         coupling = _cj((r.angular_gain * om + r.damping_coupling / 2) * a, -r.stiffness_coupling * a / (2 * w))
-        Y = (-coupling - _cx(vcf / (2 * w * m))) / _cj(gy, -dy)
+        force = -coupling - _cx(vcf / (2 * w * m))
+        Y = force / _cj(gy, -dy)
+        for _ in range(3):  # the sense's cubic stiffness: d_y + 3/8 duffing_y |Y|^2 / w, by fixed point
+            Y = force / _cj(gy, -(dy + 0.375 * r.duffing_y * jnp.abs(Y) ** 2 / w))
         rebalance = jnp.zeros(2)
         drive_meas = gyro.drive_frontend.phasor_gain(w) * X
     sense_meas = gyro.sense_frontend.phasor_gain(w) * Y
-    phase_meas = jnp.angle(drive_meas * _expj(-gyro.drive_loop.reference_phase))
+    phase_meas = jnp.angle(drive_meas * _expj(-dl.reference_phase))
     loops = Loops(
-        pll=w - gyro.drive_loop.center_frequency - gyro.drive_loop.pll_kp * phase_meas,
-        agc=jnp.asarray(v_d, dtype=float),
-        drive_lpf=jnp.stack([_r(drive_meas)] * gyro.drive_loop.demod_order),
+        pll=w - dl.center_frequency - dl.pll_kp * phase_meas,
+        agc=jnp.asarray(v_d - dl.agc_kp * err, dtype=float),
+        drive_lpf=jnp.stack([_r(drive_meas)] * dl.demod_order),
         sense_lpf=jnp.stack([_r(sense_meas)] * _sense_demod(gyro).demod_order),
         rebalance=rebalance,
     )
