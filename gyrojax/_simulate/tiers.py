@@ -8,6 +8,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import optimistix as optx
+from jax.flatten_util import ravel_pytree
 
 from .._checks import check_positive
 from .._gyroscope import Gyroscope
@@ -25,6 +26,7 @@ from ._model import (
     wave_from_slow,
     wave_scales,
 )
+from ._unrolled_rk import UnrolledRK
 
 
 def _mul(a, b):
@@ -168,21 +170,90 @@ class Averaged(AbstractTier):
         return _ode_settle(self, averaged_field, y0, slow_scales(gyro), gyro, stimulus, self.average_time)
 
 
+def _diffrax_result(result):
+    return RESULTS.where(
+        result == diffrax.RESULTS.successful,
+        RESULTS.successful,
+        RESULTS.where(result == diffrax.RESULTS.max_steps_reached, RESULTS.max_steps_reached,
+                      RESULTS.solver_failed),
+    )
+
+
+def _window_settle(tier, field, y0, scales, gyro, stimulus, average_time):
+    """Settle with one `diffeqsolve` on one flat vector, saving only its end: the state with the running
+    integrals of the outputs, which are switched on at `settle_time`, a step boundary declared as a jump
+    (`jump_ts`) so that no Runge-Kutta stage straddles it.
+
+    (Measured, `benchmarks/README.md`: saving at both window ends with `SaveAt(ts=...)` instead ran about
+    5x slower per step; two solves, settling then window, ran as fast but compile twice.)
+    """
+    out_scales = output_scales(gyro)
+    solver = tier.solver
+    if tier.unroll_stages and isinstance(solver, diffrax.AbstractERK):
+        solver = UnrolledRK.from_solver(solver)
+    settle_time = jnp.asarray(tier.settle_time, dtype=float)
+    t1 = settle_time + average_time
+    controller = diffrax.PIDController(rtol=tier.rtol, atol=tier.atol, jump_ts=jnp.stack([settle_time]))
+    zero = Outputs(jnp.zeros(()), jnp.zeros(()), jnp.zeros(()))
+    flat0, unravel = ravel_pytree((_div(y0, scales), zero))
+
+    def flat_field(t, z, _):
+        state, _ = unravel(z)
+        d, out = field(t, _mul(state, scales), gyro, stimulus)
+        out = jax.tree.map(lambda o, s: jnp.where(t >= settle_time, o / s, 0.0), out, out_scales)
+        return ravel_pytree((_div(d, scales), out))[0]
+
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(flat_field), solver, t0=0.0, t1=t1, dt0=tier.dt0, y0=flat0,
+        saveat=diffrax.SaveAt(t1=True), stepsize_controller=controller, max_steps=tier.max_steps,
+        adjoint=tier.adjoint, throw=False,
+    )
+    z_end, integral = unravel(sol.ys[-1])
+    mean = jax.tree.map(lambda acc, s: acc / average_time * s, integral, out_scales)
+    return _finalise(mean.rate, mean.quadrature, mean.frequency, _mul(z_end, scales),
+                     _diffrax_result(sol.result), sol.stats["num_steps"])
+
+
 class FullWaveform(AbstractTier):
     """The carrier-level ODE of resonator and loops, integrated with diffrax: the ground truth.
 
     Starts from the ideal operating point, settles for `settle_time`, then averages the outputs over
     `average_periods` whole carrier periods (so the demodulators' 2w ripple averages out).
+
+    How it runs (see `benchmarks/README.md` for the measurements behind each choice): one `diffeqsolve` on
+    the state and the running integrals of the outputs, flattened to one vector, saving only the end
+    point; the integrals are switched on at `settle_time`, declared a jump so that no step straddles it.
+    An explicit Runge-Kutta `solver` (`Dopri8()` by default; `Tsit5()`, `Dopri5()`, ...) is run with the
+    same tableau and step-size control but its stages written out at trace time (`unroll_stages=True`):
+    diffrax's own per-stage loop costs several times this small vector field, so unrolling makes each
+    step about 3x cheaper, at the price of a longer compile (about 10 s instead of 2-4 s on a 2-core CPU
+    for one point; several times longer for reverse-mode gradients). Pass `unroll_stages=False` where
+    compile time matters more than run time. Other solvers are used as given.
+
+    **Fields:**
+
+    - `settle_time`: settling span, s.
+    - `average_periods`: whole carrier periods (of the nominal drive frequency) averaged over.
+    - `solver`: a diffrax solver.
+    - `rtol`, `atol`: the `diffrax.PIDController` tolerances on the O(1)-scaled state.
+    - `dt0`: first step of each solve, s.
+    - `max_steps`: step limit of the solve.
+    - `adjoint`: the diffrax adjoint (`ForwardMode()` / `DirectAdjoint()` for `jax.jacfwd`).
+    - `unroll_stages`: run an explicit Runge-Kutta `solver`'s stages as straight-line code.
     """
 
     settle_time: float = 0.12
     average_periods: int = eqx.field(static=True, default=40)
-    solver: diffrax.AbstractSolver = diffrax.Tsit5()
-    rtol: float = 1e-10
-    atol: float = 1e-10
+    solver: diffrax.AbstractSolver = diffrax.Dopri8()
+    # 1e-8 on the O(1)-scaled state: on paper-qmg's 22-point sweep (with DAC INL) Dopri8 then stays within
+    # 0.003 ppm of full scale of a 1e-12 solve, 100x inside the tiers' 0.25 ppm physical difference and
+    # 400x inside the 1 ppm agreement target, in 1.8x fewer steps than at 1e-10 (benchmarks/README.md).
+    rtol: float = 1e-8
+    atol: float = 1e-8
     dt0: float = 1e-6
     max_steps: int = eqx.field(static=True, default=400_000)
     adjoint: diffrax.AbstractAdjoint = diffrax.RecursiveCheckpointAdjoint()
+    unroll_stages: bool = eqx.field(static=True, default=True)
 
     def __check_init__(self):
         check_positive("FullWaveform", "settle_time", self.settle_time)
@@ -193,8 +264,8 @@ class FullWaveform(AbstractTier):
         slow = operating_point(gyro, stimulus)
         omega = gyro.drive_loop.center_frequency
         period = 2.0 * math.pi / omega
-        return _ode_settle(self, full_field, wave_from_slow(slow, omega), wave_scales(gyro), gyro, stimulus,
-                           self.average_periods * period)
+        return _window_settle(self, full_field, wave_from_slow(slow, omega), wave_scales(gyro), gyro, stimulus,
+                              self.average_periods * period)
 
 
 def settle(gyro: Gyroscope, stimulus: Stimulus, tier: AbstractTier = Steady()) -> Settled:
