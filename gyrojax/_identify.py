@@ -8,7 +8,6 @@ direction of parameter space the data cannot fix to better than its natural size
 `gyrojax.PARAMETERS`' order of preference is held at its start value, so the fit does not wander along it.
 """
 
-import math
 
 import equinox as eqx
 import jax
@@ -29,9 +28,15 @@ from ._parameters import (
     build_entries,
     read_values,
 )
-from ._residuals import device_residuals, num_biases, num_points, predict_block, run_biases
+from ._residuals import (
+    block_residuals,
+    device_residuals,
+    num_biases,
+    num_points,
+    predict_block,
+    run_biases,
+)
 from ._simulate.tiers import Steady
-
 
 SOLVERS = ("levenberg-marquardt", "gauss-newton", "bfgs")
 
@@ -87,7 +92,7 @@ class Fit(eqx.Module):
     stderr: jax.Array
     lot_values: jax.Array
     lot_stderr: jax.Array
-    free: np.ndarray = eqx.field(static=True)
+    free: tuple[bool, ...] = eqx.field(static=True)
     covariance: jax.Array
     u: jax.Array
     u_lot: jax.Array
@@ -107,6 +112,8 @@ class Fit(eqx.Module):
     data: FitData
     entries: tuple[Entry, ...] = eqx.field(static=True)
     weighted: bool = eqx.field(static=True)
+    jacobian: jax.Array  # (device, residual, n) d(residual)/du for every per-device entry, held ones too
+    residual_vector: jax.Array  # (device, residual): all standardised residuals (data then priors)
 
     @property
     def chi2_red(self):
@@ -223,12 +230,49 @@ def _unbatched_problem(model, start, data, free_index, n_dev, entries, tier, pri
     return _Problem(model, start, data, free_index, n_dev, entries, tier, *priors)
 
 
-@eqx.filter_jit
-def _jacobians(problem_batch, u_free, u_lot):
-    def one(problem, uf):
-        return jax.jacfwd(lambda x: problem.residuals(x, u_lot)[0])(uf)
+class _Evaluation(eqx.Module):
+    """Residuals, Jacobians and derived quantities of every device at one point of parameter space."""
 
-    return eqx.filter_vmap(one)(problem_batch, u_free)
+    residuals: jax.Array  # (device, residual)
+    jac: jax.Array  # (device, residual, n_dev) with respect to every per-device entry
+    jac_lot: jax.Array  # (device, residual, n_lot)
+    scale_factor: jax.Array  # (device,) LSB per deg/s at zero rate
+    sf_grad: jax.Array  # (device, n_dev)
+    sf_grad_lot: jax.Array  # (device, n_lot)
+    predictions: dict
+    biases: dict
+    failed: jax.Array  # (device,)
+
+
+@eqx.filter_jit
+def _evaluate(problem_all, u_full, u_lot, t_sf):
+    """One compiled pass (used at the start and at the solution): residuals, the Jacobian with respect to
+    every per-device and lot entry, the zero-rate scale factor and its gradient, predictions and biases."""
+    def one(problem, u, temp):
+        def outputs(uu, ul):
+            model = apply_u(problem.model, problem.entries, problem.start, uu, ul)
+            gyro = model.gyroscope()
+            r, _ = problem._evaluate(uu, ul)
+
+            def rate_out(rate):
+                return rate_table_points(gyro, rate[None], temp[None], problem.tier).rate[0]
+
+            sf = jax.jvp(rate_out, (jnp.zeros(()),), (jnp.ones(()),))[1]
+            return r, sf
+
+        (r, sf) = outputs(u, u_lot)
+        (j, j_lot), (g, g_lot) = jax.jacfwd(outputs, argnums=(0, 1))(u, u_lot)
+        gyro = apply_u(problem.model, problem.entries, problem.start, u, u_lot).gyroscope()
+        preds, biases, failed = {}, {}, jnp.zeros((), dtype=int)
+        for sweep in problem.data.sweeps:
+            block = problem.data.blocks[sweep]
+            pred, bad = predict_block(gyro, sweep, block, problem.tier)
+            preds[sweep] = pred
+            biases[sweep] = run_biases(sweep, block, pred)
+            failed = failed + jnp.sum(bad)
+        return _Evaluation(r, j, j_lot, sf, g, g_lot, preds, biases, failed)
+
+    return eqx.filter_vmap(one)(problem_all, u_full, t_sf)
 
 
 @eqx.filter_jit
@@ -238,8 +282,8 @@ def _solve_independent(problem_batch, u0, u_lot, solver, max_steps):
             return problem.residuals(y, u_lot)[0]
 
         sol = optx.least_squares(fn, solver, y0, max_steps=max_steps, throw=False)
-        r, failed = problem.residuals(sol.value, u_lot)
-        return sol.value, sol.result, sol.stats["num_steps"], jnp.sum(r**2), failed
+        r = problem.residuals(sol.value, u_lot)[0]
+        return sol.value, sol.result._value, sol.stats["num_steps"], jnp.sum(r**2)
 
     return eqx.filter_vmap(one)(problem_batch, u0)
 
@@ -248,66 +292,27 @@ def _solve_independent(problem_batch, u0, u_lot, solver, max_steps):
 def _solve_joint(problem_batch, u0, u_lot0, solver, max_steps):
     def fn(y, _):
         u_free, u_lot = y
-        r, _ = eqx.filter_vmap(lambda p, x: p.residuals(x, u_lot))(problem_batch, u_free)
-        return r
+        return eqx.filter_vmap(lambda p, x: p.residuals(x, u_lot)[0])(problem_batch, u_free)
 
     sol = optx.least_squares(fn, solver, (u0, u_lot0), max_steps=max_steps, throw=False)
-    u_free, u_lot = sol.value
-    r, failed = eqx.filter_vmap(lambda p, x: p.residuals(x, u_lot))(problem_batch, u_free)
+    r = fn(sol.value, None)
     n = u0.shape[0]
-    return (u_free, u_lot, jnp.broadcast_to(sol.result._value, (n,)), jnp.broadcast_to(sol.stats["num_steps"], (n,)),
-            jnp.sum(r**2, axis=-1), failed)
-
-
-@eqx.filter_jit
-def _lot_jacobian(problem_batch, u_free, u_lot):
-    def fn(y):
-        uf, ul = y
-        r, _ = eqx.filter_vmap(lambda p, x: p.residuals(x, ul))(problem_batch, uf)
-        return r
-
-    return jax.jacfwd(fn)((u_free, u_lot))
-
-
-@eqx.filter_jit
-def _scale_factor(problem_batch, u_free, u_lot, temperature):
-    """Linear SF (LSB per deg/s) at zero rate and its gradient with respect to (u_free, u_lot)."""
-    def sf(problem, uf, ul, temp):
-        u = jnp.zeros(problem.n_dev).at[problem.free_index].set(uf)
-        gyro = apply_u(problem.model, problem.entries, problem.start, u, ul).gyroscope()
-
-        def out(rate):
-            return rate_table_points(gyro, rate[None], temp[None], problem.tier).rate[0]
-
-        return jax.jvp(out, (jnp.zeros(()),), (jnp.ones(()),))[1]
-
-    def one(problem, uf, temp):
-        value, grads = jax.value_and_grad(sf, argnums=(1, 2))(problem, uf, u_lot, temp)
-        return value, grads
-
-    return eqx.filter_vmap(one)(problem_batch, u_free, temperature)
-
-
-@eqx.filter_jit
-def _predictions(problem_batch, u_free, u_lot):
-    def one(problem, uf):
-        u = jnp.zeros(problem.n_dev).at[problem.free_index].set(uf)
-        gyro = apply_u(problem.model, problem.entries, problem.start, u, u_lot).gyroscope()
-        out = {}
-        for sweep in problem.data.sweeps:
-            block = problem.data.blocks[sweep]
-            pred, _ = predict_block(gyro, sweep, block, problem.tier)
-            out[sweep] = (pred, run_biases(sweep, block, pred))
-        return out
-
-    return eqx.filter_vmap(one)(problem_batch, u_free)
+    return (sol.value[0], sol.value[1], jnp.broadcast_to(sol.result._value, (n,)),
+            jnp.broadcast_to(sol.stats["num_steps"], (n,)), jnp.sum(r**2, axis=-1))
 
 
 def _hold_unidentifiable(jac, names_free, threshold):
     """Indices (into the free list) to hold, and the reports. `jac` is (device, residual, free)."""
-    normal = jnp.mean(jnp.einsum("dri,drj->dij", jac, jac), axis=0)
+    normal = np.mean(np.einsum("dri,drj->dij", jac, jac), axis=0)
     keep = list(range(len(names_free)))
     reports = []
+    # Parameters the data do not see at all, one by one; then combinations.
+    scale = np.sqrt(max(float(np.max(np.diagonal(normal))), 0.0)) if keep else 0.0
+    for j in list(keep):
+        s_j = float(np.sqrt(max(normal[j, j], 0.0)))
+        if s_j < threshold or s_j < 1e-7 * scale:
+            reports.append(Unidentifiable((names_free[j],), names_free[j], s_j))
+            keep.remove(j)
     while keep:
         sub = np.asarray(normal)[np.ix_(keep, keep)]
         evals, evecs = np.linalg.eigh(sub)
@@ -352,7 +357,8 @@ def _to_model(model) -> Model:
 
 def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="levenberg-marquardt",
              starts: int = 1, start_spread: float = 0.05, seed: int = 0, rtol: float = 1e-8, atol: float = 1e-8,
-             max_steps: int = 200, identifiability_threshold: float = 1.0, hold=(), tier=Steady()) -> Fit:
+             max_steps: int = 200, identifiability_threshold: float = 1.0, hold=(), tier=Steady(),
+             evaluate_only: bool = False) -> Fit:
     r"""Fit the free parameters of `model` to every sweep in `data`, per device (vmapped) or jointly.
 
     **Arguments:**
@@ -373,6 +379,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
       internal units: relative change for positive parameters, typical size for effects) are held.
     - `hold`: names held at their start values regardless.
     - `tier`: the settling tier for rate-table and static-VCF points (`Steady()`).
+    - `evaluate_only`: do not solve; return the `Fit` at the start (residuals, Jacobian, covariance there),
+      e.g. to test a candidate effect at zero against an already fitted model.
 
     **Returns:** a `Fit`. It never raises on non-convergence: check `fit.converged` or call `fit.check()`.
     """
@@ -422,156 +430,143 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         return _Problem(model, start, data, jnp.broadcast_to(jnp.asarray(free_index, dtype=int), (n, len(free_index))),
                         n_dev, entries, tier, *pri)
 
+    # One compiled evaluation, at the start and at the solution: the Jacobian over every per-device entry.
+    problem_all = problem_for(list(range(n_dev)))
+    t_sf = _sf_temperature(data)
+    at_start = _evaluate(problem_all, jnp.zeros((n, n_dev)), jnp.zeros(n_lot), t_sf)
     # Identifiability at the start: hold what the data cannot see.
-    free_index = [i for i, nm in enumerate(names_dev) if not any(nm == h or nm.startswith(h + "[") for h in hold)]
-    held_reports = ()
-    if free_index:
-        problem = problem_for(free_index)
-        jac = _jacobians(problem, jnp.zeros((n, len(free_index))), jnp.zeros(n_lot))
-        keep, held_reports = _hold_unidentifiable(jac, [names_dev[i] for i in free_index], identifiability_threshold)
-        free_index = [free_index[k] for k in keep]
+    candidates = [i for i, nm in enumerate(names_dev) if not any(nm == h or nm.startswith(h + "[") for h in hold)]
+    keep, held_reports = _hold_unidentifiable(np.asarray(at_start.jac)[:, :, candidates],
+                                              [names_dev[i] for i in candidates], identifiability_threshold)
+    free_index = [candidates[k] for k in keep]
     problem = problem_for(free_index)
     solver_ = _solver(solver, rtol, atol)
     rng = np.random.default_rng(seed)
     best = None
-    for k in range(starts):
+    for k in range(0 if evaluate_only else starts):
         u0 = np.zeros((n, len(free_index)))
         if k > 0:
             u0 = rng.normal(scale=start_spread, size=u0.shape)
         if n_lot:
-            res = _solve_joint(problem, jnp.asarray(u0), jnp.zeros(n_lot), solver_, max_steps)
+            u0_lot = np.zeros(n_lot) if k == 0 else rng.normal(scale=start_spread, size=n_lot)
+            res = _solve_joint(problem, jnp.asarray(u0), jnp.asarray(u0_lot), solver_, max_steps)
         else:
-            v, r_, steps, chi2, failed = _solve_independent(problem, jnp.asarray(u0), jnp.zeros(0), solver_, max_steps)
-            res = (v, jnp.zeros(0), r_._value, steps, chi2, failed)
+            v, code, steps, chi2 = _solve_independent(problem, jnp.asarray(u0), jnp.zeros(0), solver_, max_steps)
+            res = (v, jnp.zeros(0), code, steps, chi2)
+        res = tuple(np.asarray(x) for x in res)
         if best is None:
             best = res
+            continue
+        if n_lot:
+            if np.nansum(res[4]) < np.nansum(best[4]):
+                best = res
         else:
-            better = np.asarray(res[4]) < np.asarray(best[4]) if not n_lot else (
-                np.full(n, float(jnp.sum(res[4])) < float(jnp.sum(best[4]))))
-            best = tuple(jnp.where(better.reshape((n,) + (1,) * (jnp.ndim(b) - 1)), a, b) if jnp.ndim(b) and
-                         jnp.shape(b)[0] == n else (a if better.all() else b) for a, b in zip(res, best))
-    u_free, u_lot, result_code, steps, chi2, failed = best
-    return _finish(problem, data, entries, names_dev, names_lot, free_index, u_free, u_lot, result_code, steps, chi2,
-                   failed, held_reports, n_lot)
+            better = np.nan_to_num(res[4], nan=np.inf) < np.nan_to_num(best[4], nan=np.inf)
+            best = tuple(np.where(better.reshape((n,) + (1,) * (b.ndim - 1)), a, b) if b.ndim else b
+                         for a, b in zip(res, best))
+    if evaluate_only:
+        best = (np.zeros((n, len(free_index))), np.zeros(n_lot), np.full(n, optx.RESULTS.successful._value),
+                np.zeros(n, dtype=int), None)
+    u_free, u_lot, code, steps, _ = best
+    u_full = np.zeros((n, n_dev))
+    u_full[:, free_index] = u_free
+    final = at_start if evaluate_only else _evaluate(problem_all, jnp.asarray(u_full), jnp.asarray(u_lot), t_sf)
+    return _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full, np.asarray(u_lot), code,
+                   steps, final, held_reports)
 
 
-def _finish(problem, data, entries, names_dev, names_lot, free_index, u_free, u_lot, result_code, steps, chi2,
-            failed, held_reports, n_lot):
-    import optimistix as optx_
+def _sf_temperature(data):
+    """Temperature at which the fit's scale factor is reported: the mean of the rate-table points (else of
+    all recorded points, else the reference 25 C)."""
+    blocks = [data.blocks["rate_table"]] if "rate_table" in data.blocks else list(data.blocks.values())
+    total = sum(jnp.sum(jnp.where(b.mask & jnp.isfinite(b.temperatures), b.temperatures, 0.0), axis=(1, 2))
+                for b in blocks)
+    count = sum(jnp.sum(b.mask & jnp.isfinite(b.temperatures), axis=(1, 2)) for b in blocks)
+    return jnp.where(count > 0, total / jnp.maximum(count, 1), 25.0)
 
-    n = len(data.devices)
-    n_free = len(free_index)
-    # Covariance from the Jacobian at the solution: (J^T J)^-1, scaled by chi2_red when unweighted.
+
+def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full, u_lot, code, steps, final,
+            held_reports):
+    n, n_dev, n_lot = len(data.devices), len(names_dev), len(names_lot)
+    f = np.asarray(free_index, dtype=int)
+    jac = np.asarray(final.jac)[:, :, f]  # (device, residual, free)
+    jac_lot = np.asarray(final.jac_lot)
+    chi2 = np.sum(np.asarray(final.residuals) ** 2, axis=-1)
+    dof = np.asarray(num_points(data) - num_biases(data)) - f.size
+    # Covariance of the internal coordinates: (J^T J)^-1, block-diagonal over devices unless some entries
+    # are shared (then the whole lot's normal matrix is inverted). Unweighted data: scaled by chi2_red.
     if n_lot:
-        jac_dev, jac_lot = _lot_jacobian(problem, u_free, u_lot)  # (d, r, d, f) and (d, r, l)
-        full = jnp.concatenate([jnp.reshape(jac_dev, (jac_dev.shape[0] * jac_dev.shape[1], -1)),
-                                jnp.reshape(jac_lot, (jac_lot.shape[0] * jac_lot.shape[1], -1))], axis=1)
-        cov_all = jnp.linalg.pinv(full.T @ full)
-        cov_dev = jnp.stack([cov_all[d * n_free:(d + 1) * n_free, d * n_free:(d + 1) * n_free] for d in range(n)])
-        cov_lot = cov_all[n * n_free:, n * n_free:]
+        rows = jac.shape[1]
+        full = np.zeros((n * rows, n * f.size + n_lot))
+        for d in range(n):
+            full[d * rows:(d + 1) * rows, d * f.size:(d + 1) * f.size] = jac[d]
+            full[d * rows:(d + 1) * rows, n * f.size:] = jac_lot[d]
+        cov_all = np.linalg.pinv(full.T @ full)
+        cov_dev = np.stack([cov_all[d * f.size:(d + 1) * f.size, d * f.size:(d + 1) * f.size] for d in range(n)])
+        cov_lot = cov_all[n * f.size:, n * f.size:]
+        cross = np.stack([cov_all[d * f.size:(d + 1) * f.size, n * f.size:] for d in range(n)])
     else:
-        jac = _jacobians(problem, u_free, u_lot)
-        cov_dev = jax.vmap(lambda j: jnp.linalg.pinv(j.T @ j))(jac)
-        cov_lot = jnp.zeros((0, 0))
-    points = num_points(data)
-    dof = points - num_biases(data) - n_free
+        cov_dev = np.linalg.pinv(np.einsum("dri,drj->dij", jac, jac))
+        cov_lot = np.zeros((0, 0))
+        cross = np.zeros((n, f.size, 0))
     if not data.weighted:
-        scale = chi2 / jnp.maximum(dof, 1)
+        scale = chi2 / np.maximum(dof, 1)
         cov_dev = cov_dev * scale[:, None, None]
-        cov_lot = cov_lot * (jnp.sum(chi2) / max(int(jnp.sum(dof)) - n_lot, 1))
-    # Full per-device covariance in the order of names_dev (zeros where held).
-    idx = jnp.asarray(free_index, dtype=int)
-    cov_full = jnp.zeros((n, len(names_dev), len(names_dev))).at[:, idx[:, None], idx[None, :]].set(cov_dev)
-    u_full = jnp.zeros((n, len(names_dev))).at[:, idx].set(u_free)
-    values, stderr = _physical(problem, entries, u_full, u_lot, cov_full, cov_lot, free_index, len(names_dev))
-    lot_values, lot_stderr = _physical_lot(problem, entries, u_lot, cov_lot)
-    fitted = eqx.filter_vmap(lambda p, u: apply_u(p.model, p.entries, p.start, u, u_lot))(problem, u_full)
-    preds = _predictions(problem, u_free, u_lot)
-    residuals, predictions, biases = {}, {}, {}
-    from ._residuals import block_residuals
-
+        cov_lot = cov_lot * (chi2.sum() / max(int(dof.sum()) - n_lot, 1))
+        cross = cross * scale[:, None, None]
+    cov_full = np.zeros((n, n_dev, n_dev))
+    cov_full[:, f[:, None], f[None, :]] = cov_dev
+    values, stderr = _physical(problem_all.start, entries, u_full, cov_full, f, shared=False)
+    lot_values, lot_stderr = _physical(problem_all.start, entries, u_lot[None], cov_lot[None],
+                                       np.arange(n_lot), shared=True)
+    fitted = eqx.filter_vmap(lambda p, u: apply_u(p.model, p.entries, p.start, u, jnp.asarray(u_lot)))(
+        problem_all, jnp.asarray(u_full))
+    residuals = {}
     for sweep in data.sweeps:
-        pred, b = preds[sweep]
         block = data.blocks[sweep]
-        residuals[sweep] = jax.vmap(lambda bl, p: block_residuals(sweep, bl, p))(block, pred)
-        predictions[sweep] = pred
-        biases[sweep] = b
-    temps = data.blocks["rate_table"].temperatures if "rate_table" in data.blocks else None
-    if temps is not None:
-        mask = data.blocks["rate_table"].mask
-        t_sf = jnp.sum(jnp.where(mask, temps, 0.0), axis=(1, 2)) / jnp.maximum(jnp.sum(mask, axis=(1, 2)), 1)
-    else:
-        t_sf = jnp.full((n,), 25.0)
-    sf, (g_dev, g_lot) = _scale_factor(problem, u_free, u_lot, t_sf)
-    var = jnp.einsum("di,dij,dj->d", g_dev, cov_dev, g_dev)
+        residuals[sweep] = jax.vmap(lambda bl, p, s=sweep: block_residuals(s, bl, p))(block, final.predictions[sweep])
+    g = np.asarray(final.sf_grad)[:, f]
+    g_lot = np.asarray(final.sf_grad_lot)
+    var = np.einsum("di,dij,dj->d", g, cov_dev, g)
     if n_lot:
-        var = var + jnp.einsum("di,ij,dj->d", g_lot, cov_lot, g_lot)
-    ok = np.asarray(result_code) == optx_.RESULTS.successful._value
-    failed_np = np.asarray(failed)
-    messages = tuple(_message(bool(o), optx_.RESULTS[int(c)] if not o else "", int(f))
-                     for o, c, f in zip(ok, np.asarray(result_code), failed_np))
-    converged = jnp.asarray(ok & (failed_np == 0))
-    free_mask = np.zeros(len(names_dev), dtype=bool)
-    free_mask[np.asarray(free_index, dtype=int)] = True
-    return Fit(model=fitted, names=names_dev, lot_names=names_lot, values=values, stderr=stderr,
-               lot_values=lot_values, lot_stderr=lot_stderr, free=free_mask, covariance=cov_full, u=u_full,
-               u_lot=u_lot, residuals=residuals, predictions=predictions, biases=biases, chi2=chi2, dof=dof,
-               converged=converged, result_message=messages, num_steps=steps, unsettled=jnp.asarray(failed),
-               unidentifiable=held_reports, scale_factor=sf, scale_factor_stderr=jnp.sqrt(jnp.maximum(var, 0.0)),
-               devices=data.devices, data=data, entries=entries, weighted=data.weighted)
+        var = var + np.einsum("di,ij,dj->d", g_lot, cov_lot, g_lot) + 2 * np.einsum("di,dij,dj->d", g, cross, g_lot)
+    failed = np.asarray(final.failed)
+    ok = np.asarray(code) == optx.RESULTS.successful._value
+    messages = tuple(_message(bool(o), "" if o else optx.RESULTS[int(c)], int(fl))
+                     for o, c, fl in zip(ok, np.asarray(code), failed))
+    free_mask = tuple(bool(i in set(f.tolist())) for i in range(n_dev))
+    return Fit(model=fitted, names=names_dev, lot_names=names_lot, values=values[:, :n_dev],
+               stderr=stderr[:, :n_dev], lot_values=lot_values[0], lot_stderr=lot_stderr[0], free=free_mask,
+               covariance=jnp.asarray(cov_full), u=jnp.asarray(u_full), u_lot=jnp.asarray(u_lot),
+               residuals=residuals, predictions=dict(final.predictions), biases=dict(final.biases),
+               chi2=jnp.asarray(chi2), dof=jnp.asarray(dof), converged=jnp.asarray(ok & (failed == 0)),
+               result_message=messages, num_steps=jnp.asarray(steps), unsettled=jnp.asarray(failed),
+               unidentifiable=held_reports, scale_factor=final.scale_factor,
+               scale_factor_stderr=jnp.asarray(np.sqrt(np.maximum(var, 0.0))), devices=data.devices, data=data,
+               entries=entries, weighted=data.weighted, jacobian=final.jac, residual_vector=final.residuals)
 
 
-def _physical(problem, entries, u_full, u_lot, cov_full, cov_lot, free_index, n_names):
+def _physical(start, entries, u, cov, free_index, *, shared):
+    """Physical values and standard errors (delta method) of the per-device (or shared) entries."""
     values, ses = [], []
+    var_all = np.diagonal(cov, axis1=1, axis2=2)
     k = 0
-    start = problem.start
     for e, p0 in zip(entries, start):
-        if e.shared:
+        if e.shared != shared:
             continue
-        u = u_full[:, k:k + e.size]
-        var = jnp.diagonal(cov_full, axis1=1, axis2=2)[:, k:k + e.size]
-        p0 = jnp.reshape(p0, (p0.shape[0], -1))
+        uu = u[:, k:k + e.size]
+        var = var_all[:, k:k + e.size]
+        p0 = np.reshape(np.asarray(p0), (np.shape(p0)[0], -1))[: uu.shape[0]]
         if e.transform == "log":
-            v = p0 * jnp.exp(u)
-            s = v * jnp.sqrt(var)
+            v = p0 * np.exp(uu)
+            sd = v * np.sqrt(var)
         else:
-            sc = jnp.asarray(e.scale)
-            v = p0 + sc * u
-            s = sc * jnp.sqrt(var)
-        held = ~np.isin(np.arange(k, k + e.size), np.asarray(free_index, dtype=int))
-        s = jnp.where(jnp.asarray(held)[None, :], jnp.nan, s)
+            sc = np.asarray(e.scale)
+            v, sd = p0 + sc * uu, sc * np.sqrt(var)
+        held = ~np.isin(np.arange(k, k + e.size), free_index)
         values.append(v)
-        ses.append(s)
+        ses.append(np.where(held[None, :], np.nan, sd))
         k += e.size
     if not values:
-        n = u_full.shape[0]
-        return jnp.zeros((n, 0)), jnp.zeros((n, 0))
-    return jnp.concatenate(values, axis=1), jnp.concatenate(ses, axis=1)
-
-
-def _physical_lot(problem, entries, u_lot, cov_lot):
-    values, ses = [], []
-    k = 0
-    for e, p0 in zip(entries, problem.start):
-        if not e.shared:
-            continue
-        u = u_lot[k:k + e.size]
-        var = jnp.diagonal(cov_lot)[k:k + e.size]
-        p0 = jnp.reshape(p0[0], (-1,))
-        if e.transform == "log":
-            v = p0 * jnp.exp(u)
-            s = v * jnp.sqrt(var)
-        else:
-            sc = jnp.asarray(e.scale)
-            v, s = p0 + sc * u, sc * jnp.sqrt(var)
-        values.append(v)
-        ses.append(s)
-        k += e.size
-    if not values:
-        return jnp.zeros(0), jnp.zeros(0)
-    return jnp.concatenate(values), jnp.concatenate(ses)
-
-
-def lot_jacobian_rank(fit: Fit) -> int:
-    """Numerical rank of the per-device weighted Jacobian at the solution (for reports)."""
-    return int(math.fsum(np.asarray(fit.free)))
+        return np.zeros((u.shape[0], 0)), np.zeros((u.shape[0], 0))
+    return np.concatenate(values, axis=1), np.concatenate(ses, axis=1)
