@@ -187,7 +187,7 @@ class _Problem(eqx.Module):
     model: Model
     start: list
     data: FitData
-    free_index: jax.Array
+    free_mask: jax.Array  # (n_dev,) 1.0 where free: the solve runs in the full space with held ones masked
     n_dev: int = eqx.field(static=True)
     entries: tuple = eqx.field(static=True)
     tier: Steady
@@ -196,7 +196,7 @@ class _Problem(eqx.Module):
     prior_sigma: jax.Array
 
     def _evaluate(self, u_free, u_lot):
-        u = jnp.zeros(self.n_dev).at[self.free_index].set(u_free)
+        u = u_free * self.free_mask
         model = apply_u(self.model, self.entries, self.start, u, u_lot)
         r, failed = device_residuals(model.gyroscope(), self.data, self.tier)
         prior = (u[self.prior_index] - self.prior_mean) / self.prior_sigma
@@ -224,10 +224,6 @@ def _residuals_jvp(primals, tangents):
     r = problem._evaluate(u_free, u_lot)[0]
     j_free, j_lot = jax.jacfwd(lambda a, b: problem._evaluate(a, b)[0], argnums=(0, 1))(u_free, u_lot)
     return r, j_free @ t_free + j_lot @ t_lot
-
-
-def _unbatched_problem(model, start, data, free_index, n_dev, entries, tier, priors):
-    return _Problem(model, start, data, free_index, n_dev, entries, tier, *priors)
 
 
 class _Evaluation(eqx.Module):
@@ -399,7 +395,7 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         if name not in PARAMETERS:
             raise ValueError(f"unknown parameter {name!r} in free; expected one of {', '.join(PARAMETERS)}.")
     entries = build_entries(one, free, tuple(shared))
-    known = {e.label for e in entries}
+    known = {e.label for e in entries} | {e.label.split(".")[0] for e in entries if e.effect_index is not None}
     for name in tuple(shared) + tuple(hold) + tuple(priors or {}):
         if name not in known:
             raise ValueError(f"{name!r} (in shared, hold or priors) is not a parameter of this fit; the fit has "
@@ -424,10 +420,12 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         prior_sd.append(sd)
 
     def problem_for(free_index):
+        mask = np.zeros(n_dev)
+        mask[np.asarray(free_index, dtype=int)] = 1.0
         pri = (jnp.asarray(prior_idx, dtype=int), jnp.asarray(np.stack(prior_mu, -1) if prior_mu else np.zeros((n, 0))),
                jnp.asarray(np.stack(prior_sd, -1) if prior_sd else np.ones((n, 0))))
         pri = (jnp.broadcast_to(pri[0], (n, len(prior_idx))), pri[1], pri[2])
-        return _Problem(model, start, data, jnp.broadcast_to(jnp.asarray(free_index, dtype=int), (n, len(free_index))),
+        return _Problem(model, start, data, jnp.broadcast_to(jnp.asarray(mask), (n, n_dev)),
                         n_dev, entries, tier, *pri)
 
     # One compiled evaluation, at the start and at the solution: the Jacobian over every per-device entry.
@@ -435,7 +433,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     t_sf = _sf_temperature(data)
     at_start = _evaluate(problem_all, jnp.zeros((n, n_dev)), jnp.zeros(n_lot), t_sf)
     # Identifiability at the start: hold what the data cannot see.
-    candidates = [i for i, nm in enumerate(names_dev) if not any(nm == h or nm.startswith(h + "[") for h in hold)]
+    candidates = [i for i, nm in enumerate(names_dev)
+                  if not any(nm == h or nm.startswith(h + "[") or nm.startswith(h + ".") for h in hold)]
     keep, held_reports = _hold_unidentifiable(np.asarray(at_start.jac)[:, :, candidates],
                                               [names_dev[i] for i in candidates], identifiability_threshold)
     free_index = [candidates[k] for k in keep]
@@ -444,9 +443,11 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     rng = np.random.default_rng(seed)
     best = None
     for k in range(0 if evaluate_only else starts):
-        u0 = np.zeros((n, len(free_index)))
+        # The solve runs over every per-device entry (held ones masked out of the model), so that a model's
+        # compiled solve is shared by every choice of free parameters (diagnose adds effects by unmasking).
+        u0 = np.zeros((n, n_dev))
         if k > 0:
-            u0 = rng.normal(scale=start_spread, size=u0.shape)
+            u0[:, free_index] = rng.normal(scale=start_spread, size=(n, len(free_index)))
         if n_lot:
             u0_lot = np.zeros(n_lot) if k == 0 else rng.normal(scale=start_spread, size=n_lot)
             res = _solve_joint(problem, jnp.asarray(u0), jnp.asarray(u0_lot), solver_, max_steps)
@@ -465,11 +466,11 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
             best = tuple(np.where(better.reshape((n,) + (1,) * (b.ndim - 1)), a, b) if b.ndim else b
                          for a, b in zip(res, best))
     if evaluate_only:
-        best = (np.zeros((n, len(free_index))), np.zeros(n_lot), np.full(n, optx.RESULTS.successful._value),
+        best = (np.zeros((n, n_dev)), np.zeros(n_lot), np.full(n, optx.RESULTS.successful._value),
                 np.zeros(n, dtype=int), None)
     u_free, u_lot, code, steps, _ = best
     u_full = np.zeros((n, n_dev))
-    u_full[:, free_index] = u_free
+    u_full[:, free_index] = u_free[:, free_index]
     final = at_start if evaluate_only else _evaluate(problem_all, jnp.asarray(u_full), jnp.asarray(u_lot), t_sf)
     return _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full, np.asarray(u_lot), code,
                    steps, final, held_reports)
