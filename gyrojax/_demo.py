@@ -1,11 +1,13 @@
 """`gyrojax demo`: the main job on the embedded default data (seed 000 Table 2 and the two presets).
 
-What it does today (it grows with identification and diagnosis):
-
-1. seed 000 Table 2 (shipped in gyrojax/data): the DAC nonlinearity by every definition;
-2. the paper-qmg device with the `dac_inl` effect, simulated in the three tiers on seed 000's 22 rates:
+1. the heart of gyrojax: a simulated lot of paper-qmg devices (rate table, virtual-Coriolis and DAC
+   sweeps, with noise and process spread) carries a hidden physical effect (`HIDDEN_EFFECT`); the baseline
+   model is fitted, every candidate effect is ranked, the best is added and the error falls
+   (`diagnosis/` holds the full report);
+2. seed 000 Table 2 (shipped in gyrojax/data): the DAC nonlinearity by every definition;
+3. the paper-qmg device with the `dac_inl` effect, simulated in the three tiers on seed 000's 22 rates:
    scale factor and nonlinearity per tier, and how far the tiers are apart;
-3. the vcf-2018 device: its rate frequency response and bandwidth against seed 003's reported figure.
+4. the vcf-2018 device: its rate frequency response and bandwidth against seed 003's reported figure.
 
 Writes `report.md`, `summary.json` and PNG plots into the output folder (each file atomically).
 """
@@ -18,6 +20,13 @@ from importlib import resources
 import numpy as np
 
 from ._io import atomic_write_bytes
+
+
+HIDDEN_EFFECT = "dac_inl"
+"""The effect hidden in the demo's simulated lot (the diagnosis is not told)."""
+
+DEMO_LOT = {"devices": 3, "runs": 2, "sweeps": ("rate_table", "vcf_static", "dac"), "seed": 7}
+"""The demo's simulated campaign."""
 
 
 def _save_figure(fig, path):
@@ -47,8 +56,29 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print) -> dict:
     summary = {"versions": _versions()}
     t0 = time.perf_counter()
 
-    # 1. Table 2
-    log("[1/3] seed 000 Table 2: DAC nonlinearity of the embedded data")
+    # 1. a hidden effect
+    from ._diagnose import diagnose, write_report
+
+    log(f"[1/4] a lot of {DEMO_LOT['devices']} paper-qmg devices x {DEMO_LOT['runs']} runs with a hidden effect: "
+        f"simulating {', '.join(DEMO_LOT['sweeps'])}")
+    t = time.perf_counter()
+    lot_data = gj.simulate_table(gj.add_effect(gj.paper_qmg(), HIDDEN_EFFECT), **DEMO_LOT)
+    lot_path = os.path.join(out_dir, "hidden_effect_lot.csv")
+    gj.write_table(lot_data, lot_path)
+    log(f"      {len(lot_data)} points written to {lot_path} ({time.perf_counter() - t:.0f} s)")
+
+    def step(msg, t_start=time.perf_counter()):
+        log(f"      ... {msg} (t = {time.perf_counter() - t_start:.0f} s; the first fit compiles the model)")
+
+    diag = diagnose(lot_data, "paper-qmg", progress=step)
+    write_report(diag, os.path.join(out_dir, "diagnosis"))
+    for line in diag.summary().splitlines():
+        log("      " + line)
+    summary["diagnosis"] = {**diag.to_json(), "hidden_effect": HIDDEN_EFFECT,
+                            "found": HIDDEN_EFFECT in diag.selected or any(HIDDEN_EFFECT in g for g in diag.ambiguous)}
+
+    # 2. Table 2
+    log("[2/4] seed 000 Table 2: DAC nonlinearity of the embedded data")
     table = gj.read_table(table2_path())
     words, volts, rate_dps = table["input"], table["output"], table["rate_dps"]
     t2 = {}
@@ -63,7 +93,7 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print) -> dict:
         f"(paper: 460.679 ppm)")
 
     # 2. three tiers
-    log("[2/3] paper-qmg + dac_inl on 22 rates in the steady, averaged"
+    log("[3/4] paper-qmg + dac_inl on 22 rates in the steady, averaged"
         + (" and full-waveform tiers (the full tier takes a minute)" if full_tier else " tiers"))
     gyro = gj.add_effect(gj.paper_qmg(), "dac_inl")
     rates = gj.seed000_rates()
@@ -104,7 +134,7 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print) -> dict:
     plt.close(fig)
 
     # 3. seed 003 bandwidth
-    log("[3/3] vcf-2018: rate frequency response and bandwidth")
+    log("[4/4] vcf-2018: rate frequency response and bandwidth")
     response = gj.linearise(gj.vcf_2018())  # one linearisation serves the plot and the bandwidth
     bw = response.bandwidth()
     f = np.geomspace(1, 1000, 400)
@@ -129,7 +159,7 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print) -> dict:
     summary["seconds"] = time.perf_counter() - t0
     atomic_write_bytes(os.path.join(out_dir, "summary.json"), json.dumps(summary, indent=2).encode())
     atomic_write_bytes(os.path.join(out_dir, "report.md"), _report(summary).encode())
-    log(f"wrote report.md, summary.json and 2 plots to {out_dir} in {summary['seconds']:.0f} s")
+    log(f"wrote report.md, summary.json, plots and diagnosis/ to {out_dir} in {summary['seconds']:.0f} s")
     return summary
 
 
@@ -149,7 +179,22 @@ def _versions():
 
 
 def _report(s):
-    lines = ["# gyrojax demo", "", "## Seed 000 Table 2 (embedded data): DAC nonlinearity", "",
+    d = s["diagnosis"]
+    lines = ["# gyrojax demo", "", "## A hidden effect, found", "",
+             f"A simulated lot (`hidden_effect_lot.csv`) carries the effect `{d['hidden_effect']}`; the diagnosis "
+             "starts from the plain preset and is not told. Candidates ranked by the score test:", "",
+             "| effect | statistic | p |", "|---|---|---|"]
+    for c in d["ranking"]:
+        lines.append(f"| {c['effect']} | {c['statistic']:.3g} | {c['p_value']:.3g} |" if c["testable"]
+                     else f"| {c['effect']} | not testable on this data | |")
+    lines += ["", "| step | chi2_red | nonlinearity residual (ppm) |", "|---|---|---|",
+              f"| baseline | {d['baseline']['chi2_red']:.3f} | {d['baseline']['nonlinearity_ppm']:.2f} |"]
+    for st in d["steps"]:
+        lines.append(f"| + {st['effect']} | {st['chi2_red_after']:.3f} | {st['nonlinearity_ppm_after']:.2f} |")
+    lines += ["", f"Selected: {', '.join(d['selected']) or 'none'}; hidden effect found: {d['found']}. "
+              "Full report: [diagnosis/diagnosis.md](diagnosis/diagnosis.md).", "",
+              "![error falling](diagnosis/error_fall.png)", "",
+              "## Seed 000 Table 2 (embedded data): DAC nonlinearity", "",
              "| against | max / full scale (ppm) | RMS / full scale (ppm) |", "|---|---|---|"]
     for k in ("word", "rate"):
         lines.append(f"| {k} | {s['table2'][k]['max_ppm']:.1f} | {s['table2'][k]['rms_ppm']:.1f} |")

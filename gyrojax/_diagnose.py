@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import gammaincc
 
-from ._dataset import SWEEPS, Table
+from ._dataset import Table
 from ._effects.registry import EFFECTS
 from ._fitdata import FitData, fit_data
 from ._identify import Fit, _to_model, identify
@@ -309,3 +309,49 @@ def _first(device):
     return jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, device)
 
 
+
+
+def write_report(diagnosis: Diagnosis, out_dir) -> dict:
+    """A report folder: `diagnosis.md`, `diagnosis.json` and PNG plots (residuals before and after, the
+    ranking, the fingerprints, the error falling). Every file is written atomically. Returns the JSON."""
+    import os
+
+    import matplotlib.pyplot as plt
+
+    from . import plot
+    from ._io import atomic_write_bytes, atomic_write_json
+
+    os.makedirs(out_dir, exist_ok=True)
+    sweeps = diagnosis.baseline.data.sweeps
+    figures = []
+    fig, axes = plt.subplots(len(sweeps), 2, figsize=(12, 3.2 * len(sweeps)), squeeze=False)
+    for i, sweep in enumerate(sweeps):
+        plot.residuals(diagnosis.baseline, sweep, ax=axes[i, 0])
+        axes[i, 0].set_title(f"baseline {sweep}: chi2_red {diagnosis.baseline.chi2_red_total:.3g}", fontsize=9)
+        plot.residuals(diagnosis.final, sweep, ax=axes[i, 1])
+        axes[i, 1].set_title(f"final {sweep}: chi2_red {diagnosis.final.chi2_red_total:.3g}", fontsize=9)
+    plot.save(fig, os.path.join(out_dir, "residuals.png"))
+    figures.append(("Model against measurement, before and after", "residuals.png"))
+    if diagnosis.ranking:
+        plot.save(plot.ranking(diagnosis.ranking), os.path.join(out_dir, "ranking.png"))
+        figures.append(("Candidate effects ranked by the score test", "ranking.png"))
+        plot.save(plot.fingerprints(diagnosis), os.path.join(out_dir, "fingerprints.png"))
+        figures.append(("Predicted residual shape of the top candidates against the residual", "fingerprints.png"))
+    plot.save(plot.error_fall(diagnosis), os.path.join(out_dir, "error_fall.png"))
+    figures.append(("The error falling step by step", "error_fall.png"))
+    report = diagnosis.to_json()
+    atomic_write_json(report, os.path.join(out_dir, "diagnosis.json"))
+    lines = ["# gyrojax diagnosis", "", f"Data: `{diagnosis.baseline.data.source}`, "
+             f"{len(diagnosis.baseline.devices)} device(s), sweeps {', '.join(sweeps)}.", "",
+             "## Summary", "", "```", diagnosis.summary(), "```", "",
+             "## Step by step", "", "| step | effect | chi2_red | nonlinearity residual (ppm) |", "|---|---|---|---|",
+             f"| 0 | baseline | {diagnosis.baseline.chi2_red_total:.3f} | {diagnosis.baseline_nonlinearity_ppm:.2f} |"]
+    for k, s in enumerate(diagnosis.steps, 1):
+        lines.append(f"| {k} | + {s.effect} | {s.chi2_red_after:.3f} | {s.nonlinearity_ppm_after:.2f} |")
+    lines += ["", "Effects marked *not testable* leave no fingerprint that the baseline's free parameters "
+              "(gains, per-run biases) cannot absorb on this data; a sweep over temperature, or another sweep "
+              "kind, may reveal them.", ""]
+    for title, name in figures:
+        lines += [f"## {title}", "", f"![{title}]({name})", ""]
+    atomic_write_bytes(os.path.join(out_dir, "diagnosis.md"), "\n".join(lines).encode())
+    return report

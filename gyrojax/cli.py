@@ -9,7 +9,6 @@ import sys
 
 from ._io import atomic_write_json
 
-
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
 
@@ -29,6 +28,7 @@ def _sweep_list(text):
 
 def _cmd_simulate(args):
     import gyrojax as gj
+
     from ._campaign import simulate_table
     from ._dataset import write_table
 
@@ -94,6 +94,25 @@ def _cmd_compensate(args):
     return EXIT_OK
 
 
+def _cmd_diagnose(args):
+    from ._dataset import read_table
+    from ._diagnose import diagnose, write_report
+
+    table = read_table(args.data)
+    diag = diagnose(table, args.model, alpha=args.alpha, progress=lambda m: print(f"... {m}", flush=True))
+    print(diag.summary())
+    if args.report:
+        write_report(diag, args.report)
+        print(f"wrote report to {args.report}")
+    if args.json:
+        atomic_write_json(diag.to_json(), args.json)
+        print(f"wrote {args.json}")
+    if not diag.final.all_converged:
+        print(f"gyrojax diagnose: the final fit did not converge: {diag.final.result_message}", file=sys.stderr)
+        return EXIT_FAILED
+    return EXIT_OK
+
+
 def _cmd_demo(args):
     from ._demo import run_demo
 
@@ -150,6 +169,19 @@ def build_parser():
                       help="comma-separated run ids to fit on, e.g. 0,1 (default: each device's first run)")
     comp.add_argument("--json", help="write the report as JSON here")
     comp.set_defaults(func=_cmd_compensate)
+
+    diag = sub.add_parser("diagnose", help="compare model and data, find the missing physical effect, add it",
+                          description="Fit the preset's baseline (per device: its gains free, a bias per run), "
+                                      "rank every candidate effect by a score test, add the significant ones one "
+                                      "at a time (likelihood-ratio confirmed) and report the error falling.")
+    diag.add_argument("data", help="a tidy data file (.csv or .parquet): rate_table, vcf_static, vcf_dynamic, dac")
+    diag.add_argument("--model", choices=sorted(PRESETS), default="paper-qmg",
+                      help="baseline device preset (default paper-qmg)")
+    diag.add_argument("--alpha", type=float, default=0.01,
+                      help="family-wise significance per step (default 0.01)")
+    diag.add_argument("--json", help="write the diagnosis as JSON here (DESIGN.md §7 keys)")
+    diag.add_argument("--report", metavar="DIR", help="write a Markdown report with PNG plots into DIR")
+    diag.set_defaults(func=_cmd_diagnose)
 
     demo = sub.add_parser("demo", help="the main job on the embedded default data (seed 000 Table 2, presets)",
                           description="Reproduce seed 000 Table 2's DAC nonlinearity, simulate paper-qmg with "
