@@ -181,38 +181,51 @@ def _diffrax_result(result):
 
 
 def _window_settle(tier, field, y0, scales, gyro, stimulus, average_time):
-    """Settle with one `diffeqsolve` on one flat vector, saving only its end: the state with the running
-    integrals of the outputs, which are switched on at `settle_time`, a step boundary declared as a jump
-    (`jump_ts`) so that no Runge-Kutta stage straddles it.
+    """Settle in two solves, each on one flat vector and saving only its end: the state alone over
+    [0, settle_time], then the state with the running integrals of the outputs (from zero) over the
+    averaging window.
 
-    (Measured, `benchmarks/README.md`: saving at both window ends with `SaveAt(ts=...)` instead ran about
-    5x slower per step; two solves, settling then window, ran as fast but compile twice.)
+    (Measured, `benchmarks/README.md`, per step of the long settling span: carrying the three output
+    integrals through it, in one solve with the integrals switched on at a `jump_ts`, ran about 1.5-2x
+    slower; saving at both window ends with `SaveAt(ts=...)` about 5x slower; the two solves as one
+    `lax.scan` body (compiled once) about 2x slower.)
     """
     out_scales = output_scales(gyro)
     solver = tier.solver
     if tier.unroll_stages and isinstance(solver, diffrax.AbstractERK):
         solver = UnrolledRK.from_solver(solver)
+    controller = diffrax.PIDController(rtol=tier.rtol, atol=tier.atol)
+
+    def solve(vector_field, z0, t0, t1):
+        flat0, unravel = ravel_pytree(z0)
+
+        def flat_field(t, z, _):
+            return ravel_pytree(vector_field(t, unravel(z)))[0]
+
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(flat_field), solver, t0=t0, t1=t1, dt0=tier.dt0, y0=flat0,
+            saveat=diffrax.SaveAt(t1=True), stepsize_controller=controller, max_steps=tier.max_steps,
+            adjoint=tier.adjoint, throw=False,
+        )
+        return unravel(sol.ys[-1]), sol
+
+    def state_field(t, z):
+        d, _ = field(t, _mul(z, scales), gyro, stimulus)
+        return _div(d, scales)
+
+    def window_field(t, z):
+        d, out = field(t, _mul(z[0], scales), gyro, stimulus)
+        return _div(d, scales), _div(out, out_scales)
+
     settle_time = jnp.asarray(tier.settle_time, dtype=float)
-    t1 = settle_time + average_time
-    controller = diffrax.PIDController(rtol=tier.rtol, atol=tier.atol, jump_ts=jnp.stack([settle_time]))
+    z_settled, first = solve(state_field, _div(y0, scales), jnp.zeros(()), settle_time)
     zero = Outputs(jnp.zeros(()), jnp.zeros(()), jnp.zeros(()))
-    flat0, unravel = ravel_pytree((_div(y0, scales), zero))
-
-    def flat_field(t, z, _):
-        state, _ = unravel(z)
-        d, out = field(t, _mul(state, scales), gyro, stimulus)
-        out = jax.tree.map(lambda o, s: jnp.where(t >= settle_time, o / s, 0.0), out, out_scales)
-        return ravel_pytree((_div(d, scales), out))[0]
-
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(flat_field), solver, t0=0.0, t1=t1, dt0=tier.dt0, y0=flat0,
-        saveat=diffrax.SaveAt(t1=True), stepsize_controller=controller, max_steps=tier.max_steps,
-        adjoint=tier.adjoint, throw=False,
-    )
-    z_end, integral = unravel(sol.ys[-1])
+    (z_end, integral), window = solve(window_field, (z_settled, zero), settle_time, settle_time + average_time)
     mean = jax.tree.map(lambda acc, s: acc / average_time * s, integral, out_scales)
-    return _finalise(mean.rate, mean.quadrature, mean.frequency, _mul(z_end, scales),
-                     _diffrax_result(sol.result), sol.stats["num_steps"])
+    result = RESULTS.where(first.result == diffrax.RESULTS.successful, _diffrax_result(window.result),
+                           _diffrax_result(first.result))
+    steps = first.stats["num_steps"] + window.stats["num_steps"]
+    return _finalise(mean.rate, mean.quadrature, mean.frequency, _mul(z_end, scales), result, steps)
 
 
 class FullWaveform(AbstractTier):
@@ -221,9 +234,9 @@ class FullWaveform(AbstractTier):
     Starts from the ideal operating point, settles for `settle_time`, then averages the outputs over
     `average_periods` whole carrier periods (so the demodulators' 2w ripple averages out).
 
-    How it runs (see `benchmarks/README.md` for the measurements behind each choice): one `diffeqsolve` on
-    the state and the running integrals of the outputs, flattened to one vector, saving only the end
-    point; the integrals are switched on at `settle_time`, declared a jump so that no step straddles it.
+    How it runs (see `benchmarks/README.md` for the measurements behind each choice): two `diffeqsolve`
+    calls, the settling span for the state alone and then the averaging window with the running integrals
+    of the outputs, each on the state flattened to one vector and saving only its end point.
     An explicit Runge-Kutta `solver` (`Dopri8()` by default; `Tsit5()`, `Dopri5()`, ...) is run with the
     same tableau and step-size control but its stages written out at trace time (`unroll_stages=True`):
     diffrax's own per-stage loop costs several times this small vector field, so unrolling makes each
@@ -238,7 +251,7 @@ class FullWaveform(AbstractTier):
     - `solver`: a diffrax solver.
     - `rtol`, `atol`: the `diffrax.PIDController` tolerances on the O(1)-scaled state.
     - `dt0`: first step of each solve, s.
-    - `max_steps`: step limit of the solve.
+    - `max_steps`: step limit of each of the two solves.
     - `adjoint`: the diffrax adjoint (`ForwardMode()` / `DirectAdjoint()` for `jax.jacfwd`).
     - `unroll_stages`: run an explicit Runge-Kutta `solver`'s stages as straight-line code.
     """
