@@ -77,6 +77,7 @@ from ._gyroscope import (  # noqa: E402
     design_drive_loop as design_drive_loop,
     design_rebalance_loop as design_rebalance_loop,
 )
+from ._identify import Fit as Fit, Unidentifiable as Unidentifiable, identify as identify  # noqa: E402
 from ._lot import ProcessSpread as ProcessSpread, make_lot as make_lot  # noqa: E402
 from ._metrics import (  # noqa: E402
     FULL_SCALE_CONVENTIONS as FULL_SCALE_CONVENTIONS,
@@ -89,6 +90,7 @@ from ._metrics import (  # noqa: E402
     repeatability as repeatability,
 )
 from ._noise import RateNoise as RateNoise  # noqa: E402
+from ._parameters import PARAMETERS as PARAMETERS, Model as Model, Parameter as Parameter  # noqa: E402
 from ._physics.electrodes import (  # noqa: E402
     DriveElectrode as DriveElectrode,
     FeedbackElectrode as FeedbackElectrode,

@@ -463,8 +463,9 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
                 best = res
         else:
             better = np.nan_to_num(res[4], nan=np.inf) < np.nan_to_num(best[4], nan=np.inf)
-            best = tuple(np.where(better.reshape((n,) + (1,) * (b.ndim - 1)), a, b) if b.ndim else b
-                         for a, b in zip(res, best))
+            # Per device: the lower chi2 wins (u_lot, index 1, is empty here).
+            best = tuple(b if i == 1 else np.where(better.reshape((n,) + (1,) * (b.ndim - 1)), a, b)
+                         for i, (a, b) in enumerate(zip(res, best)))
     if evaluate_only:
         best = (np.zeros((n, n_dev)), np.zeros(n_lot), np.full(n, optx.RESULTS.successful._value),
                 np.zeros(n, dtype=int), None)
