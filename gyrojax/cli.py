@@ -116,7 +116,7 @@ def _cmd_diagnose(args):
 def _cmd_demo(args):
     from ._demo import run_demo
 
-    run_demo(args.out, full_tier=not args.no_full)
+    run_demo(args.out, full_tier=args.full and not args.no_full)
     return EXIT_OK
 
 
@@ -184,11 +184,15 @@ def build_parser():
     diag.set_defaults(func=_cmd_diagnose)
 
     demo = sub.add_parser("demo", help="the main job on the embedded default data (seed 000 Table 2, presets)",
-                          description="Reproduce seed 000 Table 2's DAC nonlinearity, simulate paper-qmg with "
-                                      "a DAC INL in three tiers, and compare vcf-2018's bandwidth with seed "
-                                      "003; writes report.md, summary.json and plots.")
+                          description="Simulate a lot with a hidden effect and find it (fit, rank candidates, "
+                                      "add, watch the error fall); reproduce seed 000 Table 2's DAC "
+                                      "nonlinearity; compare the tiers on paper-qmg with a DAC INL; compare "
+                                      "vcf-2018's bandwidth with seed 003. Writes report.md, summary.json, "
+                                      "plots and a diagnosis/ report. A few minutes on a 2-core CPU.")
     demo.add_argument("--out", default="gyrojax-demo", help="output folder (default ./gyrojax-demo)")
-    demo.add_argument("--no-full", action="store_true", help="skip the (slow) full-waveform tier")
+    demo.add_argument("--full", action="store_true",
+                      help="also run the (slow, ~1 min) full-waveform tier in the three-tier comparison")
+    demo.add_argument("--no-full", action="store_true", help="skip the full-waveform tier (the default)")
     demo.set_defaults(func=_cmd_demo)
     return parser
 

@@ -62,5 +62,10 @@ def test_demo_writes_its_report(tmp_path):
     tiers = summary["tiers"]
     assert abs(tiers["averaged"]["scale_factor_lsb_per_dps"] / tiers["steady"]["scale_factor_lsb_per_dps"] - 1) < 1e-6
     assert summary["seed003"]["bandwidth_model_hz"] == pytest.approx(96.8, abs=0.5)
+    # the main job: the hidden effect is found and the error falls to the noise
+    assert summary["diagnosis"]["found"] is True
+    assert summary["diagnosis"]["selected"] == ["dac_inl"]
+    assert 0.7 <= summary["diagnosis"]["final"]["chi2_red"] <= 1.4
+    assert (out / "diagnosis" / "diagnosis.md").stat().st_size > 0
     for name in ("report.md", "nonlinearity_tiers.png", "vcf2018_rate_response.png"):
         assert (out / name).stat().st_size > 0
