@@ -103,6 +103,11 @@ from ._physics.thermal import (  # noqa: E402
     WarmupTemperature as WarmupTemperature,
 )
 from ._presets import PRESETS as PRESETS, paper_qmg as paper_qmg, preset as preset, vcf_2018 as vcf_2018  # noqa: E402
+from ._sensitivity import (  # noqa: E402
+    EffectContribution as EffectContribution,
+    NonlinearityBudget as NonlinearityBudget,
+    nonlinearity_budget as nonlinearity_budget,
+)
 from ._simulate.response import (  # noqa: E402
     StateSpace as StateSpace,
     bandwidth as bandwidth,
