@@ -57,9 +57,7 @@ def cases(effects=None):
                              f"({', '.join(gj.EFFECTS)}), 'none' or {'+'.join(PAIR)!r}.")
     out, unsupported = [], []
     if effects is None or "none" in names:
-        out += [(p, ()) for p in reversed(tuple(SWEEPS))]
-    open_loop = [n for n in names if n in gj.EFFECTS and n not in supported["paper-qmg"]]
-    names = tuple(open_loop) + tuple(n for n in names if n not in open_loop)  # open-loop cases run early
+        out += [("paper-qmg", ())]
     for n in names:
         if n not in gj.EFFECTS:
             continue
@@ -71,6 +69,10 @@ def cases(effects=None):
             out.append((where, (n,)))
     if effects is None or "+".join(PAIR) in names:
         out.append(("paper-qmg", PAIR))
+    if effects is None or "none" in names:
+        out.append(("vcf-2018", ()))
+    # closed-loop cases first, open-loop ones last: they share one compiled model per preset
+    out.sort(key=lambda c: list(SWEEPS).index(c[0]))
     return out, unsupported
 
 
