@@ -483,8 +483,8 @@ def _sf_temperature(data):
     blocks = [data.blocks["rate_table"]] if "rate_table" in data.blocks else list(data.blocks.values())
     total = sum(jnp.sum(jnp.where(b.mask & jnp.isfinite(b.temperatures), b.temperatures, 0.0), axis=(1, 2))
                 for b in blocks)
-    count = sum(jnp.sum(b.mask & jnp.isfinite(b.temperatures), axis=(1, 2)) for b in blocks)
-    return jnp.where(count > 0, total / jnp.maximum(count, 1), 25.0)
+    count = sum(jnp.sum(b.mask & jnp.isfinite(b.temperatures), axis=(1, 2)) for b in blocks).astype(float)
+    return jnp.where(count > 0, total / jnp.maximum(count, 1.0), 25.0)
 
 
 def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full, u_lot, code, steps, final,
