@@ -3,7 +3,17 @@
 The public API is re-exported here; everything else is private.
 """
 
-import jax as _jax
+import os as _os
+
+
+# XLA's CPU runtime can wedge (all worker threads idle, the call never returns) on the vmapped
+# Newton-inside-Levenberg-Marquardt graphs of `identify`; we saw it sporadically in the solve. Single-
+# threaded Eigen avoids it (as reported in PyAutoLabs/PyAutoFit#1530). This must be set before JAX starts
+# its CPU backend; an explicit user setting of the flag wins.
+if "xla_cpu_multi_thread_eigen" not in _os.environ.get("XLA_FLAGS", ""):
+    _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false").strip()
+
+import jax as _jax  # noqa: E402
 
 
 # ppm-level work needs float64; gyrojax switches it on at import.
