@@ -13,6 +13,13 @@ import os as _os
 if "xla_cpu_multi_thread_eigen" not in _os.environ.get("XLA_FLAGS", ""):
     _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false").strip()
 
+# Equinox's default runtime errors are raised from a host callback; inside identify's vmapped
+# Levenberg-Marquardt loop an error at a discarded trial point (a NaN fed to an implicit-differentiation
+# linear solve) left the process hung on the CPU instead of raising. gyrojax reports failures through its own
+# RESULTS codes (a non-finite point is `RESULTS.nonfinite`, a fit says it did not converge), so it asks
+# equinox for NaNs instead. Must be set before equinox is imported; a user's own setting wins.
+_os.environ.setdefault("EQX_ON_ERROR", "nan")
+
 import jax as _jax  # noqa: E402
 
 

@@ -5,6 +5,8 @@ import os
 if "xla_cpu_multi_thread_eigen" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false").strip()
 
+os.environ.setdefault("EQX_ON_ERROR", "nan")  # as gyrojax does, before equinox is imported
+
 import jax  # noqa: E402
 
 
