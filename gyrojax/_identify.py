@@ -534,7 +534,7 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
         var = var + np.einsum("di,ij,dj->d", g_lot, cov_lot, g_lot) + 2 * np.einsum("di,dij,dj->d", g, cross, g_lot)
     failed = np.asarray(final.failed)
     ok = np.asarray(code) == optx.RESULTS.successful._value
-    messages = tuple(_message(bool(o), "" if o else optx.RESULTS[int(c)], int(fl))
+    messages = tuple(_message(bool(o), "" if o else optx.RESULTS._index_to_message[int(c)].split(".")[0], int(fl))
                      for o, c, fl in zip(ok, np.asarray(code), failed))
     free_mask = tuple(bool(i in set(f.tolist())) for i in range(n_dev))
     return Fit(model=fitted, names=names_dev, lot_names=names_lot, values=values[:, :n_dev],

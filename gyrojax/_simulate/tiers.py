@@ -59,8 +59,16 @@ class Settled(eqx.Module):
     num_steps: jax.Array
 
     def check(self):
-        """Raise if the point did not settle (eager use only; under jit use `eqx.error_if`)."""
-        return self.result.error_if(self, self.result != RESULTS.successful)
+        """Raise a RuntimeError with the reason if any point did not settle (eager use only; under jit
+        inspect `result`)."""
+        import numpy as np
+
+        codes = np.asarray(self.result._value)
+        bad = codes != RESULTS.successful._value
+        if bad.any():
+            reasons = sorted({RESULTS._index_to_message[int(c)] for c in codes[bad]})
+            raise RuntimeError(f"{int(bad.sum())} of {codes.size} point(s) did not settle: " + " / ".join(reasons))
+        return self
 
 
 class AbstractTier(eqx.Module):
