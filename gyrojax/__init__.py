@@ -94,6 +94,8 @@ from ._gyroscope import (  # noqa: E402
     design_drive_loop as design_drive_loop,
     design_rebalance_loop as design_rebalance_loop,
 )
+from ._fitio import load_fit as load_fit, save_fit as save_fit  # noqa: E402
+from ._fitreport import fit_report as fit_report  # noqa: E402
 from ._identify import Fit as Fit, Unidentifiable as Unidentifiable, identify as identify  # noqa: E402
 from ._lot import ProcessSpread as ProcessSpread, make_lot as make_lot  # noqa: E402
 from ._metrics import (  # noqa: E402

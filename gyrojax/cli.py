@@ -113,6 +113,35 @@ def _cmd_diagnose(args):
     return EXIT_OK
 
 
+def _name_list(text):
+    names = tuple(s.strip() for s in text.split(",") if s.strip())
+    if not names:
+        raise argparse.ArgumentTypeError(f"--free expects parameter names like k_vf,vcf_gain, got {text!r}")
+    return names
+
+
+def _cmd_identify(args):
+    from ._dataset import read_table
+    from ._fitio import save_fit
+    from ._fitreport import fit_report
+    from ._identify import identify
+    from ._parameters import DEFAULT_FREE, Model, zero_effect
+    from ._presets import preset
+
+    table = read_table(args.data)
+    model = Model(preset(args.model), tuple(zero_effect(name) for name in args.effect))
+    fit = identify(model, table, free=args.free or DEFAULT_FREE)
+    print(fit.summary())
+    if args.json:
+        atomic_write_json(fit_report(fit), args.json)
+        print(f"wrote {args.json}")
+    if args.save:
+        save_fit(fit, args.save)
+        print(f"wrote {args.save}")
+    fit.check()  # a RuntimeError naming the devices and what to try: exit 1
+    return EXIT_OK
+
+
 def _cmd_demo(args):
     from ._demo import run_demo
 
@@ -182,6 +211,22 @@ def build_parser():
     diag.add_argument("--json", help="write the diagnosis as JSON here (DESIGN.md §7 keys)")
     diag.add_argument("--report", metavar="DIR", help="write a Markdown report with PNG plots into DIR")
     diag.set_defaults(func=_cmd_diagnose)
+
+    idf = sub.add_parser("identify", help="fit the model's physical parameters to every sweep of a data file",
+                         description="Fit the free parameters of a preset (plus any effects) to all sweeps of "
+                                     "every device jointly, with standard errors; parameters the data cannot "
+                                     "fix are named and held. Exit 1 if a fit does not converge.")
+    idf.add_argument("data", help="a tidy data file (.csv or .parquet)")
+    idf.add_argument("--model", choices=sorted(PRESETS), default="paper-qmg",
+                     help="the preset the fit starts from (default paper-qmg)")
+    idf.add_argument("--free", type=_name_list, default=None, metavar="LIST",
+                     help="comma-separated names of gyrojax.PARAMETERS to fit per device (default: "
+                          "k_vf,sense_gain,vcf_gain,dac_gain_error,omega_y,q_y, those the device has)")
+    idf.add_argument("--effect", action="append", default=[], metavar="NAME",
+                     help="add an effect (from zero) and fit its parameters too (repeatable), e.g. dac_inl")
+    idf.add_argument("--json", help="write the report (DESIGN.md §7 identify keys) as JSON here")
+    idf.add_argument("--save", metavar="FIT", help="save the fit here (read back with gyrojax.load_fit)")
+    idf.set_defaults(func=_cmd_identify)
 
     demo = sub.add_parser("demo", help="the main job on the embedded default data (seed 000 Table 2, presets)",
                           description="Simulate a lot with a hidden effect and find it (fit, rank candidates, "

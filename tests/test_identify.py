@@ -1,0 +1,224 @@
+"""identify: recovery within the reported uncertainty, identifiability, non-convergence said, priors,
+save/load, and the CLI's JSON.
+
+One simulated table (3 devices x 2 runs, rate table + static VCF + DAC: the demo's shapes, so that the
+compiled fit is shared with test_diagnose in one session) and one fit serve most tests.
+"""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gyrojax as gj
+from gyrojax._observe import rate_table_points, vcf_static_points
+
+
+LOT = {"devices": 3, "runs": 2, "sweeps": ("rate_table", "vcf_static", "dac"), "seed": 11}
+
+
+@pytest.fixture(scope="module")
+def csv_path(tmp_path_factory):
+    path = tmp_path_factory.mktemp("identify") / "lot.csv"
+    gj.write_table(gj.simulate_table(gj.paper_qmg(), **LOT), path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def table(csv_path):
+    # Read back from the file, as the CLI does: the data's source is part of the compiled function's key.
+    return gj.read_table(csv_path)
+
+
+@pytest.fixture(scope="module")
+def fit(table):
+    return gj.identify("paper-qmg", table)
+
+
+@pytest.fixture(scope="module")
+def rate_only(table):
+    return gj.Table({k: table[k][table["sweep"] == "rate_table"] for k in table.columns}, source="rate-only")
+
+
+# A rate table alone with k_vf and angular_gain free and a prior on angular_gain. The vague prior (sigma
+# 1000x the value) informs nothing but gives every fit below the same array shapes: one compiled function.
+VAGUE = {"angular_gain": (1.0, 1e3)}
+
+
+@pytest.fixture(scope="module")
+def truth():
+    return gj.campaign_lot(gj.paper_qmg(), devices=LOT["devices"], seed=LOT["seed"])
+
+
+def _device(lot, i):
+    return jax.tree.map(lambda x: x[i] if hasattr(x, "ndim") and x.ndim >= 1 else x, lot)
+
+
+def _slope(fn, gyro, temp):
+    """d(output)/d(input) at zero input of a settled sweep, LSB per input unit."""
+    return jax.jvp(lambda x: fn(gyro, x[None], jnp.asarray(temp)[None]).rate[0], (jnp.zeros(()),),
+                   (jnp.ones(()),))[1]
+
+
+def test_fit_converges_with_chi2_near_one(fit):
+    assert fit.all_converged
+    assert fit.check() is fit
+    # 3 devices x (2 runs x (22 rate + VCF points) + DAC points): chi2_red of a correct model is ~1 +/- 0.1
+    assert 0.8 < fit.chi2_red_total < 1.2
+    assert fit.devices == tuple(f"paper-qmg-{i:03d}" for i in range(3))
+
+
+def test_scale_factor_recovered_within_three_sigma(fit, truth):
+    """The fitted zero-rate SF against each true device's, both at the fit's reporting temperature."""
+    from gyrojax._identify import _sf_temperature
+
+    temps = np.asarray(_sf_temperature(fit.data))
+    for i in range(3):
+        true_sf = float(_slope(rate_table_points, _device(truth, i), temps[i]))
+        sf, se = float(fit.scale_factor[i]), float(fit.scale_factor_stderr[i])
+        assert 0 < se < 1e-5 * abs(sf)  # a few ppm: 44 points per device at ~0.5 mdeg/s noise
+        assert abs(sf - true_sf) < 3 * se, (i, sf, true_sf, se)
+    # the lot spread (1 % electrodes, 0.5 % mass) is resolved: the devices' SFs differ by many sigma
+    sfs = np.asarray(fit.scale_factor)
+    assert np.ptp(sfs) > 100 * float(np.max(fit.scale_factor_stderr))
+
+
+def test_vcf_ratio_and_dac_gain_recovered_within_three_sigma(fit, truth):
+    """The VCF output sees K_svf / K_vf (virtual force balanced by the feedback force); the DAC sweep pins
+    the DAC gain, whose true error is zero."""
+    i_kvf, i_vcf, i_dac = (fit.names.index(n) for n in ("k_vf", "vcf_gain", "dac_gain_error"))
+    for i in range(3):
+        true_ratio = float(truth.vcf_electrode.force_per_volt2[i] / truth.feedback_electrode.k_vf[i])
+        ratio = float(fit.values[i, i_vcf] / fit.values[i, i_kvf])
+        cov = np.asarray(fit.covariance[i])  # internal (log) coordinates: var(u_vcf - u_kvf)
+        se = ratio * np.sqrt(cov[i_vcf, i_vcf] + cov[i_kvf, i_kvf] - 2 * cov[i_vcf, i_kvf])
+        assert abs(ratio - true_ratio) < 3 * se, (i, ratio, true_ratio, se)
+        assert abs(float(fit.values[i, i_dac])) < 3 * float(fit.stderr[i, i_dac])
+        assert float(fit.stderr[i, i_dac]) < 1e-4
+
+
+def test_closed_loop_data_cannot_see_the_sense_mode(fit):
+    """Force rebalance holds the sense mode at rest: omega_y and q_y are named and held, not fitted."""
+    held = {u.held for u in fit.unidentifiable}
+    assert held == {"omega_y", "q_y"}
+    for name in ("omega_y", "q_y"):
+        k = fit.names.index(name)
+        assert not fit.free[k]
+        assert np.all(np.isnan(np.asarray(fit.stderr[:, k])))
+        np.testing.assert_array_equal(np.asarray(fit.values[:, k]), np.asarray(fit.values[0, k]))
+    assert "unidentifiable: omega_y" in fit.summary()
+
+
+def test_product_combination_is_named_and_one_held(rate_only):
+    """A rate table alone sees only Ag m a w / K_vf: with k_vf and angular_gain free, the direction is
+    named with both and the later one in PARAMETERS' order (angular_gain) held."""
+    f = gj.identify("paper-qmg", rate_only, free=("k_vf", "angular_gain"), priors=VAGUE, evaluate_only=True)
+    combo = [u for u in f.unidentifiable if len(u.parameters) > 1]
+    assert len(combo) == 1
+    assert set(combo[0].parameters) == {"k_vf", "angular_gain"}
+    assert combo[0].held == "angular_gain"
+    assert f.free == (True, False)
+    assert "unidentifiable: k_vf x angular_gain" in f.summary()
+
+
+def test_a_prior_pulls_and_fixes_the_combination(rate_only):
+    """A design value with a tight tolerance on angular_gain makes the product identifiable: Ag lands on
+    the prior and K_vf follows, keeping the measured SF (Ag / K_vf)."""
+    ag = 1.002  # the preset's Ag is 1.0 (an ASSUMPTION there); +0.2 % is one lot sigma
+    f = gj.identify("paper-qmg", rate_only, free=("k_vf", "angular_gain"), priors={"angular_gain": (ag, 1e-5)})
+    base = gj.identify("paper-qmg", rate_only, free=("k_vf", "angular_gain"), priors=VAGUE)
+    assert f.all_converged and base.all_converged
+    assert f.free == (True, True) and f.unidentifiable == ()
+    np.testing.assert_allclose(np.asarray(f.value("angular_gain")), ag, rtol=3e-5)
+    np.testing.assert_allclose(np.asarray(f.value("k_vf")) / np.asarray(base.value("k_vf")), ag, rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(f.scale_factor), np.asarray(base.scale_factor), rtol=1e-6)
+
+
+def test_a_fit_that_cannot_converge_says_so(rate_only):
+    f = gj.identify("paper-qmg", rate_only, free=("k_vf", "angular_gain"), priors=VAGUE, max_steps=1)
+    assert not bool(np.any(np.asarray(f.converged)))
+    assert all("Try:" in m and "max_steps" in m for m in f.result_message)
+    with pytest.raises(RuntimeError, match="did not converge for paper-qmg-000: .*max_steps"):
+        f.check()
+    assert "NOT CONVERGED" in f.summary()
+
+
+def test_bad_names_are_refused(table):
+    with pytest.raises(ValueError, match="unknown parameter 'k_vff' in free"):
+        gj.identify("paper-qmg", table, free=("k_vff",))
+    with pytest.raises(ValueError, match="'mass' .* is not a parameter of this fit"):
+        gj.identify("paper-qmg", table, hold=("mass",))
+    with pytest.raises(ValueError, match="starts must be an integer >= 1"):
+        gj.identify("paper-qmg", table, starts=0)
+
+
+def test_save_load_round_trip_is_exact(fit, tmp_path):
+    path = tmp_path / "lot.fit"
+    gj.save_fit(fit, path)
+    back = gj.load_fit(path)
+    a, ta = jax.tree.flatten(fit)
+    b, tb = jax.tree.flatten(back)
+    assert ta == tb  # static fields too: names, free, devices, messages, unidentifiable, entries
+    for x, y in zip(a, b):
+        assert type(x) is type(y)
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+        assert np.asarray(x).dtype == np.asarray(y).dtype
+    assert back.unidentifiable == fit.unidentifiable
+    assert back.summary() == fit.summary()
+
+
+def test_load_refuses_foreign_and_corrupt_files(fit, tmp_path):
+    foreign = tmp_path / "data.csv"
+    foreign.write_text("device,run\n")
+    with pytest.raises(ValueError, match=r"data\.csv: not a gyrojax fit file"):
+        gj.load_fit(foreign)
+    path = tmp_path / "lot.fit"
+    gj.save_fit(fit, path)
+    raw = bytearray(path.read_bytes())
+    raw[-10] ^= 0xFF
+    bad = tmp_path / "flipped.fit"
+    bad.write_bytes(bytes(raw))
+    with pytest.raises(ValueError, match=r"flipped\.fit: corrupt gyrojax fit file: .*checksum"):
+        gj.load_fit(bad)
+    cut = tmp_path / "cut.fit"
+    cut.write_bytes(bytes(raw[:20]))
+    with pytest.raises(ValueError, match=r"cut\.fit: corrupt gyrojax fit file"):
+        gj.load_fit(cut)
+
+
+def test_fit_report_json_keys(fit):
+    report = gj.fit_report(fit)
+    json.dumps(report, allow_nan=False)
+    assert set(report) >= {"devices", "lot", "unidentifiable"}
+    d = report["devices"][1]
+    assert set(d) >= {"parameters", "scale_factor_lsb_per_dps", "scale_factor_stderr", "chi2_red", "converged"}
+    assert d["scale_factor_lsb_per_dps"] == float(fit.scale_factor[1])
+    assert d["parameters"]["k_vf"] == {"value": float(fit.values[1, 0]), "stderr": float(fit.stderr[1, 0]),
+                                       "held": False}
+    assert d["parameters"]["q_y"]["stderr"] is None and d["parameters"]["q_y"]["held"]
+    assert report["unidentifiable"] == ["omega_y", "q_y"]
+    assert report["lot"] == {}
+
+
+def test_cli_identify(csv_path, tmp_path, capsys):
+    from gyrojax.cli import main
+
+    data = csv_path
+    out, saved = tmp_path / "fit.json", tmp_path / "lot.fit"
+    assert main(["identify", str(data), "--json", str(out), "--save", str(saved)]) == 0
+    report = json.loads(out.read_text())
+    assert [d["device"] for d in report["devices"]] == ["paper-qmg-000", "paper-qmg-001", "paper-qmg-002"]
+    assert all(d["converged"] for d in report["devices"])
+    assert all(0.5 < d["chi2_red"] < 1.5 for d in report["devices"])
+    back = gj.load_fit(saved)
+    assert back.data.source == str(data)
+    np.testing.assert_array_equal(np.asarray(back.scale_factor),
+                                  [d["scale_factor_lsb_per_dps"] for d in report["devices"]])
+    assert "chi2_red" in capsys.readouterr().out
+    # data errors: exit 2, no traceback
+    assert main(["identify", str(tmp_path / "missing.csv")]) == 2
+    assert main(["identify", str(data), "--free", "k_vf,nope"]) == 2
+    err = capsys.readouterr().err
+    assert "missing.csv" in err and "unknown parameter 'nope'" in err and "Traceback" not in err
