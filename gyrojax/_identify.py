@@ -117,7 +117,7 @@ class Fit(eqx.Module):
 
     @property
     def chi2_red(self):
-        return self.chi2 / jnp.maximum(self.dof, 1)
+        return self.chi2 / jnp.maximum(self.dof, 1).astype(self.chi2.dtype)
 
     @property
     def chi2_total(self):
