@@ -3,11 +3,12 @@
 diffrax runs the stages of its explicit Runge-Kutta solvers (`Tsit5`, `Dopri5`, `Dopri8`, ...) as an inner
 loop (`eqxi.while_loop` over the stage index, with the tableau and the stage derivatives indexed
 dynamically), which keeps compile times short for big vector fields. For the full-waveform tier the
-vector field is tiny (28 scalars, about 0.3 us inside XLA on a CPU) and is called for some 10^4-10^5 steps,
+vector field is tiny (25 states, about 0.3 us inside XLA on a CPU) and is called for some 10^4-10^5 steps,
 so that inner loop and its per-stage bookkeeping cost several times the field itself. `UnrolledRK` takes
 the *same* Butcher tableau and writes every stage as straight-line code, so XLA fuses each step into a few
 kernels. Same tableau, same error estimate, same step-size control: the numbers agree with diffrax's own
-solver to rounding (the order of the floating-point sums differs).
+solver to rounding (the order of the floating-point sums differs). `UnrolledRK.dop853()` adds Hairer's
+DOP853, which diffrax does not ship.
 """
 
 from typing import ClassVar
@@ -51,6 +52,8 @@ class UnrolledRK(diffrax.AbstractAdaptiveSolver):
     - `c`: the nodes of stages 2, 3, ... (stage 1 is at the start of the step).
     - `a`: row i holds the coefficients of stage i + 2 on the stages before it.
     - `b_sol`, `b_error`: the solution weights and the error-estimate weights over all stages.
+    - `b_error_low`: optional second error-estimate weights (a lower-order embedded solution), for
+      Hairer's combined estimate of DOP853 (see `dop853`); `None` for the usual single estimate.
     - `fsal`: first-same-as-last (the last stage is the field at the end of the step, reused next step).
     - `method_order`: the order of the solution.
     """
@@ -61,6 +64,7 @@ class UnrolledRK(diffrax.AbstractAdaptiveSolver):
     b_error: tuple[float, ...] = eqx.field(static=True)
     fsal: bool = eqx.field(static=True)
     method_order: int = eqx.field(static=True)
+    b_error_low: tuple[float, ...] | None = eqx.field(static=True, default=None)
 
     term_structure: ClassVar = diffrax.AbstractTerm
     interpolation_cls: ClassVar = diffrax.ThirdOrderHermitePolynomialInterpolation
@@ -73,6 +77,8 @@ class UnrolledRK(diffrax.AbstractAdaptiveSolver):
         if len(self.b_sol) != stages or len(self.b_error) != stages:
             raise ValueError(f"UnrolledRK.b_sol and b_error need {stages} weights each, got "
                              f"{len(self.b_sol)} and {len(self.b_error)}.")
+        if self.b_error_low is not None and len(self.b_error_low) != stages:
+            raise ValueError(f"UnrolledRK.b_error_low needs {stages} weights, got {len(self.b_error_low)}.")
         if self.fsal and (self.c[-1] != 1.0 or self.a[-1] != self.b_sol[:-1] or self.b_sol[-1] != 0.0):
             raise ValueError("UnrolledRK: fsal=True needs a last stage at c = 1 whose coefficients are the "
                              "solution weights (b_sol with a zero last weight).")
@@ -92,6 +98,23 @@ class UnrolledRK(diffrax.AbstractAdaptiveSolver):
         return cls(c=_floats(tableau.c), a=tuple(_floats(row) for row in tableau.a_lower),
                    b_sol=_floats(tableau.b_sol), b_error=_floats(tableau.b_error), fsal=bool(tableau.fsal),
                    method_order=int(order))
+
+    @classmethod
+    def dop853(cls) -> "UnrolledRK":
+        r"""DOP853: Dormand and Prince's order-8 method with Hairer's error estimate, the method of scipy's
+        `solve_ivp(method="DOP853")` and of the Fortran `dop853` (coefficients in `_dop853.py`).
+
+        12 stages plus the field at the end of the step (reused as the next step's first stage). The error
+        estimate combines the differences e5, e3 of the order-8 solution from embedded solutions of order
+        5 and 3 as Hairer does, e5 |e5| / sqrt(|e5|^2 + 0.01 |e3|^2): it follows the error of the order-8
+        solution itself, where diffrax's `Dopri8` estimates that of its order-7 companion, so for the same
+        tolerance DOP853 takes fewer steps. (Hairer weights |.| by the tolerances; here it is the plain
+        root-sum-square over the state, the same thing when the states are scaled to O(1) as in the tiers.)
+        """
+        from . import _dop853 as d
+
+        return cls(c=d.C + (1.0,), a=d.A + (d.B,), b_sol=d.B + (0.0,), b_error=d.E5, fsal=True, method_order=8,
+                   b_error_low=d.E3)
 
     def order(self, terms):
         return self.method_order
@@ -128,6 +151,13 @@ class UnrolledRK(diffrax.AbstractAdaptiveSolver):
         else:
             y1, f1 = add(y0, _combine(self.b_sol, fs)), None
         error = _combine(self.b_error, fs)
+        if self.b_error_low is not None:
+            low = _combine(self.b_error_low, fs)
+            high2 = sum(jnp.sum(v**2) for v in jax.tree.leaves(error))
+            low2 = sum(jnp.sum(v**2) for v in jax.tree.leaves(low))
+            denominator = jnp.sqrt(high2 + 0.01 * low2)
+            ratio = jnp.where(denominator > 0, jnp.sqrt(high2) / jnp.where(denominator > 0, denominator, 1.0), 0.0)
+            error = jax.tree.map(lambda v: ratio * v, error)
         y_error = jax.tree.map(lambda v: dt * v, error)
         k1 = terms.vf(t1, y1, args) if f1 is None else f1
         dense_info = dict(y0=y0, y1=y1, k0=jax.tree.map(lambda v: dt * v, f0),

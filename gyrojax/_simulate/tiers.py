@@ -26,6 +26,7 @@ from ._model import (
     wave_from_slow,
     wave_scales,
 )
+from ._hairer_controller import HairerController
 from ._unrolled_rk import UnrolledRK
 
 
@@ -189,51 +190,47 @@ def _diffrax_result(result):
 
 
 def _window_settle(tier, field, y0, scales, gyro, stimulus, average_time):
-    """Settle in two solves, each on one flat vector and saving only its end: the state alone over
-    [0, settle_time], then the state with the running integrals of the outputs (from zero) over the
-    averaging window.
+    """Settle with one `diffeqsolve` run twice by a `lax.scan` (so compiled once): over [0, settle_time],
+    then over the averaging window, each time with the running integrals of the outputs restarted from
+    zero; the window's integrals give the means.
 
-    (Measured, `benchmarks/README.md`, per step of the long settling span: carrying the three output
-    integrals through it, in one solve with the integrals switched on at a `jump_ts`, ran about 1.5-2x
-    slower; saving at both window ends with `SaveAt(ts=...)` about 5x slower; the two solves as one
-    `lax.scan` body (compiled once) about 2x slower.)
+    The ODE state is the pair (scaled state flattened to one vector, the three output integrals). Each
+    choice was measured (`benchmarks/README.md`): the integrals ride along through the settling span
+    because the settled output is then ~40x more accurate at the same tolerance (the step size at the
+    end of the settling span matches the window's); a separate 3-vector beside the 25-state vector keeps
+    XLA's fused step (one 28-vector ran 1.7-1.9x slower per step); only end points are saved
+    (`SaveAt(ts=...)` at both window ends ran ~5x slower).
     """
     out_scales = output_scales(gyro)
     solver = tier.solver
     if tier.unroll_stages and isinstance(solver, diffrax.AbstractERK):
         solver = UnrolledRK.from_solver(solver)
-    controller = diffrax.PIDController(rtol=tier.rtol, atol=tier.atol)
+    controller = HairerController(rtol=tier.rtol, atol=tier.atol)
+    flat0, unravel = ravel_pytree(_div(y0, scales))
+    out_scale = jnp.stack([out_scales.rate, out_scales.quadrature, out_scales.frequency])
 
-    def solve(vector_field, z0, t0, t1):
-        flat0, unravel = ravel_pytree(z0)
+    def vector_field(t, y, _):
+        z, _ = y
+        d, out = field(t, _mul(unravel(z), scales), gyro, stimulus)
+        return ravel_pytree(_div(d, scales))[0], jnp.stack([out.rate, out.quadrature, out.frequency]) / out_scale
 
-        def flat_field(t, z, _):
-            return ravel_pytree(vector_field(t, unravel(z)))[0]
-
+    def segment(z, span):
         sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(flat_field), solver, t0=t0, t1=t1, dt0=tier.dt0, y0=flat0,
-            saveat=diffrax.SaveAt(t1=True), stepsize_controller=controller, max_steps=tier.max_steps,
-            adjoint=tier.adjoint, throw=False,
+            diffrax.ODETerm(vector_field), solver, t0=span[0], t1=span[1], dt0=tier.dt0,
+            y0=(z, jnp.zeros(3)), saveat=diffrax.SaveAt(t1=True), stepsize_controller=controller,
+            max_steps=tier.max_steps, adjoint=tier.adjoint, throw=False,
         )
-        return unravel(sol.ys[-1]), sol
-
-    def state_field(t, z):
-        d, _ = field(t, _mul(z, scales), gyro, stimulus)
-        return _div(d, scales)
-
-    def window_field(t, z):
-        d, out = field(t, _mul(z[0], scales), gyro, stimulus)
-        return _div(d, scales), _div(out, out_scales)
+        z_end, integral = jax.tree.map(lambda v: v[-1], sol.ys)
+        return z_end, (integral, sol.result, sol.stats["num_steps"])
 
     settle_time = jnp.asarray(tier.settle_time, dtype=float)
-    z_settled, first = solve(state_field, _div(y0, scales), jnp.zeros(()), settle_time)
-    zero = Outputs(jnp.zeros(()), jnp.zeros(()), jnp.zeros(()))
-    (z_end, integral), window = solve(window_field, (z_settled, zero), settle_time, settle_time + average_time)
-    mean = jax.tree.map(lambda acc, s: acc / average_time * s, integral, out_scales)
-    result = RESULTS.where(first.result == diffrax.RESULTS.successful, _diffrax_result(window.result),
-                           _diffrax_result(first.result))
-    steps = first.stats["num_steps"] + window.stats["num_steps"]
-    return _finalise(mean.rate, mean.quadrature, mean.frequency, _mul(z_end, scales), result, steps)
+    zero = jnp.zeros(())
+    spans = jnp.stack([jnp.stack([zero, settle_time]), jnp.stack([settle_time, settle_time + average_time])])
+    z_end, (integrals, results, steps) = jax.lax.scan(segment, flat0, spans)
+    first, window = (jax.tree.map(lambda v: v[i], results) for i in (0, 1))
+    mean = integrals[1] / average_time * out_scale
+    result = RESULTS.where(first == diffrax.RESULTS.successful, _diffrax_result(window), _diffrax_result(first))
+    return _finalise(mean[0], mean[1], mean[2], _mul(unravel(z_end), scales), result, jnp.sum(steps))
 
 
 class FullWaveform(AbstractTier):
@@ -242,34 +239,37 @@ class FullWaveform(AbstractTier):
     Starts from the ideal operating point, settles for `settle_time`, then averages the outputs over
     `average_periods` whole carrier periods (so the demodulators' 2w ripple averages out).
 
-    How it runs (see `benchmarks/README.md` for the measurements behind each choice): two `diffeqsolve`
-    calls, the settling span for the state alone and then the averaging window with the running integrals
-    of the outputs, each on the state flattened to one vector and saving only its end point.
-    An explicit Runge-Kutta `solver` (`Dopri8()` by default; `Tsit5()`, `Dopri5()`, ...) is run with the
-    same tableau and step-size control but its stages written out at trace time (`unroll_stages=True`):
-    diffrax's own per-stage loop costs several times this small vector field, so unrolling makes each
-    step about 3x cheaper, at the price of a longer compile (about 10 s instead of 2-4 s on a 2-core CPU
-    for one point; several times longer for reverse-mode gradients). Pass `unroll_stages=False` where
-    compile time matters more than run time. Other solvers are used as given.
+    How it runs (`benchmarks/README.md` has the measurements behind each choice): the default solver is
+    DOP853 (Dormand-Prince order 8 with Hairer's error estimate, the method of scipy's
+    `solve_ivp(method="DOP853")`) with its stages written out at trace time (`UnrolledRK`), under Hairer's
+    step-size rule (`HairerController`), on the state flattened to one vector. An explicit Runge-Kutta
+    solver of diffrax (`Tsit5()`, `Dopri5()`, `Dopri8()`, ...) is unrolled the same way (same tableau,
+    same numbers) when `unroll_stages=True`: diffrax's own stage loop costs several times this small
+    vector field. Other solvers are used as given. Unrolling lengthens compilation (about 8 s for one
+    point on a 2-core CPU; several times that for reverse-mode gradients): pass `unroll_stages=False`
+    with a diffrax solver where compile time matters more than run time.
+
+    Tolerance: the default rtol = atol = 1e-8 on the O(1)-scaled state keeps the settled output within
+    ~1e-3 ppm of full scale of a 1e-12 solve on paper-qmg's sweep, and is also tight enough for the lower-
+    order diffrax solvers; with DOP853, rtol = atol = 1e-6 (~40% faster) still stays within ~0.03 ppm, far
+    inside the tiers' 0.25 ppm physical difference and their 1 ppm agreement target
+    (`benchmarks/README.md` has the measured figures).
 
     **Fields:**
 
     - `settle_time`: settling span, s.
     - `average_periods`: whole carrier periods (of the nominal drive frequency) averaged over.
-    - `solver`: a diffrax solver.
-    - `rtol`, `atol`: the `diffrax.PIDController` tolerances on the O(1)-scaled state.
-    - `dt0`: first step of each solve, s.
-    - `max_steps`: step limit of each of the two solves.
+    - `solver`: a diffrax solver (default `UnrolledRK.dop853()`).
+    - `rtol`, `atol`: the step-size controller's tolerances on the O(1)-scaled state.
+    - `dt0`: first step of the settling span and of the window, s.
+    - `max_steps`: step limit of each of the two spans.
     - `adjoint`: the diffrax adjoint (`ForwardMode()` / `DirectAdjoint()` for `jax.jacfwd`).
-    - `unroll_stages`: run an explicit Runge-Kutta `solver`'s stages as straight-line code.
+    - `unroll_stages`: run a diffrax explicit Runge-Kutta `solver`'s stages as straight-line code.
     """
 
     settle_time: float = 0.12
     average_periods: int = eqx.field(static=True, default=40)
-    solver: diffrax.AbstractSolver = diffrax.Dopri8()
-    # 1e-8 on the O(1)-scaled state: on paper-qmg's 22-point sweep (with DAC INL) Dopri8 then stays within
-    # 0.003 ppm of full scale of a 1e-12 solve, 100x inside the tiers' 0.25 ppm physical difference and
-    # 400x inside the 1 ppm agreement target, in 1.8x fewer steps than at 1e-10 (benchmarks/README.md).
+    solver: diffrax.AbstractSolver = UnrolledRK.dop853()
     rtol: float = 1e-8
     atol: float = 1e-8
     dt0: float = 1e-6
