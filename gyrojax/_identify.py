@@ -9,6 +9,8 @@ direction of parameter space the data cannot fix to better than its natural size
 """
 
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -285,6 +287,25 @@ def _solve_independent(problem_batch, u0, u_lot, solver, max_steps):
 
 
 @eqx.filter_jit
+def _solve_one(problem, y0, u_lot, solver, max_steps):
+    def fn(y, _):
+        return problem.residuals(y, u_lot)[0]
+
+    sol = optx.least_squares(fn, solver, y0, max_steps=max_steps, throw=False)
+    r = problem.residuals(sol.value, u_lot)[0]
+    return sol.value, sol.result._value, sol.stats["num_steps"], jnp.sum(r**2)
+
+
+def _solve_loop(problem_batch, u0, u_lot, solver, max_steps):
+    """Device by device (one compiled single-device solve): see `identify(lot_solve=...)`."""
+    outs = []
+    for d in range(u0.shape[0]):
+        problem = jax.tree.map(lambda x: x[d] if eqx.is_array(x) else x, problem_batch)
+        outs.append(_solve_one(problem, u0[d], u_lot, solver, max_steps))
+    return tuple(jnp.stack([o[i] for o in outs]) for i in range(4))
+
+
+@eqx.filter_jit
 def _solve_joint(problem_batch, u0, u_lot0, solver, max_steps):
     def fn(y, _):
         u_free, u_lot = y
@@ -354,7 +375,7 @@ def _to_model(model) -> Model:
 def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="levenberg-marquardt",
              starts: int = 1, start_spread: float = 0.05, seed: int = 0, rtol: float = 1e-8, atol: float = 1e-8,
              max_steps: int = 200, identifiability_threshold: float = 1.0, hold=(), tier=Steady(),
-             evaluate_only: bool = False) -> Fit:
+             evaluate_only: bool = False, lot_solve: str = "loop") -> Fit:
     r"""Fit the free parameters of `model` to every sweep in `data`, per device (vmapped) or jointly.
 
     **Arguments:**
@@ -375,6 +396,9 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
       internal units: relative change for positive parameters, typical size for effects) are held.
     - `hold`: names held at their start values regardless.
     - `tier`: the settling tier for rate-table and static-VCF points (`Steady()`).
+    - `lot_solve`: `"loop"` (default): independent device fits one after another through one compiled
+      single-device solve; `"vmap"`: all devices in one vmapped solve (faster for large lots, but on the
+      CPU backend of jax 0.10 it sometimes wedged: every thread idle, the call never returning).
     - `evaluate_only`: do not solve; return the `Fit` at the start (residuals, Jacobian, covariance there),
       e.g. to test a candidate effect at zero against an already fitted model.
 
@@ -385,6 +409,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         data = fit_data(data)
     if not isinstance(data, FitData):
         raise TypeError(f"data must be a gyrojax.Table or FitData, got {type(data).__name__}.")
+    if lot_solve not in ("loop", "vmap"):
+        raise ValueError(f"lot_solve must be 'loop' or 'vmap', got {lot_solve!r}.")
     if not isinstance(starts, int) or starts < 1:
         raise ValueError(f"starts must be an integer >= 1, got {starts!r}.")
     n = len(data.devices)
@@ -419,13 +445,17 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         prior_mu.append(mu)
         prior_sd.append(sd)
 
+    # Names, run ids and the source are static metadata: keep them out of the compiled functions' keys, so
+    # that every dataset of the same shapes shares one compile.
+    data_jit = dataclasses.replace(data, devices=(), runs=(), source="")
+
     def problem_for(free_index):
         mask = np.zeros(n_dev)
         mask[np.asarray(free_index, dtype=int)] = 1.0
         pri = (jnp.asarray(prior_idx, dtype=int), jnp.asarray(np.stack(prior_mu, -1) if prior_mu else np.zeros((n, 0))),
                jnp.asarray(np.stack(prior_sd, -1) if prior_sd else np.ones((n, 0))))
         pri = (jnp.broadcast_to(pri[0], (n, len(prior_idx))), pri[1], pri[2])
-        return _Problem(model, start, data, jnp.broadcast_to(jnp.asarray(mask), (n, n_dev)),
+        return _Problem(model, start, data_jit, jnp.broadcast_to(jnp.asarray(mask), (n, n_dev)),
                         n_dev, entries, tier, *pri)
 
     # One compiled evaluation, at the start and at the solution: the Jacobian over every per-device entry.
@@ -452,7 +482,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
             u0_lot = np.zeros(n_lot) if k == 0 else rng.normal(scale=start_spread, size=n_lot)
             res = _solve_joint(problem, jnp.asarray(u0), jnp.asarray(u0_lot), solver_, max_steps)
         else:
-            v, code, steps, chi2 = _solve_independent(problem, jnp.asarray(u0), jnp.zeros(0), solver_, max_steps)
+            solve = _solve_loop if lot_solve == "loop" else _solve_independent
+            v, code, steps, chi2 = solve(problem, jnp.asarray(u0), jnp.zeros(0), solver_, max_steps)
             res = (v, jnp.zeros(0), code, steps, chi2)
         res = tuple(np.asarray(x) for x in res)
         if best is None:
