@@ -250,7 +250,7 @@ class FullWaveform(AbstractTier):
     with a diffrax solver where compile time matters more than run time.
 
     Tolerance: the default rtol = atol = 1e-8 on the O(1)-scaled state keeps the settled output within
-    ~1e-3 ppm of full scale of a 1e-12 solve on paper-qmg's sweep, and is also tight enough for the lower-
+    ~1e-4 ppm of full scale of a 1e-12 solve on paper-qmg's sweep, and is also tight enough for the lower-
     order diffrax solvers; with DOP853, rtol = atol = 1e-6 (~40% faster) still stays within ~0.03 ppm, far
     inside the tiers' 0.25 ppm physical difference and their 1 ppm agreement target
     (`benchmarks/README.md` has the measured figures).
