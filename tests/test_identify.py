@@ -13,8 +13,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from conftest import needs_solver
+
 import gyrojax as gj
 from gyrojax._observe import rate_table_points
+
+pytestmark = needs_solver
 
 
 LOT = {"devices": 3, "runs": 2, "sweeps": ("rate_table", "vcf_static", "dac"), "seed": 11}
