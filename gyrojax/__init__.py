@@ -3,24 +3,7 @@
 The public API is re-exported here; everything else is private.
 """
 
-import os as _os
-
-
-# XLA's CPU runtime can wedge (all worker threads idle, the call never returns) on the vmapped
-# Newton-inside-Levenberg-Marquardt graphs of `identify`; we saw it sporadically in the solve. Single-
-# threaded Eigen avoids it (as reported in PyAutoLabs/PyAutoFit#1530). This must be set before JAX starts
-# its CPU backend; an explicit user setting of the flag wins.
-if "xla_cpu_multi_thread_eigen" not in _os.environ.get("XLA_FLAGS", ""):
-    _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false").strip()
-
-# Equinox's default runtime errors are raised from a host callback; inside identify's vmapped
-# Levenberg-Marquardt loop an error at a discarded trial point (a NaN fed to an implicit-differentiation
-# linear solve) left the process hung on the CPU instead of raising. gyrojax reports failures through its own
-# RESULTS codes (a non-finite point is `RESULTS.nonfinite`, a fit says it did not converge), so it asks
-# equinox for NaNs instead. Must be set before equinox is imported; a user's own setting wins.
-_os.environ.setdefault("EQX_ON_ERROR", "nan")
-
-import jax as _jax  # noqa: E402
+import jax as _jax
 
 
 # ppm-level work needs float64; gyrojax switches it on at import.

@@ -14,12 +14,14 @@ import dataclasses
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
 import optimistix as optx
 
 from ._dataset import Table
 from ._fitdata import FitData, fit_data
 from ._gyroscope import Gyroscope
+from ._linsolve import PivotedLU
 from ._observe import rate_table_points
 from ._parameters import (
     DEFAULT_FREE,
@@ -46,10 +48,12 @@ SOLVERS = ("levenberg-marquardt", "gauss-newton", "bfgs")
 def _solver(solver, rtol, atol):
     if not isinstance(solver, str):
         return solver
+    # Normal equations through an XLA-only LU, not lineax's LAPACK QR: see gyrojax/_linsolve.py.
+    linear_solver = lx.Normal(PivotedLU(zero_pivot_gives_zero=True))
     if solver == "levenberg-marquardt":
-        return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+        return optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=linear_solver)
     if solver == "gauss-newton":
-        return optx.GaussNewton(rtol=rtol, atol=atol)
+        return optx.GaussNewton(rtol=rtol, atol=atol, linear_solver=linear_solver)
     if solver == "bfgs":
         return optx.BFGS(rtol=rtol, atol=atol)
     raise ValueError(f"solver must be one of {SOLVERS} or an optimistix solver, got {solver!r}.")

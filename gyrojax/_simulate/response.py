@@ -7,6 +7,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 
 from .._gyroscope import Gyroscope
+from .._linsolve import solve
 from .._stimulus import Stimulus
 from ._model import averaged_field, slow_scales
 from .tiers import Steady
@@ -32,7 +33,7 @@ class StateSpace(eqx.Module):
         def one(wi):
             lhs = jax.lax.complex(-self.a, wi * eye)
             rhs = self.b.astype(jnp.complex128)
-            return self.c.astype(jnp.complex128) @ jnp.linalg.solve(lhs, rhs) + self.d.astype(jnp.complex128)
+            return self.c.astype(jnp.complex128) @ solve(lhs, rhs) + self.d.astype(jnp.complex128)
 
         return jax.vmap(one)(jnp.ravel(w)).reshape(w.shape)
 

@@ -12,6 +12,7 @@ from jax.flatten_util import ravel_pytree
 
 from .._checks import check_positive
 from .._gyroscope import Gyroscope
+from .._linsolve import PivotedLU
 from .._solution import RESULTS
 from .._stimulus import Stimulus
 from ._model import (
@@ -113,8 +114,10 @@ class Steady(AbstractTier):
             return _div(d, scales)
 
         y0 = _div(operating_point(gyro, stimulus), scales)
-        sol = optx.root_find(residual, optx.Newton(rtol=self.rtol, atol=self.atol), y0,
-                             max_steps=self.max_steps, throw=False)
+        # XLA-only linear solves in Newton and its implicit derivative: see gyrojax/_linsolve.py.
+        sol = optx.root_find(residual, optx.Newton(rtol=self.rtol, atol=self.atol, linear_solver=PivotedLU()),
+                             y0, max_steps=self.max_steps, throw=False,
+                             adjoint=optx.ImplicitAdjoint(linear_solver=PivotedLU()))
         state = _mul(sol.value, scales)
         _, out = averaged_field(0.0, state, gyro, stimulus)
         result = RESULTS.where(sol.result == optx.RESULTS.successful, RESULTS.successful,
