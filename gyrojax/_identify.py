@@ -322,6 +322,37 @@ def _solve_joint(problem_batch, u0, u_lot0, solver, max_steps):
             jnp.broadcast_to(sol.stats["num_steps"], (n,)), jnp.sum(r**2, axis=-1))
 
 
+class _LotSpread:
+    """Pads the device axis to a multiple of `shards` and places it across a 1-D mesh of JAX devices; unpads
+    results. With one shard it does nothing."""
+
+    def __init__(self, n: int, shards: int):
+        self.n, self.shards = n, shards
+        if shards > 1:
+            mesh = jax.sharding.Mesh(np.asarray(jax.devices()[:shards]), ("lot",))
+            self.sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("lot"))
+
+    def pad(self, *trees):
+        if self.shards <= 1:
+            return trees
+        extra = -self.n % self.shards
+
+        def put(x):
+            if not eqx.is_array(x):
+                return x
+            x = jnp.asarray(x)
+            if extra:  # copies of the last device: solved, then dropped
+                x = jnp.concatenate([x, jnp.repeat(x[-1:], extra, axis=0)])
+            return jax.device_put(x, self.sharding)
+
+        return tuple(jax.tree.map(put, t) for t in trees)
+
+    def unpad(self, tree):
+        if self.shards <= 1 or self.n % self.shards == 0:
+            return tree
+        return jax.tree.map(lambda x: x[: self.n] if eqx.is_array(x) else x, tree)
+
+
 def _hold_unidentifiable(jac, names_free, threshold):
     """Indices (into the free list) to hold, and the reports. `jac` is (device, residual, free)."""
     normal = np.mean(np.einsum("dri,drj->dij", jac, jac), axis=0)
@@ -379,7 +410,7 @@ def _to_model(model) -> Model:
 def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="levenberg-marquardt",
              starts: int = 1, start_spread: float = 0.05, seed: int = 0, rtol: float = 1e-8, atol: float = 1e-8,
              max_steps: int = 200, identifiability_threshold: float = 1.0, hold=(), tier=Steady(),
-             evaluate_only: bool = False, lot_solve: str = "loop") -> Fit:
+             evaluate_only: bool = False, lot_solve: str = "vmap", shard: bool | None = None) -> Fit:
     r"""Fit the free parameters of `model` to every sweep in `data`, per device (vmapped) or jointly.
 
     **Arguments:**
@@ -400,9 +431,12 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
       internal units: relative change for positive parameters, typical size for effects) are held.
     - `hold`: names held at their start values regardless.
     - `tier`: the settling tier for rate-table and static-VCF points (`Steady()`).
-    - `lot_solve`: `"loop"` (default): independent device fits one after another through one compiled
-      single-device solve; `"vmap"`: all devices in one vmapped solve (faster for large lots, but on the
-      CPU backend of jax 0.10 it sometimes wedged: every thread idle, the call never returning).
+    - `lot_solve`: `"vmap"` (default): all devices' independent fits in one vmapped, compiled solve;
+      `"loop"`: one device after another through one compiled single-device solve (less memory).
+    - `shard`: spread the device axis over every JAX device (`jax.sharding`, a 1-D mesh named `"lot"`; the
+      lot is padded to a multiple of the device count). `None` (default): when more than one JAX device
+      exists. Applies to the vmapped solve and the Jacobian passes; a joint (shared-parameter) fit is
+      sharded only when the lot divides evenly.
     - `evaluate_only`: do not solve; return the `Fit` at the start (residuals, Jacobian, covariance there),
       e.g. to test a candidate effect at zero against an already fitted model.
 
@@ -415,6 +449,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         raise TypeError(f"data must be a gyrojax.Table or FitData, got {type(data).__name__}.")
     if lot_solve not in ("loop", "vmap"):
         raise ValueError(f"lot_solve must be 'loop' or 'vmap', got {lot_solve!r}.")
+    if shard and lot_solve == "loop":
+        raise ValueError("shard=True needs lot_solve='vmap' (the loop solves one device at a time).")
     if not isinstance(starts, int) or starts < 1:
         raise ValueError(f"starts must be an integer >= 1, got {starts!r}.")
     n = len(data.devices)
@@ -465,7 +501,10 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     # One compiled evaluation, at the start and at the solution: the Jacobian over every per-device entry.
     problem_all = problem_for(list(range(n_dev)))
     t_sf = _sf_temperature(data)
-    at_start = _evaluate(problem_all, jnp.zeros((n, n_dev)), jnp.zeros(n_lot), t_sf)
+    shards = (len(jax.devices()) if shard is None or shard else 1) if lot_solve == "vmap" else 1
+    spread = _LotSpread(n, shards)
+    problem_all_s, zeros_s, t_sf_s = spread.pad(problem_all, jnp.zeros((n, n_dev)), t_sf)
+    at_start = spread.unpad(_evaluate(problem_all_s, zeros_s, jnp.zeros(n_lot), t_sf_s))
     # Identifiability at the start: hold what the data cannot see.
     candidates = [i for i, nm in enumerate(names_dev)
                   if not any(nm == h or nm.startswith(h + "[") or nm.startswith(h + ".") for h in hold)]
@@ -484,10 +523,13 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
             u0[:, free_index] = rng.normal(scale=start_spread, size=(n, len(free_index)))
         if n_lot:
             u0_lot = np.zeros(n_lot) if k == 0 else rng.normal(scale=start_spread, size=n_lot)
-            res = _solve_joint(problem, jnp.asarray(u0), jnp.asarray(u0_lot), solver_, max_steps)
+            joint = spread if n % shards == 0 else _LotSpread(n, 1)  # padding would add fake devices
+            res = joint.unpad(_solve_joint(*joint.pad(problem, jnp.asarray(u0)), jnp.asarray(u0_lot), solver_,
+                                           max_steps))
         else:
             solve = _solve_loop if lot_solve == "loop" else _solve_independent
-            v, code, steps, chi2 = solve(problem, jnp.asarray(u0), jnp.zeros(0), solver_, max_steps)
+            v, code, steps, chi2 = spread.unpad(solve(*spread.pad(problem, jnp.asarray(u0)), jnp.zeros(0), solver_,
+                                                      max_steps))
             res = (v, jnp.zeros(0), code, steps, chi2)
         res = tuple(np.asarray(x) for x in res)
         if best is None:
@@ -507,7 +549,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     u_free, u_lot, code, steps, _ = best
     u_full = np.zeros((n, n_dev))
     u_full[:, free_index] = u_free[:, free_index]
-    final = at_start if evaluate_only else _evaluate(problem_all, jnp.asarray(u_full), jnp.asarray(u_lot), t_sf)
+    final = at_start if evaluate_only else spread.unpad(
+        _evaluate(problem_all_s, spread.pad(jnp.asarray(u_full))[0], jnp.asarray(u_lot), t_sf_s))
     return _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full, np.asarray(u_lot), code,
                    steps, final, held_reports)
 

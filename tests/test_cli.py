@@ -5,7 +5,6 @@ import json
 import numpy as np
 import pytest
 
-from conftest import needs_solver
 
 import gyrojax as gj
 from gyrojax.cli import main
@@ -56,7 +55,6 @@ def test_user_errors_exit_2_without_traceback(tmp_path, monkeypatch, capsys, arg
     assert not (tmp_path / "x.csv").exists()
 
 
-@needs_solver
 def test_demo_writes_its_report(tmp_path):
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--no-full"]) == 0

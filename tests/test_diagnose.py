@@ -9,13 +9,11 @@ import json
 import numpy as np
 import pytest
 
-from conftest import needs_solver
 
 import gyrojax as gj
 from gyrojax._demo import DEMO_LOT
 from gyrojax._diagnose import diagnose, nonlinearity_residual_ppm
 
-pytestmark = needs_solver
 
 
 def _table(*effects):

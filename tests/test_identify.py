@@ -13,12 +13,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from conftest import needs_solver
 
 import gyrojax as gj
 from gyrojax._observe import rate_table_points
 
-pytestmark = needs_solver
 
 
 LOT = {"devices": 3, "runs": 2, "sweeps": ("rate_table", "vcf_static", "dac"), "seed": 11}
@@ -228,3 +226,38 @@ def test_cli_identify(csv_path, tmp_path, capsys):
     assert main(["identify", str(data), "--free", "k_vf,nope"]) == 2
     err = capsys.readouterr().err
     assert "missing.csv" in err and "unknown parameter 'nope'" in err and "Traceback" not in err
+
+
+_SHARDED = r"""
+import json, sys
+import jax
+import numpy as np
+import gyrojax as gj
+
+assert len(jax.devices()) == 8, jax.devices()
+fit = gj.identify("paper-qmg", gj.read_table(sys.argv[1]), lot_solve="vmap", shard=True)
+json.dump({"values": np.asarray(fit.values).tolist(), "stderr": np.asarray(fit.stderr).tolist(),
+           "chi2": np.asarray(fit.chi2).tolist(), "converged": np.asarray(fit.converged).tolist()},
+          open(sys.argv[2], "w"))
+"""
+
+
+def test_lot_sharded_over_eight_cpu_devices_gives_the_same_fit(fit, csv_path, tmp_path):
+    """The device axis over 8 forced CPU devices (3 devices padded to 8) against the one-device fit."""
+    import os
+    import subprocess
+    import sys
+
+    out = tmp_path / "sharded.json"
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=8", JAX_PLATFORMS="cpu")
+    proc = subprocess.run([sys.executable, "-c", _SHARDED, str(csv_path), str(out)], env=env,
+                          capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    got = json.loads(out.read_text())
+    assert all(got["converged"])
+    free = np.asarray(fit.free)
+    # the same optimum to a thousandth of a standard error (the solver's tolerance, not the noise)
+    diff = np.abs(np.asarray(got["values"]) - np.asarray(fit.values))[:, free]
+    assert np.all(diff < 1e-3 * np.asarray(fit.stderr)[:, free]), diff / np.asarray(fit.stderr)[:, free]
+    np.testing.assert_allclose(np.asarray(got["stderr"])[:, free], np.asarray(fit.stderr)[:, free], rtol=1e-4)
+    np.testing.assert_allclose(got["chi2"], np.asarray(fit.chi2), rtol=1e-6)
