@@ -111,6 +111,10 @@ class Diagnosis:
         lines.append(f"final: chi2_red {self.final.chi2_red_total:.3f}, selected: {', '.join(self.selected) or 'none'}")
         return "\n".join(lines)
 
+    def write_report(self, out_dir) -> dict:
+        """The report folder (Markdown, JSON, PNG plots) of `write_report`; returns the JSON."""
+        return write_report(self, out_dir)
+
     def to_json(self) -> dict:
         """The JSON of DESIGN.md §7."""
         return {

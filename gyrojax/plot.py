@@ -1,9 +1,5 @@
 """Plots a reader of a fit or a diagnosis wants (matplotlib; every function takes an optional `ax`)."""
 
-import matplotlib
-
-matplotlib.use("Agg", force=False)
-
 import matplotlib.pyplot as plt
 import numpy as np
 
