@@ -227,8 +227,12 @@ def _residuals_jvp(primals, tangents):
     # start values) are not parameters and are ignored.
     problem, u_free, u_lot = primals
     _, t_free, t_lot = tangents
-    r = problem._evaluate(u_free, u_lot)[0]
-    j_free, j_lot = jax.jacfwd(lambda a, b: problem._evaluate(a, b)[0], argnums=(0, 1))(u_free, u_lot)
+
+    def value_twice(a, b):  # the value as aux: jacfwd evaluates it once, with the Jacobian
+        r = problem._evaluate(a, b)[0]
+        return r, r
+
+    (j_free, j_lot), r = jax.jacfwd(value_twice, argnums=(0, 1), has_aux=True)(u_free, u_lot)
     return r, j_free @ t_free + j_lot @ t_lot
 
 
@@ -260,10 +264,9 @@ def _evaluate(problem_all, u_full, u_lot, t_sf):
                 return rate_table_points(gyro, rate[None], temp[None], problem.tier).rate[0]
 
             sf = jax.jvp(rate_out, (jnp.zeros(()),), (jnp.ones(()),))[1]
-            return r, sf
+            return (r, sf), (r, sf)  # the values as aux: jacfwd evaluates them once, with the Jacobian
 
-        (r, sf) = outputs(u, u_lot)
-        (j, j_lot), (g, g_lot) = jax.jacfwd(outputs, argnums=(0, 1))(u, u_lot)
+        ((j, j_lot), (g, g_lot)), (r, sf) = jax.jacfwd(outputs, argnums=(0, 1), has_aux=True)(u, u_lot)
         gyro = apply_u(problem.model, problem.entries, problem.start, u, u_lot).gyroscope()
         preds, biases, failed = {}, {}, jnp.zeros((), dtype=int)
         for sweep in problem.data.sweeps:
@@ -277,27 +280,22 @@ def _evaluate(problem_all, u_full, u_lot, t_sf):
     return eqx.filter_vmap(one)(problem_all, u_full, t_sf)
 
 
-@eqx.filter_jit
-def _solve_independent(problem_batch, u0, u_lot, solver, max_steps):
-    def one(problem, y0):
-        def fn(y, _):
-            return problem.residuals(y, u_lot)[0]
-
-        sol = optx.least_squares(fn, solver, y0, max_steps=max_steps, throw=False)
-        r = problem.residuals(sol.value, u_lot)[0]
-        return sol.value, sol.result._value, sol.stats["num_steps"], jnp.sum(r**2)
-
-    return eqx.filter_vmap(one)(problem_batch, u0)
-
-
-@eqx.filter_jit
-def _solve_one(problem, y0, u_lot, solver, max_steps):
+def _solve_device(problem, y0, u_lot, solver, max_steps):
+    """One device's fit: (solution, result code, steps, chi2)."""
     def fn(y, _):
         return problem.residuals(y, u_lot)[0]
 
     sol = optx.least_squares(fn, solver, y0, max_steps=max_steps, throw=False)
     r = problem.residuals(sol.value, u_lot)[0]
     return sol.value, sol.result._value, sol.stats["num_steps"], jnp.sum(r**2)
+
+
+@eqx.filter_jit
+def _solve_independent(problem_batch, u0, u_lot, solver, max_steps):
+    return eqx.filter_vmap(lambda p, y0: _solve_device(p, y0, u_lot, solver, max_steps))(problem_batch, u0)
+
+
+_solve_one = eqx.filter_jit(_solve_device)
 
 
 def _solve_loop(problem_batch, u0, u_lot, solver, max_steps):
