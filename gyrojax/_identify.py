@@ -510,6 +510,10 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
                                               [names_dev[i] for i in candidates], identifiability_threshold)
     free_index = [candidates[k] for k in keep]
     problem = problem_for(free_index)
+    # A joint fit sums over devices: it is sharded only when the lot divides evenly (padding would add fake
+    # devices to the sum).
+    solve_spread = spread if not n_lot or n % shards == 0 else _LotSpread(n, 1)
+    (problem_s,) = solve_spread.pad(problem)
     solver_ = _solver(solver, rtol, atol)
     rng = np.random.default_rng(seed)
     best = None
@@ -519,15 +523,13 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         u0 = np.zeros((n, n_dev))
         if k > 0:
             u0[:, free_index] = rng.normal(scale=start_spread, size=(n, len(free_index)))
+        (u0_s,) = solve_spread.pad(jnp.asarray(u0))
         if n_lot:
             u0_lot = np.zeros(n_lot) if k == 0 else rng.normal(scale=start_spread, size=n_lot)
-            joint = spread if n % shards == 0 else _LotSpread(n, 1)  # padding would add fake devices
-            res = joint.unpad(_solve_joint(*joint.pad(problem, jnp.asarray(u0)), jnp.asarray(u0_lot), solver_,
-                                           max_steps))
+            res = solve_spread.unpad(_solve_joint(problem_s, u0_s, jnp.asarray(u0_lot), solver_, max_steps))
         else:
             solve = _solve_loop if lot_solve == "loop" else _solve_independent
-            v, code, steps, chi2 = spread.unpad(solve(*spread.pad(problem, jnp.asarray(u0)), jnp.zeros(0), solver_,
-                                                      max_steps))
+            v, code, steps, chi2 = solve_spread.unpad(solve(problem_s, u0_s, jnp.zeros(0), solver_, max_steps))
             res = (v, jnp.zeros(0), code, steps, chi2)
         res = tuple(np.asarray(x) for x in res)
         if best is None:
