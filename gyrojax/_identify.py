@@ -22,6 +22,7 @@ from ._dataset import Table
 from ._fitdata import FitData, fit_data
 from ._gyroscope import Gyroscope
 from ._linsolve import PivotedLU
+from ._lm import LevenbergMarquardt
 from ._observe import rate_table_points
 from ._parameters import (
     DEFAULT_FREE,
@@ -51,7 +52,7 @@ def _solver(solver, rtol, atol):
     # Normal equations through an XLA-only LU, not lineax's LAPACK QR: see gyrojax/_linsolve.py.
     linear_solver = lx.Normal(PivotedLU(zero_pivot_gives_zero=True))
     if solver == "levenberg-marquardt":
-        return optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=linear_solver)
+        return LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=linear_solver)
     if solver == "gauss-newton":
         return optx.GaussNewton(rtol=rtol, atol=atol, linear_solver=linear_solver)
     if solver == "bfgs":

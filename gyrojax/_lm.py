@@ -1,0 +1,69 @@
+"""Levenberg-Marquardt whose trust region knows the round-off of the loss.
+
+optimistix's `ClassicalTrustRegion` accepts a step only if the loss fell by at least 1 % of the predicted
+fall. At the minimum the predicted fall is ~1e-20 while the computed loss moves by its round-off (the
+residuals come out of steady-state root finds, ~1e-10), so about every other step is rejected; each
+rejection quarters the step, until the step underflows to exactly zero and the test `0 <= 0.01 * 0` passes.
+A lot of 16 devices measured 5 steps for most devices and up to 34 for some, and a vmapped lot runs until
+its slowest device has finished. Here a step whose loss change is within `roundoff * (1 + loss)` of the
+required fall is accepted; Cauchy termination (optimistix's, unchanged) then ends the solve.
+"""
+
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import optimistix as optx
+
+
+class _RadiusState(eqx.Module):
+    step_size: jnp.ndarray
+
+
+class RoundoffTrustRegion(optx.AbstractSearch):
+    """`optimistix.ClassicalTrustRegion` (same cutoffs and constants, same predicted reduction) with the
+    acceptance test widened by the loss's round-off."""
+
+    roundoff: float = 1e-10
+    classical: optx.ClassicalTrustRegion = optx.ClassicalTrustRegion()
+
+    def init(self, y, f_info_struct):
+        return _RadiusState(step_size=jnp.array(1.0))
+
+    def step(self, first_step, y, y_eval, f_info, f_eval_info, state):
+        tr = self.classical
+        y_diff = jax.tree.map(lambda a, b: a - b, y_eval, y)
+        predicted = tr.predict_reduction(y_diff, f_info)
+        f_min = f_info.as_min()
+        change = f_eval_info.as_min() - f_min  # negative when the loss fell
+        slack = self.roundoff * (1.0 + jnp.abs(f_min))
+        accept = (change <= tr.low_cutoff * predicted + slack) | first_step
+        good = (change < tr.high_cutoff * predicted) & (predicted < 0) & ~first_step
+        mul = jnp.where(accept, jnp.where(good, tr.high_constant, 1.0), tr.low_constant)
+        step_size = mul * state.step_size
+        return step_size, accept, optx.RESULTS.successful, _RadiusState(step_size)
+
+
+def _quiet(**kwargs):
+    return None
+
+
+class LevenbergMarquardt(optx.AbstractGaussNewton):
+    """optimistix's Levenberg-Marquardt (damped Newton descent, classical trust-region update) with the
+    round-off-aware acceptance of `RoundoffTrustRegion`."""
+
+    rtol: float
+    atol: float
+    norm: Callable = optx.max_norm
+    descent: optx.DampedNewtonDescent = optx.DampedNewtonDescent()
+    search: RoundoffTrustRegion = RoundoffTrustRegion()
+    verbose: Callable = _quiet
+
+    def __init__(self, rtol: float, atol: float, linear_solver: lx.AbstractLinearSolver, roundoff: float = 1e-10):
+        self.rtol, self.atol = rtol, atol
+        self.norm = optx.max_norm
+        self.descent = optx.DampedNewtonDescent(linear_solver=linear_solver)
+        self.search = RoundoffTrustRegion(roundoff=roundoff)
+        self.verbose = _quiet
