@@ -108,7 +108,7 @@ def run(sizes, scipy_devices, seed=0, preset="paper-qmg"):
                "free_parameters": len(free), "simulate_s": t_sim, "gyrojax_first_call_s": t_first,
                "gyrojax_compile_s": t_first - t_gj, "gyrojax_s": t_gj, "gyrojax_per_device_ms": 1e3 * t_gj / n,
                "gyrojax_converged": int(np.sum(np.asarray(fit.converged))), "gyrojax_steps_max":
-               int(np.max(np.asarray(fit.num_steps))), "scipy_devices_timed": m, "scipy_s": t_sp_n,
+               int(np.max(np.asarray(fit.num_steps))), "gyrojax_steps_mean": float(np.mean(np.asarray(fit.num_steps))), "scipy_devices_timed": m, "scipy_s": t_sp_n,
                "scipy_scaled": m < n, "scipy_per_device_ms": 1e3 * t_sp / m, "scipy_nfev_per_device": nfev / m,
                "speedup": t_sp_n / t_gj, "worst_deviation_in_stderr": worst, "peak_rss_gb": rss_gb}
         rows.append(row)

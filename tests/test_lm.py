@@ -1,0 +1,57 @@
+"""The round-off-aware Levenberg-Marquardt of gyrojax/_lm.py."""
+
+import jax.numpy as jnp
+import lineax as lx
+import numpy as np
+import optimistix as optx
+
+from gyrojax._linsolve import PivotedLU
+from gyrojax._lm import LevenbergMarquardt
+
+
+RNG = np.random.default_rng(0)
+# Columns scaled like identify's (a k_vf, a K_svf and a DAC gain error: curvatures 1e4 apart).
+A = RNG.normal(size=(60, 3)) * np.array([1e5, 1e6, 1e2])
+B = RNG.normal(size=60)
+STARTS = RNG.normal(size=(10, 3)) * np.array([1e-5, 1e-6, 1e-2])
+NORMAL = lx.Normal(PivotedLU(zero_pivot_gives_zero=True))
+
+
+def _noisy_linear(y, _):
+    # Residuals as a root find delivers them: exact up to deterministic round-off of 1e-11 relative.
+    r = jnp.asarray(A) @ y - jnp.asarray(B)
+    return r + 1e-11 * jnp.sin(1e9 * y[0] + 3e8 * y[1] + 1e6 * y[2]) * jnp.abs(r)
+
+
+def _steps(solver):
+    out = []
+    for y0 in STARTS:
+        sol = optx.least_squares(_noisy_linear, solver, jnp.asarray(y0), max_steps=200, throw=False)
+        assert sol.result == optx.RESULTS.successful
+        out.append((int(sol.stats["num_steps"]), np.asarray(sol.value)))
+    return out
+
+
+def test_round_off_does_not_stall_the_trust_region():
+    exact = np.linalg.lstsq(A, B, rcond=None)[0]
+    stderr = np.sqrt(np.diag(np.linalg.inv(A.T @ A)))
+    ours = _steps(LevenbergMarquardt(1e-8, 1e-8, NORMAL))
+    classical = _steps(optx.LevenbergMarquardt(1e-8, 1e-8, linear_solver=NORMAL))
+    for steps, value in ours:
+        assert steps <= 5
+        assert np.max(np.abs(value - exact) / stderr) < 1e-5  # the least-squares solution, in sigma
+    # optimistix's own test rejects steps whose loss change is round-off until the step underflows.
+    assert max(s for s, _ in classical) > max(s for s, _ in ours)
+
+
+def test_same_path_as_optimistix_away_from_round_off():
+    # Rosenbrock: every step's loss change is far above round-off, so both accept and reject alike.
+    def rosenbrock(y, _):
+        return jnp.stack([10 * (y[1] - y[0] ** 2), 1 - y[0]])
+
+    y0 = jnp.asarray([-1.2, 1.0])
+    a = optx.least_squares(rosenbrock, LevenbergMarquardt(1e-10, 1e-10, NORMAL), y0, max_steps=200)
+    b = optx.least_squares(rosenbrock, optx.LevenbergMarquardt(1e-10, 1e-10, linear_solver=NORMAL), y0,
+                           max_steps=200)
+    assert int(a.stats["num_steps"]) == int(b.stats["num_steps"])
+    np.testing.assert_allclose(np.asarray(a.value), [1.0, 1.0], rtol=1e-9)
