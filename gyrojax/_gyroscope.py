@@ -19,8 +19,11 @@ class Gyroscope(eqx.Module):
 
     Every array field is a differentiable parameter; change one with `eqx.tree_at`, never in place.
     `phase_points` is how many carrier phases the averaged and steady tiers use to take the fundamental
-    (the describing function) of the nonlinear forces; 64 is exact for polynomial nonlinearities up to
-    degree 62.
+    (the describing function) of the nonlinear forces. N phases give the fundamental of a force polynomial
+    in the carrier phase exactly up to degree N - 2; the default 16 covers a DAC INL up to u^7 squared by
+    the push-pull combs (degree 14). Measured: 16 and 64 agree within 7e-10 ppm of full scale on the rate
+    sweep of both presets, with every effect at 1x and 4x its typical size, and the steady tier runs ~4x
+    faster. A DAC with DNL (a sawtooth in the code, not band-limited) needs many more (256+).
     """
 
     resonator: Resonator
@@ -34,7 +37,7 @@ class Gyroscope(eqx.Module):
     readout: OpenLoopReadout | None = None
     vcf_electrode: VirtualCoriolisElectrode = VirtualCoriolisElectrode(0.0)
     temperature: AbstractTemperature = ConstantTemperature()
-    phase_points: int = eqx.field(static=True, default=64)
+    phase_points: int = eqx.field(static=True, default=16)
     name: str = eqx.field(static=True, default="custom")
 
     def __check_init__(self):
