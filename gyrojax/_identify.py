@@ -251,8 +251,22 @@ class _Evaluation(eqx.Module):
     failed: jax.Array  # (device,)
 
 
+def _map_devices(f, chunk, *trees):
+    """`f` vmapped over the leading (device) axis of the array leaves of `trees`; with `chunk`, `chunk`
+    devices at a time (`jax.lax.map`), which bounds memory, and each chunk's solve stops at its own slowest
+    device. The axis must be a multiple of `chunk` (see `_LotSpread`)."""
+    dynamic, static = eqx.partition(trees, eqx.is_array)
+
+    def g(d):
+        return f(*eqx.combine(d, static))
+
+    if chunk is None:
+        return jax.vmap(g)(dynamic)
+    return jax.lax.map(g, dynamic, batch_size=chunk)
+
+
 @eqx.filter_jit
-def _evaluate(problem_all, u_full, u_lot, t_sf):
+def _evaluate(problem_all, u_full, u_lot, t_sf, chunk):
     """One compiled pass (used at the start and at the solution): residuals, the Jacobian with respect to
     every per-device and lot entry, the zero-rate scale factor and its gradient, predictions and biases."""
     def one(problem, u, temp):
@@ -278,7 +292,7 @@ def _evaluate(problem_all, u_full, u_lot, t_sf):
             failed = failed + jnp.sum(bad)
         return _Evaluation(r, j, j_lot, sf, g, g_lot, preds, biases, failed)
 
-    return eqx.filter_vmap(one)(problem_all, u_full, t_sf)
+    return _map_devices(one, chunk, problem_all, u_full, t_sf)
 
 
 def _solve_device(problem, y0, u_lot, solver, max_steps):
@@ -292,14 +306,14 @@ def _solve_device(problem, y0, u_lot, solver, max_steps):
 
 
 @eqx.filter_jit
-def _solve_independent(problem_batch, u0, u_lot, solver, max_steps):
-    return eqx.filter_vmap(lambda p, y0: _solve_device(p, y0, u_lot, solver, max_steps))(problem_batch, u0)
+def _solve_independent(problem_batch, u0, u_lot, solver, max_steps, chunk):
+    return _map_devices(lambda p, y0: _solve_device(p, y0, u_lot, solver, max_steps), chunk, problem_batch, u0)
 
 
 _solve_one = eqx.filter_jit(_solve_device)
 
 
-def _solve_loop(problem_batch, u0, u_lot, solver, max_steps):
+def _solve_loop(problem_batch, u0, u_lot, solver, max_steps, chunk=None):
     """Device by device (one compiled single-device solve): see `identify(lot_solve=...)`."""
     outs = []
     for d in range(u0.shape[0]):
@@ -322,19 +336,21 @@ def _solve_joint(problem_batch, u0, u_lot0, solver, max_steps):
 
 
 class _LotSpread:
-    """Pads the device axis to a multiple of `shards` and places it across a 1-D mesh of JAX devices; unpads
-    results. With one shard it does nothing."""
+    """Pads the device axis to a multiple of `shards` (placing it across a 1-D mesh of JAX devices) or of
+    `chunk` (for `_map_devices`); unpads results. With one shard and no chunk it does nothing."""
 
-    def __init__(self, n: int, shards: int):
+    def __init__(self, n: int, shards: int, chunk: int | None = None):
         self.n, self.shards = n, shards
+        self.chunk = chunk if chunk is not None and chunk < n else None
+        self.multiple = shards * (self.chunk or 1)
         if shards > 1:
             mesh = jax.sharding.Mesh(np.asarray(jax.devices()[:shards]), ("lot",))
             self.sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("lot"))
 
     def pad(self, *trees):
-        if self.shards <= 1:
+        if self.multiple <= 1:
             return trees
-        extra = -self.n % self.shards
+        extra = -self.n % self.multiple
 
         def put(x):
             if not eqx.is_array(x):
@@ -342,12 +358,12 @@ class _LotSpread:
             x = jnp.asarray(x)
             if extra:  # copies of the last device: solved, then dropped
                 x = jnp.concatenate([x, jnp.repeat(x[-1:], extra, axis=0)])
-            return jax.device_put(x, self.sharding)
+            return jax.device_put(x, self.sharding) if self.shards > 1 else x
 
         return tuple(jax.tree.map(put, t) for t in trees)
 
     def unpad(self, tree):
-        if self.shards <= 1 or self.n % self.shards == 0:
+        if self.n % self.multiple == 0:
             return tree
         return jax.tree.map(lambda x: x[: self.n] if eqx.is_array(x) else x, tree)
 
@@ -409,7 +425,8 @@ def _to_model(model) -> Model:
 def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="levenberg-marquardt",
              starts: int = 1, start_spread: float = 0.05, seed: int = 0, rtol: float = 1e-8, atol: float = 1e-8,
              max_steps: int = 200, identifiability_threshold: float = 1.0, hold=(), tier=Steady(),
-             evaluate_only: bool = False, lot_solve: str = "vmap", shard: bool | None = None) -> Fit:
+             evaluate_only: bool = False, lot_solve: str = "vmap", shard: bool | None = None,
+             lot_chunk: int | None = None) -> Fit:
     r"""Fit the free parameters of `model` to every sweep in `data`, per device (vmapped) or jointly.
 
     **Arguments:**
@@ -436,6 +453,10 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
       lot is padded to a multiple of the device count). `None` (default): when more than one JAX device
       exists. Applies to the vmapped solve and the Jacobian passes; a joint (shared-parameter) fit is
       sharded only when the lot divides evenly.
+    - `lot_chunk`: with `lot_solve="vmap"`, solve and differentiate at most this many devices at a time
+      (`jax.lax.map` over chunks of the vmapped solve; the lot is padded to a multiple of it). It bounds
+      memory on large lots and lets each chunk stop at its own slowest device. `None` (default): the whole
+      lot at once. Not with `shard` over several JAX devices, nor for a joint (shared-parameter) fit.
     - `evaluate_only`: do not solve; return the `Fit` at the start (residuals, Jacobian, covariance there),
       e.g. to test a candidate effect at zero against an already fitted model.
 
@@ -450,6 +471,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         raise ValueError(f"lot_solve must be 'loop' or 'vmap', got {lot_solve!r}.")
     if shard and lot_solve == "loop":
         raise ValueError("shard=True needs lot_solve='vmap' (the loop solves one device at a time).")
+    if lot_chunk is not None and (not isinstance(lot_chunk, int) or lot_chunk < 1):
+        raise ValueError(f"lot_chunk must be None or an integer >= 1, got {lot_chunk!r}.")
     if not isinstance(starts, int) or starts < 1:
         raise ValueError(f"starts must be an integer >= 1, got {starts!r}.")
     n = len(data.devices)
@@ -501,9 +524,12 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     problem_all = problem_for(list(range(n_dev)))
     t_sf = _sf_temperature(data)
     shards = (len(jax.devices()) if shard is None or shard else 1) if lot_solve == "vmap" else 1
-    spread = _LotSpread(n, shards)
+    if lot_chunk is not None and (shards > 1 or shared or lot_solve == "loop"):
+        raise ValueError("lot_chunk applies to the vmapped solve of independent devices on one JAX device; "
+                         "drop it, or drop shard / shared / lot_solve='loop'.")
+    spread = _LotSpread(n, shards, lot_chunk)
     problem_all_s, zeros_s, t_sf_s = spread.pad(problem_all, jnp.zeros((n, n_dev)), t_sf)
-    at_start = spread.unpad(_evaluate(problem_all_s, zeros_s, jnp.zeros(n_lot), t_sf_s))
+    at_start = spread.unpad(_evaluate(problem_all_s, zeros_s, jnp.zeros(n_lot), t_sf_s, spread.chunk))
     # Identifiability at the start: hold what the data cannot see.
     candidates = [i for i, nm in enumerate(names_dev)
                   if not any(nm == h or nm.startswith(h + "[") or nm.startswith(h + ".") for h in hold)]
@@ -530,7 +556,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
             res = solve_spread.unpad(_solve_joint(problem_s, u0_s, jnp.asarray(u0_lot), solver_, max_steps))
         else:
             solve = _solve_loop if lot_solve == "loop" else _solve_independent
-            v, code, steps, chi2 = solve_spread.unpad(solve(problem_s, u0_s, jnp.zeros(0), solver_, max_steps))
+            v, code, steps, chi2 = solve_spread.unpad(solve(problem_s, u0_s, jnp.zeros(0), solver_, max_steps,
+                                                            solve_spread.chunk))
             res = (v, jnp.zeros(0), code, steps, chi2)
         res = tuple(np.asarray(x) for x in res)
         if best is None:
@@ -551,7 +578,7 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     u_full = np.zeros((n, n_dev))
     u_full[:, free_index] = u_free[:, free_index]
     final = at_start if evaluate_only else spread.unpad(
-        _evaluate(problem_all_s, spread.pad(jnp.asarray(u_full))[0], jnp.asarray(u_lot), t_sf_s))
+        _evaluate(problem_all_s, spread.pad(jnp.asarray(u_full))[0], jnp.asarray(u_lot), t_sf_s, spread.chunk))
     return _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full, np.asarray(u_lot), code,
                    steps, final, held_reports)
 
