@@ -59,7 +59,7 @@ def _problems(fit, preset):
                     jnp.ones((n, 0)))
 
 
-def run(sizes, scipy_devices, seed=0, preset="paper-qmg"):
+def run(sizes, scipy_devices, seed=0, preset="paper-qmg", chunk=None):
     import equinox as eqx
     import jax
     import jax.numpy as jnp
@@ -75,10 +75,11 @@ def run(sizes, scipy_devices, seed=0, preset="paper-qmg"):
                                   sweeps=("rate_table", "vcf_static", "dac"))
         t_sim = time.perf_counter() - t0
         t0 = time.perf_counter()
-        fit = gj.identify(preset, table)
+        lot_chunk = chunk if chunk is not None and n > chunk else None
+        fit = gj.identify(preset, table, lot_chunk=lot_chunk)
         t_first = time.perf_counter() - t0
         t0 = time.perf_counter()
-        fit = gj.identify(preset, table)
+        fit = gj.identify(preset, table, lot_chunk=lot_chunk)
         t_gj = time.perf_counter() - t0
         rss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
         free = np.flatnonzero(np.asarray(fit.free))
@@ -104,7 +105,7 @@ def run(sizes, scipy_devices, seed=0, preset="paper-qmg"):
             nfev += sol.nfev
             worst = max(worst, float(np.max(np.abs(sol.x - u_gj[d]) / se[d])))
         t_sp_n = t_sp * n / m
-        row = {"devices": n, "points_per_device": int(np.asarray(fit.residual_vector).shape[1]),
+        row = {"devices": n, "lot_chunk": lot_chunk, "points_per_device": int(np.asarray(fit.residual_vector).shape[1]),
                "free_parameters": len(free), "simulate_s": t_sim, "gyrojax_first_call_s": t_first,
                "gyrojax_compile_s": t_first - t_gj, "gyrojax_s": t_gj, "gyrojax_per_device_ms": 1e3 * t_gj / n,
                "gyrojax_converged": int(np.sum(np.asarray(fit.converged))), "gyrojax_steps_max":
@@ -113,7 +114,7 @@ def run(sizes, scipy_devices, seed=0, preset="paper-qmg"):
                "speedup": t_sp_n / t_gj, "worst_deviation_in_stderr": worst, "peak_rss_gb": rss_gb}
         rows.append(row)
         print(f"N={n:5d}  gyrojax {t_gj:8.2f} s ({1e3 * t_gj / n:7.1f} ms/device, compile {t_first - t_gj:6.1f} s, "
-              f"converged {row['gyrojax_converged']}/{n})  scipy {t_sp_n:9.2f} s{' (scaled)' if m < n else ''} "
+              f"converged {row['gyrojax_converged']}/{n}, LM steps max {row['gyrojax_steps_max']})  scipy {t_sp_n:9.2f} s{' (scaled)' if m < n else ''} "
               f"({1e3 * t_sp / m:7.1f} ms/device, {nfev / m:.0f} evaluations)  speed-up {t_sp_n / t_gj:6.1f}x  "
               f"worst |du| {worst:.3f} sigma  peak RSS {rss_gb:.2f} GB", flush=True)
         if worst > 0.05:
@@ -127,10 +128,11 @@ def main(argv=None):
     ap.add_argument("--sizes", default="1,16,256,1024")
     ap.add_argument("--scipy-devices", type=int, default=16)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--chunk", type=int, help="identify(lot_chunk=...) for lots larger than this")
     ap.add_argument("--json")
     args = ap.parse_args(argv)
     print(f"versions {_versions()}; {platform.machine()} {os.cpu_count()} CPUs; load {os.getloadavg()}", flush=True)
-    rows = run([int(s) for s in args.sizes.split(",")], args.scipy_devices, args.seed)
+    rows = run([int(s) for s in args.sizes.split(",")], args.scipy_devices, args.seed, chunk=args.chunk)
     print(f"load at end {os.getloadavg()}")
     if len(rows) > 1:
         per = [r["gyrojax_per_device_ms"] for r in rows if r["devices"] >= 16]

@@ -262,7 +262,11 @@ def _map_devices(f, chunk, *trees):
 
     if chunk is None:
         return jax.vmap(g)(dynamic)
-    return jax.lax.map(g, dynamic, batch_size=chunk)
+    # By hand rather than lax.map(batch_size=...), whose reshape fails on empty leaves (no priors: (n, 0)).
+    n = jax.tree.leaves(dynamic)[0].shape[0]
+    split = jax.tree.map(lambda x: x.reshape((n // chunk, chunk) + x.shape[1:]), dynamic)
+    out = jax.lax.map(jax.vmap(g), split)
+    return jax.tree.map(lambda x: x.reshape((n,) + x.shape[2:]), out)
 
 
 @eqx.filter_jit
