@@ -93,6 +93,7 @@ from ._metrics import (  # noqa: E402
     repeatability as repeatability,
 )
 from ._noise import RateNoise as RateNoise  # noqa: E402
+from ._process import WaferProcess as WaferProcess  # noqa: E402
 from ._parameters import PARAMETERS as PARAMETERS, Model as Model, Parameter as Parameter  # noqa: E402
 from ._physics.electrodes import (  # noqa: E402
     DriveElectrode as DriveElectrode,

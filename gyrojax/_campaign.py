@@ -19,6 +19,7 @@ from ._gyroscope import Gyroscope
 from ._lot import ProcessSpread, as_arrays, make_lot
 from ._noise import DAC_VOLTMETER_SIGMA_V, RateNoise
 from ._observe import dac_points, rate_table_points, vcf_dynamic_points, vcf_static_points
+from ._process import WaferProcess
 from ._simulate.tiers import AbstractTier, Steady
 from ._solution import RESULTS
 from ._sweeps import Protocol
@@ -101,21 +102,28 @@ def _rng(seed, sweep):
 
 
 def campaign_lot(gyro: Gyroscope, *, devices: int = 1, seed: int = 0,
-                 spread: ProcessSpread = ProcessSpread()) -> Gyroscope:
+                 spread: ProcessSpread | WaferProcess = ProcessSpread()) -> Gyroscope:
     """The devices that `simulate_table` simulates for these arguments: one Gyroscope whose array leaves
     have a leading device axis (device i is the table's `{prefix}-{i:03d}`). With `devices=1` it is `gyro`
-    itself; otherwise `make_lot(gyro, devices, key, spread)` with the key derived from `seed`."""
+    itself; otherwise `make_lot(gyro, devices, key, spread)` (a `ProcessSpread`: independent leaves) or
+    `spread.draw(gyro, devices, key)` (a `WaferProcess`: leaves generated together by the process), with the
+    key derived from `seed`."""
     if not isinstance(devices, int) or isinstance(devices, bool) or devices < 1:
         raise ValueError(f"devices must be an integer >= 1, got {devices!r}.")
     if devices == 1:
         return jax.tree.map(lambda x: x[None], as_arrays(gyro))
     key_lot, _ = jax.random.split(jax.random.PRNGKey(seed))
+    if isinstance(spread, WaferProcess):
+        return spread.draw(gyro, devices, key_lot)
+    if not isinstance(spread, ProcessSpread):
+        raise ValueError(f"spread must be a gyrojax.ProcessSpread or gyrojax.WaferProcess, got {spread!r}.")
     return make_lot(gyro, devices, key_lot, spread)
 
 
 def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=("rate_table",),
                    tier: AbstractTier = CAMPAIGN_TIER, rates_dps=None, noise: RateNoise = RateNoise(),
-                   noise_free: bool = False, seed: int = 0, spread: ProcessSpread = ProcessSpread(),
+                   noise_free: bool = False, seed: int = 0,
+                   spread: ProcessSpread | WaferProcess = ProcessSpread(),
                    device_prefix: str | None = None, protocol: Protocol = Protocol(),
                    voltmeter_sigma_v: float = DAC_VOLTMETER_SIGMA_V) -> Table:
     """Simulate a measurement campaign and return it in the tidy format of DESIGN.md §6.
@@ -137,7 +145,8 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     - `noise_free`: no noise, no turn-on bias (then `output_sigma` is 0).
     - `seed`: the PRNG seed (the lot and the noise both derive from it; each sweep kind draws its own
       stream).
-    - `spread`: process spread of the lot.
+    - `spread`: process spread of the lot: a `ProcessSpread` (independent leaves) or a `WaferProcess`
+      (thickness, etch and mismatch generate the leaves together).
     - `device_prefix`: device ids are `{prefix}-{i:03d}` (default the device's name).
     - `protocol`: inputs, timing and warm-up of each sweep kind (`gyrojax.Protocol`).
     - `voltmeter_sigma_v`: reading noise of the DAC sweep's AC voltmeter, V.
