@@ -9,9 +9,13 @@ model for the whole loop). At a fitted model, a candidate with parameters psi is
 
 where r are the standardised residuals, J_b the Jacobian of the free baseline parameters (P_b its
 projector: what the baseline could already absorb is removed) and J_e that of the candidate. The predicted
-residual change J_e' (J_e'^T J_e')^+ s is the candidate's fingerprint on this data. A candidate whose
-projected Jacobian is empty is reported as not testable (the baseline absorbs it, or this data cannot see
-it). The best candidate with p below alpha / (number of candidates) is refitted; the likelihood-ratio test
+residual change J_e' (J_e'^T J_e')^+ s is the candidate's fingerprint on this data. Effect parameters are
+in units of their typical size, so the largest eigenvalue of J_e'^T J_e', summed over devices, is the chi2
+that the most visible typical-size combination of the candidate would leave after the baseline took up what
+it could (`typical_chi2`). A candidate whose projected Jacobian is empty, or whose `typical_chi2` is below
+`min_typical_chi2` (a typical-size effect changes the lot's chi2 by less than the noise does) while its
+score is not significant, is reported as not testable (the baseline absorbs it, or this data cannot see
+it at a plausible size); it stays in the ranking and is still selected if significant. The best candidate with p below alpha / (number of candidates) is refitted; the likelihood-ratio test
 (chi2 drop ~ chi2(df)) and BIC confirm it, and the loop repeats until no candidate is significant.
 Significant candidates whose fingerprints are nearly collinear (|cos| > `ambiguity`) are reported together,
 with the sweep of the data on which their fingerprints differ most, if any.
@@ -50,6 +54,7 @@ class CandidateScore:
     testable: bool
     fingerprint: np.ndarray  # (device, residual): predicted residual change
     description: str
+    typical_chi2: float = 0.0  # chi2 left by the most visible typical-size combination, summed over devices
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,6 +90,7 @@ class Diagnosis:
     rejected: tuple  # (name, reason) candidates that scored but did not survive the refit
     alpha: float
     baseline_nonlinearity_ppm: float
+    min_typical_chi2: float = 1.0
 
     @property
     def selected(self) -> tuple[str, ...]:
@@ -95,8 +101,12 @@ class Diagnosis:
                  f"{self.baseline_nonlinearity_ppm:.2f} ppm"]
         lines.append("candidates at the first step (score test, no refit):")
         for c in self.ranking:
-            what = f"S = {c.statistic:10.2f}  df {c.df:3d}  p = {c.p_value:.3g}" if c.testable else "not testable on this data"
+            what = (f"S = {c.statistic:10.2f}  df {c.df:3d}  p = {c.p_value:.3g}  typical-size chi2 "
+                    f"{c.typical_chi2:.3g}" if c.testable else "not testable on this data")
             lines.append(f"  {c.effect:<18} {what}")
+        if self.untestable:
+            lines.append(f"not testable on this data (absorbed by the baseline, or a typical-size effect leaves a "
+                         f"chi2 below {self.min_typical_chi2:g}): {', '.join(self.untestable)}")
         for s in self.steps:
             amb = f" (ambiguous with {', '.join(s.ambiguous_with)}" + (
                 f"; {s.separated_by} separates them)" if s.separated_by else "; no sweep here separates them)") \
@@ -121,7 +131,7 @@ class Diagnosis:
             "baseline": {"chi2_red": self.baseline.chi2_red_total,
                          "nonlinearity_ppm": self.baseline_nonlinearity_ppm},
             "ranking": [{"effect": c.effect, "statistic": c.statistic, "df": c.df, "p_value": c.p_value,
-                         "testable": c.testable} for c in self.ranking],
+                         "testable": c.testable, "typical_chi2": c.typical_chi2} for c in self.ranking],
             "steps": [{"effect": s.effect, "statistic": s.statistic, "p_value": s.p_value,
                        "chi2_red_after": s.chi2_red_after, "lr_statistic": s.lr_statistic, "lr_df": s.lr_df,
                        "lr_p_value": s.lr_p_value, "delta_bic": s.delta_bic,
@@ -168,7 +178,7 @@ def score_candidates(fit: Fit, candidates, *, rank_tol: float = 1e-4) -> tuple[C
     out = []
     for name in candidates:
         cols = np.asarray([i for i, nm in enumerate(fit.names) if nm.startswith(name + ".")], dtype=int)
-        stat, df = 0.0, 0
+        stat, df, typical = 0.0, 0, 0.0
         fingerprint = np.zeros_like(res)
         for d in range(jac.shape[0]):
             jb, je, r = jac[d][:, free], jac[d][:, cols], res[d]
@@ -177,6 +187,7 @@ def score_candidates(fit: Fit, candidates, *, rank_tol: float = 1e-4) -> tuple[C
                 je = je - q @ (q.T @ je)
             info = je.T @ je
             evals, evecs = np.linalg.eigh(info)
+            typical += max(float(evals[-1]), 0.0) if evals.size else 0.0
             keep = evals > rank_tol
             if not keep.any():
                 continue
@@ -185,7 +196,8 @@ def score_candidates(fit: Fit, candidates, *, rank_tol: float = 1e-4) -> tuple[C
             stat += float(s @ inv @ s)
             df += int(keep.sum())
             fingerprint[d] = je @ (inv @ s)
-        out.append(CandidateScore(name, stat, df, chi2_sf(stat, df), df > 0, fingerprint, EFFECTS[name].description))
+        out.append(CandidateScore(name, stat, df, chi2_sf(stat, df), df > 0, fingerprint, EFFECTS[name].description,
+                                  typical))
     return tuple(sorted(out, key=lambda c: (not c.testable, c.p_value, -c.statistic)))
 
 
@@ -204,7 +216,8 @@ def _separating_sweep(a, b, data: FitData, ambiguity):
 
 
 def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alpha: float = 0.01,
-             max_effects: int = 4, ambiguity: float = 0.95, starts: int = 1, progress=None) -> Diagnosis:
+             max_effects: int = 4, ambiguity: float = 0.95, min_typical_chi2: float = 1.0, starts: int = 1,
+             progress=None) -> Diagnosis:
     r"""Compare `model` with `data`, rank every candidate effect, add the significant ones one at a time.
 
     **Arguments:**
@@ -217,6 +230,9 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
       score test and p < alpha in the likelihood-ratio test after its refit.
     - `max_effects`: stop after this many.
     - `ambiguity`: |cos| between fingerprints above which two candidates are reported as ambiguous.
+    - `min_typical_chi2`: a candidate whose typical-size fingerprint, after the baseline took up what it
+      could, changes the lot's chi2 by less than this (and whose score is not significant) is reported as
+      not testable on this data.
     - `progress`: optional callable taking a message, called before each (slow) fit.
 
     **Returns:** a `Diagnosis`.
@@ -258,10 +274,11 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     remaining = list(candidates)
     while remaining and len(selected) < max_effects:
         scores = score_candidates(fit, remaining)
+        threshold = alpha / len(remaining)
         if ranking0 is None:
             ranking0 = scores
-            untestable = tuple(c.effect for c in scores if not c.testable)
-        threshold = alpha / len(remaining)
+            untestable = tuple(c.effect for c in scores if not c.testable or (
+                c.typical_chi2 < min_typical_chi2 and c.p_value >= threshold))
         significant = [c for c in scores if c.testable and c.p_value < threshold]
         if not significant:
             break
@@ -297,7 +314,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     if ranking0 is None:
         ranking0 = ()
     return Diagnosis(baseline, fit, tuple(fits), ranking0, tuple(steps), tuple(ambiguous), untestable,
-                     tuple(rejected), alpha, nonlinearity_residual_ppm(baseline))
+                     tuple(rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2)
 
 
 def _is_lot(device):
