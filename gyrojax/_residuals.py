@@ -33,7 +33,7 @@ def predict_block(gyro: Gyroscope, sweep: str, block: SweepBlock, tier=Steady())
         pred, bad = s.rate, s.result != RESULTS.successful
     elif sweep == "vcf_dynamic":
         m = jnp.ravel(block.mask)
-        t0 = jnp.sum(jnp.where(m, temps, 0.0)) / jnp.maximum(jnp.sum(m), 1)
+        t0 = jnp.sum(jnp.where(m, temps, 0.0)) / jnp.maximum(jnp.sum(m), 1).astype(temps.dtype)
         pred, _ = vcf_dynamic_points(gyro, x, t0)
         bad = ~jnp.isfinite(pred)
     elif sweep == "dac":
