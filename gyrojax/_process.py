@@ -59,8 +59,9 @@ class WaferProcess(eqx.Module):
 
     thickness: float = 1e-3  # ASSUMPTION: 0.1 % (50 nm on a 50 um SOI device layer) across one batch
     cd_loss: float = 1e-9  # m, ASSUMPTION: 1 nm of CD loss per edge across one batch. Fixed with `thickness`
-    #                        and `mismatch` so that the seed-003 ratio spreads by 0.22 % (1-sigma), i.e. an
-    #                        expected 0.75 % range over 13 devices: seed 003 measured 0.79 %, the only
+    #                        and `mismatch` so that the seed-003 ratio spreads by ~0.24 % (1-sigma; 0.240 %
+    #                        measured on a 64-device draw), an expected ~0.8 % range over 13 devices: seed 003
+    #                        measured 0.79 %, the only
     #                        measured anchor of the part of the lot a VCF test cannot see
     beam_width: float = 5e-6  # m, ASSUMPTION: a typical suspension beam of a 1.8 kHz z-axis gyro
     comb_gap: float = 2.5e-6  # m, ASSUMPTION: comb gap of the drive comb and of both pick-offs
