@@ -108,10 +108,11 @@ class Steady(AbstractTier):
                                  f"equilibrium; a modulated one does not), got {value!r}. Use the "
                                  "averaged or full tier, or gyrojax.frequency_response.")
         scales = slow_scales(gyro)
+        rates = _residual_rates(gyro, scales)
 
         def residual(z, _):
             d, _ = averaged_field(0.0, _mul(z, scales), gyro, stimulus)
-            return _div(d, scales)
+            return _div(_div(d, scales), rates)
 
         y0 = _div(operating_point(gyro, stimulus), scales)
         # XLA-only linear solves in Newton and its implicit derivative: see gyrojax/_linsolve.py.
@@ -123,6 +124,18 @@ class Steady(AbstractTier):
         result = RESULTS.where(sol.result == optx.RESULTS.successful, RESULTS.successful,
                                RESULTS.root_find_failed)
         return _finalise(out.rate, out.quadrature, out.frequency, state, result, sol.stats["num_steps"])
+
+
+def _residual_rates(gyro, scales):
+    """Rates (1/s) that make each Newton residual component a relative error: 1 everywhere but the AGC
+    integrator, whose derivative ki (setpoint - |e_d|) - leak z is a difference of demodulated amplitudes of
+    ~4e6 LSB. Its round-off (~ki ulp(setpoint) = 6e-10 V/s on paper-qmg) sat above the 1e-10 tolerance as
+    soon as a leak (`agc_finite_gain`) made the balance inexact: every point failed to settle. Divided by
+    ki setpoint it is the relative amplitude error."""
+    ones = jax.tree.map(jnp.ones_like, scales)
+    dl = gyro.drive_loop
+    agc = jnp.maximum(jnp.abs(dl.agc_ki) * jnp.abs(dl.amplitude_setpoint) / scales.loops.agc, 1.0)
+    return eqx.tree_at(lambda s: s.loops.agc, ones, agc * ones.loops.agc)
 
 
 def _ode_settle(tier, field, y0, scales, gyro, stimulus, average_time):
