@@ -212,12 +212,12 @@ def joint_covariance(fit, sf_log_grad):
     """Covariance of the joint fit's internal coordinates from the SVD of the whole lot's weighted Jacobian,
     and from it the relative standard error of every device's zero-rate SF and of the shared gain.
 
-    Why not `fit.scale_factor_stderr`: identify inverts the normal matrix J^T J with a pseudo-inverse, which
-    squares J's condition number. Here the dynamic VCF test fixes the sense resonance to 2e-11 (singular value
-    ~5e10 in internal units) while the Ag prior contributes 1 / 8.7e-4 ~ 1e3: a condition number of J^T J
-    beyond 1e15, so the pseudo-inverse drops the prior's directions and reports ~0 for the very uncertainty
-    that dominates (measured: shared-gain stderr 8e-8 relative instead of ~6e-4, z = 3681). The SVD of the
-    column-scaled J keeps them (condition ~1e8).
+    An independent cross-check of `fit.scale_factor_stderr` / `fit.lot_stderr` (the lot column built
+    analytically here). It found that identify, which then inverted J^T J with a pseudo-inverse, squared J's
+    condition number: the dynamic VCF test fixes the sense resonance to 2e-11 (singular value ~5e10 in
+    internal units) while the Ag prior contributes 1 / 8.7e-4 ~ 1e3, J^T J's condition passed 1e15 and the
+    prior's directions were dropped (shared-gain stderr 8e-8 relative instead of ~6e-4, z = 3681). identify now
+    takes the SVD of the column-scaled J as well, and the two agree to 1e-9 (tests/test_batch_calibration.py).
 
     The lot column needs no second evaluation: every output of the open-loop readout is proportional to the
     sense gain, so d r / d log(G) is minus the bias-projected prediction over sigma (zero on prior rows).
@@ -436,8 +436,8 @@ def markdown(summary):
         f"- seed-003 ratio {sm['ratio_mean']:.4f} (paper: {sm['paper_ratio']:.3f}), its scatter "
         f"{sm['ratio_rel_sd_pct']:.3f} % x sqrt(1 + 1/K)",
         f"- uncertainties from the SVD of the lot's weighted Jacobian (condition {s['jacobian_condition']:.1e}); "
-        f"identify's own (pseudo-inverse of J^T J) give SF {s['identify_sf_stderr_rms_pct']:.2g} % RMS and shared "
-        f"gain +/- {sh['identify_stderr']:.2g}: the prior's directions are lost",
+        f"identify's own: SF {s['identify_sf_stderr_rms_pct']:.3g} % RMS (all devices), shared gain "
+        f"+/- {sh['identify_stderr']:.4g}",
         f"- times: simulate {s['timings']['simulate_s']:.0f} s, start {s['timings']['start_s']:.0f} s, identify "
         f"{s['timings']['identify_s']:.0f} s, truth {s['timings']['truth_s']:.0f} s, covariance "
         f"{s['timings']['covariance_s']:.0f} s",
