@@ -75,7 +75,7 @@ def run(sizes, scipy_devices, seed=0, preset="paper-qmg", chunk=None):
                                   sweeps=("rate_table", "vcf_static", "dac"))
         t_sim = time.perf_counter() - t0
         t0 = time.perf_counter()
-        lot_chunk = chunk if chunk is not None and n > chunk else None
+        lot_chunk = chunk if chunk is not None and n > chunk else (None if chunk is not None else "auto")
         fit = gj.identify(preset, table, lot_chunk=lot_chunk)
         t_first = time.perf_counter() - t0
         t0 = time.perf_counter()
@@ -128,7 +128,8 @@ def main(argv=None):
     ap.add_argument("--sizes", default="1,16,256,1024")
     ap.add_argument("--scipy-devices", type=int, default=16)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--chunk", type=int, help="identify(lot_chunk=...) for lots larger than this")
+    ap.add_argument("--chunk", type=int, help="identify(lot_chunk=...) for lots larger than this (default: "
+                    "identify's 'auto', 16 on a CPU)")
     ap.add_argument("--json")
     args = ap.parse_args(argv)
     print(f"versions {_versions()}; {platform.machine()} {os.cpu_count()} CPUs; load {os.getloadavg()}", flush=True)

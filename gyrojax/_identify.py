@@ -430,7 +430,7 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
              starts: int = 1, start_spread: float = 0.05, seed: int = 0, rtol: float = 1e-8, atol: float = 1e-8,
              max_steps: int = 200, identifiability_threshold: float = 1.0, hold=(), tier=Steady(),
              evaluate_only: bool = False, lot_solve: str = "vmap", shard: bool | None = None,
-             lot_chunk: int | None = None) -> Fit:
+             lot_chunk: int | None | str = "auto") -> Fit:
     r"""Fit the free parameters of `model` to every sweep in `data`, per device (vmapped) or jointly.
 
     **Arguments:**
@@ -459,8 +459,10 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
       sharded only when the lot divides evenly.
     - `lot_chunk`: with `lot_solve="vmap"`, solve and differentiate at most this many devices at a time
       (`jax.lax.map` over chunks of the vmapped solve; the lot is padded to a multiple of it). It bounds
-      memory on large lots and lets each chunk stop at its own slowest device. `None` (default): the whole
-      lot at once. Not with `shard` over several JAX devices, nor for a joint (shared-parameter) fit.
+      memory on large lots and lets each chunk stop at its own slowest device. `None`: the whole lot at
+      once. `"auto"` (default): 16 on a CPU backend for independent fits on one JAX device (measured on 256
+      devices: chunks of 16 ran 3-4x faster per device than chunks of 128, whose batched steady solves
+      outgrow the cache), else `None`. Not with `shard` over several JAX devices, nor for a joint fit.
     - `evaluate_only`: do not solve; return the `Fit` at the start (residuals, Jacobian, covariance there),
       e.g. to test a candidate effect at zero against an already fitted model.
 
@@ -475,8 +477,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         raise ValueError(f"lot_solve must be 'loop' or 'vmap', got {lot_solve!r}.")
     if shard and lot_solve == "loop":
         raise ValueError("shard=True needs lot_solve='vmap' (the loop solves one device at a time).")
-    if lot_chunk is not None and (not isinstance(lot_chunk, int) or lot_chunk < 1):
-        raise ValueError(f"lot_chunk must be None or an integer >= 1, got {lot_chunk!r}.")
+    if lot_chunk != "auto" and lot_chunk is not None and (not isinstance(lot_chunk, int) or lot_chunk < 1):
+        raise ValueError(f"lot_chunk must be 'auto', None or an integer >= 1, got {lot_chunk!r}.")
     if not isinstance(starts, int) or starts < 1:
         raise ValueError(f"starts must be an integer >= 1, got {starts!r}.")
     n = len(data.devices)
@@ -528,6 +530,9 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     problem_all = problem_for(list(range(n_dev)))
     t_sf = _sf_temperature(data)
     shards = (len(jax.devices()) if shard is None or shard else 1) if lot_solve == "vmap" else 1
+    if lot_chunk == "auto":
+        independent = shards == 1 and not shared and lot_solve == "vmap"
+        lot_chunk = 16 if independent and jax.default_backend() == "cpu" else None
     if lot_chunk is not None and (shards > 1 or shared or lot_solve == "loop"):
         raise ValueError("lot_chunk applies to the vmapped solve of independent devices on one JAX device; "
                          "drop it, or drop shard / shared / lot_solve='loop'.")

@@ -271,7 +271,7 @@ def test_lot_in_chunks_gives_the_same_fit(fit, table):
     diff = np.abs(np.asarray(chunked.values) - np.asarray(fit.values))[:, free]
     assert np.all(diff < 1e-3 * np.asarray(fit.stderr)[:, free]), diff / np.asarray(fit.stderr)[:, free]
     np.testing.assert_allclose(np.asarray(chunked.chi2), np.asarray(fit.chi2), rtol=1e-6)
-    with pytest.raises(ValueError, match="lot_chunk must be None or an integer >= 1"):
+    with pytest.raises(ValueError, match="lot_chunk must be .auto., None or an integer >= 1"):
         gj.identify("paper-qmg", table, lot_chunk=0)
     with pytest.raises(ValueError, match="lot_chunk applies to the vmapped solve"):
         gj.identify("paper-qmg", table, lot_chunk=2, shared=("dac_gain_error",))
