@@ -1,21 +1,16 @@
 """experiments/lot_batch_calibration.py at a small size: rate tables on 2 of 6 devices, VCF sweeps on all, one
 joint identify with a lot-shared readout gain (the only test of identify's shared-parameter solve)."""
 
-import importlib.util
 import math
-import pathlib
 
 import numpy as np
+from _experiments import load_experiment
 
 import gyrojax as gj
 
 
 def _load():
-    path = pathlib.Path(__file__).parent.parent / "experiments" / "lot_batch_calibration.py"
-    spec = importlib.util.spec_from_file_location("lot_batch_calibration", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_experiment("lot_batch_calibration")
 
 
 # Few points, same physics: 8 table rates / virtual rates over +/-200 deg/s and the dynamic test on a 10 Hz grid

@@ -1,13 +1,12 @@
 """Compensation: polynomial, seed 000's composite method, model-based; held-out judging; CLI; Table 3 script."""
 
-import importlib.util
 import json
-import pathlib
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _experiments import load_experiment
 
 import gyrojax as gj
 from gyrojax._compensate.composite import side_segment_starts
@@ -24,11 +23,7 @@ def _device(table):
 
 
 def _load_experiment():
-    path = pathlib.Path(__file__).parent.parent / "experiments" / "seed000_table3_compensation.py"
-    spec = importlib.util.spec_from_file_location("seed000_table3_compensation", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_experiment("seed000_table3_compensation")
 
 
 EXPERIMENT = _load_experiment()

@@ -2,19 +2,13 @@
 are within 20 % of the scatter of the fitted values, and the scatter within 1.2x of the Cramer-Rao bound
 (experiments/identify_monte_carlo.py; all 100 draws are one vmapped, compiled fit)."""
 
-import importlib.util
-import pathlib
-
 import pytest
+from _experiments import load_experiment
 
 
 @pytest.fixture(scope="module")
 def monte_carlo():
-    path = pathlib.Path(__file__).parent.parent / "experiments" / "identify_monte_carlo.py"
-    spec = importlib.util.spec_from_file_location("identify_monte_carlo", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.run(draws=100, sweeps=("rate_table", "vcf_static", "dac"), runs=2, seed=0)
+    return load_experiment("identify_monte_carlo").run(draws=100, sweeps=("rate_table", "vcf_static", "dac"), runs=2, seed=0)
 
 
 def test_every_draw_converges_with_chi2_near_one(monte_carlo):

@@ -7,14 +7,13 @@ noise-free, same shapes), so each sweep kind is compiled once per preset. The CL
 with the same lot sizes and reuse those compiled functions.
 """
 
-import importlib.util
 import math
-import pathlib
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _experiments import load_experiment
 
 import gyrojax as gj
 from gyrojax import _campaign
@@ -22,7 +21,6 @@ from gyrojax._noise import RateNoise
 from gyrojax._observe import VCF_CARRIER_V
 from gyrojax._units import DEG
 from gyrojax.cli import main as cli
-
 
 QMG_DEVICES, QMG_RUNS = 3, 8  # 528 rate-table points: enough for a chi^2 test at +/-0.2
 VCF_DEVICES, VCF_RUNS = 3, 1  # the experiment's and the CLI test's sizes too (same compiled functions)
@@ -379,11 +377,7 @@ def test_cli_unknown_sweep_exits_2(tmp_path, monkeypatch, capsys):
 
 
 def _experiment():
-    path = pathlib.Path(__file__).parent.parent / "experiments" / "seed003_batch_calibration.py"
-    spec = importlib.util.spec_from_file_location("seed003_batch_calibration", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_experiment("seed003_batch_calibration")
 
 
 def test_seed003_batch_experiment_small(tmp_path, vcf, capsys):

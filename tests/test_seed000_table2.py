@@ -1,15 +1,14 @@
 """Seed 000 Table 2 (FTR excitation DAC): the data file, its decoding, and the nonlinearity the paper quotes."""
 
-import importlib.util
 import math
 import pathlib
 
 import numpy as np
 import pytest
+from _experiments import load_experiment
 
 from gyrojax._dataset import decode_dac_word
 from gyrojax._metrics import metrics_report
-
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -25,17 +24,9 @@ PRINTED = [
 ]
 
 
-def load_experiment():
-    path = ROOT / "experiments" / "seed000_table2_dac_nonlinearity.py"
-    spec = importlib.util.spec_from_file_location("seed000_table2_dac_nonlinearity", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope="module")
 def experiment():
-    return load_experiment()
+    return load_experiment("seed000_table2_dac_nonlinearity")
 
 
 @pytest.fixture(scope="module")

@@ -1,17 +1,12 @@
 """experiments/seed_closure.py: the numbers that do and do not close in the seeds."""
 
-import importlib.util
-import pathlib
 
 import pytest
+from _experiments import load_experiment
 
 
 def _load():
-    path = pathlib.Path(__file__).parent.parent / "experiments" / "seed_closure.py"
-    spec = importlib.util.spec_from_file_location("seed_closure", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_experiment("seed_closure")
 
 
 def test_seed_closure_numbers(tmp_path, capsys):
