@@ -23,7 +23,6 @@ second) and the second call. Peak resident memory of the process is printed afte
 
 import argparse
 import dataclasses
-import json
 import os
 import platform
 import resource
@@ -75,7 +74,7 @@ def run(sizes, scipy_devices, seed=0, preset="paper-qmg", chunk=None):
                                   sweeps=("rate_table", "vcf_static", "dac"))
         t_sim = time.perf_counter() - t0
         t0 = time.perf_counter()
-        lot_chunk = chunk if chunk is not None and n > chunk else (None if chunk is not None else "auto")
+        lot_chunk = "auto" if chunk is None else (chunk if n > chunk else None)
         fit = gj.identify(preset, table, lot_chunk=lot_chunk)
         t_first = time.perf_counter() - t0
         t0 = time.perf_counter()

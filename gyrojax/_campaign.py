@@ -59,12 +59,8 @@ def _lot_vcf_static(lot, amplitudes_v, temperatures, tier):
 @eqx.filter_jit
 def _lot_vcf_dynamic(lot, frequencies_hz, temperatures, amplitude_v):
     """`vcf_dynamic_points` for every device, run and point, each point at its own temperature."""
-    def point(g, f, t):
-        amp, phase = vcf_dynamic_points(g, f[None], t, amplitude_v)
-        return amp[0], phase[0]
-
     def device(g, temps):
-        return jax.vmap(lambda t_run: jax.vmap(lambda f, t: point(g, f, t))(frequencies_hz, t_run))(temps)
+        return jax.vmap(lambda t_run: vcf_dynamic_points(g, frequencies_hz, t_run, amplitude_v))(temps)
 
     return eqx.filter_vmap(device)(lot, temperatures)
 

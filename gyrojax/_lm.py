@@ -56,10 +56,10 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
 
     rtol: float
     atol: float
-    norm: Callable = optx.max_norm
-    descent: optx.DampedNewtonDescent = optx.DampedNewtonDescent()
-    search: RoundoffTrustRegion = RoundoffTrustRegion()
-    verbose: Callable = _quiet
+    norm: Callable
+    descent: optx.DampedNewtonDescent
+    search: RoundoffTrustRegion
+    verbose: Callable
 
     def __init__(self, rtol: float, atol: float, linear_solver: lx.AbstractLinearSolver, roundoff: float = 1e-10):
         self.rtol, self.atol = rtol, atol

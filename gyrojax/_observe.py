@@ -53,14 +53,22 @@ def vcf_static_points(gyro: Gyroscope, amplitudes_v, temperatures, tier: Abstrac
     return jax.vmap(one)(jnp.asarray(amplitudes_v, dtype=float), jnp.asarray(temperatures, dtype=float))
 
 
-def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz, temperature, amplitude_v=VCF_DYNAMIC_AMPLITUDE_V,
+def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz, temperatures, amplitude_v=VCF_DYNAMIC_AMPLITUDE_V,
                        carrier_v=VCF_CARRIER_V):
     """Dynamic virtual-Coriolis test (seed 003 Eq. 6): the rate output's amplitude (LSB) and phase (deg)
     for V_ac = `amplitude_v` modulated at each frequency (Hz), from the averaged model linearised at rest at
-    one die `temperature` (deg C)."""
-    ss = _linearise(at_temperature(gyro, temperature), Stimulus(), "vcf")
-    h = ss.response(2.0 * jnp.pi * jnp.asarray(frequencies_hz, dtype=float)) * (amplitude_v * carrier_v)
-    return jnp.abs(h), jnp.rad2deg(jnp.angle(h))
+    the die temperature of each point (deg C; one value for every point linearises once)."""
+    def response(f, temperature):
+        ss = _linearise(at_temperature(gyro, temperature), Stimulus(), "vcf")
+        h = ss.response(2.0 * jnp.pi * f) * (amplitude_v * carrier_v)
+        return jnp.abs(h), jnp.rad2deg(jnp.angle(h))
+
+    f, t = jnp.asarray(frequencies_hz, dtype=float), jnp.asarray(temperatures, dtype=float)
+    if t.ndim == 0:
+        return response(f, t)
+    # Each point at its own temperature: the response follows the sense resonance's TCF.
+    amp, phase = jax.vmap(lambda fi, ti: response(fi[None], ti))(f, t)
+    return amp[:, 0], phase[:, 0]
 
 
 def dac_points(gyro: Gyroscope, words):
