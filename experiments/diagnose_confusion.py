@@ -49,11 +49,6 @@ SWEEPS = {
 }
 PAIR = ("dac_inl", "vref_drift")  # issue 5: "two effects hidden at once"
 CHI2_BAND = (0.7, 1.4)  # issue 5's acceptance band for the final reduced chi2
-# The data's settled points: Steady as gyrojax.CAMPAIGN_TIER but atol 1e-9 (1e-9 of the O(1)-scaled states,
-# far below a ppm). With a leaky AGC (agc_finite_gain) on paper-qmg the AGC integrator's residual
-# ki (setpoint - |e_d|) has a round-off floor of ki ulp(setpoint) = 0.64 x 4.7e-10 = 3e-10, above
-# CAMPAIGN_TIER's 1e-10, so a third of the points were reported unsettled.
-SIM_TIER = gj.Steady(rtol=1e-10, atol=1e-9)
 
 
 def cases(effects=None):
@@ -120,7 +115,7 @@ def run_case(preset, hidden, *, devices, runs, seed, progress=None):
     for h in hidden:
         g = gj.add_effect(g, h, 1.0)
     t0 = time.perf_counter()
-    table = gj.simulate_table(g, devices=devices, runs=runs, sweeps=SWEEPS[preset], seed=seed, tier=SIM_TIER)
+    table = gj.simulate_table(g, devices=devices, runs=runs, sweeps=SWEEPS[preset], seed=seed)
     t1 = time.perf_counter()
     d = diagnose(table, preset, progress=progress)
     t2 = time.perf_counter()

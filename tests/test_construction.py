@@ -64,6 +64,8 @@ def test_loops_and_tiers_refuse_bad_settings():
         gj.RebalanceLoop(1.0, 1.0, 1.0, leak=-1.0)
     with pytest.raises(ValueError, match=r"Averaged\.settle_time must be positive"):
         gj.Averaged(settle_time=0.0)
+    with pytest.raises(ValueError, match=r"Steady\.jacobian must be 'once' \(chord\) or 'every_step'"):
+        gj.Steady(jacobian="broyden")
     with pytest.raises(ValueError, match=r"Steady tier: stimulus\.rate_frequency must be 0"):
         gj.settle(gj.paper_qmg(), gj.Stimulus(rate=1.0, rate_frequency=10.0), gj.Steady())
     with pytest.raises(ValueError, match=r"Stimulus\.time must be non-negative"):

@@ -55,6 +55,19 @@ def test_ideal_scale_factor_matches_eq2(devices, sweeps, tier):
     assert abs(sf / float(ideal.ideal_scale_factor()) - 1) < 1e-6
 
 
+def test_chord_and_newton_steady_agree(devices, sweeps):
+    """The default chord root find (one Jacobian) and Newton's method (a Jacobian per step) reach the same
+    equilibrium: the sweeps agree far inside a ppm, and the chord takes at most a few more steps."""
+    _, inl = devices
+    newton = gj.rate_sweep(inl, RATES, tier=gj.Steady(jacobian="every_step"))
+    chord = sweeps["steady", "inl"]
+    full_scale = float(np.max(np.abs(np.asarray(newton.rate))))
+    assert np.max(np.abs(np.asarray(chord.rate) - np.asarray(newton.rate))) / full_scale < 1e-9
+    assert np.max(np.abs(np.asarray(chord.quadrature) - np.asarray(newton.quadrature))) / full_scale < 1e-9
+    assert int(np.max(np.asarray(newton.num_steps))) >= 2  # the INL needs more than the operating point
+    assert int(np.max(np.asarray(chord.num_steps))) <= int(np.max(np.asarray(newton.num_steps))) + 3
+
+
 @pytest.mark.parametrize("tier", ["averaged", "full"])
 def test_tiers_agree_with_inl(sweeps, tier):
     sf_s, nl_s = _fit(sweeps["steady", "inl"].rate)
