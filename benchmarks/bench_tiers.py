@@ -59,6 +59,7 @@ from scipy.integrate import odeint, solve_ivp  # noqa: E402
 from gyrojax._effects.dac_inl import DacInl  # noqa: E402
 from gyrojax._effects.registry import add_effect  # noqa: E402
 from gyrojax._io import atomic_write_json  # noqa: E402
+from gyrojax._lot import make_lot  # noqa: E402
 from gyrojax._physics.thermal import ConstantTemperature  # noqa: E402
 from gyrojax._presets import paper_qmg  # noqa: E402
 from gyrojax._simulate._model import (  # noqa: E402
@@ -571,8 +572,9 @@ def part1(devices, args):
              ("averaged", Averaged(settle_time=st)),
              (DEFAULT, full())]
     if not args.quick:
-        tiers += [(FAST, full(rtol=1e-6, atol=1e-6)),
-                  ("full Dopri8 unrolled 1e-8", full(solver=diffrax.Dopri8(), rtol=1e-8, atol=1e-8)),
+        tiers += [(FAST, full(rtol=1e-6, atol=1e-6))]
+    if not (args.quick or args.tiers_only):
+        tiers += [("full Dopri8 unrolled 1e-8", full(solver=diffrax.Dopri8(), rtol=1e-8, atol=1e-8)),
                   ("full Dopri8 diffrax loop 1e-8", full(solver=diffrax.Dopri8(), rtol=1e-8, atol=1e-8,
                                                          unroll_stages=False)),
                   ("full Tsit5 diffrax loop 1e-10", full(solver=diffrax.Tsit5(), rtol=1e-10, atol=1e-10,
@@ -633,9 +635,47 @@ def part1(devices, args):
            f"(target >= {TARGET_STEADY_VS_FULL:g}x: {'meets' if ok_speed else 'MISSES'}); full vs steady "
            f"{rows[default_name]['max_vs_steady_ppm_fs']:.3f} ppm of full scale (target <= {TARGET_STEADY_PPM:g} ppm: "
            f"{'meets' if ok_ppm else 'MISSES'})")
-    return {"rates_dps": dps.tolist(), "settle_time_s": st, "average_periods": periods,
+    lot = lot_scale(devices["inl"], rates, args)
+    return {"lot_scale": lot, "rates_dps": dps.tolist(), "settle_time_s": st, "average_periods": periods,
             "full_scale_lsb": fs, "steady_nl_ppm_inl": nl_s, "tiers": rows, "reference": tiers[0][0],
             "default": default_name, "steady_meets_speed_target": ok_speed, "steady_meets_ppm_target": ok_ppm}
+
+
+def lot_scale(gyro, rates, args, devices=8):
+    """Steady against the default full tier per point at lot scale: one compiled call settles the whole sweep
+    of every device of a simulated lot (`make_lot`, default process spread, INL device), as identify and
+    simulate_table do. A 22-point sweep alone leaves the steady tier's few-hundred small XLA operations
+    overhead-bound (~1 ms per call however few points); at lot scale both tiers are compute-bound."""
+    lot = make_lot(gyro, devices, jax.random.PRNGKey(0))
+    _print(f"\n-- lot scale: {devices} devices x {rates.size} points = {devices * rates.size} points per call --")
+
+    def program(tier):
+        @eqx.filter_jit
+        def run(lot, rates):
+            def device(g):
+                s = jax.vmap(lambda r: tier.settle(g, Stimulus(rate=r)))(rates)
+                return s.rate, s.result == RESULTS.successful
+            return jax.vmap(device)(lot)
+        return run
+
+    out = {}
+    for name, tier in (("steady", Steady()), (DEFAULT, FullWaveform(settle_time=args.settle,
+                                                                     average_periods=args.average_periods))):
+        fn = program(tier)
+        jax.block_until_ready(fn(lot, rates))
+        t, (rate, ok) = _best_of(lambda: jax.block_until_ready(fn(lot, rates)), args.sweep_repeats)
+        if not bool(np.all(np.asarray(ok))):
+            raise SystemExit(f"lot scale, {name}: some points did not settle")
+        out[name] = {"t_batch": t, "per_point_ms": t / rate.size * 1e3, "rate": np.asarray(rate)}
+        _print(f"{name:40s}: batch {t:8.3f} s ({t / rate.size * 1e3:8.4f} ms/point)")
+    full_scale = np.max(np.abs(out["steady"]["rate"]), axis=1, keepdims=True)
+    diff = float(np.max(np.abs(out[DEFAULT]["rate"] - out["steady"]["rate"]) / full_scale) * 1e6)
+    ratio = out[DEFAULT]["t_batch"] / out["steady"]["t_batch"]
+    _print(f"steady tier at lot scale: {ratio:.0f}x faster per point than the default full tier (target >= "
+           f"{TARGET_STEADY_VS_FULL:g}x: {'meets' if ratio >= TARGET_STEADY_VS_FULL else 'MISSES'}); the two "
+           f"{diff:.3f} ppm of full scale apart at most")
+    return {"devices": devices, "points": int(devices * rates.size), "speedup": ratio, "max_diff_ppm_fs": diff,
+            **{k: {"t_batch_s": v["t_batch"], "per_point_ms": v["per_point_ms"]} for k, v in out.items()}}
 
 
 # -------------------------------------------------------------------------------------------- part 2
@@ -879,6 +919,8 @@ def main(argv=None):
     parser.add_argument("--json", metavar="PATH", help="also write the results to this JSON file")
     parser.add_argument("--repeats", type=int, default=None, help="repeats of each gyrojax single-point timing")
     parser.add_argument("--skip-part3", action="store_true", help="skip the scipy sweep (part 3)")
+    parser.add_argument("--tiers-only", action="store_true",
+                        help="part 1 only, with the reference, steady, averaged and the two DOP853 settings")
     args = parser.parse_args(argv)
     args.average_periods = 40
     args.settle = 0.02 if args.quick else 0.12
@@ -901,6 +943,11 @@ def main(argv=None):
     t_start = time.perf_counter()
     p1 = part1(devices, args)
     payload["tiers_sweep"] = p1
+    if args.tiers_only:
+        payload["wall_s"] = time.perf_counter() - t_start
+        if args.json:
+            _write_json(args.json, payload)
+        return
 
     def full(**kw):
         return FullWaveform(settle_time=args.settle, average_periods=args.average_periods, **kw)
