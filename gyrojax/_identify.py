@@ -85,7 +85,9 @@ class Fit(eqx.Module):
     - `residuals`: dict sweep -> (device, run, point) standardised residuals; `predictions`, `biases`
       (dict sweep -> (device, run)).
     - `chi2`, `dof`, `chi2_red`: per device; `chi2_total`, `dof_total`, `chi2_red_total` for the lot.
-    - `converged`: (device,) bool; `result_message`: (device,) text; `num_steps`: solver steps;
+    - `converged`: (device,) bool; `result_message`: (device,) text (a converged device whose data no longer
+      fix some direction at the solution, as when a parameter ran off to a flat region, says so there and in
+      `summary()`); `num_steps`: solver steps;
       `unsettled`: points whose steady state failed at the solution.
     - `unidentifiable`: tuple of `Unidentifiable`.
     - `scale_factor`, `scale_factor_stderr`: (device,) LSB per deg/s of the fitted model at zero rate.
@@ -170,7 +172,7 @@ class Fit(eqx.Module):
         lines = [f"fit of {len(self.devices)} device(s) from {self.data.source}: chi2_red "
                  f"{self.chi2_red_total:.3f} (chi2 {self.chi2_total:.1f} / dof {self.dof_total})"]
         for i, d in enumerate(self.devices):
-            ok = "converged" if bool(self.converged[i]) else f"NOT CONVERGED ({self.result_message[i]})"
+            ok = self.result_message[i] if bool(self.converged[i]) else f"NOT CONVERGED ({self.result_message[i]})"
             lines.append(f"  {d}: chi2_red {float(self.chi2_red[i]):.3f}, SF {float(self.scale_factor[i]):.6f} "
                          f"+/- {float(self.scale_factor_stderr[i]):.2g} LSB/(deg/s), {ok}")
         for u in self.unidentifiable:
@@ -186,6 +188,30 @@ def _message(converged, result_text, unsettled):
         return "converged"
     return (f"{result_text}. Try: more starts (starts=8), a larger max_steps, another solver "
             "(solver='gauss-newton' or 'bfgs'), holding a parameter (free=...), or priors on the design values")
+
+
+def _weak_at_solution(jac, names_free, threshold):
+    """Per device, text naming the free directions the data no longer fix at the solution: a singular value of
+    the weighted Jacobian (data and prior rows) below `threshold`, in internal units. They were fixed at the
+    start (or identify would have held them), so the fit moved somewhere flat: a log-parameter run off towards
+    0 or infinity (an open-loop Q_y of 1e243, measured, with the solver reporting success) is the typical case.
+    `jac` is (device, residual, free)."""
+    out = []
+    for j in np.asarray(jac, dtype=float):
+        if j.shape[1] == 0 or not np.all(np.isfinite(j)):
+            out.append("")
+            continue
+        evals, evecs = np.linalg.eigh(j.T @ j)
+        notes = []
+        for i in np.nonzero(np.sqrt(np.clip(evals, 0.0, None)) < threshold)[0]:
+            v = np.abs(evecs[:, i])
+            involved = [names_free[k] for k in np.nonzero(v > 0.3 * v.max())[0]]
+            notes.append(f"{' x '.join(involved)} (s = {np.sqrt(max(evals[i], 0.0)):.2g})")
+        out.append("" if not notes else
+                   "the data no longer fix " + "; ".join(notes) + f" at the solution (singular value < "
+                   f"{threshold:g}): the fit may have wandered along a flat direction. Give it a prior "
+                   "(priors=...), hold it (hold=...), or start from the data")
+    return out
 
 
 class _Problem(eqx.Module):
@@ -589,7 +615,7 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     final = at_start if evaluate_only else spread.unpad(
         _evaluate(problem_all_s, spread.pad(jnp.asarray(u_full))[0], jnp.asarray(u_lot), t_sf_s, spread.chunk))
     return _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full, np.asarray(u_lot), code,
-                   steps, final, held_reports)
+                   steps, final, held_reports, identifiability_threshold)
 
 
 def _sf_temperature(data):
@@ -603,7 +629,7 @@ def _sf_temperature(data):
 
 
 def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full, u_lot, code, steps, final,
-            held_reports):
+            held_reports, threshold):
     n, n_dev, n_lot = len(data.devices), len(names_dev), len(names_lot)
     f = np.asarray(free_index, dtype=int)
     jac = np.asarray(final.jac)[:, :, f]  # (device, residual, free)
@@ -649,8 +675,10 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
         var = var + np.einsum("di,ij,dj->d", g_lot, cov_lot, g_lot) + 2 * np.einsum("di,dij,dj->d", g, cross, g_lot)
     failed = np.asarray(final.failed)
     ok = np.asarray(code) == optx.RESULTS.successful._value
-    messages = tuple(_message(bool(o), "" if o else optx.RESULTS._index_to_message[int(c)].split(".")[0], int(fl))
-                     for o, c, fl in zip(ok, np.asarray(code), failed))
+    messages = [_message(bool(o), "" if o else optx.RESULTS._index_to_message[int(c)].split(".")[0], int(fl))
+                for o, c, fl in zip(ok, np.asarray(code), failed)]
+    weak = _weak_at_solution(jac, [names_dev[i] for i in f], threshold)
+    messages = tuple(m if not w else f"{m}; but {w}" for m, w in zip(messages, weak))
     free_mask = tuple(bool(i in set(f.tolist())) for i in range(n_dev))
     return Fit(model=fitted, names=names_dev, lot_names=names_lot, values=values[:, :n_dev],
                stderr=stderr[:, :n_dev], lot_values=lot_values[0], lot_stderr=lot_stderr[0], free=free_mask,
