@@ -9,6 +9,7 @@ direction of parameter space the data cannot fix to better than its natural size
 """
 
 
+import contextlib
 import dataclasses
 
 import equinox as eqx
@@ -188,6 +189,26 @@ def _message(converged, result_text, unsettled):
         return "converged"
     return (f"{result_text}. Try: more starts (starts=8), a larger max_steps, another solver "
             "(solver='gauss-newton' or 'bfgs'), holding a parameter (free=...), or priors on the design values")
+
+
+@contextlib.contextmanager
+def _nonfinite_explained(stage: str):
+    """Turn a runtime error from inside the compiled model (a linear solve of a steady state or of its implicit
+    derivative that got NaN/inf) into one that says where and what to try, keeping the original as cause."""
+    try:
+        yield
+    except eqx.EquinoxRuntimeError as e:
+        # equinox prefixes the stack; the message is on the line naming the error, or else the last one
+        lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
+        named = [ln.split("EquinoxRuntimeError:", 1)[1].strip() for ln in lines
+                 if "EquinoxRuntimeError:" in ln and "stack" not in ln]
+        reason = named[-1] if named else (lines[-1] if lines else type(e).__name__)
+        raise RuntimeError(
+            f"identify: the model's predictions or their derivatives are not finite {stage} (the error inside "
+            f"the compiled model: {reason!r}). Some device has no steady "
+            "state there, or one whose derivative is singular. Try: starting closer to the data (a Model with "
+            "data-based values), holding parameters (hold=...) or priors on the design values, or fitting the "
+            "sweeps one at a time (fit_data(table, sweeps=...)) to find the one that fails.") from e
 
 
 def _weak_at_solution(jac, names_free, threshold):
@@ -564,7 +585,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
                          "drop it, or drop shard / shared / lot_solve='loop'.")
     spread = _LotSpread(n, shards, lot_chunk)
     problem_all_s, zeros_s, t_sf_s = spread.pad(problem_all, jnp.zeros((n, n_dev)), t_sf)
-    at_start = spread.unpad(_evaluate(problem_all_s, zeros_s, jnp.zeros(n_lot), t_sf_s, spread.chunk))
+    with _nonfinite_explained("at the start"):
+        at_start = spread.unpad(_evaluate(problem_all_s, zeros_s, jnp.zeros(n_lot), t_sf_s, spread.chunk))
     # Identifiability at the start: hold what the data cannot see.
     candidates = [i for i, nm in enumerate(names_dev)
                   if not any(nm == h or nm.startswith(h + "[") or nm.startswith(h + ".") for h in hold)]
@@ -588,11 +610,13 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         (u0_s,) = solve_spread.pad(jnp.asarray(u0))
         if n_lot:
             u0_lot = np.zeros(n_lot) if k == 0 else rng.normal(scale=start_spread, size=n_lot)
-            res = solve_spread.unpad(_solve_joint(problem_s, u0_s, jnp.asarray(u0_lot), solver_, max_steps))
+            with _nonfinite_explained(f"during the joint solve (start {k})"):
+                res = solve_spread.unpad(_solve_joint(problem_s, u0_s, jnp.asarray(u0_lot), solver_, max_steps))
         else:
             solve = _solve_loop if lot_solve == "loop" else _solve_independent
-            v, code, steps, chi2 = solve_spread.unpad(solve(problem_s, u0_s, jnp.zeros(0), solver_, max_steps,
-                                                            solve_spread.chunk))
+            with _nonfinite_explained(f"during the solve (start {k})"):
+                v, code, steps, chi2 = solve_spread.unpad(solve(problem_s, u0_s, jnp.zeros(0), solver_, max_steps,
+                                                                solve_spread.chunk))
             res = (v, jnp.zeros(0), code, steps, chi2)
         res = tuple(np.asarray(x) for x in res)
         if best is None:
@@ -612,8 +636,10 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     u_free, u_lot, code, steps, _ = best
     u_full = np.zeros((n, n_dev))
     u_full[:, free_index] = u_free[:, free_index]
-    final = at_start if evaluate_only else spread.unpad(
-        _evaluate(problem_all_s, spread.pad(jnp.asarray(u_full))[0], jnp.asarray(u_lot), t_sf_s, spread.chunk))
+    with _nonfinite_explained("at the solution"):
+        final = at_start if evaluate_only else spread.unpad(
+            _evaluate(problem_all_s, spread.pad(jnp.asarray(u_full))[0], jnp.asarray(u_lot), t_sf_s,
+                      spread.chunk))
     return _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full, np.asarray(u_lot), code,
                    steps, final, held_reports, identifiability_threshold)
 

@@ -310,3 +310,20 @@ def test_directions_the_data_no_longer_fix_at_the_solution_are_named():
     assert notes[0] == ""
     assert "no longer fix q_y (s = " in notes[1] and "k_vf" not in notes[1] and "prior" in notes[1]
     assert "k_vf x omega_y" in notes[2] and "q_y" not in notes[2]
+
+
+def test_a_nonfinite_model_inside_the_compiled_fit_is_explained():
+    """An error raised inside the compiled model (as the implicit derivative's linear solve does on NaN) comes
+    out of identify as a RuntimeError that says where and what to try, with the original as its cause."""
+    import equinox as eqx
+
+    from gyrojax._identify import _nonfinite_explained
+
+    @eqx.filter_jit
+    def broken(x):
+        return eqx.error_if(x, ~jnp.isfinite(x), "A linear solver received non-finite (NaN or inf) input")
+
+    with pytest.raises(RuntimeError, match=r"not finite at the start .*non-finite.*Try: starting closer") as info:
+        with _nonfinite_explained("at the start"):
+            broken(jnp.asarray(jnp.nan))
+    assert isinstance(info.value.__cause__, eqx.EquinoxRuntimeError)
