@@ -200,9 +200,12 @@ def _nonfinite_explained(stage: str):
     except eqx.EquinoxRuntimeError as e:
         # equinox prefixes the stack; the message is on the line naming the error, or else the last one
         lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
-        named = [ln.split("EquinoxRuntimeError:", 1)[1].strip() for ln in lines
-                 if "EquinoxRuntimeError:" in ln and "stack" not in ln]
-        reason = named[-1] if named else (lines[-1] if lines else type(e).__name__)
+        named = [i for i, ln in enumerate(lines) if "EquinoxRuntimeError:" in ln and "stack" not in ln]
+        if named:  # its first sentence, which may wrap onto the next lines
+            text = " ".join(lines[named[-1]:]).split("EquinoxRuntimeError:", 1)[1].strip()
+            reason = text.split("---")[0].split(". ")[0].strip().rstrip(".")[:300]
+        else:
+            reason = lines[-1] if lines else type(e).__name__
         raise RuntimeError(
             f"identify: the model's predictions or their derivatives are not finite {stage} (the error inside "
             f"the compiled model: {reason!r}). Some device has no steady "

@@ -323,7 +323,8 @@ def test_a_nonfinite_model_inside_the_compiled_fit_is_explained():
     def broken(x):
         return eqx.error_if(x, ~jnp.isfinite(x), "A linear solver received non-finite (NaN or inf) input")
 
-    with pytest.raises(RuntimeError, match=r"not finite at the start .*non-finite.*Try: starting closer") as info:
+    with pytest.raises(RuntimeError, match=r"not finite at the start \(the error inside the compiled model: 'A linear "
+                       r"solver received non-finite \(NaN or inf\) input'\).*Try: starting closer") as info:
         with _nonfinite_explained("at the start"):
             broken(jnp.asarray(jnp.nan))
     assert isinstance(info.value.__cause__, eqx.EquinoxRuntimeError)
