@@ -649,21 +649,13 @@ def lot_scale(gyro, rates, args, devices=8):
     lot = make_lot(gyro, devices, jax.random.PRNGKey(0))
     _print(f"\n-- lot scale: {devices} devices x {rates.size} points = {devices * rates.size} points per call --")
 
-    def program(tier):
-        @eqx.filter_jit
-        def run(lot, rates):
-            def device(g):
-                s = jax.vmap(lambda r: tier.settle(g, Stimulus(rate=r)))(rates)
-                return s.rate, s.result == RESULTS.successful
-            return jax.vmap(device)(lot)
-        return run
-
     out = {}
     for name, tier in (("steady", Steady()), (DEFAULT, FullWaveform(settle_time=args.settle,
                                                                      average_periods=args.average_periods))):
-        fn = program(tier)
+        # part 1's sweep program, vmapped over the lot's devices
+        fn = eqx.filter_jit(eqx.filter_vmap(_sweep_program(tier), in_axes=(eqx.if_array(0), None)))
         jax.block_until_ready(fn(lot, rates))
-        t, (rate, ok) = _best_of(lambda: jax.block_until_ready(fn(lot, rates)), args.sweep_repeats)
+        t, (rate, ok, _) = _best_of(lambda: jax.block_until_ready(fn(lot, rates)), args.sweep_repeats)
         if not bool(np.all(np.asarray(ok))):
             raise SystemExit(f"lot scale, {name}: some points did not settle")
         out[name] = {"t_batch": t, "per_point_ms": t / rate.size * 1e3, "rate": np.asarray(rate)}

@@ -228,8 +228,7 @@ def _weak_at_solution(jac, names_free, threshold):
         evals, evecs = np.linalg.eigh(j.T @ j)
         notes = []
         for i in np.nonzero(np.sqrt(np.clip(evals, 0.0, None)) < threshold)[0]:
-            v = np.abs(evecs[:, i])
-            involved = [names_free[k] for k in np.nonzero(v > 0.3 * v.max())[0]]
+            involved = [names_free[k] for k in _members(evecs[:, i])]
             notes.append(f"{' x '.join(involved)} (s = {np.sqrt(max(evals[i], 0.0)):.2g})")
         out.append("" if not notes else
                    "the data no longer fix " + "; ".join(notes) + f" at the solution (singular value < "
@@ -422,6 +421,12 @@ class _LotSpread:
         return jax.tree.map(lambda x: x[: self.n] if eqx.is_array(x) else x, tree)
 
 
+def _members(direction):
+    """Indices of the parameters taking part in a weak direction: components over 0.3 of its largest."""
+    v = np.abs(direction)
+    return np.nonzero(v > 0.3 * v.max())[0]
+
+
 def _hold_unidentifiable(jac, names_free, threshold):
     """Indices (into the free list) to hold, and the reports. `jac` is (device, residual, free)."""
     normal = np.mean(np.einsum("dri,drj->dij", jac, jac), axis=0)
@@ -441,8 +446,7 @@ def _hold_unidentifiable(jac, names_free, threshold):
         i = int(np.argmin(s))
         if s[i] >= threshold and s[i] >= 1e-7 * s.max():
             break
-        v = np.abs(evecs[:, i])
-        involved = [keep[j] for j in np.nonzero(v > 0.3 * v.max())[0]]
+        involved = [keep[j] for j in _members(evecs[:, i])]
         held = max(involved)  # the last in order of preference
         reports.append(Unidentifiable(tuple(names_free[j] for j in involved), names_free[held], float(s[i])))
         keep.remove(held)

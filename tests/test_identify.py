@@ -315,8 +315,6 @@ def test_directions_the_data_no_longer_fix_at_the_solution_are_named():
 def test_a_nonfinite_model_inside_the_compiled_fit_is_explained():
     """An error raised inside the compiled model (as the implicit derivative's linear solve does on NaN) comes
     out of identify as a RuntimeError that says where and what to try, with the original as its cause."""
-    import equinox as eqx
-
     from gyrojax._identify import _nonfinite_explained
 
     @eqx.filter_jit
