@@ -214,22 +214,29 @@ def _nonfinite_explained(stage: str):
             "sweeps one at a time (fit_data(table, sweeps=...)) to find the one that fails.") from e
 
 
-def _weak_at_solution(jac, names_free, threshold):
-    """Per device, text naming the free directions the data no longer fix at the solution: a singular value of
-    the weighted Jacobian (data and prior rows) below `threshold`, in internal units. They were fixed at the
-    start (or identify would have held them), so the fit moved somewhere flat: a log-parameter run off towards
-    0 or infinity (an open-loop Q_y of 1e243, measured, with the solver reporting success) is the typical case.
-    `jac` is (device, residual, free)."""
+def _weak_directions(jac, threshold):
+    """Per device, the free directions the data no longer fix at the solution: (member indices into the free
+    list, singular value) for each singular value of the weighted Jacobian (data and prior rows) below
+    `threshold`, in internal units. `jac` is (device, residual, free)."""
     out = []
     for j in np.asarray(jac, dtype=float):
         if j.shape[1] == 0 or not np.all(np.isfinite(j)):
-            out.append("")
+            out.append([])
             continue
         evals, evecs = np.linalg.eigh(j.T @ j)
-        notes = []
-        for i in np.nonzero(np.sqrt(np.clip(evals, 0.0, None)) < threshold)[0]:
-            involved = [names_free[k] for k in _members(evecs[:, i])]
-            notes.append(f"{' x '.join(involved)} (s = {np.sqrt(max(evals[i], 0.0)):.2g})")
+        out.append([(tuple(int(k) for k in _members(evecs[:, i])), float(np.sqrt(max(evals[i], 0.0))))
+                    for i in np.nonzero(np.sqrt(np.clip(evals, 0.0, None)) < threshold)[0]])
+    return out
+
+
+def _weak_at_solution(jac, names_free, threshold):
+    """Per device, text naming the free directions the data no longer fix at the solution (`_weak_directions`).
+    They were fixed at the start (or identify would have held them), so the fit moved somewhere flat: a
+    log-parameter run off towards 0 or infinity (an open-loop Q_y of 1e243, measured, with the solver reporting
+    success) is the typical case."""
+    out = []
+    for weak in _weak_directions(jac, threshold):
+        notes = [f"{' x '.join(names_free[k] for k in members)} (s = {s:.2g})" for members, s in weak]
         out.append("" if not notes else
                    "the data no longer fix " + "; ".join(notes) + f" at the solution (singular value < "
                    f"{threshold:g}): the fit may have wandered along a flat direction. Give it a prior "
@@ -484,7 +491,7 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
              starts: int = 1, start_spread: float = 0.05, seed: int = 0, rtol: float = 1e-8, atol: float = 1e-8,
              max_steps: int = 200, identifiability_threshold: float = 1.0, hold=(), tier=Steady(),
              evaluate_only: bool = False, lot_solve: str = "vmap", shard: bool | None = None,
-             lot_chunk: int | None | str = "auto") -> Fit:
+             lot_chunk: int | None | str = "auto", restart_runoffs: bool = True) -> Fit:
     r"""Fit the free parameters of `model` to every sweep in `data`, per device (vmapped) or jointly.
 
     **Arguments:**
@@ -517,6 +524,11 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
       once. `"auto"` (default): 16 on a CPU backend for independent fits on one JAX device (measured on 256
       devices: chunks of 16 ran 3-4x faster per device than chunks of 128, whose batched steady solves
       outgrow the cache), else `None`. Not with `shard` over several JAX devices, nor for a joint fit.
+    - `restart_runoffs`: a device whose solution leaves a direction the data no longer fix (a parameter run
+      off towards 0 or infinity, e.g. an open-loop Q_y whose steep sense resonance the first steps overshot)
+      is solved again from its start with that direction held, then released from there; the lower chi2
+      wins, and its message says so. Independent fits only (default on; costs two more solves when it
+      fires).
     - `evaluate_only`: do not solve; return the `Fit` at the start (residuals, Jacobian, covariance there),
       e.g. to test a candidate effect at zero against an already fitted model.
 
@@ -641,14 +653,50 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         best = (np.zeros((n, n_dev)), np.zeros(n_lot), np.full(n, optx.RESULTS.successful._value),
                 np.zeros(n, dtype=int), None)
     u_free, u_lot, code, steps, _ = best
-    u_full = np.zeros((n, n_dev))
-    u_full[:, free_index] = u_free[:, free_index]
-    with _nonfinite_explained("at the solution"):
-        final = at_start if evaluate_only else spread.unpad(
-            _evaluate(problem_all_s, spread.pad(jnp.asarray(u_full))[0], jnp.asarray(u_lot), t_sf_s,
-                      spread.chunk))
+
+    def at(u_free):
+        u_full = np.zeros((n, n_dev))
+        u_full[:, free_index] = u_free[:, free_index]
+        with _nonfinite_explained("at the solution"):
+            return u_full, at_start if evaluate_only else spread.unpad(
+                _evaluate(problem_all_s, spread.pad(jnp.asarray(u_full))[0], jnp.asarray(u_lot), t_sf_s,
+                          spread.chunk))
+
+    u_full, final = at(u_free)
+    notes = ("",) * n
+    if restart_runoffs and not evaluate_only and not n_lot:
+        weak = _weak_directions(np.asarray(final.jac)[:, :, free_index], identifiability_threshold)
+        runoff = [sorted({free_index[k] for members, _ in w for k in members}) for w in weak]
+        if any(runoff):
+            solve = _solve_loop if lot_solve == "loop" else _solve_independent
+
+            def solve_from(prob, u0):
+                (prob_s, u0_s) = solve_spread.pad(prob, jnp.asarray(u0))
+                with _nonfinite_explained("during the restart of a run-off fit"):
+                    out = solve_spread.unpad(solve(prob_s, u0_s, jnp.zeros(0), solver_, max_steps,
+                                                   solve_spread.chunk))
+                return tuple(np.asarray(x) for x in out)
+
+            held_mask = np.array(problem.free_mask)
+            u_hold = np.array(u_free)
+            for d, idx in enumerate(runoff):
+                held_mask[d, idx] = 0.0
+                if idx:
+                    u_hold[d] = 0.0  # from the start again
+            v1, _, steps1, _ = solve_from(eqx.tree_at(lambda p: p.free_mask, problem, jnp.asarray(held_mask)),
+                                          u_hold)
+            v2, code2, steps2, chi2_2 = solve_from(problem, v1)
+            better = np.array([bool(idx) for idx in runoff]) & (np.nan_to_num(chi2_2, nan=np.inf) < best[4])
+            if better.any():
+                u_free = np.where(better[:, None], v2, u_free)
+                code = np.where(better, code2, code)
+                steps = np.where(better, steps + steps1 + steps2, steps)
+                u_full, final = at(u_free)
+                names_runoff = [", ".join(names_dev[i] for i in idx) for idx in runoff]
+                notes = tuple(f"restarted with {nm} held, then released, after the first solve ran off along it"
+                              if b else "" for nm, b in zip(names_runoff, better))
     return _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full, np.asarray(u_lot), code,
-                   steps, final, held_reports, identifiability_threshold)
+                   steps, final, held_reports, identifiability_threshold, notes)
 
 
 def _sf_temperature(data):
@@ -662,7 +710,7 @@ def _sf_temperature(data):
 
 
 def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full, u_lot, code, steps, final,
-            held_reports, threshold):
+            held_reports, threshold, notes):
     n, n_dev, n_lot = len(data.devices), len(names_dev), len(names_lot)
     f = np.asarray(free_index, dtype=int)
     jac = np.asarray(final.jac)[:, :, f]  # (device, residual, free)
@@ -712,6 +760,7 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
                 for o, c, fl in zip(ok, np.asarray(code), failed)]
     weak = _weak_at_solution(jac, [names_dev[i] for i in f], threshold)
     messages = tuple(m if not w else f"{m}; but {w}" for m, w in zip(messages, weak))
+    messages = tuple(m if not note else f"{m} ({note})" for m, note in zip(messages, notes))
     free_mask = tuple(bool(i in set(f.tolist())) for i in range(n_dev))
     return Fit(model=fitted, names=names_dev, lot_names=names_lot, values=values[:, :n_dev],
                stderr=stderr[:, :n_dev], lot_values=lot_values[0], lot_stderr=lot_stderr[0], free=free_mask,

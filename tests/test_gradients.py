@@ -84,3 +84,37 @@ def test_vmap_over_devices_equals_loop(device):
     for i in range(3):
         one = jax.tree.map(lambda x: x[i], lot)
         assert np.allclose(np.asarray(batched[i]), np.asarray(gj.rate_sweep(one, rates).rate), rtol=1e-12)
+
+
+def test_steady_derivative_of_a_point_without_steady_state_is_nan_not_an_error(device):
+    """A fit's trial step can reach parameters where a point has no steady state. Its value and derivative
+    must come back NaN (the fit's trust region rejects the step), not raise inside the compiled fit (as
+    optimistix's implicit adjoint did: its tangent solve is a throwing lineax solve)."""
+    f = _output(gj.Steady())
+    p = jnp.array([float(device.feedback_electrode.k_vf), 1e-5])
+    broken = eqx.tree_at(lambda g: g.resonator.q_y, device, jnp.asarray(jnp.nan))
+    assert np.isnan(float(f(p, broken)))
+    jac = np.asarray(jax.jit(jax.jacfwd(f))(p, broken))
+    assert jac.shape == (2,) and np.all(np.isnan(jac))
+    # the same compiled derivative is finite and right on a device that settles
+    assert np.all(np.isfinite(np.asarray(jax.jit(jax.jacfwd(f))(p, device))))
+
+
+def test_implicit_root_derivative_matches_the_closed_form():
+    """The implicit-function derivative of the root of z^2 - a (z = sqrt a): dz/da = 1 / (2 sqrt a), forward
+    and reverse."""
+    from gyrojax._simulate._implicit import implicit_root
+
+    def find(a):
+        return jnp.sqrt(a), jnp.zeros((), dtype=int)
+
+    def residual(z, a):
+        return z**2 - a
+
+    def root(a):
+        return implicit_root(a, find=find, residual=residual)[0]
+
+    a = jnp.asarray(2.0)
+    expected = 1.0 / (2.0 * np.sqrt(2.0))
+    assert np.isclose(float(jax.jacfwd(root)(a)), expected, rtol=1e-14)
+    assert np.isclose(float(jax.grad(root)(a)), expected, rtol=1e-14)

@@ -1,6 +1,7 @@
 """The three tiers and the one entry point that settles a measurement point with any of them."""
 
 import abc
+import functools as ft
 import math
 
 import diffrax
@@ -28,6 +29,7 @@ from ._model import (
     wave_scales,
 )
 from ._hairer_controller import HairerController
+from ._implicit import implicit_root
 from ._unrolled_rk import UnrolledRK
 
 
@@ -121,25 +123,35 @@ class Steady(AbstractTier):
                                  f"equilibrium; a modulated one does not), got {value!r}. Use the "
                                  "averaged or full tier, or gyrojax.frequency_response.")
         full_scales = slow_scales(gyro)
-        scales = _last_stages(full_scales)
-        rates = _last_stages(_residual_rates(gyro, full_scales))
         orders = (full_scales.loops.drive_lpf.shape[0], full_scales.loops.sense_lpf.shape[0])
-
-        def residual(z, _):
-            d, _ = averaged_field(0.0, _all_stages(_mul(z, scales), orders), gyro, stimulus)
-            return _div(_div(_first_stages(d), scales), rates)
-
-        y0 = _div(_last_stages(operating_point(gyro, stimulus)), scales)
-        # XLA-only linear solves in the root find and its implicit derivative: see gyrojax/_linsolve.py.
-        method = optx.Chord if self.jacobian == "once" else optx.Newton
-        sol = optx.root_find(residual, method(rtol=self.rtol, atol=self.atol, linear_solver=PivotedLU()), y0,
-                             max_steps=self.max_steps, throw=False,
-                             adjoint=optx.ImplicitAdjoint(linear_solver=PivotedLU()))
-        state = _all_stages(_mul(sol.value, scales), orders)
+        z, (code, steps) = implicit_root((gyro, stimulus), find=ft.partial(_steady_find, self, orders),
+                                         residual=ft.partial(_steady_residual, orders))
+        state = _all_stages(_mul(z, _last_stages(full_scales)), orders)
         _, out = averaged_field(0.0, state, gyro, stimulus)
-        result = RESULTS.where(sol.result == optx.RESULTS.successful, RESULTS.successful,
-                               RESULTS.root_find_failed)
-        return _finalise(out.rate, out.quadrature, out.frequency, state, result, sol.stats["num_steps"])
+        result = RESULTS.where(code == optx.RESULTS.successful._value, RESULTS.successful, RESULTS.root_find_failed)
+        return _finalise(out.rate, out.quadrature, out.frequency, state, result, steps)
+
+
+def _steady_residual(orders, z, inputs):
+    """The averaged equations at the scaled unknowns `z` (last LPF stages only), each component a relative
+    error."""
+    gyro, stimulus = inputs
+    full_scales = slow_scales(gyro)
+    scales = _last_stages(full_scales)
+    rates = _last_stages(_residual_rates(gyro, full_scales))
+    d, _ = averaged_field(0.0, _all_stages(_mul(z, scales), orders), gyro, stimulus)
+    return _div(_div(_first_stages(d), scales), rates)
+
+
+def _steady_find(tier, orders, inputs):
+    gyro, stimulus = inputs
+    y0 = _div(_last_stages(operating_point(gyro, stimulus)), _last_stages(slow_scales(gyro)))
+    # XLA-only linear solves: see gyrojax/_linsolve.py. Not differentiated (see implicit_root).
+    method = optx.Chord if tier.jacobian == "once" else optx.Newton
+    sol = optx.root_find(ft.partial(_steady_residual, orders), method(rtol=tier.rtol, atol=tier.atol,
+                         linear_solver=PivotedLU()), y0, inputs, max_steps=tier.max_steps, throw=False,
+                         adjoint=optx.RecursiveCheckpointAdjoint())
+    return sol.value, (sol.result._value, sol.stats["num_steps"])
 
 
 # At equilibrium every demodulator low-pass stage equals its input (unit DC gain), so the root find solves for
