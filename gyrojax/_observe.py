@@ -38,9 +38,10 @@ def at_temperature(gyro: Gyroscope, temperature) -> Gyroscope:
 def rate_table_points(gyro: Gyroscope, rates_dps, temperatures, tier: AbstractTier = Steady()) -> Settled:
     """Settled rate-table points: table rates in deg/s, one die temperature (deg C) per point."""
     def one(rate, temp):
-        return tier.settle(at_temperature(gyro, temp), Stimulus(rate=rate * DEG))
+        return at_temperature(gyro, temp), Stimulus(rate=rate * DEG)
 
-    return jax.vmap(one)(jnp.asarray(rates_dps, dtype=float), jnp.asarray(temperatures, dtype=float))
+    return tier.settle_points(*jax.vmap(one)(jnp.asarray(rates_dps, dtype=float),
+                                             jnp.asarray(temperatures, dtype=float)))
 
 
 def vcf_static_points(gyro: Gyroscope, amplitudes_v, temperatures, tier: AbstractTier = Steady(),
@@ -48,9 +49,10 @@ def vcf_static_points(gyro: Gyroscope, amplitudes_v, temperatures, tier: Abstrac
     """Settled static virtual-Coriolis points (seed 003 Eq. 7): the virtual-rate voltage V_ac (V, signed)
     times the fixed carrier V_fc, one die temperature per point."""
     def one(v, temp):
-        return tier.settle(at_temperature(gyro, temp), Stimulus(vcf_ac=v, vcf_fc=carrier_v))
+        return at_temperature(gyro, temp), Stimulus(vcf_ac=v, vcf_fc=carrier_v)
 
-    return jax.vmap(one)(jnp.asarray(amplitudes_v, dtype=float), jnp.asarray(temperatures, dtype=float))
+    return tier.settle_points(*jax.vmap(one)(jnp.asarray(amplitudes_v, dtype=float),
+                                             jnp.asarray(temperatures, dtype=float)))
 
 
 def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz, temperatures, amplitude_v=VCF_DYNAMIC_AMPLITUDE_V,

@@ -252,9 +252,9 @@ class Protocol(eqx.Module):
 @eqx.filter_jit
 def _rate_sweep(gyro, rates, times, tier):
     def one(rate, time):
-        return tier.settle(gyro, Stimulus(rate=rate, time=time))
+        return gyro, Stimulus(rate=rate, time=time)
 
-    return jax.vmap(one)(rates, times)
+    return tier.settle_points(*jax.vmap(one)(rates, times))
 
 
 def rate_sweep(gyro: Gyroscope, rates, *, tier: AbstractTier = Steady(), times=None) -> Settled:

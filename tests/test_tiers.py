@@ -1,6 +1,7 @@
 """The three tiers against Eq. (2) and against each other, and the loops doing their jobs."""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -66,6 +67,33 @@ def test_chord_and_newton_steady_agree(devices, sweeps):
     assert np.max(np.abs(np.asarray(chord.quadrature) - np.asarray(newton.quadrature))) / full_scale < 1e-9
     assert int(np.max(np.asarray(newton.num_steps))) >= 2  # the INL needs more than the operating point
     assert int(np.max(np.asarray(chord.num_steps))) <= int(np.max(np.asarray(newton.num_steps))) + 3
+
+
+def test_sweep_chord_matches_point_by_point_values_and_derivatives(devices):
+    """`Steady.settle_points` (one chord Jacobian for the whole sweep, at its centre) against `settle` vmapped
+    point by point (a chord Jacobian per point): the same rates far inside a ppm, and the same derivatives with
+    respect to a feedback factor and an INL coefficient (each point's is implicit at its own root)."""
+    _, inl = devices
+    rates = jnp.asarray(RATES)
+
+    def device(p):
+        return eqx.tree_at(lambda g: (g.feedback_electrode.k_vf, g.excitation.dac.inl), inl,
+                           (p[0], inl.excitation.dac.inl.at[1].set(p[1])))
+
+    @jax.jit
+    def by_sweep(p):
+        return gj.rate_sweep(device(p), rates).rate
+
+    @jax.jit
+    def by_point(p):
+        return jax.vmap(lambda r: gj.settle(device(p), gj.Stimulus(rate=r)))(rates).rate
+
+    p = jnp.array([float(inl.feedback_electrode.k_vf), float(inl.excitation.dac.inl[1])])
+    a, b = np.asarray(by_sweep(p)), np.asarray(by_point(p))
+    assert np.max(np.abs(a - b)) / np.max(np.abs(b)) < 1e-9
+    ja, jb = np.asarray(jax.jit(jax.jacfwd(by_sweep))(p)), np.asarray(jax.jit(jax.jacfwd(by_point))(p))
+    assert np.all(np.abs(jb) > 0)
+    assert np.max(np.abs(ja - jb) / np.max(np.abs(jb), axis=0)) < 1e-7
 
 
 @pytest.mark.parametrize("tier", ["averaged", "full"])

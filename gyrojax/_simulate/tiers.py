@@ -8,12 +8,13 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
 from .._checks import check_positive
 from .._gyroscope import Gyroscope
-from .._linsolve import PivotedLU
+from .._linsolve import PivotedLU, lu_factor, lu_solve
 from .._solution import RESULTS
 from .._stimulus import Stimulus
 from ._model import (
@@ -82,6 +83,11 @@ class AbstractTier(eqx.Module):
     def settle(self, gyro: Gyroscope, stimulus: Stimulus) -> Settled:
         """Settle `gyro` under a constant `stimulus`."""
 
+    def settle_points(self, gyros: Gyroscope, stimuli: Stimulus) -> Settled:
+        """Settle the points of a sweep: `gyros` and `stimuli` carry a leading point axis on every array leaf
+        (e.g. the device at each point's die temperature). Default: `settle` vmapped over the points."""
+        return jax.vmap(self.settle)(gyros, stimuli)
+
 
 def _finalise(rate, quad, freq, state, result, steps):
     bad = ~(jnp.isfinite(rate) & jnp.isfinite(quad) & jnp.isfinite(freq))
@@ -116,20 +122,99 @@ class Steady(AbstractTier):
                              f"{self.jacobian!r}.")
 
     def settle(self, gyro, stimulus):
-        for name in ("rate_frequency", "vcf_frequency"):
-            value = getattr(stimulus, name)
-            if not isinstance(value, jax.core.Tracer) and float(value) != 0.0:
-                raise ValueError(f"Steady tier: stimulus.{name} must be 0 (a constant input has an "
-                                 f"equilibrium; a modulated one does not), got {value!r}. Use the "
-                                 "averaged or full tier, or gyrojax.frequency_response.")
-        full_scales = slow_scales(gyro)
-        orders = (full_scales.loops.drive_lpf.shape[0], full_scales.loops.sense_lpf.shape[0])
+        _check_constant(stimulus)
+        orders = _orders(gyro)
         z, (code, steps) = implicit_root((gyro, stimulus), find=ft.partial(_steady_find, self, orders),
                                          residual=ft.partial(_steady_residual, orders))
-        state = _all_stages(_mul(z, _last_stages(full_scales)), orders)
-        _, out = averaged_field(0.0, state, gyro, stimulus)
-        result = RESULTS.where(code == optx.RESULTS.successful._value, RESULTS.successful, RESULTS.root_find_failed)
-        return _finalise(out.rate, out.quadrature, out.frequency, state, result, steps)
+        return _steady_settled(gyro, stimulus, orders, z, code == optx.RESULTS.successful._value, steps)
+
+    def settle_points(self, gyros, stimuli):
+        """A sweep's points with one chord Jacobian for all of them (`jacobian="once"`): formed and
+        factorised at the sweep's centre (the mean over points of every parameter and input: zero rate for a
+        symmetric rate table), which is within the chord's reach of every point of a sweep; each point then
+        costs only evaluations of the equations. Each point's derivative is still exact (the implicit
+        function theorem at its own root). Newton (`"every_step"`) settles point by point."""
+        if self.jacobian != "once":
+            return super().settle_points(gyros, stimuli)
+        _check_constant(stimuli)
+        one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, gyros)
+        orders = _orders(one)
+        frozen = jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x, (gyros, stimuli))
+        z, ok, steps = _shared_chord(self, orders, frozen)
+
+        def point(gyro, stimulus, z_i, ok_i, steps_i):
+            z_i, _ = implicit_root((gyro, stimulus, z_i), find=_given_root,
+                                   residual=ft.partial(_given_root_residual, orders))
+            return _steady_settled(gyro, stimulus, orders, z_i, ok_i, steps_i)
+
+        return jax.vmap(point)(gyros, stimuli, z, ok, steps)
+
+
+def _check_constant(stimulus):
+    for name in ("rate_frequency", "vcf_frequency"):
+        value = getattr(stimulus, name)
+        if not isinstance(value, jax.core.Tracer) and bool(np.any(np.asarray(value) != 0.0)):
+            raise ValueError(f"Steady tier: stimulus.{name} must be 0 (a constant input has an "
+                             f"equilibrium; a modulated one does not), got {value!r}. Use the "
+                             "averaged or full tier, or gyrojax.frequency_response.")
+
+
+def _orders(gyro):
+    scales = jax.eval_shape(slow_scales, gyro)
+    return scales.loops.drive_lpf.shape[0], scales.loops.sense_lpf.shape[0]
+
+
+def _steady_settled(gyro, stimulus, orders, z, ok, steps):
+    state = _all_stages(_mul(z, _last_stages(slow_scales(gyro))), orders)
+    _, out = averaged_field(0.0, state, gyro, stimulus)
+    result = RESULTS.where(ok, RESULTS.successful, RESULTS.root_find_failed)
+    return _finalise(out.rate, out.quadrature, out.frequency, state, result, steps)
+
+
+def _given_root(inputs):
+    return inputs[2], ()
+
+
+def _given_root_residual(orders, z, inputs):
+    return _steady_residual(orders, z, inputs[:2])
+
+
+def _steady_start(inputs):
+    gyro, stimulus = inputs
+    return _div(_last_stages(operating_point(gyro, stimulus)), _last_stages(slow_scales(gyro)))
+
+
+def _shared_chord(tier, orders, inputs):
+    """Chord iterations for every point of a sweep with one Jacobian, optimistix's Chord termination (max
+    norm; step within atol + rtol |z| and residual within atol). Not differentiated."""
+    y0 = jax.vmap(lambda i: ravel_pytree(_steady_start(i))[0])(inputs)
+    _, unravel = ravel_pytree(_steady_start(jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, inputs)))
+
+    def residual(z, inp):
+        return ravel_pytree(_steady_residual(orders, unravel(z), inp))[0]
+
+    centre = jax.tree.map(lambda x: (jnp.mean(x, axis=0) if jnp.issubdtype(x.dtype, jnp.inexact) else x[0])
+                          if eqx.is_array(x) else x, inputs)
+    lu, perm = lu_factor(jax.jacfwd(residual)(ravel_pytree(_steady_start(centre))[0], centre))
+    solve = jax.vmap(lambda b: lu_solve(lu, perm, b))
+    batched = jax.vmap(residual)
+
+    def cond(carry):
+        _, done, _, k = carry
+        return (k < tier.max_steps) & ~jnp.all(done)
+
+    def body(carry):
+        z, done, steps, k = carry
+        f = batched(z, inputs)
+        dz = solve(f)
+        z_new = z - dz
+        small = (jnp.max(jnp.abs(dz) / (tier.atol + tier.rtol * jnp.abs(z_new)), axis=-1) < 1.0) & \
+            (jnp.max(jnp.abs(f), axis=-1) < tier.atol)
+        return jnp.where(done[:, None], z, z_new), done | small, steps + jnp.where(done, 0, 1), k + 1
+
+    n = y0.shape[0]
+    z, done, steps, _ = jax.lax.while_loop(cond, body, (y0, jnp.zeros(n, bool), jnp.zeros(n, int), 0))
+    return jax.vmap(unravel)(z), done, steps
 
 
 def _steady_residual(orders, z, inputs):
@@ -144,8 +229,7 @@ def _steady_residual(orders, z, inputs):
 
 
 def _steady_find(tier, orders, inputs):
-    gyro, stimulus = inputs
-    y0 = _div(_last_stages(operating_point(gyro, stimulus)), _last_stages(slow_scales(gyro)))
+    y0 = _steady_start(inputs)
     # XLA-only linear solves: see gyrojax/_linsolve.py. Not differentiated (see implicit_root).
     method = optx.Chord if tier.jacobian == "once" else optx.Newton
     sol = optx.root_find(ft.partial(_steady_residual, orders), method(rtol=tier.rtol, atol=tier.atol,
