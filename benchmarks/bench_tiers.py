@@ -543,7 +543,7 @@ def _tolerance_search(run, error_of, targets, budget_s):
 def _sweep_program(tier):
     @eqx.filter_jit
     def run(gyro, rates):
-        s = jax.vmap(lambda r: tier.settle(gyro, Stimulus(rate=r)))(rates)
+        s = tier.settle_points(*jax.vmap(lambda r: (gyro, Stimulus(rate=r)))(rates))
         return s.rate, s.result == RESULTS.successful, s.num_steps
 
     return run
