@@ -441,9 +441,12 @@ def _hold_unidentifiable(jac, names_free, threshold):
     reports = []
     # Parameters the data do not see at all, one by one; then combinations.
     scale = np.sqrt(max(float(np.max(np.diagonal(normal))), 0.0)) if keep else 0.0
+    # A single column's norm is a sum of squares (no cancellation): only a column at the round-off of the
+    # largest is numerically zero. (1e-7 here held a sense Duffing coefficient with a column norm of 1.1e3
+    # beside a dynamic VCF sweep's 2.7e10 for omega_y: the diagnosis then could not add it.)
     for j in list(keep):
         s_j = float(np.sqrt(max(normal[j, j], 0.0)))
-        if s_j < threshold or s_j < 1e-7 * scale:
+        if s_j < threshold or s_j < 1e-12 * scale:
             reports.append(Unidentifiable((names_free[j],), names_free[j], s_j))
             keep.remove(j)
     while keep:
