@@ -449,12 +449,15 @@ def _hold_unidentifiable(jac, names_free, threshold):
         if s_j < threshold or s_j < 1e-12 * scale:
             reports.append(Unidentifiable((names_free[j],), names_free[j], s_j))
             keep.remove(j)
+    # Combinations: the SVD of the stacked Jacobian (the lot's mean normal matrix is its Gram matrix), not
+    # eigh of J^T J, whose absolute error eps * s_max^2 left nothing below ~400 resolvable beside a dynamic
+    # VCF sweep (s_max ~ 3e10), which the former 1e-7 * s_max guard then had to hold.
+    stacked = np.asarray(jac, dtype=float).reshape(-1, jac.shape[-1]) / np.sqrt(max(jac.shape[0], 1))
     while keep:
-        sub = np.asarray(normal)[np.ix_(keep, keep)]
-        evals, evecs = np.linalg.eigh(sub)
-        s = np.sqrt(np.clip(evals, 0.0, None))
+        _, s, vt = np.linalg.svd(stacked[:, keep], full_matrices=False)
+        evecs = vt.T
         i = int(np.argmin(s))
-        if s[i] >= threshold and s[i] >= 1e-7 * s.max():
+        if s[i] >= threshold and s[i] >= 1e-12 * s.max():
             break
         involved = [keep[j] for j in _members(evecs[:, i])]
         held = max(involved)  # the last in order of preference
