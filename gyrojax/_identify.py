@@ -441,17 +441,23 @@ def _hold_unidentifiable(jac, names_free, threshold):
     reports = []
     # Parameters the data do not see at all, one by one; then combinations.
     scale = np.sqrt(max(float(np.max(np.diagonal(normal))), 0.0)) if keep else 0.0
+    # A single column's norm is a sum of squares (no cancellation): only a column at the round-off of the
+    # largest is numerically zero. (1e-7 here held a sense Duffing coefficient with a column norm of 1.1e3
+    # beside a dynamic VCF sweep's 2.7e10 for omega_y: the diagnosis then could not add it.)
     for j in list(keep):
         s_j = float(np.sqrt(max(normal[j, j], 0.0)))
-        if s_j < threshold or s_j < 1e-7 * scale:
+        if s_j < threshold or s_j < 1e-12 * scale:
             reports.append(Unidentifiable((names_free[j],), names_free[j], s_j))
             keep.remove(j)
+    # Combinations: the SVD of the stacked Jacobian (the lot's mean normal matrix is its Gram matrix), not
+    # eigh of J^T J, whose absolute error eps * s_max^2 left nothing below ~400 resolvable beside a dynamic
+    # VCF sweep (s_max ~ 3e10), which the former 1e-7 * s_max guard then had to hold.
+    stacked = np.asarray(jac, dtype=float).reshape(-1, jac.shape[-1]) / np.sqrt(max(jac.shape[0], 1))
     while keep:
-        sub = np.asarray(normal)[np.ix_(keep, keep)]
-        evals, evecs = np.linalg.eigh(sub)
-        s = np.sqrt(np.clip(evals, 0.0, None))
+        _, s, vt = np.linalg.svd(stacked[:, keep], full_matrices=False)
+        evecs = vt.T
         i = int(np.argmin(s))
-        if s[i] >= threshold and s[i] >= 1e-7 * s.max():
+        if s[i] >= threshold and s[i] >= 1e-12 * s.max():
             break
         involved = [keep[j] for j in _members(evecs[:, i])]
         held = max(involved)  # the last in order of preference
