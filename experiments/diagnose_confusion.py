@@ -44,8 +44,8 @@ SWEEPS = {
     # open loop: no FTR DAC to sweep. No vcf_dynamic yet: identify now fits it (session 6: the steady tier's
     # own implicit derivative and the run-off restart; with no hidden effect the diagnosis selects nothing at
     # chi2_red 0.977), but with duffing_sense hidden identify's hold rule (1e-7 of the largest column) holds
-    # its coefficient beside the dynamic sweep's steep omega_y column, so it is missed; fixed on branch
-    # hold-criterion (found, chi2_red 0.979), not merged yet. See README.
+    # its coefficient beside the dynamic sweep's steep omega_y column, so it is missed; fixed in session 6
+    # (found, chi2_red 0.979); the rows here are to be re-run with vcf_dynamic. See README.
     "vcf-2018": ("rate_table", "vcf_static"),
 }
 PAIR = ("dac_inl", "vref_drift")  # issue 5: "two effects hidden at once"
