@@ -640,7 +640,8 @@ def part1(devices, args):
            f"{results[default_name]['inl']['t_batch'] / npts * 1e3:.3f} ms/point: {inl_ratio:.0f}x "
            f"(steady max steps {results['steady']['inl']['steps']})")
     lot = lot_scale(devices["inl"], rates, args)
-    return {"lot_scale": lot, "speedup_inl_vs_default_full": inl_ratio, "rates_dps": dps.tolist(), "settle_time_s": st, "average_periods": periods,
+    return {"lot_scale": lot, "speedup_inl_vs_default_full": inl_ratio, "rates_dps": dps.tolist(),
+            "settle_time_s": st, "average_periods": periods,
             "full_scale_lsb": fs, "steady_nl_ppm_inl": nl_s, "tiers": rows, "reference": tiers[0][0],
             "default": default_name, "steady_meets_speed_target": ok_speed, "steady_meets_ppm_target": ok_ppm}
 

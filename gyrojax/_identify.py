@@ -223,9 +223,9 @@ def _weak_directions(jac, threshold):
         if j.shape[1] == 0 or not np.all(np.isfinite(j)):
             out.append([])
             continue
-        evals, evecs = np.linalg.eigh(j.T @ j)
-        out.append([(tuple(int(k) for k in _members(evecs[:, i])), float(np.sqrt(max(evals[i], 0.0))))
-                    for i in np.nonzero(np.sqrt(np.clip(evals, 0.0, None)) < threshold)[0]])
+        # the SVD, as in `_hold_unidentifiable` (eigh of J^T J cannot resolve s below ~sqrt(eps) s_max)
+        s, vt = _singular(j)
+        out.append([(tuple(int(k) for k in _members(vt[i])), float(s[i])) for i in np.nonzero(s < threshold)[0]])
     return out
 
 
@@ -428,6 +428,15 @@ class _LotSpread:
         return jax.tree.map(lambda x: x[: self.n] if eqx.is_array(x) else x, tree)
 
 
+def _singular(j):
+    """Singular values and right singular vectors (rows of `vt`) of `j`, one per column: fewer rows than
+    columns are padded with zero rows, so that the null directions come out with s = 0."""
+    if j.shape[0] < j.shape[1]:
+        j = np.concatenate([j, np.zeros((j.shape[1] - j.shape[0], j.shape[1]))])
+    _, s, vt = np.linalg.svd(j, full_matrices=False)
+    return s, vt
+
+
 def _members(direction):
     """Indices of the parameters taking part in a weak direction: components over 0.3 of its largest."""
     v = np.abs(direction)
@@ -436,25 +445,25 @@ def _members(direction):
 
 def _hold_unidentifiable(jac, names_free, threshold):
     """Indices (into the free list) to hold, and the reports. `jac` is (device, residual, free)."""
-    normal = np.mean(np.einsum("dri,drj->dij", jac, jac), axis=0)
+    # The lot's Jacobians stacked (its Gram matrix is the lot's mean normal matrix). Combinations come from its
+    # SVD, not eigh of J^T J, whose absolute error eps * s_max^2 left nothing below ~400 resolvable beside a
+    # dynamic VCF sweep (s_max ~ 3e10), which the former 1e-7 * s_max guard then had to hold.
+    stacked = np.asarray(jac, dtype=float).reshape(-1, jac.shape[-1]) / np.sqrt(max(jac.shape[0], 1))
     keep = list(range(len(names_free)))
     reports = []
     # Parameters the data do not see at all, one by one; then combinations.
-    scale = np.sqrt(max(float(np.max(np.diagonal(normal))), 0.0)) if keep else 0.0
+    columns = np.linalg.norm(stacked, axis=0)
+    scale = float(np.max(columns)) if keep else 0.0
     # A single column's norm is a sum of squares (no cancellation): only a column at the round-off of the
     # largest is numerically zero. (1e-7 here held a sense Duffing coefficient with a column norm of 1.1e3
     # beside a dynamic VCF sweep's 2.7e10 for omega_y: the diagnosis then could not add it.)
     for j in list(keep):
-        s_j = float(np.sqrt(max(normal[j, j], 0.0)))
+        s_j = float(columns[j])
         if s_j < threshold or s_j < 1e-12 * scale:
             reports.append(Unidentifiable((names_free[j],), names_free[j], s_j))
             keep.remove(j)
-    # Combinations: the SVD of the stacked Jacobian (the lot's mean normal matrix is its Gram matrix), not
-    # eigh of J^T J, whose absolute error eps * s_max^2 left nothing below ~400 resolvable beside a dynamic
-    # VCF sweep (s_max ~ 3e10), which the former 1e-7 * s_max guard then had to hold.
-    stacked = np.asarray(jac, dtype=float).reshape(-1, jac.shape[-1]) / np.sqrt(max(jac.shape[0], 1))
     while keep:
-        _, s, vt = np.linalg.svd(stacked[:, keep], full_matrices=False)
+        s, vt = _singular(stacked[:, keep])
         evecs = vt.T
         i = int(np.argmin(s))
         if s[i] >= threshold and s[i] >= 1e-12 * s.max():
@@ -626,22 +635,28 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     solver_ = _solver(solver, rtol, atol)
     rng = np.random.default_rng(seed)
     best = None
+
+    def solve_devices(prob_s, u0, stage):
+        """Independent fits of every device of the padded problem `prob_s` from `u0`: (u, code, steps, chi2)."""
+        solve = _solve_loop if lot_solve == "loop" else _solve_independent
+        (u0_s,) = solve_spread.pad(jnp.asarray(u0))
+        with _nonfinite_explained(stage):
+            out = solve_spread.unpad(solve(prob_s, u0_s, jnp.zeros(0), solver_, max_steps, solve_spread.chunk))
+        return tuple(np.asarray(x) for x in out)
+
     for k in range(0 if evaluate_only else starts):
         # The solve runs over every per-device entry (held ones masked out of the model), so that a model's
         # compiled solve is shared by every choice of free parameters (diagnose adds effects by unmasking).
         u0 = np.zeros((n, n_dev))
         if k > 0:
             u0[:, free_index] = rng.normal(scale=start_spread, size=(n, len(free_index)))
-        (u0_s,) = solve_spread.pad(jnp.asarray(u0))
         if n_lot:
+            (u0_s,) = solve_spread.pad(jnp.asarray(u0))
             u0_lot = np.zeros(n_lot) if k == 0 else rng.normal(scale=start_spread, size=n_lot)
             with _nonfinite_explained(f"during the joint solve (start {k})"):
                 res = solve_spread.unpad(_solve_joint(problem_s, u0_s, jnp.asarray(u0_lot), solver_, max_steps))
         else:
-            solve = _solve_loop if lot_solve == "loop" else _solve_independent
-            with _nonfinite_explained(f"during the solve (start {k})"):
-                v, code, steps, chi2 = solve_spread.unpad(solve(problem_s, u0_s, jnp.zeros(0), solver_, max_steps,
-                                                                solve_spread.chunk))
+            v, code, steps, chi2 = solve_devices(problem_s, u0, f"during the solve (start {k})")
             res = (v, jnp.zeros(0), code, steps, chi2)
         res = tuple(np.asarray(x) for x in res)
         if best is None:
@@ -674,24 +689,16 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         weak = _weak_directions(np.asarray(final.jac)[:, :, free_index], identifiability_threshold)
         runoff = [sorted({free_index[k] for members, _ in w for k in members}) for w in weak]
         if any(runoff):
-            solve = _solve_loop if lot_solve == "loop" else _solve_independent
-
-            def solve_from(prob, u0):
-                (prob_s, u0_s) = solve_spread.pad(prob, jnp.asarray(u0))
-                with _nonfinite_explained("during the restart of a run-off fit"):
-                    out = solve_spread.unpad(solve(prob_s, u0_s, jnp.zeros(0), solver_, max_steps,
-                                                   solve_spread.chunk))
-                return tuple(np.asarray(x) for x in out)
-
+            stage = "during the restart of a run-off fit"
             held_mask = np.array(problem.free_mask)
             u_hold = np.array(u_free)
             for d, idx in enumerate(runoff):
                 held_mask[d, idx] = 0.0
                 if idx:
                     u_hold[d] = 0.0  # from the start again
-            v1, _, steps1, _ = solve_from(eqx.tree_at(lambda p: p.free_mask, problem, jnp.asarray(held_mask)),
-                                          u_hold)
-            v2, code2, steps2, chi2_2 = solve_from(problem, v1)
+            (held_s,) = solve_spread.pad(eqx.tree_at(lambda p: p.free_mask, problem, jnp.asarray(held_mask)))
+            v1, _, steps1, _ = solve_devices(held_s, u_hold, stage)
+            v2, code2, steps2, chi2_2 = solve_devices(problem_s, v1, stage)
             better = np.array([bool(idx) for idx in runoff]) & (np.nan_to_num(chi2_2, nan=np.inf) < best[4])
             if better.any():
                 u_free = np.where(better[:, None], v2, u_free)
