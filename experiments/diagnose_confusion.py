@@ -1,14 +1,14 @@
 """Finding a hidden effect: the confusion table of `diagnose` over every candidate effect.
 
-Run: python experiments/diagnose_confusion.py [--out DIR] [--effects NAME,...] [--devices 3] [--runs 2]
-                                              [--seed 7] [--small]
+Run: python experiments/diagnose_confusion.py [--out DIR] [--effects NAME,...] [--presets NAME,...]
+                                              [--devices 3] [--runs 2] [--seed 7]
 
 Each candidate effect is hidden in turn, at its typical size (`gyrojax.effect(name, 1.0)`), in a simulated lot
 (`gyrojax.simulate_table`: noise on, the default `ProcessSpread`, a fixed seed shared by every case, so each
 case is the same lot with a different hidden effect) on the preset where the effect can act
 (`AbstractEffect.supports`): seed 000's closed-loop `paper-qmg` (rate table + static VCF + DAC sweeps) for all
 but the effects that act only on an open-loop readout, which go on seed 003's `vcf-2018` (rate table + static
-VCF sweeps; see SWEEPS for why not the dynamic one). `gyrojax.diagnose` then starts from the *plain* preset,
+and dynamic VCF sweeps). `gyrojax.diagnose` then starts from the *plain* preset,
 every supported candidate considered, without being told what was hidden or the true parameters. Also: nothing hidden (on each preset),
 and two effects hidden at once (dac_inl + vref_drift on paper-qmg).
 
@@ -41,19 +41,17 @@ from gyrojax._io import atomic_write_bytes, atomic_write_json
 
 SWEEPS = {
     "paper-qmg": ("rate_table", "vcf_static", "dac"),  # issue 5: rate table + VCF + DAC on the closed loop
-    # open loop: no FTR DAC to sweep. No vcf_dynamic yet: identify now fits it (session 6: the steady tier's
-    # own implicit derivative and the run-off restart; with no hidden effect the diagnosis selects nothing at
-    # chi2_red 0.977), but with duffing_sense hidden identify's hold rule (1e-7 of the largest column) holds
-    # its coefficient beside the dynamic sweep's steep omega_y column, so it is missed; fixed in session 6
-    # (found, chi2_red 0.979); the rows here are to be re-run with vcf_dynamic. See README.
-    "vcf-2018": ("rate_table", "vcf_static"),
+    # open loop: no FTR DAC to sweep; seed 003's three sweeps (the dynamic VCF sweep fixes the sense resonance:
+    # split and damping, which the static sweeps see only through the low-frequency gain).
+    "vcf-2018": ("rate_table", "vcf_static", "vcf_dynamic"),
 }
 PAIR = ("dac_inl", "vref_drift")  # issue 5: "two effects hidden at once"
 CHI2_BAND = (0.7, 1.4)  # issue 5's acceptance band for the final reduced chi2
 
 
-def cases(effects=None):
-    """(preset, hidden effects) for every case, and the effects no preset supports."""
+def cases(effects=None, presets=None):
+    """(preset, hidden effects) for every case (only those on `presets`, if given), and the effects no preset
+    supports."""
     plain = {p: gj.preset(p) for p in SWEEPS}
     supported = {p: gj.supported_effects(g) for p, g in plain.items()}
     names = tuple(gj.EFFECTS) if effects is None else tuple(effects)
@@ -77,6 +75,11 @@ def cases(effects=None):
         out.append(("paper-qmg", PAIR))
     if effects is None or "none" in names:
         out.append(("vcf-2018", ()))
+    if presets is not None:
+        for p in presets:
+            if p not in SWEEPS:
+                raise ValueError(f"--presets: unknown preset {p!r}; expected {', '.join(SWEEPS)}.")
+        out = [c for c in out if c[0] in presets]
     # closed-loop cases first, open-loop ones last: they share one compiled model per preset
     out.sort(key=lambda c: list(SWEEPS).index(c[0]))
     return out, unsupported
@@ -170,13 +173,15 @@ def main(argv=None):
     ap.add_argument("--out", help="folder for diagnose_confusion.json and .md (written after every case)")
     ap.add_argument("--effects", help="comma-separated subset of effect names ('none' and "
                                       f"'{'+'.join(PAIR)}' allowed); default every effect, none and the pair")
+    ap.add_argument("--presets", help=f"comma-separated subset of {', '.join(SWEEPS)}: only the cases on these")
     ap.add_argument("--devices", type=int, default=3, help="lot size (default 3)")
     ap.add_argument("--runs", type=int, default=2, help="runs per device and sweep (default 2)")
     ap.add_argument("--seed", type=int, default=7, help="PRNG seed of the lot and the noise, shared by all cases")
     ap.add_argument("--quiet", action="store_true", help="no progress messages")
     args = ap.parse_args(argv)
     effects = None if args.effects is None else tuple(e.strip() for e in args.effects.split(",") if e.strip())
-    todo, unsupported = cases(effects)
+    presets = None if args.presets is None else tuple(p.strip() for p in args.presets.split(",") if p.strip())
+    todo, unsupported = cases(effects, presets)
     settings = {"devices": args.devices, "runs": args.runs, "seed": args.seed}
     rows = []
     say = None if args.quiet else (lambda m: print("   ", m, file=sys.stderr, flush=True))
