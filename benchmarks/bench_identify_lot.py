@@ -66,7 +66,7 @@ def run(sizes, scipy_devices, seed=0, preset="paper-qmg", chunk=None):
 
     import gyrojax as gj
 
-    residual = eqx.filter_jit(lambda p, u: p.residuals(u, jnp.zeros(0))[0])
+    residual = eqx.filter_jit(lambda p, u: p.residuals(u, jnp.zeros(0)))
     rows = []
     for n in sizes:
         t0 = time.perf_counter()

@@ -39,7 +39,6 @@ from ._residuals import (
     device_residuals,
     num_biases,
     num_points,
-    predict_block,
     run_biases,
 )
 from ._simulate.tiers import Steady
@@ -259,15 +258,17 @@ class _Problem(eqx.Module):
     prior_sigma: jax.Array
 
     def _evaluate(self, u_free, u_lot):
+        """Standardised residuals (data, then priors), the count of points that did not settle, the
+        predictions per sweep and the device."""
         u = u_free * self.free_mask
-        model = apply_u(self.model, self.entries, self.start, u, u_lot)
-        r, failed = device_residuals(model.gyroscope(), self.data, self.tier)
+        gyro = apply_u(self.model, self.entries, self.start, u, u_lot).gyroscope()
+        r, failed, preds = device_residuals(gyro, self.data, self.tier)
         prior = (u[self.prior_index] - self.prior_mean) / self.prior_sigma
-        return jnp.concatenate([r, prior]), failed
+        return jnp.concatenate([r, prior]), failed, preds, gyro
 
     def residuals(self, u_free, u_lot):
-        """Standardised residuals (data, then priors) and the count of points that did not settle."""
-        return _residuals(self, u_free, u_lot), self._evaluate(u_free, u_lot)[1]
+        """Standardised residuals (data, then priors), differentiable (a dense forward-mode Jacobian)."""
+        return _residuals(self, u_free, u_lot)
 
 
 @jax.custom_jvp
@@ -331,25 +332,18 @@ def _evaluate(problem_all, u_full, u_lot, t_sf, chunk):
     every per-device and lot entry, the zero-rate scale factor and its gradient, predictions and biases."""
     def one(problem, u, temp):
         def outputs(uu, ul):
-            model = apply_u(problem.model, problem.entries, problem.start, uu, ul)
-            gyro = model.gyroscope()
-            r, _ = problem._evaluate(uu, ul)
+            r, failed, preds, gyro = problem._evaluate(uu, ul)
 
             def rate_out(rate):
                 return rate_table_points(gyro, rate[None], temp[None], problem.tier).rate[0]
 
             sf = jax.jvp(rate_out, (jnp.zeros(()),), (jnp.ones(()),))[1]
-            return (r, sf), (r, sf)  # the values as aux: jacfwd evaluates them once, with the Jacobian
+            # The values as aux: jacfwd evaluates the sweeps once, for the Jacobian and the predictions.
+            return (r, sf), (r, sf, failed, preds)
 
-        ((j, j_lot), (g, g_lot)), (r, sf) = jax.jacfwd(outputs, argnums=(0, 1), has_aux=True)(u, u_lot)
-        gyro = apply_u(problem.model, problem.entries, problem.start, u, u_lot).gyroscope()
-        preds, biases, failed = {}, {}, jnp.zeros((), dtype=int)
-        for sweep in problem.data.sweeps:
-            block = problem.data.blocks[sweep]
-            pred, bad = predict_block(gyro, sweep, block, problem.tier)
-            preds[sweep] = pred
-            biases[sweep] = run_biases(sweep, block, pred)
-            failed = failed + jnp.sum(bad)
+        ((j, j_lot), (g, g_lot)), (r, sf, failed, preds) = jax.jacfwd(outputs, argnums=(0, 1), has_aux=True)(
+            u, u_lot)
+        biases = {sweep: run_biases(sweep, problem.data.blocks[sweep], pred) for sweep, pred in preds.items()}
         return _Evaluation(r, j, j_lot, sf, g, g_lot, preds, biases, failed)
 
     return _map_devices(one, chunk, problem_all, u_full, t_sf)
@@ -358,10 +352,10 @@ def _evaluate(problem_all, u_full, u_lot, t_sf, chunk):
 def _solve_device(problem, y0, u_lot, solver, max_steps):
     """One device's fit: (solution, result code, steps, chi2)."""
     def fn(y, _):
-        return problem.residuals(y, u_lot)[0]
+        return problem.residuals(y, u_lot)
 
     sol = optx.least_squares(fn, solver, y0, max_steps=max_steps, throw=False)
-    r = problem.residuals(sol.value, u_lot)[0]
+    r = problem._evaluate(sol.value, u_lot)[0]  # the value only: no derivative to trace
     return sol.value, sol.result._value, sol.stats["num_steps"], jnp.sum(r**2)
 
 
@@ -386,7 +380,7 @@ def _solve_loop(problem_batch, u0, u_lot, solver, max_steps, chunk=None):
 def _solve_joint(problem_batch, u0, u_lot0, solver, max_steps):
     def fn(y, _):
         u_free, u_lot = y
-        return eqx.filter_vmap(lambda p, x: p.residuals(x, u_lot)[0])(problem_batch, u_free)
+        return eqx.filter_vmap(lambda p, x: p.residuals(x, u_lot))(problem_batch, u_free)
 
     sol = optx.least_squares(fn, solver, (u0, u_lot0), max_steps=max_steps, throw=False)
     r = fn(sol.value, None)

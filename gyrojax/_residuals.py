@@ -63,14 +63,15 @@ def block_residuals(sweep: str, block: SweepBlock, pred):
 
 def device_residuals(gyro: Gyroscope, data: FitData, tier=Steady()):
     """All standardised residuals of one device (data without the device axis), flattened in the order of
-    `data.sweeps`, and the number of points that did not settle."""
-    parts, failed = [], jnp.zeros((), dtype=int)
+    `data.sweeps`, the number of points that did not settle, and the predictions per sweep (run, point)."""
+    parts, preds, failed = [], {}, jnp.zeros((), dtype=int)
     for sweep in data.sweeps:
         block = data.blocks[sweep]
         pred, bad = predict_block(gyro, sweep, block, tier)
         parts.append(jnp.ravel(block_residuals(sweep, block, pred)))
+        preds[sweep] = pred
         failed = failed + jnp.sum(bad)
-    return jnp.concatenate(parts), failed
+    return jnp.concatenate(parts), failed, preds
 
 
 def num_biases(data: FitData):
