@@ -149,6 +149,24 @@ def test_a_fit_that_cannot_converge_says_so(rate_only):
     assert "NOT CONVERGED" in f.summary()
 
 
+def test_a_solve_that_did_not_converge_is_retried_with_gauss_newton(rate_only):
+    """BFGS stopped at max_steps=5 is solved again from the start with Gauss-Newton (5 steps here), which
+    lands on the Levenberg-Marquardt fit, and the message says so; with retry_solver=None the failure
+    stands."""
+    kw = dict(free=("k_vf", "angular_gain"), priors=VAGUE, solver="bfgs", max_steps=5)
+    f = gj.identify("paper-qmg", rate_only, **kw)
+    base = gj.identify("paper-qmg", rate_only, free=("k_vf", "angular_gain"), priors=VAGUE)
+    assert f.all_converged
+    assert all("re-solved from the start with gauss-newton after bfgs did not converge" in m
+               for m in f.result_message)
+    assert np.all(np.asarray(f.num_steps) > 5)  # both solves counted
+    np.testing.assert_allclose(np.asarray(f.scale_factor), np.asarray(base.scale_factor), rtol=1e-9)
+    np.testing.assert_allclose(np.asarray(f.chi2_red), np.asarray(base.chi2_red), rtol=1e-7)
+    g = gj.identify("paper-qmg", rate_only, retry_solver=None, **kw)
+    assert not np.any(np.asarray(g.converged))
+    assert all("Try:" in m for m in g.result_message)
+
+
 def test_bad_names_are_refused(table):
     with pytest.raises(ValueError, match="unknown parameter 'k_vff' in free"):
         gj.identify("paper-qmg", table, free=("k_vff",))
