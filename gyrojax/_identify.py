@@ -542,7 +542,7 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     - `retry_solver`: a device whose solve did not converge (e.g. Levenberg-Marquardt crawling to
       `max_steps` in a curved valley) is solved again from its start with this solver (`"gauss-newton"`
       by default; `None`: no retry); the retry is kept when it converged at no higher chi2, and the device's
-      message says so. Independent fits with a named `solver` other than this one.
+      message says so (a joint fit is retried as a whole). Only with a named `solver` other than this one.
     - `evaluate_only`: do not solve; return the `Fit` at the start (residuals, Jacobian, covariance there),
       e.g. to test a candidate effect at zero against an already fitted model.
 
@@ -674,18 +674,26 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
                 np.zeros(n, dtype=int), None)
     u_free, u_lot, code, steps, chi2 = best
     notes = [""] * n
-    if (retry_solver is not None and not evaluate_only and not n_lot and isinstance(solver, str)
-            and solver != retry_solver):
+    if retry_solver is not None and not evaluate_only and isinstance(solver, str) and solver != retry_solver:
         # Levenberg-Marquardt can crawl where a full Gauss-Newton step would not (measured: a leaky-rebalance
         # paper-qmg lot with comb_gap free, LM 200 steps at chi2_red 6.3, Gauss-Newton 10 steps to 1.02).
         ok = optx.RESULTS.successful._value
         failed = code != ok
         if failed.any():
-            v, code2, steps2, chi2_2 = solve_devices(problem_s, np.zeros((n, n_dev)),
-                                                     f"during the {retry_solver} retry", _solver(retry_solver, rtol,
-                                                                                                  atol))
-            lm_chi2 = np.nan_to_num(chi2, nan=np.inf)
-            better = failed & (code2 == ok) & (np.nan_to_num(chi2_2, nan=np.inf) <= lm_chi2 * (1 + 1e-6))
+            stage, retry = f"during the {retry_solver} retry", _solver(retry_solver, rtol, atol)
+            if n_lot:  # one joint solve: all devices or none
+                (zeros_s,) = solve_spread.pad(jnp.zeros((n, n_dev)))
+                with _nonfinite_explained(stage):
+                    v, v_lot, code2, steps2, chi2_2 = (np.asarray(x) for x in solve_spread.unpad(
+                        _solve_joint(problem_s, zeros_s, jnp.zeros(n_lot), retry, max_steps)))
+                total, total_2 = (np.sum(np.nan_to_num(c, nan=np.inf)) for c in (chi2, chi2_2))
+                better = np.full(n, bool(np.all(code2 == ok)) and total_2 <= total * (1 + 1e-6))
+                if better[0]:
+                    u_lot = v_lot
+            else:
+                v, code2, steps2, chi2_2 = solve_devices(problem_s, np.zeros((n, n_dev)), stage, retry)
+                better = failed & (code2 == ok) & (np.nan_to_num(chi2_2, nan=np.inf) <=
+                                                   np.nan_to_num(chi2, nan=np.inf) * (1 + 1e-6))
             u_free = np.where(better[:, None], v, u_free)
             code = np.where(better, code2, code)
             steps = np.where(better, steps + steps2, steps)

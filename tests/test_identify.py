@@ -167,6 +167,18 @@ def test_a_solve_that_did_not_converge_is_retried_with_gauss_newton(rate_only):
     assert all("Try:" in m for m in g.result_message)
 
 
+def test_a_joint_solve_that_did_not_converge_is_retried_as_a_whole(table):
+    """A joint fit (lot-shared DAC gain error) whose BFGS solve stops at max_steps=5 is solved again, all
+    devices at once, with Gauss-Newton: the result is that of a Gauss-Newton fit, every device says so."""
+    kw = dict(shared=("dac_gain_error",), max_steps=5)
+    f = gj.identify("paper-qmg", table, solver="bfgs", **kw)
+    g = gj.identify("paper-qmg", table, solver="gauss-newton", **kw)
+    assert f.all_converged and g.all_converged
+    assert all("re-solved from the start with gauss-newton after bfgs" in m for m in f.result_message)
+    np.testing.assert_array_equal(np.asarray(f.u), np.asarray(g.u))
+    np.testing.assert_array_equal(np.asarray(f.u_lot), np.asarray(g.u_lot))
+
+
 def test_bad_names_are_refused(table):
     with pytest.raises(ValueError, match="unknown parameter 'k_vff' in free"):
         gj.identify("paper-qmg", table, free=("k_vff",))
