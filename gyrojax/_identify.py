@@ -260,15 +260,22 @@ class _Problem(eqx.Module):
     def _evaluate(self, u_free, u_lot):
         """Standardised residuals (data, then priors), the count of points that did not settle, the
         predictions per sweep and the device."""
-        u = u_free * self.free_mask
-        gyro = apply_u(self.model, self.entries, self.start, u, u_lot).gyroscope()
-        r, failed, preds = device_residuals(gyro, self.data, self.tier)
-        prior = (u[self.prior_index] - self.prior_mean) / self.prior_sigma
-        return jnp.concatenate([r, prior]), failed, preds, gyro
+        return _evaluate_problem(self, u_free, u_lot)
 
     def residuals(self, u_free, u_lot):
         """Standardised residuals (data, then priors), differentiable (a dense forward-mode Jacobian)."""
         return _residuals(self, u_free, u_lot)
+
+
+# Its own jit: optimistix and the Jacobians trace the residual function several times inside one outer
+# trace; a jitted body is traced once per signature and reused (measured: tracing 55 s of a 132 s fit).
+@eqx.filter_jit
+def _evaluate_problem(problem, u_free, u_lot):
+    u = u_free * problem.free_mask
+    gyro = apply_u(problem.model, problem.entries, problem.start, u, u_lot).gyroscope()
+    r, failed, preds = device_residuals(gyro, problem.data, problem.tier)
+    prior = (u[problem.prior_index] - problem.prior_mean) / problem.prior_sigma
+    return jnp.concatenate([r, prior]), failed, preds, gyro
 
 
 @jax.custom_jvp
