@@ -18,7 +18,13 @@ solution on every free parameter; the script prints the worst deviation and fail
 scipy is timed on the first `--scipy-devices` devices of each lot and scaled by N / that count: the
 devices are independent and solved one after another, so its time is linear in N (printed as "scaled").
 gyrojax is timed twice per size: the first call (compile included, reported as compile time = first -
-second) and the second call. Peak resident memory of the process is printed after each size.
+second) and the second call. Peak resident memory of the process is printed after each size, and on an
+accelerator the device's peak memory in use too.
+
+On a machine with an accelerator gyrojax runs on JAX's default backend (the GPU) while scipy's residual is
+compiled for and run on the host CPU (`--scipy-backend cpu`, the default): scipy is a CPU tool, and a
+GPU round trip per finite-difference evaluation would only slow it down. `--json` is rewritten after every
+size, so a run cut short keeps the sizes it finished.
 """
 
 import argparse
@@ -58,7 +64,16 @@ def _problems(fit, preset):
                     jnp.ones((n, 0)))
 
 
-def run(sizes, scipy_devices, seed=0, preset="paper-qmg", chunk=None):
+def _device_peak_gb():
+    """Peak memory in use on the default JAX device (GB), where the backend reports it (GPU), else None."""
+    import jax
+
+    stats = jax.devices()[0].memory_stats() or {}
+    peak = stats.get("peak_bytes_in_use")
+    return None if peak is None else peak / 1e9
+
+
+def run(sizes, scipy_devices, seed=0, preset="paper-qmg", chunk=None, scipy_backend="cpu", on_row=None):
     import equinox as eqx
     import jax
     import jax.numpy as jnp
@@ -66,7 +81,8 @@ def run(sizes, scipy_devices, seed=0, preset="paper-qmg", chunk=None):
 
     import gyrojax as gj
 
-    residual = eqx.filter_jit(lambda p, u: p.residuals(u, jnp.zeros(0)))
+    scipy_device = jax.devices(scipy_backend)[0] if scipy_backend else jax.devices()[0]
+    residual = eqx.filter_jit(lambda p, u: p.residuals(u, jnp.zeros(0, device=scipy_device)))
     rows = []
     for n in sizes:
         t0 = time.perf_counter()
@@ -81,11 +97,13 @@ def run(sizes, scipy_devices, seed=0, preset="paper-qmg", chunk=None):
         fit = gj.identify(preset, table, lot_chunk=lot_chunk)
         t_gj = time.perf_counter() - t0
         rss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+        device_gb = _device_peak_gb()
         free = np.flatnonzero(np.asarray(fit.free))
         u_gj = np.asarray(fit.u)[:, free]
         se = np.sqrt(np.einsum("dii->di", np.asarray(fit.covariance)))[:, free]
 
-        problems = _problems(fit, preset)
+        problems = jax.tree.map(lambda x: jax.device_put(x, scipy_device) if eqx.is_array(x) else x,
+                                _problems(fit, preset))
         m = min(n, scipy_devices)
         worst, t_sp, nfev = 0.0, 0.0, 0
         for d in range(m):
@@ -94,7 +112,7 @@ def run(sizes, scipy_devices, seed=0, preset="paper-qmg", chunk=None):
 
             def fun(x, p=p, full=full):
                 full[free] = x
-                return np.asarray(residual(p, jnp.asarray(full)))
+                return np.asarray(residual(p, jax.device_put(full, scipy_device)))
 
             fun(np.zeros(len(free)))  # compile (once) before timing
             t0 = time.perf_counter()
@@ -110,12 +128,17 @@ def run(sizes, scipy_devices, seed=0, preset="paper-qmg", chunk=None):
                "gyrojax_converged": int(np.sum(np.asarray(fit.converged))), "gyrojax_steps_max":
                int(np.max(np.asarray(fit.num_steps))), "gyrojax_steps_mean": float(np.mean(np.asarray(fit.num_steps))), "scipy_devices_timed": m, "scipy_s": t_sp_n,
                "scipy_scaled": m < n, "scipy_per_device_ms": 1e3 * t_sp / m, "scipy_nfev_per_device": nfev / m,
-               "speedup": t_sp_n / t_gj, "worst_deviation_in_stderr": worst, "peak_rss_gb": rss_gb}
+               "speedup": t_sp_n / t_gj, "worst_deviation_in_stderr": worst, "peak_rss_gb": rss_gb,
+               "device_peak_gb": device_gb, "gyrojax_backend": jax.default_backend(),
+               "scipy_backend": scipy_device.platform}
         rows.append(row)
         print(f"N={n:5d}  gyrojax {t_gj:8.2f} s ({1e3 * t_gj / n:7.1f} ms/device, compile {t_first - t_gj:6.1f} s, "
               f"converged {row['gyrojax_converged']}/{n}, LM steps max {row['gyrojax_steps_max']})  scipy {t_sp_n:9.2f} s{' (scaled)' if m < n else ''} "
               f"({1e3 * t_sp / m:7.1f} ms/device, {nfev / m:.0f} evaluations)  speed-up {t_sp_n / t_gj:6.1f}x  "
-              f"worst |du| {worst:.3f} sigma  peak RSS {rss_gb:.2f} GB", flush=True)
+              f"worst |du| {worst:.3f} sigma  peak RSS {rss_gb:.2f} GB"
+              + ("" if device_gb is None else f", device peak {device_gb:.2f} GB"), flush=True)
+        if on_row is not None:
+            on_row(rows)
         if worst > 0.05:
             raise SystemExit(f"scipy and gyrojax disagree by {worst:.3f} standard errors at N={n}: not equal "
                              "accuracy; the ratio would mean nothing.")
@@ -129,19 +152,30 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--chunk", type=int, help="identify(lot_chunk=...) for lots larger than this (default: "
                     "identify's 'auto', 16 on a CPU)")
+    ap.add_argument("--scipy-backend", default="cpu", help="JAX backend of scipy's residual (default: cpu)")
     ap.add_argument("--json")
     args = ap.parse_args(argv)
-    print(f"versions {_versions()}; {platform.machine()} {os.cpu_count()} CPUs; load {os.getloadavg()}", flush=True)
-    rows = run([int(s) for s in args.sizes.split(",")], args.scipy_devices, args.seed, chunk=args.chunk)
+    import jax
+
+    import gyrojax  # noqa: F401  (float64 from here on)
+
+    machine = {"machine": platform.machine(), "cpus": os.cpu_count(), "jax_devices": [str(d) for d in jax.devices()],
+               "device_kind": jax.devices()[0].device_kind}
+    print(f"versions {_versions()}; {machine}; load {os.getloadavg()}", flush=True)
+
+    def write(rows):
+        if args.json:
+            from gyrojax._io import atomic_write_json
+
+            atomic_write_json({"versions": _versions(), "machine": machine, "rows": rows}, args.json)
+
+    rows = run([int(s) for s in args.sizes.split(",")], args.scipy_devices, args.seed, chunk=args.chunk,
+               scipy_backend=args.scipy_backend, on_row=write)
     print(f"load at end {os.getloadavg()}")
     if len(rows) > 1:
         per = [r["gyrojax_per_device_ms"] for r in rows if r["devices"] >= 16]
         if per:
             print(f"gyrojax per-device time from 16 up: max/min = {max(per) / min(per):.2f}")
-    if args.json:
-        from gyrojax._io import atomic_write_json
-
-        atomic_write_json({"versions": _versions(), "rows": rows}, args.json)
     return 0
 
 

@@ -538,9 +538,11 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     - `lot_chunk`: with `lot_solve="vmap"`, solve and differentiate at most this many devices at a time
       (`jax.lax.map` over chunks of the vmapped solve; the lot is padded to a multiple of it). It bounds
       memory on large lots and lets each chunk stop at its own slowest device. `None`: the whole lot at
-      once. `"auto"` (default): 16 on a CPU backend for independent fits on one JAX device (measured on 256
+      once. `"auto"` (default), for independent fits on one JAX device: 16 on a CPU backend (measured on 256
       devices: chunks of 16 ran 3-4x faster per device than chunks of 128, whose batched steady solves
-      outgrow the cache), else `None`. Not with `shard` over several JAX devices, nor for a joint fit.
+      outgrow the cache), 1024 on an accelerator (4096 devices on an H100: 2.2 ms per device in chunks of
+      1024, 3.0 ms at once, where every device waits for the slowest's 28 LM steps); else `None`. Not with
+      `shard` over several JAX devices, nor for a joint fit.
     - `restart_runoffs`: a device whose solution leaves a direction the data no longer fix (a parameter run
       off towards 0 or infinity, e.g. an open-loop Q_y whose steep sense resonance the first steps overshot)
       is solved again from its start with that direction held, then released from there; the lower chi2
@@ -619,7 +621,9 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     shards = (len(jax.devices()) if shard is None or shard else 1) if lot_solve == "vmap" else 1
     if lot_chunk == "auto":
         independent = shards == 1 and not shared and lot_solve == "vmap"
-        lot_chunk = 16 if independent and jax.default_backend() == "cpu" else None
+        # Measured: 256 CPU devices ran 3-4x faster per device in chunks of 16 than of 128; 4096 devices on
+        # an H100 ran 2.2 ms/device in chunks of 1024 against 3.0 ms/device at once (the tail's steps).
+        lot_chunk = (16 if jax.default_backend() == "cpu" else 1024) if independent else None
     if lot_chunk is not None and (shards > 1 or shared or lot_solve == "loop"):
         raise ValueError("lot_chunk applies to the vmapped solve of independent devices on one JAX device; "
                          "drop it, or drop shard / shared / lot_solve='loop'.")
