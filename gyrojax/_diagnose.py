@@ -55,6 +55,25 @@ class CandidateScore:
     fingerprint: np.ndarray  # (device, residual): predicted residual change
     description: str
     typical_chi2: float = 0.0  # chi2 left by the most visible typical-size combination, summed over devices
+    # The same before the baseline's free parameters take their share (after the run biases), and the free
+    # parameters that take it: what hides the candidate when it is not testable.
+    visible_chi2: float = 0.0
+    absorbed_by: tuple = ()
+
+    @property
+    def absorption(self) -> str:
+        """Why the data cannot test it, in words: what takes up its fingerprint, and what would reveal it."""
+        if self.visible_chi2 < 1.0:
+            what = (f"a typical size changes the chi2 by {self.visible_chi2:.2g} once the run biases are "
+                    "out: the run biases take it up, or this data barely sees it")
+        else:
+            share = 1.0 - self.typical_chi2 / self.visible_chi2
+            who = ", ".join(self.absorbed_by) or "the free parameters together"
+            what = (f"a typical size would change the chi2 by {self.visible_chi2:.3g}; {who} "
+                    f"{'absorbs' if len(self.absorbed_by) == 1 else 'absorb'} {100 * share:.4g} % of it, "
+                    f"leaving {self.typical_chi2:.2g}")
+        reveal = EFFECTS[self.effect].revealed_by
+        return what + (f". Revealed by: {reveal}" if reveal else "")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,7 +125,10 @@ class Diagnosis:
             lines.append(f"  {c.effect:<18} {what}")
         if self.untestable:
             lines.append(f"not testable on this data (absorbed by the baseline, or a typical-size effect leaves a "
-                         f"chi2 below {self.min_typical_chi2:g}): {', '.join(self.untestable)}")
+                         f"chi2 below {self.min_typical_chi2:g}):")
+            scores = {c.effect: c for c in self.ranking}
+            for name in self.untestable:
+                lines.append(f"  {name}: {scores[name].absorption}")
         for s in self.steps:
             amb = f" (ambiguous with {', '.join(s.ambiguous_with)}" + (
                 f"; {s.separated_by} separates them)" if s.separated_by else "; no sweep here separates them)") \
@@ -131,7 +153,9 @@ class Diagnosis:
             "baseline": {"chi2_red": self.baseline.chi2_red_total,
                          "nonlinearity_ppm": self.baseline_nonlinearity_ppm},
             "ranking": [{"effect": c.effect, "statistic": c.statistic, "df": c.df, "p_value": c.p_value,
-                         "testable": c.testable, "typical_chi2": c.typical_chi2} for c in self.ranking],
+                         "testable": c.testable, "typical_chi2": c.typical_chi2, "visible_chi2": c.visible_chi2,
+                         "absorbed_by": list(c.absorbed_by), "revealed_by": EFFECTS[c.effect].revealed_by}
+                        for c in self.ranking],
             "steps": [{"effect": s.effect, "statistic": s.statistic, "p_value": s.p_value,
                        "chi2_red_after": s.chi2_red_after, "lr_statistic": s.lr_statistic, "lr_df": s.lr_df,
                        "lr_p_value": s.lr_p_value, "delta_bic": s.delta_bic,
@@ -175,13 +199,23 @@ def score_candidates(fit: Fit, candidates, *, rank_tol: float = 1e-4) -> tuple[C
     jac = np.asarray(fit.jacobian)
     res = np.asarray(fit.residual_vector)
     free = np.asarray(fit.free)
+    names_free = [nm for nm, f in zip(fit.names, free) if f]
     out = []
     for name in candidates:
         cols = np.asarray([i for i, nm in enumerate(fit.names) if nm.startswith(name + ".")], dtype=int)
-        stat, df, typical = 0.0, 0, 0.0
+        stat, df, typical, visible = 0.0, 0, 0.0, 0.0
+        share = np.zeros(len(names_free))  # of the most visible fingerprint's chi2, per free parameter
         fingerprint = np.zeros_like(res)
         for d in range(jac.shape[0]):
             jb, je, r = jac[d][:, free], jac[d][:, cols], res[d]
+            if je.shape[1]:
+                evals, evecs = np.linalg.eigh(je.T @ je)
+                visible += max(float(evals[-1]), 0.0)
+                if jb.shape[1]:
+                    # |P f|^2 = sum_k c_k (b_k . f) with c the least-squares coefficients of f on the columns
+                    f = je @ evecs[:, -1]
+                    c = np.linalg.lstsq(jb, f, rcond=None)[0]
+                    share += c * (jb.T @ f)
             if jb.shape[1]:
                 q, _ = np.linalg.qr(jb)
                 je = je - q @ (q.T @ je)
@@ -196,8 +230,10 @@ def score_candidates(fit: Fit, candidates, *, rank_tol: float = 1e-4) -> tuple[C
             stat += float(s @ inv @ s)
             df += int(keep.sum())
             fingerprint[d] = je @ (inv @ s)
+        order = np.argsort(-share)
+        absorbed_by = tuple(names_free[k] for k in order if share[k] > 0.1 * max(np.sum(share), 0.0))
         out.append(CandidateScore(name, stat, df, chi2_sf(stat, df), df > 0, fingerprint, EFFECTS[name].description,
-                                  typical))
+                                  typical, visible, absorbed_by))
     return tuple(sorted(out, key=lambda c: (not c.testable, c.p_value, -c.statistic)))
 
 
@@ -370,8 +406,11 @@ def write_report(diagnosis: Diagnosis, out_dir) -> dict:
     for k, s in enumerate(diagnosis.steps, 1):
         lines.append(f"| {k} | + {s.effect} | {s.chi2_red_after:.3f} | {s.nonlinearity_ppm_after:.2f} |")
     lines += ["", "Effects marked *not testable* leave no fingerprint that the baseline's free parameters "
-              "(gains, per-run biases) cannot absorb on this data; a sweep over temperature, or another sweep "
-              "kind, may reveal them.", ""]
+              "(gains, per-run biases) cannot absorb on this data. What absorbs each, and the measurement that "
+              "would reveal it:", ""]
+    scores = {c.effect: c for c in diagnosis.ranking}
+    lines += [f"- `{name}`: {scores[name].absorption}." for name in diagnosis.untestable]
+    lines += [""]
     for title, name in figures:
         lines += [f"## {title}", "", f"![{title}]({name})", ""]
     atomic_write_bytes(os.path.join(out_dir, "diagnosis.md"), "\n".join(lines).encode())

@@ -49,9 +49,31 @@ def test_hidden_dac_inl_is_found_and_the_error_falls(hidden_dac_inl):
 
 
 def test_gain_and_bias_effects_are_reported_untestable(hidden_dac_inl):
-    """A push-pull gain mismatch is a pure gain change on these sweeps: the free K_vf absorbs it."""
+    """A push-pull gain mismatch is a pure gain change on these sweeps: the free K_vf absorbs it. The
+    diagnosis names what took it up and the measurement that would reveal it."""
     _, d = hidden_dac_inl
     assert "pushpull_mismatch" in d.untestable
+    push = next(c for c in d.ranking if c.effect == "pushpull_mismatch")
+    # A typical mismatch is a -500 ppm gain (hundreds of sigma on these sweeps) and K_vf takes all of it.
+    assert push.visible_chi2 > 1e3
+    assert push.absorbed_by == ("k_vf",)
+    assert push.typical_chi2 < 1e-6 * push.visible_chi2
+    # A damping coupling is a constant bias: nothing is left once the run biases are out.
+    damping = next(c for c in d.ranking if c.effect == "damping_coupling")
+    assert damping.visible_chi2 < 1.0
+    text = d.summary()
+    assert "pushpull_mismatch: a typical size would change the chi2 by" in text and "k_vf absorbs 100 % of it" in text
+    assert "Revealed by: the two feedback branches' AC voltages measured separately" in text
+    # A quadrature phase error is a bias (Q sin phi) and a second-order gain loss
+    assert "quadrature_phase: a typical size changes the chi2 by" in text and "the run biases take it up" in text
+    report = d.to_json()
+    row = next(r for r in report["ranking"] if r["effect"] == "pushpull_mismatch")
+    assert row["absorbed_by"] == ["k_vf"] and row["revealed_by"] == gj.EFFECTS["pushpull_mismatch"].revealed_by
+    # The INL's linear part is a DAC gain error (the free dac_gain_error takes it: 84 % of the chi2 measured);
+    # its S-curve survives the baseline
+    inl = next(c for c in d.ranking if c.effect == "dac_inl")
+    assert inl.absorbed_by[0] == "dac_gain_error"
+    assert 0.05 * inl.visible_chi2 < inl.typical_chi2 < 0.5 * inl.visible_chi2
 
 
 def test_no_hidden_effect_selects_nothing(hidden_dac_inl):

@@ -42,6 +42,8 @@ class AgcFiniteGain(AbstractEffect):
     name = "agc_finite_gain"
     description = "leaky (finite DC gain) AGC integrator: the drive amplitude sags with the drive load"
     plugs_into = "drive_loop.agc_leak"
+    revealed_by = ("an AGC set-point step, or the AGC's drive-voltage reading against die temperature: the "
+                   "amplitude sag follows the drive load")
 
     def __check_init__(self):
         check_nonnegative("AgcFiniteGain", "leak", self.leak)

@@ -23,11 +23,14 @@ class AbstractEffect(eqx.Module):
     - `name`: stable name (the registry key, the CLI's `--effect NAME`).
     - `description`: one physical line.
     - `plugs_into`: where in the device tree it acts (paths of the leaves it moves).
+    - `revealed_by`: the measurement that sees it apart from the baseline's gains and biases; the diagnosis
+      quotes it when the data at hand cannot (empty: not stated).
     """
 
     name: ClassVar[str]
     description: ClassVar[str]
     plugs_into: ClassVar[str]
+    revealed_by: ClassVar[str] = ""
 
     @abc.abstractmethod
     def apply(self, gyro: Gyroscope) -> Gyroscope:

@@ -38,6 +38,8 @@ class CombGap(AbstractEffect):
     name = "comb_gap"
     description = "gap-dependent finger-tip force of the feedback combs, seen through residual sense motion"
     plugs_into = "feedback_electrode.gap_fraction"
+    revealed_by = ("a rate table with the rebalance loop's gain changed between runs (the residual sense motion,"
+                   " and the odd cubic with it, scales with the loop's DC gain)")
 
     def __check_init__(self):
         check_range("CombGap", "gap_fraction", self.gap_fraction, 0.0, 1.0)

@@ -32,6 +32,8 @@ class DacInl(AbstractEffect):
     name = "dac_inl"
     description = "INL profile of the force-to-rebalance DAC (odd S-curve and even bow, in LSB)"
     plugs_into = "excitation.dac.inl"
+    revealed_by = ("a DAC sweep (the AC amplitude against the word, seed 000 Table 2), or a rate table: its odd "
+                   "part is an S-curve no gain takes up")
 
     def __check_init__(self):
         check_finite("DacInl", "coefficients", self.coefficients)

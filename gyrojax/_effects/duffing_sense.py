@@ -33,6 +33,8 @@ class DuffingSense(AbstractEffect):
     name = "duffing_sense"
     description = "cubic (Duffing) stiffness of the sense mode: sense resonance moves with sense amplitude"
     plugs_into = "resonator.duffing_y"
+    revealed_by = ("an open-loop rate table or a dynamic VCF sweep at two V_ac levels: the sense resonance moves"
+                   " with the sense amplitude")
 
     def __check_init__(self):
         check_finite("DuffingSense", "kappa", self.kappa)

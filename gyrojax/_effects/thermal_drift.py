@@ -41,6 +41,8 @@ class ThermalDrift(AbstractEffect):
     name = "thermal_drift"
     description = "extra temperature coefficient of both resonances and of the mode split, 1/K"
     plugs_into = "resonator.tcf, resonator.tcf_split"
+    revealed_by = ("rate tables at two or more die temperatures with the drive frequency read (drive_freq_hz): "
+                   "the scale factor tracks the drive frequency")
 
     def __check_init__(self):
         check_finite("ThermalDrift", "tcf", self.tcf)

@@ -30,6 +30,8 @@ class VrefDrift(AbstractEffect):
     name = "vref_drift"
     description = "temperature drift of the feedback bias V_dc (the voltage reference), 1/K"
     plugs_into = "feedback_electrode.v_dc_tc"
+    revealed_by = ("rate-table and closed-loop VCF sweeps at two or more die temperatures: both scale with V_dc,"
+                   " while a resonator TCF moves only the rate table")
 
     def __check_init__(self):
         check_finite("VrefDrift", "tc", self.tc)
