@@ -141,16 +141,18 @@ def run_case(preset, hidden, *, devices, runs, seed, progress=None):
     t1 = time.perf_counter()
     d = diagnose(table, base_device(preset), progress=progress)
     t2 = time.perf_counter()
+    report = d.to_json()
+    scores = {c.effect: c for c in d.ranking}
     row = {"preset": preset, "hidden": list(hidden), "selected": list(d.selected),
            "ambiguous": [list(g) for g in d.ambiguous], "untestable": list(d.untestable),
-           "rejected": [{"effect": n, "reason": r} for n, r in d.rejected],
-           "ranking": [{"effect": c.effect, "statistic": c.statistic, "df": c.df, "p_value": c.p_value,
-                        "testable": c.testable, "typical_chi2": c.typical_chi2} for c in d.ranking],
+           "rejected": report["rejected"], "ranking": report["ranking"],
            "baseline_chi2_red": d.baseline.chi2_red_total, "final_chi2_red": d.final.chi2_red_total,
            "baseline_nonlinearity_ppm": d.baseline_nonlinearity_ppm,
-           "final_nonlinearity_ppm": d.to_json()["final"]["nonlinearity_ppm"],
+           "final_nonlinearity_ppm": report["final"]["nonlinearity_ppm"],
            "seconds_simulate": t1 - t0, "seconds_diagnose": t2 - t1}
     row.update(verdict(hidden, d))
+    # why an absorbed hidden effect could not be tested, in the diagnosis's own words
+    row["absorption"] = {h: scores[h].absorption for h in row["absorbed"]}
     return row
 
 
@@ -179,6 +181,10 @@ def markdown(rows, unsupported, settings) -> str:
                      f"{r['seconds_simulate'] + r['seconds_diagnose']:.0f} | {r['verdict']} |")
     if unsupported:
         lines += ["", f"Not simulated (no preset's device supports them): {', '.join(unsupported)}."]
+    absorbed = [(r, h, why) for r in rows for h, why in r.get("absorption", {}).items()]
+    if absorbed:
+        lines += ["", "Absorbed, in the diagnosis's words (what hid it; what would reveal it):"]
+        lines += [f"- {h} on {r['preset']}: {why}" for r, h, why in absorbed]
     rej = [(r, x) for r in rows for x in r["rejected"]]
     if rej:
         lines += ["", "Rejected after refit:"]

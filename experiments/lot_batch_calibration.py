@@ -393,7 +393,7 @@ def run(devices=64, rate_devices=4, seed=11, process=None, protocol=None):
         "identify_sf_stderr_rms_pct": float(np.sqrt(np.mean((sd_identify / sf_model) ** 2)) * 100),
         "jacobian_condition": cond,
         "fit": {"chi2_red_total": float(fit.chi2_red_total), "all_converged": fit.all_converged,
-                "num_steps": int(np.max(np.asarray(fit.num_steps))),
+                "num_steps": int(np.max(np.asarray(fit.num_steps))), "message": fit.result_message[0],
                 "held": [u.held for u in fit.unidentifiable], "free": list(FREE), "shared": list(SHARED)},
         "timings": timings,
     }
@@ -432,7 +432,7 @@ def markdown(summary):
         f"- shared sense-channel gain: {sh['value']:.6g} +/- {sh['stderr']:.2g} against the true {sh['truth']:.6g} "
         f"(z = {sh['z']:+.2f})",
         f"- fit: chi2_red {s['fit']['chi2_red_total']:.3f}, all converged: {s['fit']['all_converged']}, "
-        f"{s['fit']['num_steps']} LM steps, held: {', '.join(s['fit']['held']) or 'none'}",
+        f"{s['fit']['num_steps']} LM steps, held: {', '.join(s['fit']['held']) or 'none'} ({s['fit']['message']})",
         f"- seed-003 ratio {sm['ratio_mean']:.4f} (paper: {sm['paper_ratio']:.3f}), its scatter "
         f"{sm['ratio_rel_sd_pct']:.3f} % x sqrt(1 + 1/K)",
         f"- uncertainties from the SVD of the lot's weighted Jacobian (condition {s['jacobian_condition']:.1e}); "

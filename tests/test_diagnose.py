@@ -157,5 +157,8 @@ def test_each_hidden_effect_is_found_or_absorbed(hidden_dac_inl, preset, hidden)
     if row["absorbed"]:
         # absorbed means the plain model already fits: the baseline itself is inside the band
         assert CONFUSION.CHI2_BAND[0] <= row["baseline_chi2_red"] <= CONFUSION.CHI2_BAND[1]
+        # and the diagnosis says what hid it and what would reveal it
+        for h in row["absorbed"]:
+            assert row["absorption"][h].endswith("Revealed by: " + gj.EFFECTS[h].revealed_by)
     if not hidden:
         assert row["selected"] == []

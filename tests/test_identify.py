@@ -153,6 +153,30 @@ def test_a_fit_that_cannot_converge_says_so(rate_only):
     assert "NOT CONVERGED" in f.summary()
 
 
+def test_a_solve_stopped_near_the_minimum_is_certified_by_the_gauss_newton_decrement(rate_only):
+    """A solve that stops at max_steps counts as converged when a full Gauss-Newton step from there would gain
+    less than decrement_tol in chi2, device by device. The BFGS solve stopped at 5 steps above is left far
+    from the minimum; its decrement is checked against the chi2 each device still had to gain (the converged
+    fit's), and tolerances around it certify exactly the devices below them."""
+    base = gj.identify("paper-qmg", rate_only, free=("k_vf", "angular_gain"), priors=VAGUE)
+    stopped = gj.identify("paper-qmg", rate_only, retry_solver=None, decrement_tol=0.0, **NOT_CONVERGED)
+    assert not np.any(np.asarray(stopped.converged))
+    gap = np.asarray(stopped.chi2) - np.asarray(base.chi2)  # per device, the chi2 left to gain
+    assert np.all(gap > 0) and len(set(np.round(np.log10(gap), 3))) == len(gap)
+    f = gj.identify("paper-qmg", rate_only, retry_solver=None, decrement_tol=2 * gap.max(), **NOT_CONVERGED)
+    assert f.all_converged
+    prefix = "converged (stopped at max_steps=5, where a full Gauss-Newton step would lower chi2 by only "
+    assert all(m.startswith(prefix) for m in f.result_message)
+    decrement = [float(m[len(prefix):].split(" <")[0]) for m in f.result_message]
+    # the problem is nearly linear in k_vf: the decrement is the gap
+    np.testing.assert_allclose(decrement, gap, rtol=5e-3)  # as printed: 3 digits
+    np.testing.assert_array_equal(np.asarray(f.u), np.asarray(stopped.u))
+    tol = np.sort(gap)[1]  # between the smallest gap and the others
+    g = gj.identify("paper-qmg", rate_only, retry_solver=None, decrement_tol=tol * (1 + 1e-6), **NOT_CONVERGED)
+    np.testing.assert_array_equal(np.asarray(g.converged), gap < tol * (1 + 1e-6))
+    assert sum(np.asarray(g.converged)) == 2
+
+
 def test_a_solve_that_did_not_converge_is_retried_with_gauss_newton(rate_only):
     """BFGS stopped at max_steps=5 is solved again from the start with Gauss-Newton (5 steps here), which
     lands on the Levenberg-Marquardt fit, and the message says so; with retry_solver=None the failure
