@@ -77,6 +77,7 @@ from ._gyroscope import (  # noqa: E402
     design_drive_loop as design_drive_loop,
     design_rebalance_loop as design_rebalance_loop,
 )
+from ._compare import Comparison as Comparison, compare as compare  # noqa: E402
 from ._diagnose import Diagnosis as Diagnosis, diagnose as diagnose  # noqa: E402
 from ._fitio import load_fit as load_fit, save_fit as save_fit  # noqa: E402
 from ._fitreport import fit_report as fit_report  # noqa: E402

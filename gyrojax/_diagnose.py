@@ -27,20 +27,13 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.special import gammaincc
 
+from ._compare import chi2_sf, compare
 from ._dataset import Table
 from ._effects.registry import EFFECTS
 from ._fitdata import FitData, fit_data
 from ._identify import Fit, _to_model, identify
 from ._parameters import DEFAULT_FREE, Model, zero_effect
-
-
-def chi2_sf(x, df):
-    """Survival function of the chi-squared distribution."""
-    if df <= 0:
-        return 1.0
-    return float(gammaincc(df / 2.0, max(float(x), 0.0) / 2.0))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -110,6 +103,7 @@ class Diagnosis:
     alpha: float
     baseline_nonlinearity_ppm: float
     min_typical_chi2: float = 1.0
+    comparisons: tuple = ()  # `Comparison` of each fit in `fits`: where it fails, structure in its residuals
 
     @property
     def selected(self) -> tuple[str, ...]:
@@ -118,6 +112,8 @@ class Diagnosis:
     def summary(self) -> str:
         lines = [f"baseline: chi2_red {self.baseline.chi2_red_total:.3f}, model-vs-measurement nonlinearity "
                  f"{self.baseline_nonlinearity_ppm:.2f} ppm"]
+        if self.comparisons:
+            lines += ["  " + x for x in self.comparisons[0].summary().splitlines()]
         lines.append("candidates at the first step (score test, no refit):")
         for c in self.ranking:
             what = (f"S = {c.statistic:10.2f}  df {c.df:3d}  p = {c.p_value:.3g}  typical-size chi2 "
@@ -141,6 +137,8 @@ class Diagnosis:
         for name, why in self.rejected:
             lines.append(f"  rejected {name}: {why}")
         lines.append(f"final: chi2_red {self.final.chi2_red_total:.3f}, selected: {', '.join(self.selected) or 'none'}")
+        if self.steps and self.comparisons:
+            lines += ["  " + x for x in self.comparisons[-1].summary().splitlines()]
         return "\n".join(lines)
 
     def write_report(self, out_dir) -> dict:
@@ -168,6 +166,7 @@ class Diagnosis:
             "rejected": [{"effect": n, "reason": r} for n, r in self.rejected],
             "final": {"chi2_red": self.final.chi2_red_total,
                       "nonlinearity_ppm": nonlinearity_residual_ppm(self.final)},
+            "compare": [c.to_json() for c in self.comparisons],
         }
 
 
@@ -350,7 +349,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     if ranking0 is None:
         ranking0 = ()
     return Diagnosis(baseline, fit, tuple(fits), ranking0, tuple(steps), tuple(ambiguous), untestable,
-                     tuple(rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2)
+                     tuple(rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2,
+                     tuple(compare(f, alpha=alpha) for f in fits))
 
 
 def _is_lot(device):
@@ -401,8 +401,14 @@ def write_report(diagnosis: Diagnosis, out_dir) -> dict:
     lines = ["# gyrojax diagnosis", "", f"Data: `{diagnosis.baseline.data.source}`, "
              f"{len(diagnosis.baseline.devices)} device(s), sweeps {', '.join(sweeps)}.", "",
              "## Summary", "", "```", diagnosis.summary(), "```", "",
-             "## Step by step", "", "| step | effect | chi2_red | nonlinearity residual (ppm) |", "|---|---|---|---|",
-             f"| 0 | baseline | {diagnosis.baseline.chi2_red_total:.3f} | {diagnosis.baseline_nonlinearity_ppm:.2f} |"]
+             "## Where the model fails", "",
+             "Misfit by sweep, device, run and input band (share of the chi2 in excess of the point count), and "
+             "structure tests on the residuals ordered by input (`gyrojax.compare`), fit by fit:", ""]
+    for k, c in enumerate(diagnosis.comparisons):
+        name = "baseline" if k == 0 else f"+ {diagnosis.steps[k - 1].effect}"
+        lines += [f"### {name}", "", "```", c.summary(), "```", ""]
+    lines += ["## Step by step", "", "| step | effect | chi2_red | nonlinearity residual (ppm) |", "|---|---|---|---|",
+              f"| 0 | baseline | {diagnosis.baseline.chi2_red_total:.3f} | {diagnosis.baseline_nonlinearity_ppm:.2f} |"]
     for k, s in enumerate(diagnosis.steps, 1):
         lines.append(f"| {k} | + {s.effect} | {s.chi2_red_after:.3f} | {s.nonlinearity_ppm_after:.2f} |")
     lines += ["", "Effects marked *not testable* leave no fingerprint that the baseline's free parameters "

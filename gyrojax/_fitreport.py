@@ -18,7 +18,9 @@ def fit_report(fit: Fit) -> dict:
     `scale_factor_lsb_per_dps`, `scale_factor_stderr`, `chi2_red`, `converged`, `message`), `lot` (shared
     parameters {name: {`value`, `stderr`}}), `unidentifiable` (every parameter name taking part in a direction
     the data cannot fix), `unidentifiable_directions` (each with `parameters`, `held`, `singular_value`),
-    `chi2_red` (whole lot), `source`."""
+    `chi2_red` (whole lot), `source`, `compare` (where the model fails: `gyrojax.compare`)."""
+    from ._compare import compare
+
     values, stderr = np.asarray(fit.values), np.asarray(fit.stderr)
     chi2_red = np.asarray(fit.chi2_red)
     devices = []
@@ -41,4 +43,5 @@ def fit_report(fit: Fit) -> dict:
         "unidentifiable": names,
         "unidentifiable_directions": [{"parameters": list(u.parameters), "held": u.held,
                                        "singular_value": _num(u.singular_value)} for u in fit.unidentifiable],
+        "compare": compare(fit).to_json(),
     }

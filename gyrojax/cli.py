@@ -121,6 +121,7 @@ def _name_list(text):
 
 
 def _cmd_identify(args):
+    from ._compare import compare
     from ._dataset import read_table
     from ._fitio import save_fit
     from ._fitreport import fit_report
@@ -132,6 +133,7 @@ def _cmd_identify(args):
     model = Model(preset(args.model), tuple(zero_effect(name) for name in args.effect))
     fit = identify(model, table, free=args.free or DEFAULT_FREE)
     print(fit.summary())
+    print(compare(fit).summary())
     if args.json:
         atomic_write_json(fit_report(fit), args.json)
         print(f"wrote {args.json}")

@@ -48,6 +48,28 @@ def test_hidden_dac_inl_is_found_and_the_error_falls(hidden_dac_inl):
     assert d.ranking[0].typical_chi2 > 1e4
 
 
+def test_the_comparison_says_where_the_baseline_fails_and_that_nothing_is_left(hidden_dac_inl):
+    """Workflow steps 1-2 on the hidden INL: the baseline's residuals are odd in the input and cluster by sign
+    in every sweep the FTR DAC acts on (rate table, closed-loop VCF, DAC), and nothing is even; after dac_inl
+    no structure is left and the chi2 is at the noise level."""
+    _, d = hidden_dac_inl
+    base, final = d.comparisons[0], d.comparisons[-1]
+    assert len(d.comparisons) == len(d.fits) == 2
+    assert base.fails and base.chi2 == pytest.approx(d.baseline.chi2_total, rel=1e-9)
+    flagged = {(f.sweep, f.test) for f in base.flagged}
+    for sweep in ("rate_table", "vcf_static", "dac"):
+        assert {(sweep, "odd part"), (sweep, "runs")} <= flagged
+        assert (sweep, "even part") not in flagged
+    # the DAC sweep is measured in volts with a tight sigma: its residual per point is far below the others'
+    shares = {g.label: g.share for g in base.by_sweep}
+    assert shares["rate_table"] > 0.3 and shares["vcf_static"] > 0.3 and shares["dac"] < 0.01
+    assert not final.flagged and not final.fails
+    text = d.summary()
+    assert "rate_table odd part: p = 0" in text and text.count("no structure in the residuals") == 1
+    report = d.to_json()
+    assert [c["fails"] for c in report["compare"]] == [True, False]
+
+
 def test_gain_and_bias_effects_are_reported_untestable(hidden_dac_inl):
     """A push-pull gain mismatch is a pure gain change on these sweeps: the free K_vf absorbs it. The
     diagnosis names what took it up and the measurement that would reveal it."""
@@ -115,6 +137,9 @@ def test_cli_diagnose_json_and_report(hidden_dac_inl, tmp_path):
     assert {"effect", "statistic", "p_value", "chi2_red_after"} <= set(report["steps"][0])
     for name in ("diagnosis.md", "residuals.png", "ranking.png", "error_fall.png"):
         assert (tmp_path / "rep" / name).stat().st_size > 0
+    md = (tmp_path / "rep" / "diagnosis.md").read_text()
+    assert "## Where the model fails" in md and "### + dac_inl" in md
+    assert len(report["compare"]) == 2 and report["compare"][0]["findings"]
 
 
 def test_bad_candidate_names(hidden_dac_inl):

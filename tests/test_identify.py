@@ -266,6 +266,9 @@ def test_fit_report_json_keys(fit):
     assert d["parameters"]["q_y"]["stderr"] is None and d["parameters"]["q_y"]["held"]
     assert report["unidentifiable"] == ["omega_y", "q_y"]
     assert report["lot"] == {}
+    # noise-only lot, right model: the comparison finds the chi2 at the noise level and no structure
+    assert report["compare"]["points"] == 396 and not report["compare"]["fails"]
+    assert not any(f["flagged"] for f in report["compare"]["findings"])
 
 
 def test_cli_identify(csv_path, tmp_path, capsys):
@@ -282,7 +285,8 @@ def test_cli_identify(csv_path, tmp_path, capsys):
     assert back.data.source == str(data)
     np.testing.assert_array_equal(np.asarray(back.scale_factor),
                                   [d["scale_factor_lsb_per_dps"] for d in report["devices"]])
-    assert "chi2_red" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "chi2_red" in printed and "model against measurement: chi2" in printed
     # data errors: exit 2, no traceback
     assert main(["identify", str(tmp_path / "missing.csv")]) == 2
     assert main(["identify", str(data), "--free", "k_vf,nope"]) == 2

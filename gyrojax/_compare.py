@@ -1,0 +1,267 @@
+r"""`compare`: the model against the measurements, and where it fails.
+
+The standardised residuals of a fit (measurement minus model, after each run's bias, over the point's
+standard uncertainty) are, if the model is right, independent and of unit variance. `compare` tests that,
+point by point in each sweep ordered by its input, and says where the misfit sits:
+
+- **misfit**: chi2 per sweep, device, run and input band (|input| in thirds of the sweep's range, each sign
+  apart), each with its share of the lot's chi2 in excess of the point count;
+- **runs**: the Wald-Wolfowitz runs test on the signs of the residuals ordered by input, per (device, run),
+  pooled per sweep by Stouffer's sum (one-sided: too few runs, i.e. residuals that cluster by sign, are what a
+  missing smooth effect leaves);
+- **shape**: the residuals projected on orthonormal polynomials of degree 1, 2 and 3 in the input over each
+  run's points (a trend, an even bow, an odd cubic); each projection is N(0, 1) for pure noise, so their sums
+  of squares over the sweep's runs are chi2-distributed (conservative: the fit's gains already took up part of
+  the linear one);
+- **symmetry**: where a run's inputs come in +/- pairs, the odd and even parts (r(x) -+ r(-x)) / sqrt(2) of
+  the residual, each chi2 over the pairs: an odd misfit (an S-curve, a cubic) or an even one (a bow, drift
+  during an ordered sweep) — seed 000's symmetry argument: a memoryless carrier nonlinearity is odd.
+
+A finding is flagged when its p-value is below `alpha` over the number of tests made (Bonferroni), so pure
+noise flags nothing at the family-wise rate `alpha`.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+from jax.scipy.special import gammaincc, ndtr
+
+
+def chi2_sf(x, df):
+    """Survival function of the chi-squared distribution."""
+    return 1.0 if df <= 0 else float(gammaincc(df / 2.0, max(float(x), 0.0) / 2.0))
+
+
+def _normal_cdf(z):
+    return float(ndtr(z))
+
+
+def runs_test(signs) -> tuple[int, float, float]:
+    """Wald-Wolfowitz runs test of a sequence of signs (+1 / -1, zeros dropped): (runs, expected runs, z).
+    z < 0: fewer runs than independent signs would give (the residuals cluster)."""
+    s = np.asarray(signs)
+    s = s[s != 0]
+    n1, n2 = int(np.sum(s > 0)), int(np.sum(s < 0))
+    n = n1 + n2
+    runs = int(1 + np.sum(s[1:] != s[:-1])) if n else 0
+    if n1 == 0 or n2 == 0:
+        return runs, float(runs), 0.0
+    mean = 2.0 * n1 * n2 / n + 1.0
+    var = 2.0 * n1 * n2 * (2.0 * n1 * n2 - n) / (n**2 * (n - 1.0))
+    return runs, mean, (runs - mean) / math.sqrt(var) if var > 0 else 0.0
+
+
+def shape_components(x, r, degree: int = 3):
+    """Projections of residuals `r` on polynomials of degree 1..`degree` in `x` made orthonormal over these
+    points (and orthogonal to a constant, which the run bias took): N(0, 1) each for unit-variance noise."""
+    x = np.asarray(x, float)
+    span = np.max(np.abs(x))
+    t = x / span if span > 0 else x
+    basis = np.vander(t, degree + 1, increasing=True)
+    if len(x) <= degree + 1:
+        return np.full(degree, np.nan)
+    q, rr = np.linalg.qr(basis)
+    ok = np.abs(np.diag(rr)) > 1e-12 * np.max(np.abs(np.diag(rr)))
+    out = q.T @ np.asarray(r, float)
+    return np.where(ok, out, np.nan)[1:]
+
+
+def symmetric_parts(x, r, rtol: float = 1e-9):
+    """The odd and even parts (r(x) - r(-x)) / sqrt(2), (r(x) + r(-x)) / sqrt(2) over the +/- pairs of `x`."""
+    x, r = np.asarray(x, float), np.asarray(r, float)
+    tol = rtol * (np.max(np.abs(x)) if len(x) else 0.0)
+    pos = np.flatnonzero(x > tol)
+    odd, even = [], []
+    for i in pos:
+        j = np.flatnonzero(np.abs(x + x[i]) <= tol)
+        if j.size:
+            odd.append((r[i] - r[j[0]]) / math.sqrt(2.0))
+            even.append((r[i] + r[j[0]]) / math.sqrt(2.0))
+    return np.asarray(odd), np.asarray(even)
+
+
+@dataclasses.dataclass(frozen=True)
+class Misfit:
+    """chi2 of a group of points (a sweep, a device, a run, an input band) and its share of the lot's excess."""
+
+    label: str
+    points: int
+    chi2: float
+    share: float  # of sum(max(chi2 - points, 0)) over the groups of its kind
+
+    @property
+    def chi2_per_point(self) -> float:
+        return self.chi2 / self.points if self.points else float("nan")
+
+
+@dataclasses.dataclass(frozen=True)
+class Finding:
+    """One structure test of one sweep: its statistic, degrees of freedom (runs: the number of runs tested),
+    p-value, and whether it is flagged (p below alpha / number of tests)."""
+
+    sweep: str
+    test: str  # "runs", "trend", "even bow", "odd cubic", "odd part", "even part"
+    statistic: float
+    df: int
+    p_value: float
+    flagged: bool
+    meaning: str
+
+
+_MEANING = {
+    "runs": "residuals cluster by sign along the input: a smooth effect is missing",
+    "trend": "a residual slope: a gain the model gets wrong (partly taken up by the fit's gains)",
+    "even bow": "an even (quadratic) shape: a bow, or drift during an ordered sweep",
+    "odd cubic": "an odd cubic: a nonlinearity growing with input (INL S-curve, comb gap, AGC sag)",
+    "odd part": "the residual is odd in the input: a memoryless carrier nonlinearity (seed 000)",
+    "even part": "the residual is even in the input: a DC-path effect, memory, or drift in sweep order",
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class Comparison:
+    """The solution of `compare`: misfit by sweep, device, run and input band, and the structure tests."""
+
+    by_sweep: tuple
+    by_device: tuple
+    by_run: tuple  # label "sweep device run"
+    by_band: tuple  # label "sweep band"
+    findings: tuple
+    chi2: float
+    points: int
+    alpha: float
+
+    @property
+    def p_value(self) -> float:
+        """Of the chi2 against the point count (conservative: the fit's parameters took some of it)."""
+        return chi2_sf(self.chi2, self.points)
+
+    @property
+    def fails(self) -> bool:
+        """The chi2 is above what noise gives at `alpha`: the misfit shares say where."""
+        return self.p_value < self.alpha
+
+    @property
+    def flagged(self) -> tuple:
+        return tuple(f for f in self.findings if f.flagged)
+
+    def summary(self, top: int = 3) -> str:
+        lines = [f"model against measurement: chi2 {self.chi2:.4g} over {self.points} points "
+                 f"({self.chi2 / max(self.points, 1):.3g} per point, p = {self.p_value:.2g})"]
+        if not self.fails:
+            lines[0] += ": at the noise level"
+        for title, groups in (("sweep", self.by_sweep), ("device", self.by_device), ("run", self.by_run),
+                              ("input band", self.by_band)) if self.fails else ():
+            worst = sorted((g for g in groups if g.share > 0), key=lambda g: -g.share)[:top]
+            if worst:
+                lines.append(f"  misfit by {title}: " + "; ".join(
+                    f"{g.label} {100 * g.share:.0f} % ({g.chi2_per_point:.3g}/point)" for g in worst))
+        if self.flagged:
+            lines.append(f"  structure in the residuals (p < {self.alpha:g} / {len(self.findings)} tests):")
+            for f in sorted(self.flagged, key=lambda f: f.p_value):
+                lines.append(f"    {f.sweep} {f.test}: p = {f.p_value:.2g} ({f.meaning})")
+        else:
+            lines.append(f"  no structure in the residuals (runs, trend, bow, cubic, odd/even parts; "
+                         f"family-wise alpha {self.alpha:g})")
+        return "\n".join(lines)
+
+    def to_json(self) -> dict:
+        def groups(gs):
+            return [{"label": g.label, "points": g.points, "chi2": g.chi2, "share": g.share} for g in gs]
+
+        return {"chi2": self.chi2, "points": self.points, "p_value": self.p_value, "fails": self.fails,
+                "alpha": self.alpha,
+                "by_sweep": groups(self.by_sweep), "by_device": groups(self.by_device),
+                "by_run": groups(self.by_run), "by_band": groups(self.by_band),
+                "findings": [dataclasses.asdict(f) for f in self.findings]}
+
+
+def _shares(items):
+    excess = [max(c - n, 0.0) for _, n, c in items]
+    total = sum(excess)
+    return tuple(Misfit(label, n, c, e / total if total > 0 else 0.0) for (label, n, c), e in zip(items, excess))
+
+
+_BANDS = ((0.0, 1.0 / 3.0, "low"), (1.0 / 3.0, 2.0 / 3.0, "mid"), (2.0 / 3.0, np.inf, "high"))
+
+
+def compare_residuals(residuals, inputs, masks, *, devices, run_ids=None, alpha: float = 0.01) -> Comparison:
+    """`compare` on arrays: `residuals`, `inputs`, `masks` are dicts sweep -> (device, run, point)
+    standardised residuals, inputs and real-point masks; `devices` the device names; `run_ids` optional
+    dict sweep -> per-device run ids (default: run indices)."""
+    by_sweep, by_device, by_run, by_band = [], {}, [], []
+    tests = []  # (sweep, test, statistic, df, p)
+    for sweep in residuals:
+        r_all, x_all, m_all = (np.asarray(a[sweep]) for a in (residuals, inputs, masks))
+        r_all = np.where(m_all, r_all, 0.0)
+        by_sweep.append((sweep, int(m_all.sum()), float(np.sum(r_all**2))))
+        span = np.max(np.where(m_all, np.abs(x_all), 0.0)) if m_all.any() else 0.0
+        band_chi2 = {}
+        zs, comps, odd, even = [], [], [], []
+        for d in range(r_all.shape[0]):
+            n_d, c_d = by_device.get(devices[d], (0, 0.0))
+            by_device[devices[d]] = (n_d + int(m_all[d].sum()), c_d + float(np.sum(r_all[d] ** 2)))
+            for k in range(r_all.shape[1]):
+                m = m_all[d, k]
+                if not m.any():
+                    continue
+                x, r = x_all[d, k][m], r_all[d, k][m]
+                run = run_ids[sweep][d][k] if run_ids is not None else k
+                by_run.append((f"{sweep} {devices[d]} run {run}", int(m.sum()), float(np.sum(r**2))))
+                rel = np.abs(x) / span if span > 0 else np.zeros_like(x)
+                for lo, hi, name in _BANDS:
+                    for sign, sname in ((x < 0, "-"), (x >= 0, "+")):
+                        sel = (rel >= lo) & (rel < hi) & sign
+                        key = f"{sweep} {name} |input| ({sname})"
+                        n0, c0 = band_chi2.get(key, (0, 0.0))
+                        band_chi2[key] = (n0 + int(sel.sum()), c0 + float(np.sum(r[sel] ** 2)))
+                order = np.argsort(x, kind="stable")
+                if len(x) >= 4:
+                    zs.append(runs_test(np.sign(r[order]))[2])
+                comps.append(shape_components(x, r))
+                o, e = symmetric_parts(x, r)
+                odd.append(o)
+                even.append(e)
+        by_band += [(k, n, c) for k, (n, c) in band_chi2.items() if n]
+        if zs:
+            z = float(np.sum(zs) / math.sqrt(len(zs)))
+            tests.append((sweep, "runs", z, len(zs), _normal_cdf(z)))
+        if comps:
+            c = np.asarray(comps)
+            for i, name in enumerate(("trend", "even bow", "odd cubic")):
+                col = c[:, i][np.isfinite(c[:, i])]
+                if col.size:
+                    s = float(np.sum(col**2))
+                    tests.append((sweep, name, s, int(col.size), chi2_sf(s, col.size)))
+        odd_all, even_all = np.concatenate(odd) if odd else np.zeros(0), np.concatenate(even) if even else np.zeros(0)
+        if odd_all.size >= 2:
+            # The even part of a biased sweep lost one direction per run to the bias: conservative.
+            for name, part in (("odd part", odd_all), ("even part", even_all)):
+                s = float(np.sum(part**2))
+                tests.append((sweep, name, s, int(part.size), chi2_sf(s, part.size)))
+    cut = alpha / max(len(tests), 1)
+    findings = tuple(Finding(s, t, stat, df, p, p < cut, _MEANING[t]) for s, t, stat, df, p in tests)
+    total_n = sum(n for _, n, _ in by_sweep)
+    total_c = sum(c for _, _, c in by_sweep)
+    return Comparison(_shares(by_sweep), _shares([(k, n, c) for k, (n, c) in by_device.items()]),
+                      _shares(by_run), _shares(by_band), findings, total_c, total_n, alpha)
+
+
+def compare(fit, *, alpha: float = 0.01) -> Comparison:
+    """Compare a fitted model with its data: where the misfit sits (sweep, device, run, input band) and
+    whether the residuals have structure along the input (runs, trend, bow, cubic, odd and even parts).
+
+    **Arguments:**
+
+    - `fit`: a `gyrojax.Fit` (from `identify`, or a `Diagnosis`'s `baseline` / `final`).
+    - `alpha`: family-wise false-alarm rate of the structure tests (Bonferroni over all of them).
+
+    **Returns:** a `Comparison` (`summary()`, `to_json()`, `flagged`).
+    """
+    data = fit.data
+    residuals = {s: np.asarray(fit.residuals[s]) for s in data.sweeps}
+    inputs = {s: np.asarray(data.blocks[s].inputs) for s in data.sweeps}
+    masks = {s: np.asarray(data.blocks[s].mask) for s in data.sweeps}
+    return compare_residuals(residuals, inputs, masks, devices=data.devices,
+                             run_ids={s: data.run_ids(s) for s in data.sweeps}, alpha=alpha)
