@@ -29,9 +29,8 @@ class DampingCoupling(AbstractEffect):
     name = "damping_coupling"
     description = "damping coupling c_xy between drive and sense: a zero-rate output in phase with rate"
     plugs_into = "resonator.damping_coupling"
-    revealed_by = ("the zero-rate output against the drive damping (a die-temperature step through the Q's), or "
-                   "a mode-reversal test: at one temperature it is a constant c / (2 Ag) that a turn-on bias "
-                   "takes up")
+    revealed_by = ("a mode-reversal test (swapping the drive and sense roles flips the Coriolis term's sign, not"
+                   " c's): at one configuration it is a constant c / (2 Ag) that a turn-on bias takes up")
 
     def __check_init__(self):
         check_finite("DampingCoupling", "c", self.c)
