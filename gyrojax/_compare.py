@@ -56,12 +56,10 @@ def shape_components(x, r, degree: int = 3):
     """Projections of residuals `r` on polynomials of degree 1..`degree` in `x` made orthonormal over these
     points (and orthogonal to a constant, which the run bias took): N(0, 1) each for unit-variance noise."""
     x = np.asarray(x, float)
-    span = np.max(np.abs(x))
-    t = x / span if span > 0 else x
-    basis = np.vander(t, degree + 1, increasing=True)
     if len(x) <= degree + 1:
         return np.full(degree, np.nan)
-    q, rr = np.linalg.qr(basis)
+    span = np.max(np.abs(x))
+    q, rr = np.linalg.qr(np.vander(x / span if span > 0 else x, degree + 1, increasing=True))
     ok = np.abs(np.diag(rr)) > 1e-12 * np.max(np.abs(np.diag(rr)))
     out = q.T @ np.asarray(r, float)
     return np.where(ok, out, np.nan)[1:]
