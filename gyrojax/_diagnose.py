@@ -36,6 +36,11 @@ from ._identify import Fit, _to_model, identify
 from ._parameters import DEFAULT_FREE, Model, zero_effect
 
 
+# ASSUMPTION: each effect's `typical(1.0)` is a realistic size with a provenance; a device more than 20 times
+# worse than that is outside what the library's sources support.
+IMPLAUSIBLE_MULTIPLE = 20.0
+
+
 @dataclasses.dataclass(frozen=True)
 class CandidateScore:
     """One candidate effect scored against a fitted model (no refit)."""
@@ -85,6 +90,9 @@ class Step:
     ranking: tuple
     ambiguous_with: tuple
     separated_by: str | None
+    # Largest fitted parameter of the effect over the lot, in units of its typical size: far above 1, the
+    # effect explains the data only at an implausible size (another effect may leave this fingerprint).
+    typical_multiple: float = float("nan")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -131,7 +139,12 @@ class Diagnosis:
                 if s.ambiguous_with else ""
             lines.append(f"+ {s.effect}: LR {s.lr_statistic:.1f} (df {s.lr_df}, p {s.lr_p_value:.2g}), dBIC "
                          f"{s.delta_bic:.1f} -> chi2_red {s.chi2_red_after:.3f}, nonlinearity residual "
-                         f"{s.nonlinearity_ppm_after:.2f} ppm{amb}")
+                         f"{s.nonlinearity_ppm_after:.2f} ppm{amb}; fitted at {s.typical_multiple:.3g}x its "
+                         "typical size")
+            if s.typical_multiple > IMPLAUSIBLE_MULTIPLE:
+                lines.append(f"  ! {s.effect} explains the data only at {s.typical_multiple:.3g}x its typical size "
+                             "(beyond the library's plausible range): another effect, perhaps not among the "
+                             "candidates, may leave this fingerprint; see where the model still fails")
         if not self.steps:
             lines.append("no candidate effect is significant: the baseline explains the data.")
         for name, why in self.rejected:
@@ -158,7 +171,8 @@ class Diagnosis:
                        "chi2_red_after": s.chi2_red_after, "lr_statistic": s.lr_statistic, "lr_df": s.lr_df,
                        "lr_p_value": s.lr_p_value, "delta_bic": s.delta_bic,
                        "nonlinearity_ppm_after": s.nonlinearity_ppm_after,
-                       "ambiguous_with": list(s.ambiguous_with), "separated_by": s.separated_by}
+                       "ambiguous_with": list(s.ambiguous_with), "separated_by": s.separated_by,
+                       "typical_multiple": s.typical_multiple}
                       for s in self.steps],
             "selected": list(self.selected),
             "ambiguous": [list(g) for g in self.ambiguous],
@@ -344,8 +358,10 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         selected.append(best.effect)
         fit = new
         fits.append(fit)
+        cols = [i for i, nm in enumerate(fit.names) if nm.startswith(best.effect + ".")]
+        multiple = float(np.max(np.abs(np.asarray(fit.u)[:, cols])))
         steps.append(Step(best.effect, best.statistic, best.p_value, lr, df_total, p_lr, delta_bic,
-                          fit.chi2_red_total, nonlinearity_residual_ppm(fit), scores, group, separated))
+                          fit.chi2_red_total, nonlinearity_residual_ppm(fit), scores, group, separated, multiple))
     if ranking0 is None:
         ranking0 = ()
     return Diagnosis(baseline, fit, tuple(fits), ranking0, tuple(steps), tuple(ambiguous), untestable,

@@ -42,6 +42,10 @@ def test_hidden_dac_inl_is_found_and_the_error_falls(hidden_dac_inl):
     assert nonlinearity_residual_ppm(d.final) < 0.02 * d.baseline_nonlinearity_ppm
     step = d.steps[0]
     assert step.lr_p_value < 1e-6 and step.delta_bic < 0
+    # hidden at its typical size: the refit finds it at about that size (largest coefficient over the lot;
+    # the even INL term is invisible and stays at zero)
+    assert 0.95 < step.typical_multiple < 1.05  # measured 1.011
+    assert f"fitted at {step.typical_multiple:.3g}x its typical size" in d.summary() and "!" not in d.summary()
     # the even INL term is invisible in AC sweeps: only the odd terms are counted per device
     assert d.ranking[0].df == 2 * DEMO_LOT["devices"]
     # a typical-size INL leaves a chi2 of the order of the one measured (the hidden one is typical-size)
@@ -68,6 +72,17 @@ def test_the_comparison_says_where_the_baseline_fails_and_that_nothing_is_left(h
     assert "rate_table odd part: p = 0" in text and text.count("no structure in the residuals") == 1
     report = d.to_json()
     assert [c["fails"] for c in report["compare"]] == [True, False]
+
+
+def test_an_effect_that_fits_only_far_beyond_its_typical_size_is_flagged(hidden_dac_inl):
+    """An INL 40 times the library's typical one is still found, at its size, and the summary warns that a
+    candidate this far out of range may stand in for another effect (same shapes: no new compile)."""
+    gyro = gj.add_effect(gj.paper_qmg(), "dac_inl", 40.0)
+    d = diagnose(gj.simulate_table(gyro, **DEMO_LOT), "paper-qmg")
+    assert d.selected[0] == "dac_inl"
+    assert 38.0 < d.steps[0].typical_multiple < 42.0  # measured 40.009
+    assert "! dac_inl explains the data only at" in d.summary()
+    assert d.to_json()["steps"][0]["typical_multiple"] == d.steps[0].typical_multiple
 
 
 def test_gain_and_bias_effects_are_reported_untestable(hidden_dac_inl):
