@@ -142,7 +142,6 @@ def run_case(preset, hidden, *, devices, runs, seed, progress=None):
     d = diagnose(table, base_device(preset), progress=progress)
     t2 = time.perf_counter()
     report = d.to_json()
-    scores = {c.effect: c for c in d.ranking}
     row = {"preset": preset, "hidden": list(hidden), "selected": list(d.selected),
            "ambiguous": [list(g) for g in d.ambiguous], "untestable": list(d.untestable),
            "rejected": report["rejected"], "ranking": report["ranking"],
@@ -152,7 +151,7 @@ def run_case(preset, hidden, *, devices, runs, seed, progress=None):
            "seconds_simulate": t1 - t0, "seconds_diagnose": t2 - t1}
     row.update(verdict(hidden, d))
     # why an absorbed hidden effect could not be tested, in the diagnosis's own words
-    row["absorption"] = {h: scores[h].absorption for h in row["absorbed"]}
+    row["absorption"] = {h: d.absorptions[h] for h in row["absorbed"]}
     return row
 
 

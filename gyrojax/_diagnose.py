@@ -117,6 +117,12 @@ class Diagnosis:
     def selected(self) -> tuple[str, ...]:
         return tuple(s.effect for s in self.steps)
 
+    @property
+    def absorptions(self) -> dict:
+        """Each untestable candidate: what hid it on this data and what would reveal it, in words."""
+        scores = {c.effect: c for c in self.ranking}
+        return {name: scores[name].absorption for name in self.untestable}
+
     def summary(self) -> str:
         lines = [f"baseline: chi2_red {self.baseline.chi2_red_total:.3f}, model-vs-measurement nonlinearity "
                  f"{self.baseline_nonlinearity_ppm:.2f} ppm"]
@@ -130,9 +136,7 @@ class Diagnosis:
         if self.untestable:
             lines.append(f"not testable on this data (absorbed by the baseline, or a typical-size effect leaves a "
                          f"chi2 below {self.min_typical_chi2:g}):")
-            scores = {c.effect: c for c in self.ranking}
-            for name in self.untestable:
-                lines.append(f"  {name}: {scores[name].absorption}")
+            lines += [f"  {name}: {why}" for name, why in self.absorptions.items()]
         for s in self.steps:
             amb = f" (ambiguous with {', '.join(s.ambiguous_with)}" + (
                 f"; {s.separated_by} separates them)" if s.separated_by else "; no sweep here separates them)") \
@@ -430,8 +434,7 @@ def write_report(diagnosis: Diagnosis, out_dir) -> dict:
     lines += ["", "Effects marked *not testable* leave no fingerprint that the baseline's free parameters "
               "(gains, per-run biases) cannot absorb on this data. What absorbs each, and the measurement that "
               "would reveal it:", ""]
-    scores = {c.effect: c for c in diagnosis.ranking}
-    lines += [f"- `{name}`: {scores[name].absorption}." for name in diagnosis.untestable]
+    lines += [f"- `{name}`: {why}." for name, why in diagnosis.absorptions.items()]
     lines += [""]
     for title, name in figures:
         lines += [f"## {title}", "", f"![{title}]({name})", ""]

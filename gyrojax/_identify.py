@@ -844,9 +844,7 @@ def _decrement(jac, jac_lot, residuals, *, joint):
         return np.full(jac.shape[0], _decrement(full[None], None, np.reshape(residuals, (1, -1)), joint=False)[0])
     finite = np.all(np.isfinite(jac), axis=(-2, -1)) & np.all(np.isfinite(residuals), axis=-1)
     jac, residuals = np.where(finite[:, None, None], jac, 0.0), np.where(finite[:, None], residuals, 0.0)
-    norm = np.sqrt(np.sum(jac**2, axis=-2))
-    u, sv, _ = np.linalg.svd(jac / np.where(norm > 0, norm, 1.0)[..., None, :], full_matrices=False)
-    keep = sv > sv[..., :1] * max(jac.shape[-2:]) * np.finfo(float).eps
+    u, _, _, _, keep = _scaled_svd(jac)
     dec = np.sum(np.where(keep, np.einsum("...rk,...r->...k", u, residuals), 0.0) ** 2, axis=-1)
     return np.where(finite, dec, np.inf)
 
@@ -870,14 +868,20 @@ def _covariance(jac):
     the weak directions (a 6-device lot: shared-gain stderr off by 3681 sigma). Zero columns (held
     parameters) get zero rows and columns, as a pseudo-inverse gives them; directions with a singular value
     below round-off of the largest are dropped likewise."""
+    _, sv, vt, d, keep = _scaled_svd(jac)
+    inv2 = np.where(keep, 1.0 / np.where(sv > 0, sv, 1.0) ** 2, 0.0)
+    cov = np.einsum("...ki,...k,...kj->...ij", vt, inv2, vt)
+    return cov * d[..., :, None] * d[..., None, :]
+
+
+def _scaled_svd(jac):
+    """SVD of the Jacobian (..., residual, parameter) with its columns scaled to unit norm (zero columns stay
+    zero): (u, s, vt, column scales d, s above round-off of the largest)."""
     jac = np.asarray(jac, dtype=float)
     norm = np.sqrt(np.sum(jac**2, axis=-2))
     d = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 0.0)
-    _, sv, vt = np.linalg.svd(jac * d[..., None, :], full_matrices=False)
-    cutoff = sv[..., :1] * max(jac.shape[-2:]) * np.finfo(float).eps
-    inv2 = np.where(sv > cutoff, 1.0 / np.where(sv > 0, sv, 1.0) ** 2, 0.0)
-    cov = np.einsum("...ki,...k,...kj->...ij", vt, inv2, vt)
-    return cov * d[..., :, None] * d[..., None, :]
+    u, sv, vt = np.linalg.svd(jac * d[..., None, :], full_matrices=False)
+    return u, sv, vt, d, sv > sv[..., :1] * max(jac.shape[-2:]) * np.finfo(float).eps
 
 
 def _physical(start, entries, u, cov, free_index, *, shared):
