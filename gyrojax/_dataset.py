@@ -16,12 +16,14 @@ a failed measurement is never mistaken for a point that was simply not recorded.
 
 from __future__ import annotations
 
+import codecs
 import csv
+import decimal
 import difflib
+import io
 import math
 import os
 import re
-import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, final
 
@@ -29,6 +31,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
+
+from ._io import atomic_open, atomic_path
 
 
 SWEEPS = ("rate_table", "vcf_static", "vcf_dynamic", "dac")
@@ -55,6 +59,9 @@ _FLOAT_RE = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z")
 _INT_RE = re.compile(r"[+-]?\d+\Z")
 _INTEGRAL_DEC_RE = re.compile(r"[+-]?\d+\.0*\Z")
 _HEX_RE = re.compile(r"[0-9A-Fa-f]+\Z")
+
+# Run ids: int32, so that any id fits every integer column it is copied into.
+_INT_MIN, _INT_MAX = -(1 << 31), (1 << 31) - 1
 
 
 class DataError(ValueError):
@@ -130,6 +137,9 @@ def _parse_float(cell: Any, where: _Where, i: int, column: str) -> float:
             if not math.isfinite(value):
                 raise where.error(i, column, f"{_show(cell)} overflows float64; expected a finite number (a hex "
                                   "DAC word belongs in a dac sweep).")
+            if value == 0.0 and re.search(r"[1-9]", text.split("e")[0].split("E")[0]):
+                raise where.error(i, column, f"{_show(cell)} underflows float64 to 0; expected 0 or a number "
+                                  "of magnitude at least 5e-324, the smallest float64.")
     else:
         raise where.error(i, column, f"got {type(cell).__name__} {_show(cell)}; expected a finite number.")
     if not math.isfinite(value):
@@ -139,19 +149,19 @@ def _parse_float(cell: Any, where: _Where, i: int, column: str) -> float:
 
 
 def _parse_int(cell: Any, where: _Where, i: int, column: str) -> int:
+    expected = f"expected an integer in [{_INT_MIN}, {_INT_MAX}] such as 0 or 3"
     if isinstance(cell, (bool, np.bool_)):
-        raise where.error(i, column, f"got the boolean {cell!r}; expected an integer.")
+        raise where.error(i, column, f"got the boolean {cell!r}; {expected}.")
     if isinstance(cell, (int, np.integer)):
-        return int(cell)
-    if isinstance(cell, str):
-        text = cell.strip()
-        if _INT_RE.match(text):
-            return int(text)
-        if _INTEGRAL_DEC_RE.match(text):
-            return int(text.split(".")[0])
-    value = _parse_float(cell, where, i, column)
-    if value != math.floor(value):
-        raise where.error(i, column, f"{_show(cell)} is not an integer; expected an integer such as 0 or 3.")
+        value = decimal.Decimal(int(cell))
+    elif isinstance(cell, str) and _FLOAT_RE.match(cell.strip()):
+        value = decimal.Decimal(cell.strip())  # exact: '1.0000000000000001' is not 1, '1e23' is 10**23
+    else:
+        value = decimal.Decimal(_parse_float(cell, where, i, column))
+    if value != value.to_integral_value():
+        raise where.error(i, column, f"{_show(cell)} is not an integer; {expected}.")
+    if not _INT_MIN <= value <= _INT_MAX:  # compared as decimals: int('1e999999999') would never finish
+        raise where.error(i, column, f"{_show(cell)} is outside the range of a run id; {expected}.")
     return int(value)
 
 
@@ -729,6 +739,8 @@ def read_table(path: str | os.PathLike) -> Table:
     """
     suffix = _format_suffix(path, "read_table")
     source = os.fspath(path)
+    if os.path.isdir(source):
+        raise DataError(f"{source} is a directory; give a .csv or .parquet file.", source=source)
     if suffix == ".csv":
         columns, lines = _read_csv(source)
         return Table._from_file(columns, source, lines)
@@ -737,50 +749,68 @@ def read_table(path: str | os.PathLike) -> Table:
 
 
 def _read_csv(source: str) -> tuple[dict[str, list], list[int]]:
+    with open(source, "rb") as f:
+        data = f.read()
+    bom = data.startswith(codecs.BOM_UTF8)
     try:
-        return _read_csv_text(source)
+        text = data[3 if bom else 0:].decode("utf-8")
     except UnicodeDecodeError as e:
-        raise DataError(f"{source}: not UTF-8 text (byte {e.start}: {e.reason}); save the CSV as UTF-8.",
+        at = e.start + (3 if bom else 0)
+        line = data[:at].count(b"\n") + 1
+        raise DataError(f"{source}: line {line}: not UTF-8 text (byte {at}: {e.reason}); save the CSV as UTF-8.",
                         source=source) from None
-    except csv.Error as e:
-        raise DataError(f"{source}: not a readable CSV file: {e}.", source=source) from None
-
-
-def _read_csv_text(source: str) -> tuple[dict[str, list], list[int]]:
-    with open(source, newline="", encoding="utf-8-sig") as f:
-        reader = csv.reader(f)
-        header = None
-        while header is None:
-            try:
-                row = next(reader)
-            except StopIteration:
-                raise DataError(f"{source}: empty file: no header line (expected a header naming at least "
-                                f"{', '.join(REQUIRED_COLUMNS)}).", source=source) from None
-            if any(cell.strip() for cell in row):
-                header = row
-                if reader.line_num != 1:
-                    raise DataError(f"{source}: the header must be line 1, found blank lines before it.",
-                                    source=source)
-        names = [h.strip() for h in header]
-        for j, name in enumerate(names):
-            if not name:
-                raise DataError(f"{source}: header (line 1): column {j + 1} has no name.", source=source)
-            if name in names[:j]:
-                raise DataError(f"{source}: header (line 1): column {name!r} appears twice.", source=source,
-                                column=name)
-        columns: dict[str, list] = {name: [] for name in names}
-        lines: list[int] = []
-        previous = reader.line_num
+    reader = csv.reader(io.StringIO(text, newline=""))
+    records: list[tuple[int, list[str]]] = []  # (first line, fields)
+    previous = 0
+    try:
         for row in reader:
-            start, previous = previous + 1, reader.line_num
-            if not any(cell.strip() for cell in row) and len(row) <= 1:
-                continue  # a blank line holds no data
-            if len(row) != len(names):
-                raise DataError(f"{source}: data row {len(lines) + 1} (line {start}) has {len(row)} fields but "
-                                f"the header has {len(names)}.", source=source, row=len(lines) + 1)
-            for name, cell in zip(names, row):
-                columns[name].append(cell)
-            lines.append(start)
+            records.append((previous + 1, row))
+            previous = reader.line_num
+    except csv.Error as e:
+        raise DataError(f"{source}: line {reader.line_num}: not a readable CSV line: {e}.", source=source) from None
+
+    def blank(row):
+        return not any(cell.strip() for cell in row)
+
+    first = next((k for k, (_, row) in enumerate(records) if not blank(row)), None)
+    if first is None:
+        raise DataError(f"{source}: empty file: no header line (expected a header naming at least "
+                        f"{', '.join(REQUIRED_COLUMNS)}).", source=source)
+    if records[first][0] != 1:
+        raise DataError(f"{source}: the header must be line 1, found blank lines before it.", source=source)
+    header = records[first][1]
+    names = [h.strip() for h in header]
+    if len(names) == 1:
+        for sep, what in ((";", "semicolon"), ("\t", "tab"), ("|", "bar")):
+            if sep in names[0]:
+                raise DataError(f"{source}: the header (line 1) has one column {_show(names[0])}: the file looks "
+                                f"{what}-separated; gyrojax reads comma-separated CSV (save it with ',' between "
+                                "fields and '.' as the decimal mark).", source=source)
+    for j, name in enumerate(names):
+        if not name:
+            raise DataError(f"{source}: header (line 1): column {j + 1} has no name.", source=source)
+        if name in names[:j]:
+            raise DataError(f"{source}: header (line 1): column {name!r} appears twice.", source=source,
+                            column=name)
+    data_records = [(line, row) for line, row in records[first + 1:] if not (blank(row) and len(row) <= 1)]
+    # A file cut short inside its last record would read as complete, with a wrong last number: refuse a last
+    # line that holds text but no newline (a blank last line holds no data).
+    tail = text[max(text.rfind("\n"), text.rfind("\r")) + 1:]
+    if tail.strip():
+        where = (f"data row {len(data_records)} (line {data_records[-1][0]})" if data_records
+                 else "the header (line 1)")
+        raise DataError(f"{source}: {where} does not end with a newline, so the file may have been cut short "
+                        "inside it (a partial copy or an interrupted write). If the file is complete, add a final "
+                        "newline.", source=source, row=len(data_records) or None)
+    columns: dict[str, list] = {name: [] for name in names}
+    lines: list[int] = []
+    for k, (start, row) in enumerate(data_records):
+        if len(row) != len(names):
+            raise DataError(f"{source}: data row {k + 1} (line {start}) has {len(row)} fields but the header has "
+                            f"{len(names)}.", source=source, row=k + 1)
+        for name, cell in zip(names, row):
+            columns[name].append(cell)
+        lines.append(start)
     return columns, lines
 
 
@@ -814,7 +844,8 @@ def write_table(table: Table, path: str | os.PathLike) -> None:
     """Write a table atomically as CSV or Parquet (chosen by the suffix of `path`).
 
     The file is written to a temporary file in the same directory and moved into place with `os.replace`, so a
-    reader never sees a half-written file and a failed write leaves any old file untouched.
+    reader never sees a half-written file and a failed write leaves any old file untouched (a symbolic link is
+    written through, a new file gets `0o666 & ~umask`, a replaced one keeps its mode).
 
     **Arguments:**
 
@@ -823,38 +854,18 @@ def write_table(table: Table, path: str | os.PathLike) -> None:
 
     CSV floats are written with `repr` (the shortest text that reads back to the identical float64: exact
     round trip); DAC words, runs and sample counts as integers; "not given" optional values as empty cells.
-    Parquet keeps dtypes, with nulls for "not given".
+    Every line, the last included, ends with a newline ([`gyrojax.read_table`][] refuses a file that does
+    not: it may have been cut short). Parquet keeps dtypes, with nulls for "not given".
     """
     if not isinstance(table, Table):
         raise TypeError(f"write_table expects a gyrojax.Table, got {type(table).__name__}.")
     suffix = _format_suffix(path, "write_table")
-    path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{os.path.basename(path)}.", suffix=".tmp")
-    try:
-        if suffix == ".csv":
-            with os.fdopen(fd, "w", newline="", encoding="utf-8") as f:
-                _write_csv(table, f)
-                f.flush()
-                os.fsync(f.fileno())
-        else:
-            os.close(fd)
+    if suffix == ".csv":
+        with atomic_open(path, "w", newline="", encoding="utf-8") as f:
+            _write_csv(table, f)
+    else:
+        with atomic_path(path) as tmp:
             _write_parquet(table, tmp)
-        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the usual permissions
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def _read_umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _read_umask()
 
 
 def _csv_cells(name: str, arr: np.ndarray, table: Table) -> list[str]:

@@ -96,6 +96,13 @@ def _weights(mask, sigmas, x, xp) -> Array:
     return xp.where(mask, 1.0 / safe**2, 0.0)
 
 
+def _flat(y, mask, xp):
+    """True where a sweep's valid outputs are all equal: they do not change with the input."""
+    hi = xp.max(xp.where(mask, y, -xp.inf), axis=-1)
+    lo = xp.min(xp.where(mask, y, xp.inf), axis=-1)
+    return hi == lo  # False for a fully masked sweep (-inf != inf)
+
+
 def _line(x, y, w, xp):
     """Weighted least-squares line (centred sums); NaN where fewer than two distinct weighted inputs."""
     sw = xp.sum(w, axis=-1)
@@ -172,7 +179,8 @@ def fit_scale_factor(inputs: Float[ArrayLike, "*batch point"], outputs: Float[Ar
     **Returns:**
 
     A [`gyrojax.ScaleFactorFit`][]. A sweep with 1 or 2 valid points is an error (a line through two points has
-    no nonlinearity); a fully masked one gives NaN.
+    no nonlinearity); a fully masked one gives NaN. A sweep whose outputs are all equal has scale factor 0
+    exactly, bias the output, and NaN nonlinearity (there is no full scale to divide by).
     """
     if full_scale not in FULL_SCALE_CONVENTIONS:
         raise ValueError(f"full_scale must be one of {', '.join(FULL_SCALE_CONVENTIONS)}, got {full_scale!r}.")
@@ -191,6 +199,11 @@ def fit_scale_factor(inputs: Float[ArrayLike, "*batch point"], outputs: Float[Ar
     y = xp.where(mask, y, 0.0)
     w = _weights(mask, sigmas, x, xp)
     k, b = _line(x, y, w, xp)
+    # Constant outputs have slope 0 exactly; the fit would give a round-off slope (1e-35) that turns into a
+    # nonlinearity of 1e21 ppm. With k = 0 the full scale is 0 and the nonlinearity NaN (not applicable).
+    flat = _flat(y, mask, xp) & ~xp.isnan(k)
+    k = xp.where(flat, 0.0, k)
+    b = xp.where(flat, xp.max(xp.where(mask, y, -xp.inf), axis=-1), b)
     r = xp.where(mask, y - (k[..., None] * x + b[..., None]), 0.0)
     if full_scale == "half_range":
         fs = xp.abs(k) * xp.max(xp.abs(x), axis=-1)
@@ -240,7 +253,7 @@ def asymmetry(inputs: Float[ArrayLike, "*batch point"], outputs: Float[ArrayLike
     **Returns:**
 
     Asymmetry in ppm, batch shape. NaN where a sweep has no positive or no negative input (not applicable: an
-    asymmetry needs both signs) or is fully masked. An error where it has both signs but too few points
+    asymmetry needs both signs), where its outputs are all equal, or where it is fully masked. An error where it has both signs but too few points
     (common bias: fewer than 3 in all; separate fits: fewer than 2 on a side).
     """
     xp = _xp(inputs, outputs, mask, sigmas)
@@ -277,7 +290,7 @@ def asymmetry(inputs: Float[ArrayLike, "*batch point"], outputs: Float[ArrayLike
         k_neg, _ = _line(x, y, xp.where(neg, w, 0.0), xp)
         ok = both & (n_pos >= 2) & (n_neg >= 2)
     mean = 0.5 * (k_pos + k_neg)
-    ok = ok & (mean != 0)
+    ok = ok & (mean != 0) & ~_flat(y, mask, xp)  # constant outputs: the slopes are round-off, not a measurement
     return xp.where(ok, 1e6 * (k_pos - k_neg) / xp.where(ok, mean, 1.0), xp.nan)
 
 
@@ -416,6 +429,33 @@ def _num(x) -> float | None:
     return None if math.isnan(v) else v
 
 
+_FLAT = "the outputs do not change with the input (scale factor 0)"
+
+
+def _why_not(rec: dict[str, Any], outputs: np.ndarray, inputs: np.ndarray) -> dict[str, str]:
+    """The reason for each None among a point record's numbers (see `metrics_report`)."""
+    flat = bool(np.all(outputs == outputs[0]))
+    reasons = {}
+    for key, value in rec.items():
+        if value is not None or key in ("device", "run", "sweep", "n_points"):
+            continue
+        if rec["sweep"] == "vcf_dynamic":
+            why = ("no phase_deg was given for every point of this sweep" if key == "phase_deg_at_bandwidth"
+                   else "a vcf_dynamic sweep gives a bandwidth, not a straight-line fit")
+        elif flat and key.startswith("nonlinearity"):
+            why = f"{_FLAT}: there is no full scale to divide the residuals by"
+        elif flat and key == "asymmetry_ppm":
+            why = f"{_FLAT}: there are no slopes to compare"
+        elif key == "asymmetry_ppm" and not (np.any(inputs > 0) and np.any(inputs < 0)):
+            why = "the sweep lacks positive or negative inputs; an asymmetry needs both signs"
+        elif key.startswith("scale_factor") or key.startswith("bias"):
+            why = "fewer than two distinct inputs: no slope can be fitted"
+        else:
+            why = "not determined by these points"
+        reasons[key] = why
+    return reasons
+
+
 def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bool = False,
                    common_bias: bool = True, ddof: int = 1) -> dict[str, Any]:
     """The `metrics` JSON of DESIGN.md §7 for a table: per-sweep metrics and per-device repeatability.
@@ -439,8 +479,11 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
       `rate_dps` column also `scale_factor_vs_rate`, `bias_vs_rate`, `nonlinearity_max_ppm_vs_rate`,
       `nonlinearity_rms_ppm_vs_rate` (output against the rate the word stands for). For `vcf_dynamic` sweeps
       the linear keys are None and `bandwidth_hz`, `phase_deg_at_bandwidth`, `low_frequency_gain` are given.
+      A sweep whose outputs are all equal has `scale_factor` 0 and None nonlinearities and asymmetry.
+      `not_applicable` maps each key that is None to the reason, in words.
     - `devices`: one record per (device, sweep) with a linear fit: `device`, `sweep`, `n_runs`,
-      `scale_factor_mean`, `repeatability_ppm` (None with a single run).
+      `scale_factor_mean`, `repeatability_ppm` (None with a single run, or when the mean scale factor is 0),
+      and `not_applicable` as above.
     - `conventions`: the choices above and the unit of `scale_factor` per sweep kind.
 
     Raises [`gyrojax.DataError`][] naming the device, run, sweep and rows when a sweep has too few points
@@ -509,6 +552,9 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
                     "bandwidth_hz": _num(bw.bandwidth_hz[d, k]),
                     "phase_deg_at_bandwidth": _num(bw.phase_deg[d, k]) if has_phase else None,
                     "low_frequency_gain": _num(bw.low_frequency_gain[d, k])}
+                sel = arr.mask[d, k]
+                records[(dev, r, sweep)]["not_applicable"] = _why_not(records[(dev, r, sweep)],
+                                                                      arr.outputs[d, k][sel], arr.inputs[d, k][sel])
             continue
         fit = fit_scale_factor(arr.inputs, arr.outputs, mask=arr.mask, sigmas=sig, full_scale=full_scale)
         asym = asymmetry(arr.inputs, arr.outputs, mask=arr.mask, sigmas=sig, common_bias=common_bias)
@@ -529,14 +575,21 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
                             "bias_vs_rate": _num(vs_rate.bias[d, k]),
                             "nonlinearity_max_ppm_vs_rate": _num(vs_rate.nonlinearity_max_ppm[d, k]),
                             "nonlinearity_rms_ppm_vs_rate": _num(vs_rate.nonlinearity_rms_ppm[d, k])})
+            sel = arr.mask[d, k]
+            rec["not_applicable"] = _why_not(rec, arr.outputs[d, k][sel], arr.inputs[d, k][sel])
             records[(dev, r, sweep)] = rec
         run_mask = arr.mask.any(axis=-1)
         rep = repeatability(np.where(run_mask, fit.scale_factor, 0.0), mask=run_mask, ddof=ddof)
         n_runs = run_mask.sum(axis=-1)
         for d, dev in enumerate(arr.devices):
             sf = fit.scale_factor[d][run_mask[d]]
-            device_records.append({"device": dev, "sweep": sweep, "n_runs": int(n_runs[d]),
-                                   "scale_factor_mean": float(np.mean(sf)), "repeatability_ppm": _num(rep[d])})
+            rec = {"device": dev, "sweep": sweep, "n_runs": int(n_runs[d]),
+                   "scale_factor_mean": _num(np.mean(sf)), "repeatability_ppm": _num(rep[d]), "not_applicable": {}}
+            if rec["repeatability_ppm"] is None:
+                rec["not_applicable"]["repeatability_ppm"] = (
+                    f"{int(n_runs[d])} run{'s' * (int(n_runs[d]) != 1)}: a repeatability needs at least {ddof + 1}"
+                    if int(n_runs[d]) <= ddof else "the mean scale factor is 0: there is nothing to be relative to")
+            device_records.append(rec)
     order = {}
     for dev, _, sweep in groups:
         order.setdefault((dev, sweep), len(order))

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from gyrojax import _dataset
+from gyrojax import _dataset, _io
 from gyrojax._dataset import (DataError, SweepArrays, Table, aggregate_samples, decode_dac_word, read_table,
                               write_table)
 
@@ -426,4 +426,109 @@ def test_hex_word_in_a_rate_table_row(tmp_path):
 def test_written_file_is_readable_by_others(tmp_path):
     path = tmp_path / "lot.parquet"
     write_table(full_table(), path)
-    assert path.stat().st_mode & 0o777 == 0o666 & ~_dataset._UMASK
+    assert path.stat().st_mode & 0o777 == 0o666 & ~_io._UMASK
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Files that used to be misread or crash (the "never a silently wrong number" cases).
+
+
+@pytest.mark.parametrize("run, what", [
+    ("1e23", "is outside the range of a run id"),
+    ("99999999999999999999", "is outside the range of a run id"),
+    ("-2147483649", "is outside the range of a run id"),
+    ("1e999999999", "is outside the range of a run id"),
+    ("1.0000000000000001", "is not an integer"),
+    ("2.5e0", "is not an integer"),
+])
+def test_run_must_be_a_small_integer(tmp_path, run, what):
+    path = write_csv(tmp_path, [HEADER, GOOD_ROWS[0], f"A,{run},rate_table,0,12.0"])
+    with pytest.raises(DataError, match=re.escape(str(path)) + ": " + cell(2, 3, "run") + ": "
+                       + re.escape(f"{run!r} {what}; expected an integer in [-2147483648, 2147483647]")):
+        read_table(path)
+
+
+@pytest.mark.parametrize("run, value", [("3", 3), ("3.000", 3), ("1e3", 1000), ("2147483647", 2147483647),
+                                        ("-2147483648", -2147483648)])
+def test_integer_runs_in_range_read_exactly(tmp_path, run, value):
+    table = read_table(write_csv(tmp_path, [HEADER, f"A,{run},rate_table,0,12.0"]))
+    assert table["run"].tolist() == [value]
+
+
+def test_underflow_is_refused(tmp_path):
+    path = write_csv(tmp_path, [HEADER, "A,0,rate_table,0,1e-400"])
+    with pytest.raises(DataError, match=cell(1, 2, "output") + ".*'1e-400' underflows float64 to 0"):
+        read_table(path)
+    assert read_table(write_csv(tmp_path, [HEADER, "A,0,rate_table,0,0e-400"], "zero.csv"))["output"][0] == 0.0
+
+
+@pytest.mark.parametrize("sep, what", [(";", "semicolon"), ("\t", "tab")])
+def test_other_separators_are_named(tmp_path, sep, what):
+    path = write_csv(tmp_path, [HEADER.replace(",", sep), *(r.replace(",", sep) for r in GOOD_ROWS)])
+    shown = repr(HEADER.replace(",", sep))
+    with pytest.raises(DataError, match=re.escape(f"{path}: the header (line 1) has one column {shown}: the file "
+                                                  f"looks {what}-separated; gyrojax reads comma-separated CSV")):
+        read_table(path)
+
+
+def test_directory_is_refused(tmp_path):
+    folder = tmp_path / "lot.csv"
+    folder.mkdir()
+    with pytest.raises(DataError, match=re.escape(f"{folder} is a directory; give a .csv or .parquet file.")):
+        read_table(folder)
+
+
+def test_file_cut_inside_its_last_number_is_refused(tmp_path):
+    rows = [f"A,0,rate_table,{x},{x * 13771.0 + 1.5}" for x in (-10, -5, 0, 5, 10)]
+    whole = "\n".join([HEADER, *rows]) + "\n"
+    path = tmp_path / "cut.csv"
+    path.write_text(whole[:-6])  # '137711.5' -> '13'
+    with pytest.raises(DataError, match=re.escape(f"{path}: data row 5 (line 6) does not end with a newline, so the "
+                                                  "file may have been cut short inside it") + ".*add a final newline"):
+        read_table(path)
+    path.write_text(whole[:-1])  # complete, but without the final newline: refused the same way
+    with pytest.raises(DataError, match="data row 5 \\(line 6\\) does not end with a newline"):
+        read_table(path)
+    path.write_text(HEADER)
+    with pytest.raises(DataError, match=re.escape("the header (line 1) does not end with a newline")):
+        read_table(path)
+    path.write_text(whole + "   ")  # a blank last line holds no data: fine
+    assert len(read_table(path)) == 5
+    path.write_text(whole.replace("\n", "\r\n"))
+    assert read_table(path)["output"][-1] == 137711.5
+
+
+def test_not_utf8_names_the_line(tmp_path):
+    path = tmp_path / "latin1.csv"
+    path.write_bytes((HEADER + "\nA,0,rate_table,1,2\nA\xb5,0,rate_table,2,3\n").encode("latin-1"))
+    with pytest.raises(DataError, match=re.escape(f"{path}: line 3: not UTF-8 text (byte 50: invalid start byte)")):
+        read_table(path)
+
+
+def test_written_files_end_with_a_newline_and_read_back(tmp_path):
+    path = tmp_path / "t.csv"
+    write_table(full_table(), path)
+    assert path.read_bytes().endswith(b"\n")
+    assert read_table(path).equals(full_table())
+
+
+def test_every_csv_shipped_reads_back():
+    from importlib import resources
+
+    shipped = [p for p in resources.files("gyrojax").joinpath("data").iterdir() if p.name.endswith(".csv")]
+    assert shipped
+    for p in shipped:
+        assert p.read_bytes().endswith(b"\n"), p.name
+        assert len(read_table(str(p))) > 0
+
+
+def test_write_table_through_a_symlink_keeps_mode_and_link(tmp_path):
+    target = tmp_path / "real.csv"
+    write_table(full_table(), target)
+    target.chmod(0o640)
+    link = tmp_path / "link.csv"
+    link.symlink_to("real.csv")
+    write_table(full_table().select([0, 1, 2]), link)
+    assert link.is_symlink()
+    assert len(read_table(target)) == 3
+    assert target.stat().st_mode & 0o777 == 0o640

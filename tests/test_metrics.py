@@ -307,3 +307,50 @@ def test_jax_and_numpy_paths_agree():
         np.testing.assert_allclose(getattr(fit, name), getattr(ref, name), rtol=1e-12, err_msg=name)
     np.testing.assert_allclose(asym, asymmetry(x, y, mask=mask), rtol=1e-9)
     np.testing.assert_allclose(rep, repeatability(ref.scale_factor[:2]), rtol=1e-12)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Outputs that do not change with the input: no number that was not measured.
+
+
+@pytest.mark.parametrize("level", [0.0, 5.0, 0.1, 13771.123])
+def test_constant_outputs_give_slope_zero_and_no_nonlinearity(level):
+    # Before: 0.1 gave a round-off slope of -8e-35 and a "nonlinearity" of 5.6e21 ppm, asymmetry -2.9e6 ppm.
+    y = np.full(RATES.shape, level)
+    for xp in (np, jnp):
+        fit = fit_scale_factor(xp.asarray(RATES), xp.asarray(y))
+        assert float(fit.scale_factor) == 0.0
+        assert float(fit.bias) == level
+        assert math.isnan(float(fit.nonlinearity_max_ppm)) and math.isnan(float(fit.nonlinearity_rms_ppm))
+        assert math.isnan(float(asymmetry(xp.asarray(RATES), xp.asarray(y))))
+        assert math.isnan(float(asymmetry(xp.asarray(RATES), xp.asarray(y), common_bias=False)))
+
+
+def test_constant_outputs_under_jit_and_grad():
+    @jax.jit
+    def nl(scale):
+        return fit_scale_factor(jnp.asarray(RATES), scale * jnp.full(RATES.shape, 0.1)).scale_factor
+
+    assert float(nl(1.0)) == 0.0
+    assert float(jax.grad(nl)(1.0)) == 0.0
+
+
+def test_metrics_report_says_why_a_number_is_missing():
+    rows = [{"device": "A", "run": r, "sweep": "rate_table", "input": x, "output": 0.1 if r == 1 else 3.0 * x}
+            for r in (0, 1) for x in (-10.0, -5.0, 0.0, 5.0, 10.0)]
+    rows += [{"device": "B", "run": 0, "sweep": "rate_table", "input": x, "output": 2.0 * x} for x in (1.0, 2.0, 3.0)]
+    report = metrics_report(Table.from_records(rows, source="flat.csv"))
+    json.dumps(report, allow_nan=False)
+    good, flat, one_sided = report["points"]
+    assert good["not_applicable"] == {}
+    assert flat["scale_factor"] == 0.0 and flat["nonlinearity_max_ppm"] is None and flat["asymmetry_ppm"] is None
+    assert flat["not_applicable"]["nonlinearity_max_ppm"].startswith("the outputs do not change with the input")
+    assert set(flat["not_applicable"]) == {"nonlinearity_max_ppm", "nonlinearity_rms_ppm", "asymmetry_ppm"}
+    assert one_sided["not_applicable"] == {
+        "asymmetry_ppm": "the sweep lacks positive or negative inputs; an asymmetry needs both signs"}
+    dev = {d["device"]: d for d in report["devices"]}
+    assert dev["A"]["repeatability_ppm"] is not None  # 3 and 0: measured, enormous
+    assert dev["B"]["not_applicable"] == {"repeatability_ppm": "1 run: a repeatability needs at least 2"}
+    both_flat = [dict(r, output=0.0) for r in rows[:10]]
+    (d,) = metrics_report(Table.from_records(both_flat))["devices"]
+    assert d["repeatability_ppm"] is None and "mean scale factor is 0" in d["not_applicable"]["repeatability_ppm"]
