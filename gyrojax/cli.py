@@ -1,15 +1,95 @@
 """The `gyrojax` command line (DESIGN.md §7).
 
-Exit codes: 0 success; 1 a computation failed (a point did not settle, a fit did not converge);
-2 a usage or data error (bad argument, unreadable or invalid file) - reported without a traceback.
+Exit codes:
+
+- 0: success.
+- 1: a computation failed (a point did not settle, a fit did not converge), or a number the data should give
+  could not be determined (`metrics`, `compensate`: printed as "n/a" with the reason; the JSON holds null
+  and the reason). Files written before the failure are complete.
+- 2: a usage or data error (bad argument, unreadable or invalid file, an output path that cannot be written),
+  reported without a traceback; output paths are checked before any data is read or any work is done.
+- 128 + N: stopped by signal N (130 for SIGINT, 143 for SIGTERM). The signal is turned into an exception, so
+  the file being written is discarded (its temporary file removed) and the previous version is kept; it is
+  acted on when the running computation returns to Python. A second signal during that cleanup is ignored.
 """
 
 import argparse
+import contextlib
+import signal
 import sys
+import threading
+import warnings
 
-from ._io import atomic_write_json
+from ._io import OutputPathError, atomic_directory, atomic_write_json, check_output_paths
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+EXIT_SIGNAL_BASE = 128
+
+_EXIT_CODES = """exit codes: 0 success; 1 a computation failed, or a number the data should give could not be
+determined (printed as n/a with the reason); 2 a usage or data error (no traceback; output paths are checked
+before any work); 128+N stopped by signal N (130 SIGINT, 143 SIGTERM; the file being written is discarded, the
+previous one kept)."""
+
+
+class _Interrupted(BaseException):
+    """SIGTERM or SIGINT, raised in the main thread so that `finally` and `except` cleanups run."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+@contextlib.contextmanager
+def _signals_raise():
+    """Turn SIGTERM and SIGINT into `_Interrupted` for the block (once), restoring the old handlers after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signal handlers can only be set from the main thread
+        return
+    fired = []
+
+    def handler(signum, frame):
+        if not fired:  # a second signal must not cut the cleanup of the first short
+            fired.append(signum)
+            raise _Interrupted(signum)
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+def _na(value, spec: str, reason: str | None = None, unit: str = "") -> str:
+    """`value` formatted with `spec` and followed by `unit`, or "n/a" (with the reason) when it is None."""
+    if value is None:
+        return "n/a" + (f" ({reason})" if reason else "")
+    return format(value, spec) + unit
+
+
+def _check_outputs(*outputs) -> None:
+    """Check every output path of a command before any work: `(argument, path or None, folder)` triples."""
+    check_output_paths(list(outputs))
+
+
+def _load_effects(args) -> None:
+    """Register the installed plugins' effects (entry points, once) and those of every --effects-module."""
+    from ._plugins import load_effect_entry_points, load_effects_module
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_effect_entry_points()
+    for w in caught:
+        print(f"gyrojax {args.command}: warning: {w.message}", file=sys.stderr)
+    for path in getattr(args, "effects_module", None) or ():
+        load_effects_module(path)
+
+
+def _write_json(obj, path) -> None:
+    try:
+        atomic_write_json(obj, path)
+    except ValueError as e:  # a NaN in a result: a computation that did not give a number, not a usage error
+        raise RuntimeError(str(e)) from None
 
 
 def _parse_effect(text):
@@ -27,6 +107,12 @@ def _sweep_list(text):
 
 
 def _cmd_simulate(args):
+    from ._dataset import _format_suffix
+
+    _format_suffix(args.out, "--out")
+    _check_outputs(("--out", args.out, False))
+    _load_effects(args)
+
     import gyrojax as gj
 
     from ._campaign import simulate_table
@@ -48,20 +134,58 @@ def _cmd_metrics(args):
     from ._dataset import read_table
     from ._metrics import metrics_report
 
+    _check_outputs(("--json", args.json, False))
     report = metrics_report(read_table(args.data))
+    undetermined = 0
     for p in report["points"]:
-        if p.get("scale_factor") is None:
+        why = p.get("not_applicable", {})
+        head = f"{p['device']:>16} run {p['run']:<3} {p['sweep']:<11}"
+        if p["sweep"] == "vcf_dynamic":
+            print(f"{head} bandwidth {_na(p.get('bandwidth_hz'), '.4g', why.get('bandwidth_hz'), ' Hz')}")
             continue
-        print(f"{p['device']:>16} run {p['run']:<3} {p['sweep']:<11} SF {p['scale_factor']:.6g}  "
-              f"NL max {p['nonlinearity_max_ppm']:.1f} ppm  rms {p['nonlinearity_rms_ppm']:.1f} ppm")
+        if p["scale_factor"] is None or p["nonlinearity_max_ppm"] is None:
+            undetermined += 1
+        sf = _na(p["scale_factor"], ".6g", why.get("scale_factor"))
+        if p["nonlinearity_max_ppm"] is None:
+            print(f"{head} SF {sf}  NL n/a ({why.get('nonlinearity_max_ppm', 'not determined')})")
+        else:
+            print(f"{head} SF {sf}  NL max {p['nonlinearity_max_ppm']:.1f} ppm  "
+                  f"rms {_na(p['nonlinearity_rms_ppm'], '.1f', why.get('nonlinearity_rms_ppm'), ' ppm')}")
     for d in report["devices"]:
-        if d.get("repeatability_ppm") is not None:
-            print(f"{d['device']:>16} {d['sweep']:<11} repeatability {d['repeatability_ppm']:.2f} ppm "
-                  f"over {d['n_runs']} runs")
+        if d["n_runs"] > 1:
+            rep = _na(d["repeatability_ppm"], ".2f", d.get("not_applicable", {}).get("repeatability_ppm"), " ppm")
+            print(f"{d['device']:>16} {d['sweep']:<11} repeatability {rep} over {d['n_runs']} runs")
     if args.json:
-        atomic_write_json(report, args.json)
+        _write_json(report, args.json)
         print(f"wrote {args.json}")
+    if undetermined:
+        print(f"gyrojax metrics: {undetermined} sweep(s) gave no nonlinearity (n/a above, null in the JSON)",
+              file=sys.stderr)
+        return EXIT_FAILED
     return EXIT_OK
+
+
+def _alpha(text):
+    try:
+        alpha = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--alpha expects a number in (0, 0.5], got {text!r}") from None
+    if not 0 < alpha <= 0.5:  # also refuses nan
+        raise argparse.ArgumentTypeError(f"--alpha is a significance level and must lie in (0, 0.5], got {text!r} "
+                                         "(e.g. 0.01; alpha 5 would call every candidate significant)")
+    return alpha
+
+
+def _positive_int(option):
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{option} expects a whole number >= 1, got {text!r}") from None
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"{option} expects a whole number >= 1, got {text!r}")
+        return value
+    return parse
 
 
 def _run_list(text):
@@ -74,23 +198,45 @@ def _run_list(text):
     return runs
 
 
+def _compensation_na(run: dict, when: str) -> str:
+    """Why a run's nonlinearity before/after compensation is None."""
+    if when == "after" and run.get("converged") is False:
+        return "the compensation did not converge on this run"
+    if run.get(f"scale_factor_{when}") == 0:
+        return ("the outputs do not change with the input" if when == "before"
+                else "the compensated rates do not change with the input")
+    return "not determined"
+
+
 def _cmd_compensate(args):
     from ._compensate.compensate import compensate
     from ._dataset import read_table
 
+    _check_outputs(("--json", args.json, False))
+    _load_effects(args)
     result = compensate(read_table(args.data), method=args.method, train_runs=args.train_runs)
+    undetermined = 0
     print(f"{'device':>16} {'run':>4} {'use':>8}  worst nonlinearity before -> after (ppm)")
     for r in result.runs:
+        before, after = r["nonlinearity_max_ppm_before"], r["nonlinearity_max_ppm_after"]
+        undetermined += before is None or after is None
         print(f"{r['device']:>16} {r['run']:>4} {'train' if r['used_for_training'] else 'held-out':>8}  "
-              f"{r['nonlinearity_max_ppm_before']:10.2f} -> {r['nonlinearity_max_ppm_after']:.2f}")
+              f"{_na(before, '10.2f', _compensation_na(r, 'before'))} -> "
+              f"{_na(after, '.2f', _compensation_na(r, 'after'))}")
     for d in result.devices:
+        if d["n_runs"] < 2:
+            continue
         before, after = d["repeatability_ppm_before"], d["repeatability_ppm_after"]
-        if before is not None:
-            print(f"{d['device']:>16} repeatability over {d['n_runs']} runs: {before:.2f} -> {after:.2f} ppm "
-                  f"({args.method}, trained on runs {', '.join(map(str, d['train_runs']))})")
+        print(f"{d['device']:>16} repeatability over {d['n_runs']} runs: "
+              f"{_na(before, '.2f', 'not determined', ' ppm')} -> {_na(after, '.2f', 'not determined', ' ppm')} "
+              f"({args.method}, trained on runs "
+              f"{', '.join(map(str, d['train_runs']))})")
     if args.json:
-        atomic_write_json(result.to_json(), args.json)
+        _write_json(result.to_json(), args.json)
         print(f"wrote {args.json}")
+    if undetermined:
+        print(f"gyrojax compensate: {undetermined} run(s) gave no nonlinearity (n/a above)", file=sys.stderr)
+        return EXIT_FAILED
     return EXIT_OK
 
 
@@ -98,14 +244,17 @@ def _cmd_diagnose(args):
     from ._dataset import read_table
     from ._diagnose import diagnose, write_report
 
+    _check_outputs(("--json", args.json, False), ("--report", args.report, True))
+    _load_effects(args)
     table = read_table(args.data)
     diag = diagnose(table, args.model, alpha=args.alpha, progress=lambda m: print(f"... {m}", flush=True))
     print(diag.summary())
     if args.report:
-        write_report(diag, args.report)
+        with atomic_directory(args.report) as folder:  # the report folder appears whole or not at all
+            write_report(diag, folder)
         print(f"wrote report to {args.report}")
     if args.json:
-        atomic_write_json(diag.to_json(), args.json)
+        _write_json(diag.to_json(), args.json)
         print(f"wrote {args.json}")
     if not diag.final.all_converged:
         print(f"gyrojax diagnose: the final fit did not converge: {diag.final.result_message}", file=sys.stderr)
@@ -129,13 +278,15 @@ def _cmd_identify(args):
     from ._parameters import DEFAULT_FREE, Model, zero_effect
     from ._presets import preset
 
+    _check_outputs(("--json", args.json, False), ("--save", args.save, False))
+    _load_effects(args)
     table = read_table(args.data)
     model = Model(preset(args.model), tuple(zero_effect(name) for name in args.effect))
     fit = identify(model, table, free=args.free or DEFAULT_FREE)
     print(fit.summary())
     print(compare(fit).summary())
     if args.json:
-        atomic_write_json(fit_report(fit), args.json)
+        _write_json(fit_report(fit), args.json)
         print(f"wrote {args.json}")
     if args.save:
         save_fit(fit, args.save)
@@ -147,15 +298,25 @@ def _cmd_identify(args):
 def _cmd_demo(args):
     from ._demo import run_demo
 
-    run_demo(args.out, full_tier=args.full and not args.no_full)
+    _check_outputs(("--out", args.out, True))
+    with atomic_directory(args.out) as folder:  # the demo folder appears whole or not at all
+        run_demo(folder, full_tier=args.full and not args.no_full,
+                 log=lambda m: print(m.replace(folder, args.out), flush=True))
     return EXIT_OK
+
+
+def _effects_module_option(parser):
+    parser.add_argument("--effects-module", action="append", default=[], metavar="FILE.py",
+                        help="import this Python file and register every gyrojax.AbstractEffect subclass it "
+                             "defines, for --effect and the diagnosis (repeatable); installed packages' effects "
+                             "(entry-point group gyrojax.effects) are loaded too")
 
 
 def build_parser():
     from ._presets import PRESETS
 
     parser = argparse.ArgumentParser(
-        prog="gyrojax",
+        prog="gyrojax", epilog=_EXIT_CODES,
         description="Differentiable simulation and identification of MEMS Coriolis vibratory gyroscopes. "
                     "Data files are the tidy table of DESIGN.md §6 (CSV or Parquet): rates in deg/s, "
                     "gyro outputs in LSB, DAC amplitudes in V.")
@@ -166,8 +327,9 @@ def build_parser():
                                      "them in the tidy data format.")
     sim.add_argument("--preset", required=True, choices=sorted(PRESETS),
                      help="paper-qmg: seed 000's closed-loop QMG; vcf-2018: seed 003's open-loop gyro")
-    sim.add_argument("--devices", type=int, default=1, help="lot size (default 1: the nominal device)")
-    sim.add_argument("--runs", type=int, default=1, help="repeated runs per device (default 1)")
+    sim.add_argument("--devices", type=_positive_int("--devices"), default=1,
+                     help="lot size (default 1: the nominal device)")
+    sim.add_argument("--runs", type=_positive_int("--runs"), default=1, help="repeated runs per device (default 1)")
     sim.add_argument("--sweeps", type=_sweep_list, default=("rate_table",),
                      help="comma-separated, any of rate_table, vcf_static, vcf_dynamic, dac (default rate_table); "
                           "the protocols are seed 000 §5's rate table and seed 003's virtual-Coriolis tests, see "
@@ -179,6 +341,7 @@ def build_parser():
     sim.add_argument("--noise-free", action="store_true", help="no measurement noise, no turn-on bias")
     sim.add_argument("--seed", type=int, default=0, help="PRNG seed for the lot and the noise (default 0)")
     sim.add_argument("--out", required=True, help="output file, .csv or .parquet")
+    _effects_module_option(sim)
     sim.set_defaults(func=_cmd_simulate)
 
     met = sub.add_parser("metrics", help="scale factor, nonlinearity, asymmetry, repeatability of a data file",
@@ -199,6 +362,7 @@ def build_parser():
     comp.add_argument("--train-runs", type=_run_list, default=None, metavar="LIST",
                       help="comma-separated run ids to fit on, e.g. 0,1 (default: each device's first run)")
     comp.add_argument("--json", help="write the report as JSON here")
+    _effects_module_option(comp)
     comp.set_defaults(func=_cmd_compensate)
 
     diag = sub.add_parser("diagnose", help="compare model and data, find the missing physical effect, add it",
@@ -208,10 +372,13 @@ def build_parser():
     diag.add_argument("data", help="a tidy data file (.csv or .parquet): rate_table, vcf_static, vcf_dynamic, dac")
     diag.add_argument("--model", choices=sorted(PRESETS), default="paper-qmg",
                       help="baseline device preset (default paper-qmg)")
-    diag.add_argument("--alpha", type=float, default=0.01,
-                      help="family-wise significance per step (default 0.01)")
+    diag.add_argument("--alpha", type=_alpha, default=0.01,
+                      help="family-wise significance per step, in (0, 0.5] (default 0.01)")
     diag.add_argument("--json", help="write the diagnosis as JSON here (DESIGN.md §7 keys)")
-    diag.add_argument("--report", metavar="DIR", help="write a Markdown report with PNG plots into DIR")
+    diag.add_argument("--report", metavar="DIR",
+                      help="write a Markdown report with PNG plots into the folder DIR (new, empty, or written by "
+                           "gyrojax before: it is replaced as a whole)")
+    _effects_module_option(diag)
     diag.set_defaults(func=_cmd_diagnose)
 
     idf = sub.add_parser("identify", help="fit the model's physical parameters to every sweep of a data file",
@@ -228,6 +395,7 @@ def build_parser():
                      help="add an effect (from zero) and fit its parameters too (repeatable), e.g. dac_inl")
     idf.add_argument("--json", help="write the report (DESIGN.md §7 identify keys) as JSON here")
     idf.add_argument("--save", metavar="FIT", help="save the fit here (read back with gyrojax.load_fit)")
+    _effects_module_option(idf)
     idf.set_defaults(func=_cmd_identify)
 
     demo = sub.add_parser("demo", help="the main job on the embedded default data (seed 000 Table 2, presets)",
@@ -236,7 +404,9 @@ def build_parser():
                                       "nonlinearity; compare the tiers on paper-qmg with a DAC INL; compare "
                                       "vcf-2018's bandwidth with seed 003. Writes report.md, summary.json, "
                                       "plots and a diagnosis/ report. A few minutes on a 2-core CPU.")
-    demo.add_argument("--out", default="gyrojax-demo", help="output folder (default ./gyrojax-demo)")
+    demo.add_argument("--out", default="gyrojax-demo",
+                      help="output folder (default ./gyrojax-demo): new, empty, or written by gyrojax before (it is "
+                           "replaced as a whole)")
     demo.add_argument("--full", action="store_true",
                       help="also run the (slow, ~1 min) full-waveform tier in the three-tier comparison")
     demo.add_argument("--no-full", action="store_true", help="skip the full-waveform tier (the default)")
@@ -244,16 +414,44 @@ def build_parser():
     return parser
 
 
+def _os_error_text(e: OSError) -> str:
+    if e.filename is None:
+        return str(e)
+    text = f"{e.filename}: {e.strerror or e}"
+    return text + (f" (moving it to {e.filename2})" if e.filename2 is not None else "")
+
+
 def main(argv=None):
+    """Run the command line; returns the exit code (see the module notes)."""
     parser = build_parser()
-    args = parser.parse_args(argv)
     try:
-        return args.func(args)
-    except (ValueError, FileNotFoundError, IsADirectoryError, PermissionError) as e:
-        print(f"gyrojax {args.command}: error: {e}", file=sys.stderr)
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # argparse has printed the usage error (or the help)
+        return e.code if isinstance(e.code, int) else EXIT_USAGE
+    from ._dataset import DataError
+
+    name = f"gyrojax {args.command}"
+    try:
+        with _signals_raise():
+            return args.func(args)
+    except _Interrupted as e:
+        print(f"{name}: stopped by {signal.Signals(e.signum).name}; the file being written (if any) was "
+              "discarded and its previous version kept", file=sys.stderr)
+        return EXIT_SIGNAL_BASE + e.signum
+    except KeyboardInterrupt:  # outside the main thread, where no handler could be set
+        print(f"{name}: interrupted", file=sys.stderr)
+        return EXIT_SIGNAL_BASE + signal.SIGINT
+    except (DataError, OutputPathError, ValueError) as e:
+        print(f"{name}: error: {e}", file=sys.stderr)
         return EXIT_USAGE
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError, FileExistsError) as e:
+        print(f"{name}: error: {_os_error_text(e)}", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as e:  # the disk is full, an I/O error: nothing the arguments could fix
+        print(f"{name}: failed: {_os_error_text(e)}", file=sys.stderr)
+        return EXIT_FAILED
     except RuntimeError as e:
-        print(f"gyrojax {args.command}: failed: {e}", file=sys.stderr)
+        print(f"{name}: failed: {e}", file=sys.stderr)
         return EXIT_FAILED
 
 

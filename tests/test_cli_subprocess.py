@@ -1,0 +1,135 @@
+"""The command line as a user runs it: a real process, its exit code and stderr (no traceback), and signals
+that arrive in the middle of a write. Only cheap commands (bad inputs, metrics): each process costs the import."""
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+
+HEADER = "device,run,sweep,input,output"
+RATES = (-10, -5, 0, 5, 10)
+
+
+def run_cli(*argv, cwd):
+    proc = subprocess.run([sys.executable, "-m", "gyrojax.cli", *argv], cwd=cwd, capture_output=True, text=True,
+                          timeout=300)
+    return proc.returncode, proc.stdout, proc.stderr
+
+
+def files(tmp_path):
+    (tmp_path / "semi.csv").write_text("\n".join([HEADER.replace(",", ";"),
+                                                  *(f"A;0;rate_table;{x};{3.0 * x}" for x in RATES)]) + "\n")
+    (tmp_path / "dir.csv").mkdir()
+    good = "\n".join([HEADER, *(f"A,0,rate_table,{x},{x * 13771.0 + 1.5}" for x in RATES)]) + "\n"
+    (tmp_path / "cut.csv").write_text(good[:-6])
+    (tmp_path / "bigrun.csv").write_text("\n".join([HEADER, *(f"A,1e23,rate_table,{x},{3.0 * x}" for x in RATES)])
+                                         + "\n")
+    (tmp_path / "flat.csv").write_text("\n".join([HEADER, *(f"A,0,rate_table,{x},5.0" for x in RATES)]) + "\n")
+    (tmp_path / "good.csv").write_text(good)
+
+
+@pytest.mark.parametrize("argv, code, message", [
+    (["metrics", "semi.csv"], 2, "semi.csv: the header (line 1) has one column 'device;run;sweep;input;output': the "
+                                 "file looks semicolon-separated"),
+    (["metrics", "dir.csv"], 2, "dir.csv is a directory; give a .csv or .parquet file."),
+    (["metrics", "cut.csv"], 2, "cut.csv: data row 5 (line 6) does not end with a newline"),
+    (["metrics", "bigrun.csv"], 2, "bigrun.csv: data row 1 (line 2), column 'run': '1e23' is outside the range of a "
+                                   "run id"),
+    (["metrics", "missing.csv"], 2, "missing.csv: No such file or directory"),
+    (["metrics", "flat.csv"], 1, "1 sweep(s) gave no nonlinearity"),
+    (["simulate", "--preset", "paper-qmg", "--out", "nodir/o.csv"], 2, "--out nodir/o.csv: the folder"),
+    (["diagnose", "good.csv", "--alpha", "5"], 2, "argument --alpha: --alpha is a significance level"),
+])
+def test_bad_inputs_exit_cleanly_without_traceback(tmp_path, argv, code, message):
+    files(tmp_path)
+    rc, out, err = run_cli(*argv, cwd=tmp_path)
+    assert rc == code, err
+    assert message in err
+    assert "Traceback" not in err and "Traceback" not in out
+    if argv[0] == "metrics" and code == 1:
+        assert "NL n/a (the outputs do not change with the input" in out
+
+
+# A CLI process whose JSON writer writes slowly, so that a signal lands in the middle of the write.
+SLOW_JSON = textwrap.dedent("""
+    import sys, time
+    import gyrojax.cli as cli
+    from gyrojax import _io
+
+    def slow(obj, path):
+        with _io.atomic_open(path, "w") as f:
+            f.write("{\\n")
+            f.flush()
+            print("WRITING", flush=True)
+            for i in range(2000):
+                f.write(f'  "k{i}": {i},\\n')
+                f.flush()
+                time.sleep(0.01)
+            f.write('  "end": 0\\n}\\n')
+
+    cli.atomic_write_json = slow
+    sys.exit(cli.main(sys.argv[1:]))
+""")
+
+
+def interrupt_when_writing(tmp_path, script, argv, signum):
+    proc = subprocess.Popen([sys.executable, "-c", script, *argv], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        for line in proc.stdout:
+            if line.strip() == "WRITING":
+                break
+        else:
+            pytest.fail(f"the writer never started: {proc.stderr.read()}")
+        during = sorted(os.listdir(tmp_path))
+        proc.send_signal(signum)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    return proc.returncode, err, during
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_signal_during_a_write_keeps_the_old_file(tmp_path, signum):
+    files(tmp_path)
+    out = tmp_path / "m.json"
+    out.write_text('{"old": true}\n')
+    rc, err, during = interrupt_when_writing(tmp_path, SLOW_JSON, ["metrics", "good.csv", "--json", "m.json"], signum)
+    assert any(name.startswith(".m.json.") and name.endswith(".tmp") for name in during)  # really mid-write
+    assert rc == 128 + signum
+    assert f"gyrojax metrics: stopped by {signal.Signals(signum).name}" in err and "Traceback" not in err
+    assert out.read_text() == '{"old": true}\n'
+    assert not [n for n in os.listdir(tmp_path) if n.endswith(".tmp")]
+
+
+SLOW_DEMO = textwrap.dedent("""
+    import os, sys, time
+    import gyrojax.cli as cli
+    from gyrojax import _demo
+
+    def slow(out_dir, full_tier=False, log=print):
+        with open(os.path.join(out_dir, "report.md"), "w") as f:
+            f.write("half a report")
+        print("WRITING", flush=True)
+        time.sleep(60)
+
+    _demo.run_demo = slow
+    sys.exit(cli.main(sys.argv[1:]))
+""")
+
+
+def test_sigterm_while_a_folder_is_built_keeps_the_old_folder(tmp_path):
+    from gyrojax._io import FOLDER_MARKER, atomic_directory
+
+    with atomic_directory(tmp_path / "demo") as folder:  # a complete earlier output
+        (open(os.path.join(folder, "report.md"), "w")).write("the old, whole report")
+    rc, err, during = interrupt_when_writing(tmp_path, SLOW_DEMO, ["demo", "--out", "demo"], signal.SIGTERM)
+    assert any(name.startswith(".demo.") for name in during)  # being built aside
+    assert rc == 143 and "stopped by SIGTERM" in err and "Traceback" not in err
+    assert sorted(os.listdir(tmp_path)) == ["demo"]  # no temporary folder left
+    assert sorted(os.listdir(tmp_path / "demo")) == sorted([FOLDER_MARKER, "report.md"])
+    assert (tmp_path / "demo" / "report.md").read_text() == "the old, whole report"

@@ -1,0 +1,149 @@
+"""User effects from a file (`load_effects_module`) and from installed packages (the `gyrojax.effects` entry
+points), registered like the built-in ones; registered effects are global, so every test removes its own."""
+
+import importlib.metadata
+import sys
+import textwrap
+
+import pytest
+
+import gyrojax as gj
+from gyrojax import _plugins
+from gyrojax._plugins import ENTRY_POINT_GROUP, load_effect_entry_points, load_effects_module
+
+
+EFFECT = textwrap.dedent('''
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    import gyrojax as gj
+
+
+    class {cls}(gj.AbstractEffect):
+        gain: jax.Array = eqx.field(converter=lambda v: jnp.asarray(v, dtype=float))
+
+        name = "{name}"
+        description = "a DAC reference gain error"
+        plugs_into = "excitation.dac.gain_error"
+
+        @classmethod
+        def supports(cls, gyro):
+            return gyro.closed_loop
+
+        def apply(self, gyro):
+            return eqx.tree_at(lambda g: g.excitation.dac.gain_error, gyro,
+                               gyro.excitation.dac.gain_error + self.gain)
+
+        @classmethod
+        def typical(cls, scale=1.0):
+            return cls(scale * {size})
+''')
+
+
+def effect_source(cls="UserGain", name="user_gain", size="5e-4"):
+    return EFFECT.format(cls=cls, name=name, size=size)
+
+
+@pytest.fixture(autouse=True)
+def clean_registry(monkeypatch):
+    effects, files, modules = dict(gj.EFFECTS), dict(_plugins._loaded_files), set(sys.modules)
+    monkeypatch.setattr(_plugins, "_entry_points_loaded", False)
+    yield
+    for name in set(gj.EFFECTS) - set(effects):
+        del gj.EFFECTS[name]
+    _plugins._loaded_files.clear()
+    _plugins._loaded_files.update(files)
+    for name in set(sys.modules) - modules:
+        if name.startswith(("gyrojax_user_effects_", "gjtest_")):
+            del sys.modules[name]
+
+
+def test_a_file_defining_classes_registers_them(tmp_path):
+    path = tmp_path / "fx.py"
+    path.write_text(effect_source() + textwrap.dedent('''
+        from gyrojax._effects.dac_inl import DacInl  # imported: not this file's, not registered again
+
+        class AbstractUserThing(gj.AbstractEffect):  # abstract: a base for others, skipped
+            pass
+
+        with open(__file__ + ".runs", "a") as f:
+            f.write("ran\\n")
+    '''))
+    (cls,) = load_effects_module(path)
+    assert gj.EFFECTS["user_gain"] is cls and cls.__name__ == "UserGain"
+    assert "user_gain" in gj.supported_effects(gj.paper_qmg())
+    assert load_effects_module(str(path)) == (cls,)  # loaded once: the file ran once
+    assert (tmp_path / "fx.py.runs").read_text() == "ran\n"
+    assert gj.add_effect(gj.paper_qmg(), "user_gain", 2.0).excitation.dac.gain_error == pytest.approx(
+        float(gj.paper_qmg().excitation.dac.gain_error) + 1e-3)
+
+
+def test_a_file_may_register_its_effect_itself(tmp_path):
+    path = tmp_path / "self_registering.py"
+    path.write_text(effect_source() + "\ngj.register_effect(UserGain)\n")
+    (cls,) = load_effects_module(path)
+    assert gj.EFFECTS["user_gain"] is cls
+
+
+def test_all_or_none(tmp_path):
+    path = tmp_path / "mixed.py"
+    path.write_text(effect_source("GoodOne", "good_one") + effect_source("BadOne", "bad_one", "5e-4 + 1.0")
+                    .split("import gyrojax as gj", 1)[1])
+    with pytest.raises(ValueError, match=f"{path}: effect class BadOne cannot be registered: .*typical\\(0.0\\)"):
+        load_effects_module(path)
+    assert "good_one" not in gj.EFFECTS and "bad_one" not in gj.EFFECTS
+
+
+@pytest.mark.parametrize("name, text, message", [
+    ("missing.py", None, "{p}: no such file"),
+    ("notpython.txt", "x = 1\n", "{p}: not a .py file"),
+    ("syntax.py", "x = 1\nclass (:\n", "{p}: line 2: syntax error"),
+    ("raises.py", "import os\n\nos.environ['GJ_NOPE_' + 1]\n", "{p}: line 3: importing it failed: TypeError"),
+])
+def test_load_errors_name_the_file(tmp_path, name, text, message):
+    path = tmp_path / name
+    if text is not None:
+        path.write_text(text)
+    with pytest.raises(ValueError, match=message.format(p=path)):
+        load_effects_module(path)
+    assert not [m for m in sys.modules if m.startswith("gyrojax_user_effects_")]  # no half-imported module
+
+
+def test_entry_points_load_classes_and_modules_once_and_warn_on_broken_ones(tmp_path, monkeypatch):
+    (tmp_path / "gjtest_ep_class.py").write_text(effect_source("EpClass", "ep_class") + "\nNOT_AN_EFFECT = 3\n")
+    (tmp_path / "gjtest_ep_module.py").write_text(effect_source("EpModule", "ep_module"))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    eps = [importlib.metadata.EntryPoint("one", "gjtest_ep_class:EpClass", ENTRY_POINT_GROUP),
+           importlib.metadata.EntryPoint("two", "gjtest_ep_module", ENTRY_POINT_GROUP),
+           importlib.metadata.EntryPoint("broken", "gjtest_not_installed:Effect", ENTRY_POINT_GROUP),
+           importlib.metadata.EntryPoint("wrong", "gjtest_ep_class:NOT_AN_EFFECT", ENTRY_POINT_GROUP)]
+    calls = []
+
+    def entry_points(*, group):
+        calls.append(group)
+        return eps
+
+    monkeypatch.setattr(importlib.metadata, "entry_points", entry_points)
+    with pytest.warns(UserWarning) as caught:
+        added = load_effect_entry_points()
+    assert set(added) == {"ep_class", "ep_module"}
+    messages = [str(w.message) for w in caught]
+    assert any("entry point 'broken' = 'gjtest_not_installed:Effect' in group 'gyrojax.effects' was skipped: "
+               "ModuleNotFoundError" in m for m in messages)
+    assert any("entry point 'wrong'" in m and "neither an effect class nor a module" in m for m in messages)
+    assert load_effect_entry_points() == () and calls == [ENTRY_POINT_GROUP]  # once
+
+
+def test_the_cli_reports_a_broken_entry_point_as_a_warning(tmp_path, monkeypatch, capsys):
+    from gyrojax.cli import main
+
+    broken = importlib.metadata.EntryPoint("broken", "gjtest_not_installed:Effect", ENTRY_POINT_GROUP)
+    monkeypatch.setattr(importlib.metadata, "entry_points", lambda *, group: [broken])
+    rates = (-200, -100, -50, -10, 0, 10, 50, 100, 200)
+    data = tmp_path / "d.csv"
+    data.write_text("\n".join(["device,run,sweep,input,output",
+                               *(f"A,0,rate_table,{x},{x * 13771.0 + 1e-3 * x**3}" for x in rates)]) + "\n")
+    assert main(["compensate", str(data), "--method", "polynomial"]) == 0
+    err = capsys.readouterr().err
+    assert "gyrojax compensate: warning: gyrojax: entry point 'broken'" in err and "was skipped" in err
