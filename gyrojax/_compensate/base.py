@@ -27,6 +27,11 @@ class AbstractCompensation(eqx.Module):
     def summary(self) -> dict[str, Any]:
         """The fitted coefficients as a JSON-ready dict (Python numbers, lists and strings)."""
 
+    def status(self) -> tuple[bool, str]:
+        """`(converged, message)`: whether the fit reached what its method solves for, and if not, what did not
+        converge and what to try. Closed-form fits (linear least squares) always converge."""
+        return True, ""
+
 
 class AbstractCompensator(eqx.Module):
     """A compensation method (a strategy, holding only its settings); `fit` returns the fitted solution.

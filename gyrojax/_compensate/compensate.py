@@ -1,6 +1,7 @@
 """`compensate`: fit a compensator on training runs, judge it on held-out runs (seed 000's metrics)."""
 
 import math
+import warnings
 from typing import Any
 
 import equinox as eqx
@@ -47,14 +48,18 @@ class CompensationResult(eqx.Module):
       `scale_factor_before` (LSB per deg/s), `scale_factor_after` (compensated deg/s per table deg/s),
       `nonlinearity_max_ppm_before` / `_after`, `nonlinearity_rms_ppm_before` / `_after`, and the curve:
       `rates_dps`, `residuals_ppm_before` / `_after` (residual from the run's own straight line over its full
-      scale, ppm, signed: the worst |.| is the max nonlinearity).
+      scale, ppm, signed: the worst |.| is the max nonlinearity), and `converged` (the device's fit).
     - `devices`: one record per device: `device`, `train_runs`, `held_out_runs`, `repeatability_ppm_before`
       / `_after` over all its runs, the same over the held-out runs only (`..._held_out`, None with fewer
-      than two), `worst_nonlinearity_max_ppm_held_out_before` / `_after`, and `compensator` (the fitted
-      coefficients, method-specific).
+      than two), `worst_nonlinearity_max_ppm_held_out_before` / `_after`, `compensator` (the fitted
+      coefficients, method-specific), `converged` and `message` (empty when converged; else what did not
+      converge and what to try).
     - `solutions`: the fitted compensators by device, to apply to new data
-      (`solution.rate(output, drive_freq_hz=...)`).
+      (`solution.rate(output, drive_freq_hz=...)`); for a device whose fit did not converge, its best fit.
     - `full_scale`: the nonlinearity full-scale convention (see [`gyrojax.fit_scale_factor`][]).
+
+    Every `_after` figure of a device whose fit did not converge is None: the figures of a compensator that
+    is not the method's result are not reported as the method's.
     """
 
     method: str = eqx.field(static=True)
@@ -132,7 +137,9 @@ def compensate(table: Table, *, method: str | AbstractCompensator = "composite",
       factory calibration followed by use). Every device must have them.
     - `full_scale`: nonlinearity full-scale convention of [`gyrojax.fit_scale_factor`][].
 
-    **Returns:** a [`gyrojax.CompensationResult`][].
+    **Returns:** a [`gyrojax.CompensationResult`][]. A device whose fit does not converge (an iterative
+    method, `model`) does not stop the others: its record says so (`converged`, `message`, no `_after`
+    figures) and a `RuntimeWarning` carries the message.
 
     Raises [`gyrojax.DataError`][] naming the device, run and row where the data cannot support the method
     (no rate_table rows, a run with fewer than 3 points, a training run the device lacks, a missing
@@ -178,38 +185,50 @@ def compensate(table: Table, *, method: str | AbstractCompensator = "composite",
         except ValueError as e:
             raise ValueError(f"device {dev!r}, training runs {list(train[dev])}: {e}") from None
         solutions[dev] = solution
-        estimate = np.asarray(solution.rate(pts.output, drive_freq_hz=pts.drive_freq_hz,
-                                            temperature_c=pts.temperature_c))
+        converged, message = solution.status()
+        if not converged:
+            warnings.warn(f"device {dev!r}, training runs {list(train[dev])}: {message}", RuntimeWarning,
+                          stacklevel=2)
+        estimate = (np.asarray(solution.rate(pts.output, drive_freq_hz=pts.drive_freq_hz,
+                                             temperature_c=pts.temperature_c)) if converged else None)
         sf_before, sf_after, held = [], [], []
         worst_before, worst_after = [], []
         for run in runs_of[dev]:
             sel = pts.run == run
             x = pts.rate_dps[sel]
             before = fit_scale_factor(x, pts.output[sel], full_scale=full_scale)
-            after = fit_scale_factor(x, estimate[sel], full_scale=full_scale)
+            after = fit_scale_factor(x, estimate[sel], full_scale=full_scale) if converged else None
             trained = run in train[dev]
             sf_before.append(float(before.scale_factor))
-            sf_after.append(float(after.scale_factor))
+            sf_after.append(float(after.scale_factor) if converged else math.nan)
             held.append(not trained)
             if not trained:
                 worst_before.append(float(before.nonlinearity_max_ppm))
-                worst_after.append(float(after.nonlinearity_max_ppm))
+                if converged:
+                    worst_after.append(float(after.nonlinearity_max_ppm))
+
+            def post(name):
+                return _num(getattr(after, name)) if converged else None
+
             run_records.append({
                 "device": dev, "run": int(run), "used_for_training": bool(trained), "n_points": int(sel.sum()),
-                "scale_factor_before": _num(before.scale_factor), "scale_factor_after": _num(after.scale_factor),
+                "converged": converged,
+                "scale_factor_before": _num(before.scale_factor), "scale_factor_after": post("scale_factor"),
                 "nonlinearity_max_ppm_before": _num(before.nonlinearity_max_ppm),
-                "nonlinearity_max_ppm_after": _num(after.nonlinearity_max_ppm),
+                "nonlinearity_max_ppm_after": post("nonlinearity_max_ppm"),
                 "nonlinearity_rms_ppm_before": _num(before.nonlinearity_rms_ppm),
-                "nonlinearity_rms_ppm_after": _num(after.nonlinearity_rms_ppm),
+                "nonlinearity_rms_ppm_after": post("nonlinearity_rms_ppm"),
                 "rates_dps": [float(v) for v in x],
                 "residuals_ppm_before": [float(v) for v in 1e6 * before.residuals / before.full_scale],
-                "residuals_ppm_after": [float(v) for v in 1e6 * after.residuals / after.full_scale],
+                "residuals_ppm_after": ([float(v) for v in 1e6 * after.residuals / after.full_scale]
+                                        if converged else None),
             })
         sf_before, sf_after, held = np.asarray(sf_before), np.asarray(sf_after), np.asarray(held)
 
         def rep(sf, mask=None):
-            return _num(repeatability(sf if mask is None else sf[mask])) if (mask is None or mask.sum() > 1) \
-                else None
+            if mask is not None and mask.sum() < 2 or not np.all(np.isfinite(sf)):  # NaN: fit not converged
+                return None
+            return _num(repeatability(sf if mask is None else sf[mask]))
 
         device_records.append({
             "device": dev, "method": compensator.name, "train_runs": [int(r) for r in train[dev]],
@@ -219,7 +238,7 @@ def compensate(table: Table, *, method: str | AbstractCompensator = "composite",
             "repeatability_ppm_after_held_out": rep(sf_after, held),
             "worst_nonlinearity_max_ppm_held_out_before": max(worst_before) if worst_before else None,
             "worst_nonlinearity_max_ppm_held_out_after": max(worst_after) if worst_after else None,
-            "compensator": solution.summary(),
+            "compensator": solution.summary(), "converged": converged, "message": message,
         })
     return CompensationResult(method=compensator.name, runs=tuple(run_records), devices=tuple(device_records),
                               solutions=solutions, full_scale=full_scale)
