@@ -67,8 +67,10 @@ from ._effects.registry import (  # noqa: E402
     register_effect as register_effect,
     supported_effects as supported_effects,
 )
+from ._effects.feedback_compression import FeedbackCompression as FeedbackCompression  # noqa: E402
 from ._effects.thermal_drift import ThermalDrift as ThermalDrift  # noqa: E402
 from ._effects.vref_drift import VrefDrift as VrefDrift  # noqa: E402
+from ._effects.zro_tempco import ZroTempco as ZroTempco  # noqa: E402
 from ._electronics.dac import DAC as DAC  # noqa: E402
 from ._electronics.excitation import FTRExcitation as FTRExcitation  # noqa: E402
 from ._electronics.frontend import FrontEnd as FrontEnd  # noqa: E402
@@ -78,7 +80,12 @@ from ._gyroscope import (  # noqa: E402
     design_rebalance_loop as design_rebalance_loop,
 )
 from ._compare import Comparison as Comparison, compare as compare  # noqa: E402
-from ._diagnose import Diagnosis as Diagnosis, diagnose as diagnose  # noqa: E402
+from ._diagnose import (  # noqa: E402
+    Diagnosis as Diagnosis,
+    Discrepancy as Discrepancy,
+    Rejection as Rejection,
+    diagnose as diagnose,
+)
 from ._fitio import load_fit as load_fit, save_fit as save_fit  # noqa: E402
 from ._fitreport import fit_report as fit_report  # noqa: E402
 from ._identify import Fit as Fit, Unidentifiable as Unidentifiable, identify as identify  # noqa: E402
@@ -94,6 +101,12 @@ from ._metrics import (  # noqa: E402
     repeatability as repeatability,
 )
 from ._noise import RateNoise as RateNoise  # noqa: E402
+from ._observe import (  # noqa: E402
+    dac_points as dac_points,
+    rate_table_points as rate_table_points,
+    vcf_dynamic_points as vcf_dynamic_points,
+    vcf_static_points as vcf_static_points,
+)
 from ._process import WaferProcess as WaferProcess  # noqa: E402
 from ._parameters import PARAMETERS as PARAMETERS, Model as Model, Parameter as Parameter  # noqa: E402
 from ._physics.electrodes import (  # noqa: E402
@@ -127,8 +140,17 @@ from ._simulate.tiers import (  # noqa: E402
     Steady as Steady,
     settle as settle,
 )
+from ._probes import PROBES as PROBES, AbstractProbe as AbstractProbe  # noqa: E402
 from ._solution import RESULTS as RESULTS  # noqa: E402
 from ._stimulus import Stimulus as Stimulus  # noqa: E402
+from ._terms import (  # noqa: E402
+    AbstractFeedbackTerm as AbstractFeedbackTerm,
+    AbstractOutputTerm as AbstractOutputTerm,
+    AbstractRateTerm as AbstractRateTerm,
+    AbstractTerm as AbstractTerm,
+    PointConditions as PointConditions,
+    TemperatureCoefficient as TemperatureCoefficient,
+)
 from ._sweeps import (  # noqa: E402
     SEED000_RATES_DPS as SEED000_RATES_DPS,
     VCF_DYNAMIC_FREQUENCIES_HZ as VCF_DYNAMIC_FREQUENCIES_HZ,

@@ -38,29 +38,44 @@ vcf-2018 lot with seed 003's spread; at 1e-10 every point converges in 2 Newton 
 DAC_VOLTMETER_SIGMA = DAC_VOLTMETER_SIGMA_V  # V, the default of simulate_table(voltmeter_sigma_v=...)
 
 
+def _per_run(x, temperatures):
+    """Inputs or times, (point,) or (run, point), as (run, point) like the temperatures' last two axes."""
+    return jnp.broadcast_to(jnp.asarray(x, dtype=float), temperatures.shape[1:])
+
+
 @eqx.filter_jit
-def _lot_rate_table(lot, rates_dps, temperatures, tier):
-    """`rate_table_points` for every device (axis 0) and run (axis 1); temperatures (device, run, point)."""
+def _lot_rate_table(lot, rates_dps, temperatures, tier, times=None):
+    """`rate_table_points` for every device (axis 0) and run (axis 1); temperatures (device, run, point);
+    rates and times since power-on (point,) or (run, point) (default: times not recorded)."""
+    rates = _per_run(rates_dps, temperatures)
+    t = _per_run(jnp.nan if times is None else times, temperatures)
+
     def device(g, temps):
-        return jax.vmap(lambda t: rate_table_points(g, rates_dps, t, tier))(temps)
+        return jax.vmap(lambda x, tp, tm: rate_table_points(g, x, tp, tier, times=tm))(rates, temps, t)
 
     return eqx.filter_vmap(device)(lot, temperatures)
 
 
 @eqx.filter_jit
-def _lot_vcf_static(lot, amplitudes_v, temperatures, tier):
-    """`vcf_static_points` for every device and run."""
+def _lot_vcf_static(lot, amplitudes_v, temperatures, tier, times=None):
+    """`vcf_static_points` for every device and run (shapes as `_lot_rate_table`)."""
+    volts = _per_run(amplitudes_v, temperatures)
+    t = _per_run(jnp.nan if times is None else times, temperatures)
+
     def device(g, temps):
-        return jax.vmap(lambda t: vcf_static_points(g, amplitudes_v, t, tier))(temps)
+        return jax.vmap(lambda x, tp, tm: vcf_static_points(g, x, tp, tier, times=tm))(volts, temps, t)
 
     return eqx.filter_vmap(device)(lot, temperatures)
 
 
 @eqx.filter_jit
 def _lot_vcf_dynamic(lot, frequencies_hz, temperatures, amplitude_v):
-    """`vcf_dynamic_points` for every device, run and point, each point at its own temperature."""
+    """`vcf_dynamic_points` for every device, run and point, each point at its own temperature; frequencies
+    (point,) or (run, point)."""
+    freqs = _per_run(frequencies_hz, temperatures)
+
     def device(g, temps):
-        return jax.vmap(lambda t_run: vcf_dynamic_points(g, frequencies_hz, t_run, amplitude_v))(temps)
+        return jax.vmap(lambda f, t_run: vcf_dynamic_points(g, f, t_run, amplitude_v))(freqs, temps)
 
     return eqx.filter_vmap(device)(lot, temperatures)
 
@@ -148,7 +163,8 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     - `voltmeter_sigma_v`: reading noise of the DAC sweep's AC voltmeter, V.
 
     **Returns:** a `gyrojax.Table` with `output_sigma` (the standard uncertainty of each point about its
-    run's constant bias), `n_samples`, `temperature_c` (die temperature at the middle of the dwell),
+    run's constant bias), `n_samples`, `temperature_c` (die temperature at the middle of the dwell), `time_s`
+    (seconds since the run's power-on at the middle of the dwell; not for dac rows; rows in time order),
     `drive_freq_hz` (settled PLL frequency; not given for vcf_dynamic and dac rows), `phase_deg`
     (vcf_dynamic sweeps) and `rate_dps` (dac sweeps: the rate the word stands for, seed 000 Table 2).
     """
@@ -189,17 +205,25 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     def temperatures(sweep):
         return np.broadcast_to(protocol.temperatures(gyro, runs, sweep), shape_runs + (protocol.n_points(sweep),))
 
+    def applied(sweep, listed):
+        """The inputs of each run in the order applied, (run, point): rows of the table in time order."""
+        return np.asarray(listed)[protocol.point_order(sweep, runs, seed)]
+
+    def times(sweep):
+        return np.broadcast_to(protocol.point_times(sweep), (runs, protocol.n_points(sweep)))
+
     rates = np.asarray(protocol.rates_dps)
+    rates_run = applied("rate_table", rates)
     rate_settled = None
     if "rate_table" in sweeps or (not noise_free and {"vcf_static", "vcf_dynamic"} & set(sweeps)):
         # The rate-table sweep: an output, and each device's scale factor for the noise in LSB.
         rate_tier = tier if "rate_table" in sweeps else CAMPAIGN_TIER
-        rate_settled = _lot_rate_table(lot, jnp.asarray(rates), jnp.asarray(temperatures("rate_table")),
-                                       rate_tier)
+        rate_settled = _lot_rate_table(lot, jnp.asarray(rates_run), jnp.asarray(temperatures("rate_table")),
+                                       rate_tier, jnp.asarray(times("rate_table")))
         _raise_unsettled(rate_settled.result, "rate-table" if "rate_table" in sweeps
                          else "rate-table (the noise-free sweep whose scale factor converts the noise to LSB)")
     lsb_per_dps = (np.zeros(devices) if rate_settled is None
-                   else np.abs(_slope(rates, np.asarray(rate_settled.rate[:, 0], dtype=float))))
+                   else np.abs(_slope(rates_run[0], np.asarray(rate_settled.rate[:, 0], dtype=float))))
 
     columns = []
     for sweep in sweeps:
@@ -210,10 +234,11 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
         extra = {}
         if sweep in ("rate_table", "vcf_static"):
             if sweep == "rate_table":
-                inputs, settled = rates, rate_settled
+                inputs, settled = rates_run, rate_settled
             else:
-                inputs = vcf_amplitudes
-                settled = _lot_vcf_static(lot, jnp.asarray(inputs), jnp.asarray(temps), tier)
+                inputs = applied(sweep, vcf_amplitudes)
+                settled = _lot_vcf_static(lot, jnp.asarray(inputs), jnp.asarray(temps), tier,
+                                          jnp.asarray(times(sweep)))
                 _raise_unsettled(settled.result, "vcf-static")
             out = np.asarray(settled.rate, dtype=float)
             dwell = protocol.dwell(sweep)
@@ -225,8 +250,9 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
                 sigma = np.broadcast_to((noise.point_sigma_dps(dwell) * lsb_per_dps)[:, None, None], full)
             freq = np.asarray(settled.frequency, dtype=float) / (2.0 * np.pi)
             n_samples = np.full(full, float(protocol.n_samples(sweep)))
+            extra["time_s"] = np.broadcast_to(times(sweep), full)
         elif sweep == "vcf_dynamic":
-            inputs = np.asarray(protocol.vcf_frequencies_hz)
+            inputs = applied(sweep, protocol.vcf_frequencies_hz)
             amp, phase = _lot_vcf_dynamic(lot, jnp.asarray(inputs), jnp.asarray(temps),
                                           float(protocol.vcf_dynamic_amplitude_v))
             amp, phase = np.asarray(amp, dtype=float), np.asarray(phase, dtype=float)
@@ -238,13 +264,14 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
                 sigma = np.zeros(full)
             else:
                 # Lock-in over whole cycles: each quadrature component carries sqrt(G(f) / T) (see RateNoise).
-                sigma = (noise.amplitude_sigma_dps(inputs, protocol.dynamic_dwell_s)[None, None, :]
+                sigma = (noise.amplitude_sigma_dps(inputs, protocol.dynamic_dwell_s)[None, :, :]
                          * lsb_per_dps[:, None, None]) * np.ones(full)
                 z = rng.standard_normal(full + (2,))
                 reading = 1.0 + sigma * (z[..., 0] + 1j * z[..., 1]) / amp
                 out = amp * np.abs(reading)
                 phase = phase + np.rad2deg(np.angle(reading))
             extra["phase_deg"] = phase
+            extra["time_s"] = np.broadcast_to(times(sweep), full)
             freq = np.full(full, np.nan)
             n_samples = np.full(full, float(protocol.n_samples(sweep)))
         else:  # dac
@@ -274,7 +301,7 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
         })
 
     order = ["device", "run", "sweep", "input", "output", "output_sigma", "n_samples", "phase_deg",
-             "temperature_c", "drive_freq_hz", "rate_dps"]
+             "temperature_c", "time_s", "drive_freq_hz", "rate_dps"]
     present = [c for c in order if any(c in cols for cols in columns)]
     table = {}
     for c in present:

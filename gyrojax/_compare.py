@@ -15,7 +15,14 @@ point by point in each sweep ordered by its input, and says where the misfit sit
   the linear one);
 - **symmetry**: where a run's inputs come in +/- pairs, the odd and even parts (r(x) -+ r(-x)) / sqrt(2) of
   the residual, each chi2 over the pairs: an odd misfit (an S-curve, a cubic) or an even one (a bow, drift
-  during an ordered sweep) — seed 000's symmetry argument: a memoryless carrier nonlinearity is odd.
+  during an ordered sweep) — seed 000's symmetry argument: a memoryless carrier nonlinearity is odd; and the
+  residual projected on a gain that differs between positive and negative inputs (K+ vs K-);
+- **every other recorded coordinate**: the residuals projected, run by run, on orthonormal polynomials of
+  degree 1 and 2 in the die temperature (`temperature_c`), the time since power-on (`time_s`), the drive
+  frequency (`drive_freq_hz`) and the point's order in its run (`order`), and a runs test in time order;
+- **confounding**: coordinates that rise or fall together in every run of a sweep (the input swept in one
+  direction while the die warms up) cannot be told apart there; the comparison says so and what would separate
+  them.
 
 A finding is flagged when its p-value is below `alpha` over the number of tests made (Bonferroni), so pure
 noise flags nothing at the family-wise rate `alpha`.
@@ -95,16 +102,22 @@ class Misfit:
 
 @dataclasses.dataclass(frozen=True)
 class Finding:
-    """One structure test of one sweep: its statistic, degrees of freedom (runs: the number of runs tested),
-    p-value, and whether it is flagged (p below alpha / number of tests)."""
+    """One structure test of one sweep along one coordinate: its statistic, degrees of freedom (runs: the
+    number of runs tested), p-value, and whether it is flagged (p below alpha / number of tests)."""
 
     sweep: str
-    test: str  # "runs", "trend", "even bow", "odd cubic", "odd part", "even part"
+    test: str  # "runs", "trend", "even bow", "odd cubic", "odd part", "even part", "sign gain", "linear", ...
     statistic: float
     df: int
     p_value: float
     flagged: bool
     meaning: str
+    coordinate: str = "input"  # a data column (input, temperature_c, time_s, drive_freq_hz) or "order"
+
+    @property
+    def label(self) -> str:
+        return f"{self.sweep} {self.test}" if self.coordinate == "input" else \
+            f"{self.sweep} {self.test} in {self.coordinate}"
 
 
 _MEANING = {
@@ -114,7 +127,145 @@ _MEANING = {
     "odd cubic": "an odd cubic: a nonlinearity growing with input (INL S-curve, comb gap, AGC sag)",
     "odd part": "the residual is odd in the input: a memoryless carrier nonlinearity (seed 000)",
     "even part": "the residual is even in the input: a DC-path effect, memory, or drift in sweep order",
+    "sign gain": "the gain differs for positive and negative inputs (K+ vs K-): memory or a DC-path effect",
 }
+
+COORDINATES = ("temperature_c", "time_s", "drive_freq_hz", "order")
+"""The recorded coordinates besides the input that the residuals are tested against (data columns, and the
+point's position in its run in time order)."""
+
+_COORDINATE_WORDS = {"input": "the input", "temperature_c": "the die temperature",
+                     "time_s": "the time since power-on", "drive_freq_hz": "the drive frequency",
+                     "order": "the point's order in its run"}
+
+
+def _coordinate_meaning(test, coordinate):
+    what = _COORDINATE_WORDS[coordinate]
+    if test == "runs":
+        return "residuals cluster by sign in time order: a slow drift during the run"
+    if test == "linear":
+        return f"the residual changes linearly with {what}: a bias or gain that depends on it"
+    return f"the residual bends with {what}: a curved dependence on it"
+
+
+@dataclasses.dataclass(frozen=True)
+class Confounding:
+    """Two coordinates that rise or fall together in every run of a sweep: a shape along one cannot be told
+    from a shape along the other on this data."""
+
+    sweep: str
+    first: str
+    second: str
+    correlation: float  # the smallest |rank correlation| over the sweep's runs
+    advice: str
+
+    def describe(self) -> str:
+        return (f"{self.sweep}: {_COORDINATE_WORDS[self.first]} and {_COORDINATE_WORDS[self.second]} move "
+                f"together in every run (|rank correlation| >= {self.correlation:.2f}): a shape along one cannot "
+                f"be told from one along the other; {self.advice}")
+
+
+_ADVICE = {
+    frozenset(("input", "time_s")): "sweep some runs in the other direction, or in shuffled order "
+                                    "(gyrojax.Protocol(order='alternating' or 'shuffled'))",
+    frozenset(("input", "order")): "sweep some runs in the other direction, or in shuffled order "
+                                   "(gyrojax.Protocol(order='alternating' or 'shuffled'))",
+    frozenset(("input", "temperature_c")): "sweep some runs in the other direction or in shuffled order, or "
+                                           "hold the die temperature (a settled chamber plateau)",
+    frozenset(("temperature_c", "time_s")): "measure runs at other chamber temperatures (temperature "
+                                            "plateaus), or after a full warm-up",
+    frozenset(("temperature_c", "order")): "measure runs at other chamber temperatures (temperature "
+                                           "plateaus), or after a full warm-up",
+    frozenset(("drive_freq_hz", "temperature_c")): "nothing on these sweeps: the drive frequency follows the die "
+                                                   "temperature through the TCF by physics",
+}
+
+
+def confounded_groups(confounded) -> list[str]:
+    """The confounded pairs as one sentence per sweep and group of coordinates that move together, with what
+    would separate them."""
+    out = []
+    for sweep in dict.fromkeys(c.sweep for c in confounded):
+        pairs = [c for c in confounded if c.sweep == sweep]
+        groups: list[set] = []
+        for c in pairs:
+            joined = [g for g in groups if c.first in g or c.second in g]
+            merged = set().union({c.first, c.second}, *joined)
+            groups = [g for g in groups if g not in joined] + [merged]
+        for g in groups:
+            names = [n for n in ("input",) + COORDINATES if n in g]
+            words = [_COORDINATE_WORDS[n] for n in names]
+            advice = []
+            if "input" in g:
+                advice.append("sweep some runs in the other direction or in shuffled order "
+                              "(gyrojax.Protocol(order='alternating' or 'shuffled'))")
+            if "temperature_c" in g and ({"time_s", "order"} & g):
+                advice.append("measure runs at other chamber temperatures (plateaus)")
+            if g == {"temperature_c", "drive_freq_hz"}:
+                advice.append("nothing here: the drive frequency follows the die temperature by the TCF")
+            what = ", ".join(words[:-1]) + f" and {words[-1]}" if len(words) > 1 else words[0]
+            out.append(f"{sweep}: {what} move together in every run, so shapes along them cannot be told apart "
+                       f"here" + (f"; to separate them: {'; '.join(advice)}" if advice else ""))
+    return out
+
+
+def _rank(x):
+    return np.argsort(np.argsort(x, kind="stable"), kind="stable").astype(float)
+
+
+def _rank_correlation(a, b):
+    ra, rb = _rank(a), _rank(b)
+    ra, rb = ra - ra.mean(), rb - rb.mean()
+    den = math.sqrt(float(np.sum(ra**2) * np.sum(rb**2)))
+    return float(np.sum(ra * rb) / den) if den > 0 else 0.0
+
+
+def confounded_coordinates(coords, mask, sweep, *, threshold: float = 0.95):
+    """Pairs of coordinates of one sweep (dict name -> (device, run, point)) whose |rank correlation| is at
+    least `threshold` in every run with at least 4 points (time_s and order, the same axis, are not paired)."""
+    names = [c for c in ("input",) + COORDINATES if c in coords]
+    out = []
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            if {a, b} == {"time_s", "order"} or (b == "order" and "time_s" in names):
+                continue
+            worst, runs = 1.0, 0
+            for d, k in np.ndindex(mask.shape[:2]):
+                m = mask[d, k]
+                xa, xb = coords[a][d, k][m], coords[b][d, k][m]
+                if m.sum() < 4 or not (np.all(np.isfinite(xa)) and np.all(np.isfinite(xb))):
+                    continue
+                if np.ptp(xa) == 0 or np.ptp(xb) == 0:
+                    worst = 0.0
+                    break
+                worst = min(worst, abs(_rank_correlation(xa, xb)))
+                runs += 1
+            if runs and worst >= threshold:
+                advice = _ADVICE.get(frozenset((a, b)), "change the protocol so that they vary apart")
+                out.append(Confounding(sweep, a, b, worst, advice))
+    return out
+
+
+def _projections(x, r, degree):
+    """Projections of `r` on polynomials of degree 1..`degree` in `x`, orthonormal over the points and
+    orthogonal to a constant (NaN where `x` does not vary enough)."""
+    x = np.asarray(x, float)
+    if len(x) <= degree + 1 or not np.all(np.isfinite(x)) or np.ptp(x) == 0:
+        return np.full(degree, np.nan)
+    return shape_components(x - np.mean(x), r, degree)
+
+
+def sign_gain_component(x, r):
+    """Projection of `r` on a gain for positive inputs only, made orthogonal to a constant and to the input:
+    N(0, 1) for unit-variance noise; NaN without inputs of both signs."""
+    x = np.asarray(x, float)
+    if np.sum(x > 0) < 2 or np.sum(x < 0) < 2:
+        return np.nan
+    basis = np.stack([np.ones_like(x), x, np.where(x > 0, x, 0.0)], axis=1)
+    q, rr = np.linalg.qr(basis / np.max(np.abs(basis), axis=0))
+    if abs(rr[2, 2]) < 1e-9:
+        return np.nan
+    return float(q[:, 2] @ np.asarray(r, float))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -129,6 +280,7 @@ class Comparison:
     chi2: float
     points: int
     alpha: float
+    confounded: tuple = ()  # `Confounding` per sweep and pair of coordinates
 
     @property
     def p_value(self) -> float:
@@ -144,7 +296,7 @@ class Comparison:
     def flagged(self) -> tuple:
         return tuple(f for f in self.findings if f.flagged)
 
-    def summary(self, top: int = 3) -> str:
+    def summary(self, top: int = 3, top_findings: int = 6) -> str:
         lines = [f"model against measurement: chi2 {self.chi2:.4g} over {self.points} points "
                  f"({self.chi2 / max(self.points, 1):.3g} per point, p = {self.p_value:.2g})"]
         if not self.fails:
@@ -157,11 +309,19 @@ class Comparison:
                     f"{g.label} {100 * g.share:.0f} % ({g.chi2_per_point:.3g}/point)" for g in worst))
         if self.flagged:
             lines.append(f"  structure in the residuals (p < {self.alpha:g} / {len(self.findings)} tests):")
-            for f in sorted(self.flagged, key=lambda f: f.p_value):
-                lines.append(f"    {f.sweep} {f.test}: p = {f.p_value:.2g} ({f.meaning})")
+            ranked = sorted(self.flagged, key=lambda f: f.p_value)
+            for f in ranked[:top_findings]:
+                lines.append(f"    {f.label}: p = {f.p_value:.2g} ({f.meaning})")
+            if len(ranked) > top_findings:
+                lines.append(f"    ... and {len(ranked) - top_findings} more: "
+                             + ", ".join(f.label for f in ranked[top_findings:]))
         else:
-            lines.append(f"  no structure in the residuals (runs, trend, bow, cubic, odd/even parts; "
-                         f"family-wise alpha {self.alpha:g})")
+            coords = sorted({f.coordinate for f in self.findings})
+            lines.append(f"  no structure in the residuals along {', '.join(coords) or 'the input'} (runs, "
+                         f"trend, bow, cubic, odd/even parts, K+/K-; family-wise alpha {self.alpha:g})")
+        if self.confounded and (self.flagged or self.fails):
+            lines.append("  confounded on this data:")
+            lines += [f"    {text}" for text in confounded_groups(self.confounded)]
         return "\n".join(lines)
 
     def to_json(self) -> dict:
@@ -172,7 +332,8 @@ class Comparison:
                 "alpha": self.alpha,
                 "by_sweep": groups(self.by_sweep), "by_device": groups(self.by_device),
                 "by_run": groups(self.by_run), "by_band": groups(self.by_band),
-                "findings": [dataclasses.asdict(f) for f in self.findings]}
+                "findings": [dataclasses.asdict(f) for f in self.findings],
+                "confounded": [dataclasses.asdict(c) for c in self.confounded]}
 
 
 def _shares(items):
@@ -184,19 +345,25 @@ def _shares(items):
 _BANDS = ((0.0, 1.0 / 3.0, "low"), (1.0 / 3.0, 2.0 / 3.0, "mid"), (2.0 / 3.0, np.inf, "high"))
 
 
-def compare_residuals(residuals, inputs, masks, *, devices, run_ids=None, alpha: float = 0.01) -> Comparison:
+def compare_residuals(residuals, inputs, masks, *, devices, run_ids=None, coordinates=None,
+                      alpha: float = 0.01) -> Comparison:
     """`compare` on arrays: `residuals`, `inputs`, `masks` are dicts sweep -> (device, run, point)
     standardised residuals, inputs and real-point masks; `devices` the device names; `run_ids` optional
-    dict sweep -> per-device run ids (default: run indices)."""
+    dict sweep -> per-device run ids (default: run indices); `coordinates` optional dict sweep -> {name:
+    (device, run, point)} of the other recorded coordinates (names of `COORDINATES`; NaN: not recorded)."""
     by_sweep, by_device, by_run, by_band = [], {}, [], []
-    tests = []  # (sweep, test, statistic, df, p)
+    tests = []  # (sweep, test, statistic, df, p, coordinate)
+    confounded = []
     for sweep in residuals:
         r_all, x_all, m_all = (np.asarray(a[sweep]) for a in (residuals, inputs, masks))
         r_all = np.where(m_all, r_all, 0.0)
         by_sweep.append((sweep, int(m_all.sum()), float(np.sum(r_all**2))))
         span = np.max(np.where(m_all, np.abs(x_all), 0.0)) if m_all.any() else 0.0
         band_chi2 = {}
-        zs, comps, odd, even = [], [], [], []
+        zs, comps, odd, even, signs = [], [], [], [], []
+        coords = {name: np.asarray(v) for name, v in ((coordinates or {}).get(sweep) or {}).items()}
+        along = {name: ([], []) for name in coords if name != "order"}  # name -> (projections, runs z)
+        time_zs = []
         for d in range(r_all.shape[0]):
             n_d, c_d = by_device.get(devices[d], (0, 0.0))
             by_device[devices[d]] = (n_d + int(m_all[d].sum()), c_d + float(np.sum(r_all[d] ** 2)))
@@ -221,29 +388,65 @@ def compare_residuals(residuals, inputs, masks, *, devices, run_ids=None, alpha:
                 o, e = symmetric_parts(x, r)
                 odd.append(o)
                 even.append(e)
+                signs.append(sign_gain_component(x, r))
+                for name, (proj, _) in along.items():
+                    proj.append(_projections(coords[name][d, k][m], r, 2))
+                if "order" in coords and len(x) >= 4:
+                    time_zs.append(runs_test(np.sign(r[np.argsort(coords["order"][d, k][m], kind="stable")]))[2])
         by_band += [(k, n, c) for k, (n, c) in band_chi2.items() if n]
         if zs:
             z = float(np.sum(zs) / math.sqrt(len(zs)))
-            tests.append((sweep, "runs", z, len(zs), _normal_cdf(z)))
+            tests.append((sweep, "runs", z, len(zs), _normal_cdf(z), "input"))
         if comps:
             c = np.asarray(comps)
             for i, name in enumerate(("trend", "even bow", "odd cubic")):
                 col = c[:, i][np.isfinite(c[:, i])]
                 if col.size:
                     s = float(np.sum(col**2))
-                    tests.append((sweep, name, s, int(col.size), chi2_sf(s, col.size)))
+                    tests.append((sweep, name, s, int(col.size), chi2_sf(s, col.size), "input"))
         odd_all, even_all = np.concatenate(odd) if odd else np.zeros(0), np.concatenate(even) if even else np.zeros(0)
         if odd_all.size >= 2:
             # The even part of a biased sweep lost one direction per run to the bias: conservative.
             for name, part in (("odd part", odd_all), ("even part", even_all)):
                 s = float(np.sum(part**2))
-                tests.append((sweep, name, s, int(part.size), chi2_sf(s, part.size)))
+                tests.append((sweep, name, s, int(part.size), chi2_sf(s, part.size), "input"))
+        sg = np.asarray(signs, float)
+        sg = sg[np.isfinite(sg)]
+        if sg.size:
+            s = float(np.sum(sg**2))
+            tests.append((sweep, "sign gain", s, int(sg.size), chi2_sf(s, sg.size), "input"))
+        for name, (proj, _) in along.items():
+            c = np.asarray(proj, float).reshape(-1, 2)
+            for i, test in enumerate(("linear", "quadratic")):
+                col = c[:, i][np.isfinite(c[:, i])]
+                if col.size:
+                    s = float(np.sum(col**2))
+                    tests.append((sweep, test, s, int(col.size), chi2_sf(s, col.size), name))
+        if time_zs and not _same_order(x_all, coords.get("order"), m_all):
+            z = float(np.sum(time_zs) / math.sqrt(len(time_zs)))
+            tests.append((sweep, "runs", z, len(time_zs), _normal_cdf(z), "order"))
+        confounded += confounded_coordinates({"input": x_all, **coords}, m_all, sweep)
     cut = alpha / max(len(tests), 1)
-    findings = tuple(Finding(s, t, stat, df, p, p < cut, _MEANING[t]) for s, t, stat, df, p in tests)
+    findings = tuple(Finding(s, t, stat, df, p, p < cut,
+                             _MEANING[t] if coord == "input" else _coordinate_meaning(t, coord), coord)
+                     for s, t, stat, df, p, coord in tests)
     total_n = sum(n for _, n, _ in by_sweep)
     total_c = sum(c for _, _, c in by_sweep)
     return Comparison(_shares(by_sweep), _shares([(k, n, c) for k, (n, c) in by_device.items()]),
-                      _shares(by_run), _shares(by_band), findings, total_c, total_n, alpha)
+                      _shares(by_run), _shares(by_band), findings, total_c, total_n, alpha, tuple(confounded))
+
+
+def _same_order(inputs, order, mask):
+    """Whether time order is input order in every run (then the runs test in time order repeats the one
+    along the input)."""
+    if order is None:
+        return True
+    for d, k in np.ndindex(mask.shape[:2]):
+        m = mask[d, k]
+        if m.sum() and not np.array_equal(np.argsort(inputs[d, k][m], kind="stable"),
+                                          np.argsort(order[d, k][m], kind="stable")):
+            return False
+    return True
 
 
 def compare(fit, *, alpha: float = 0.01) -> Comparison:
@@ -262,4 +465,21 @@ def compare(fit, *, alpha: float = 0.01) -> Comparison:
     inputs = {s: np.asarray(data.blocks[s].inputs) for s in data.sweeps}
     masks = {s: np.asarray(data.blocks[s].mask) for s in data.sweeps}
     return compare_residuals(residuals, inputs, masks, devices=data.devices,
-                             run_ids={s: data.run_ids(s) for s in data.sweeps}, alpha=alpha)
+                             run_ids={s: data.run_ids(s) for s in data.sweeps},
+                             coordinates={s: recorded_coordinates(data.blocks[s]) for s in data.sweeps}, alpha=alpha)
+
+
+def recorded_coordinates(block) -> dict:
+    """The coordinates of a sweep block other than the input that the data record (all real points given),
+    as dict name -> (device, run, point): `temperature_c`, `time_s`, `drive_freq_hz`, and `order`."""
+    mask = np.asarray(block.mask)
+    out = {}
+    for name, field in (("temperature_c", "temperatures"), ("time_s", "times"), ("drive_freq_hz", "drive_freqs"),
+                        ("order", "order")):
+        values = getattr(block, field, None)
+        if values is None:
+            continue
+        values = np.asarray(values, float)
+        if mask.any() and np.all(np.isfinite(values[mask])):
+            out[name] = values
+    return out

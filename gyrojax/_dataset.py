@@ -41,7 +41,8 @@ SWEEPS = ("rate_table", "vcf_static", "vcf_dynamic", "dac")
 REQUIRED_COLUMNS = ("device", "run", "sweep", "input", "output")
 """Columns every table must have."""
 
-OPTIONAL_COLUMNS = ("output_sigma", "n_samples", "phase_deg", "temperature_c", "drive_freq_hz", "rate_dps")
+OPTIONAL_COLUMNS = ("output_sigma", "n_samples", "phase_deg", "temperature_c", "drive_freq_hz", "rate_dps",
+                    "time_s")
 """Known optional columns; float64 in memory, NaN where a value was not given."""
 
 DAC_WORD_BITS = 24
@@ -359,6 +360,8 @@ def _validate(raw: Mapping[str, Any], source: str, lines: Sequence[int] | None,
                 raise where.error(i, c, f"{_show(x)} is not a positive whole number of samples.")
             if c == "drive_freq_hz" and col[i] <= 0:
                 raise where.error(i, c, f"{_show(x)} is not a positive frequency.")
+            if c == "time_s" and col[i] < 0:
+                raise where.error(i, c, f"{_show(x)} is negative; time_s is seconds since the run's power-on.")
         optional[c] = col
 
     # Hex words without a prefix next to plain-digit words: '539' could be decimal 539 or hex 0x539 (seed 000

@@ -25,6 +25,7 @@ import dataclasses
 import math
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -34,11 +35,33 @@ from ._effects.registry import EFFECTS
 from ._fitdata import FitData, fit_data
 from ._identify import Fit, _to_model, identify
 from ._parameters import DEFAULT_FREE, Model, zero_effect
+from ._probes import PROBES, design, score_columns
 
 
 # ASSUMPTION: each effect's `typical(1.0)` is a realistic size with a provenance; a device more than 20 times
 # worse than that is outside what the library's sources support.
 IMPLAUSIBLE_MULTIPLE = 20.0
+
+# ASSUMPTION: beyond 100 times its typical size an effect is not physical any more (a 16-bit DAC's INL at
+# 100x is ~5 % of full scale, a damping coupling at 100x breaks passivity on paper-qmg): a candidate that
+# explains the misfit only there is not confirmed.
+MAX_TYPICAL_MULTIPLE = 100.0
+
+# Two fingerprints with |cos| above this describe the same residual shape on this data.
+SAME_SHAPE = 0.9
+
+
+def chi2_isf(p: float, df: int) -> float:
+    """The chi2 value whose survival probability is `p` (bisection on `chi2_sf`)."""
+    if df <= 0:
+        return 0.0
+    lo, hi = 0.0, max(10.0 * df, 100.0)
+    while chi2_sf(hi, df) > p:
+        hi *= 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if chi2_sf(mid, df) > p else (lo, mid)
+    return 0.5 * (lo + hi)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,6 +82,14 @@ class CandidateScore:
     absorbed_by: tuple = ()
 
     @property
+    def implied_multiple(self) -> float:
+        """The size, in units of its typical size, at which the candidate would explain what its score
+        credits it with: sqrt(S / typical_chi2) (its most visible combination)."""
+        if self.typical_chi2 <= 0:
+            return math.inf
+        return math.sqrt(max(self.statistic, 0.0) / self.typical_chi2)
+
+    @property
     def absorption(self) -> str:
         """Why the data cannot test it, in words: what takes up its fingerprint, and what would reveal it."""
         if self.visible_chi2 < 1.0:
@@ -72,6 +103,55 @@ class CandidateScore:
                     f"leaving {self.typical_chi2:.2g}")
         reveal = EFFECTS[self.effect].revealed_by
         return what + (f". Revealed by: {reveal}" if reveal else "")
+
+
+@dataclasses.dataclass(frozen=True)
+class Discrepancy:
+    """Where an unexplained misfit lives: a generic shape (a probe) along a recorded coordinate, with the share
+    of the misfit it explains and the size of the term it implies."""
+
+    probe: str
+    coordinate: str  # a data column (input, temperature_c, time_s, drive_freq_hz), "order" or "run"
+    shape: str
+    sweeps: tuple  # (sweep, share of the probe's fingerprint) where it acts on this data, largest first
+    chi2_explained: float  # the score S: the chi2 it would remove
+    df: int
+    share: float  # of the chi2 in excess of the degrees of freedom
+    p_value: float
+    significant: bool
+    coefficient: float  # the lot's mean fitted coefficient (largest |.| for a multi-column probe), in `unit`
+    coefficient_spread: float  # standard deviation over the devices
+    unit: str
+    fingerprint: np.ndarray
+    same_shape_as: tuple = ()  # other significant probes this data cannot tell from it
+    library: str = ""  # which library effect has this fingerprint, and at what size
+
+    @property
+    def description(self) -> str:
+        where = ", ".join(f"{s} {100 * f:.0f} %" for s, f in self.sweeps)
+        size = f"{self.coefficient:.3g} {self.unit}"
+        if self.coefficient_spread > 0:
+            size += f" (device spread {self.coefficient_spread:.2g})"
+        text = f"{100 * self.share:.0f} % of the misfit is {self.shape} ({where}): about {size}"
+        if self.same_shape_as:
+            text += f"; indistinguishable here from {', '.join(self.same_shape_as)}"
+        return text + (f"; {self.library}" if self.library else "")
+
+    def to_json(self) -> dict:
+        return {"coordinate": self.coordinate, "shape": self.shape, "sweeps": [s for s, _ in self.sweeps],
+                "chi2_explained": self.chi2_explained, "share": self.share, "p": self.p_value,
+                "description": self.description, "probe": self.probe, "df": self.df,
+                "coefficient": self.coefficient, "coefficient_spread": self.coefficient_spread, "unit": self.unit,
+                "same_shape_as": list(self.same_shape_as), "library": self.library}
+
+
+@dataclasses.dataclass(frozen=True)
+class Rejection:
+    """A candidate that scored but was not confirmed, and why (in physical words)."""
+
+    effect: str
+    reason: str
+    contradicted_by: tuple = ()  # sweeps whose misfit the refit made significantly worse
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,12 +173,18 @@ class Step:
     # Largest fitted parameter of the effect over the lot, in units of its typical size: far above 1, the
     # effect explains the data only at an implausible size (another effect may leave this fingerprint).
     typical_multiple: float = float("nan")
+    implied_multiple: float = float("nan")  # at the score stage, before the refit
+    contradicted_by: tuple = ()  # sweeps whose misfit the step made significantly worse (none when accepted)
+
+
+VERDICTS = ("explained", "partly explained", "unexplained")
 
 
 @dataclasses.dataclass(frozen=True)
 class Diagnosis:
     """The solution of `diagnose`: the baseline fit, the ranking at the first step, the accepted steps, the
-    final fit, and what was ambiguous or untestable."""
+    final fit, what was ambiguous, untestable or rejected, where the misfit that is left lives, and a
+    verdict."""
 
     baseline: Fit
     final: Fit
@@ -107,11 +193,14 @@ class Diagnosis:
     steps: tuple  # Step per accepted effect
     ambiguous: tuple  # groups of names
     untestable: tuple  # names not testable on this data at the first step
-    rejected: tuple  # (name, reason) candidates that scored but did not survive the refit
+    rejected: tuple  # Rejection per candidate that scored but was not confirmed
     alpha: float
     baseline_nonlinearity_ppm: float
     min_typical_chi2: float = 1.0
     comparisons: tuple = ()  # `Comparison` of each fit in `fits`: where it fails, structure in its residuals
+    baseline_discrepancy: tuple = ()  # Discrepancy per probe at the baseline, most explanatory first
+    discrepancy: tuple = ()  # the same at the final fit: where what is left lives
+    verdict: str = "unexplained"
 
     @property
     def selected(self) -> tuple[str, ...]:
@@ -123,15 +212,44 @@ class Diagnosis:
         scores = {c.effect: c for c in self.ranking}
         return {name: scores[name].absorption for name in self.untestable}
 
+    @property
+    def remaining(self) -> tuple:
+        """The significant discrepancies of the final fit, most explanatory first."""
+        return tuple(d for d in self.discrepancy if d.significant)
+
+    def verdict_text(self) -> str:
+        final = self.comparisons[-1] if self.comparisons else None
+        tail = (f" (chi2 {final.chi2:.4g} over {final.points} points, p = {final.p_value:.2g})"
+                if final is not None else "")
+        if self.verdict == "explained":
+            what = (f"{', '.join(self.selected)} explain" if self.steps else "the baseline explains")
+            return f"verdict: explained: {what} the data at the noise level{tail}"
+        left = self.remaining
+        where = (f"; what is left: {left[0].description}" if left else
+                 "; no generic shape (bias or gain in temperature, time, run; cubics; bow; K+/K-) explains what "
+                 "is left: see where the model fails")
+        if self.verdict == "partly explained":
+            base = max(self.baseline.chi2_total - self.baseline.dof_total, 1e-300)
+            gone = (self.baseline.chi2_total - self.final.chi2_total) / base
+            return (f"verdict: partly explained: {', '.join(self.selected)} take {100 * min(gone, 1.0):.0f} % of "
+                    f"the baseline's excess misfit, but the model still fails{tail}{where}")
+        return f"verdict: unexplained: no library effect is confirmed and the model fails{tail}{where}"
+
     def summary(self) -> str:
         lines = [f"baseline: chi2_red {self.baseline.chi2_red_total:.3f}, model-vs-measurement nonlinearity "
                  f"{self.baseline_nonlinearity_ppm:.2f} ppm"]
         if self.comparisons:
             lines += ["  " + x for x in self.comparisons[0].summary().splitlines()]
+        found = [d for d in self.baseline_discrepancy if d.significant]
+        if found:
+            lines.append("where the misfit lives (generic shapes, score test, no refit):")
+            lines += [f"  {d.coordinate:<14} {d.description} (S = {d.chi2_explained:.4g}, p = {d.p_value:.2g})"
+                      for d in found[:4]]
         lines.append("candidates at the first step (score test, no refit):")
         for c in self.ranking:
             what = (f"S = {c.statistic:10.2f}  df {c.df:3d}  p = {c.p_value:.3g}  typical-size chi2 "
-                    f"{c.typical_chi2:.3g}" if c.testable else "not testable on this data")
+                    f"{c.typical_chi2:.3g}, implies ~{c.implied_multiple:.3g}x typical" if c.testable
+                    else "not testable on this data")
             lines.append(f"  {c.effect:<18} {what}")
         if self.untestable:
             lines.append(f"not testable on this data (absorbed by the baseline, or a typical-size effect leaves a "
@@ -150,12 +268,14 @@ class Diagnosis:
                              "(beyond the library's plausible range): another effect, perhaps not among the "
                              "candidates, may leave this fingerprint; see where the model still fails")
         if not self.steps:
-            lines.append("no candidate effect is significant: the baseline explains the data.")
-        for name, why in self.rejected:
-            lines.append(f"  rejected {name}: {why}")
+            lines.append("no candidate effect is confirmed." if self.rejected else
+                         "no candidate effect is significant.")
+        for r in self.rejected:
+            lines.append(f"  not confirmed: {r.effect}: {r.reason}")
         lines.append(f"final: chi2_red {self.final.chi2_red_total:.3f}, selected: {', '.join(self.selected) or 'none'}")
         if self.steps and self.comparisons:
             lines += ["  " + x for x in self.comparisons[-1].summary().splitlines()]
+        lines.append(self.verdict_text())
         return "\n".join(lines)
 
     def write_report(self, out_dir) -> dict:
@@ -163,12 +283,14 @@ class Diagnosis:
         return write_report(self, out_dir)
 
     def to_json(self) -> dict:
-        """The JSON of DESIGN.md §7."""
+        """The diagnosis as JSON: baseline, ranking, steps, selected, ambiguous, untestable, rejected, final,
+        verdict, discrepancy (what is left, most explanatory first), baseline_discrepancy, compare."""
         return {
             "baseline": {"chi2_red": self.baseline.chi2_red_total,
                          "nonlinearity_ppm": self.baseline_nonlinearity_ppm},
             "ranking": [{"effect": c.effect, "statistic": c.statistic, "df": c.df, "p_value": c.p_value,
                          "testable": c.testable, "typical_chi2": c.typical_chi2, "visible_chi2": c.visible_chi2,
+                         "implied_multiple": _finite(c.implied_multiple),
                          "absorbed_by": list(c.absorbed_by), "revealed_by": EFFECTS[c.effect].revealed_by}
                         for c in self.ranking],
             "steps": [{"effect": s.effect, "statistic": s.statistic, "p_value": s.p_value,
@@ -176,16 +298,26 @@ class Diagnosis:
                        "lr_p_value": s.lr_p_value, "delta_bic": s.delta_bic,
                        "nonlinearity_ppm_after": s.nonlinearity_ppm_after,
                        "ambiguous_with": list(s.ambiguous_with), "separated_by": s.separated_by,
-                       "typical_multiple": s.typical_multiple}
+                       "typical_multiple": s.typical_multiple, "implied_multiple": _finite(s.implied_multiple),
+                       "contradicted_by": list(s.contradicted_by)}
                       for s in self.steps],
             "selected": list(self.selected),
             "ambiguous": [list(g) for g in self.ambiguous],
             "untestable": list(self.untestable),
-            "rejected": [{"effect": n, "reason": r} for n, r in self.rejected],
+            "rejected": [{"effect": r.effect, "reason": r.reason, "contradicted_by": list(r.contradicted_by)}
+                         for r in self.rejected],
             "final": {"chi2_red": self.final.chi2_red_total,
                       "nonlinearity_ppm": nonlinearity_residual_ppm(self.final)},
+            "verdict": self.verdict,
+            "verdict_text": self.verdict_text(),
+            "discrepancy": [d.to_json() for d in self.remaining],
+            "baseline_discrepancy": [d.to_json() for d in self.baseline_discrepancy if d.significant],
             "compare": [c.to_json() for c in self.comparisons],
         }
+
+
+def _finite(x):
+    return float(x) if math.isfinite(x) else None
 
 
 def _row_blocks(data: FitData):
@@ -211,6 +343,15 @@ def nonlinearity_residual_ppm(fit: Fit) -> float:
     return float(np.max(np.where(np.asarray(block.mask), raw / full, 0.0)) * 1e6)
 
 
+def _effect_columns(fit: Fit, name: str) -> np.ndarray:
+    return np.asarray([i for i, nm in enumerate(fit.names) if nm.startswith(name + ".")], dtype=int)
+
+
+def _base_columns(fit: Fit) -> np.ndarray:
+    """The free columns of the fit's Jacobian (device, residual, free): what it could already absorb."""
+    return np.asarray(fit.jacobian)[:, :, np.asarray(fit.free)]
+
+
 def score_candidates(fit: Fit, candidates, *, rank_tol: float = 1e-4) -> tuple[CandidateScore, ...]:
     """Score test of each candidate (effect name held at zero in `fit.model`) against the fitted model."""
     jac = np.asarray(fit.jacobian)
@@ -219,12 +360,11 @@ def score_candidates(fit: Fit, candidates, *, rank_tol: float = 1e-4) -> tuple[C
     names_free = [nm for nm, f in zip(fit.names, free) if f]
     out = []
     for name in candidates:
-        cols = np.asarray([i for i, nm in enumerate(fit.names) if nm.startswith(name + ".")], dtype=int)
-        stat, df, typical, visible = 0.0, 0, 0.0, 0.0
+        cols = _effect_columns(fit, name)
+        visible = 0.0
         share = np.zeros(len(names_free))  # of the most visible fingerprint's chi2, per free parameter
-        fingerprint = np.zeros_like(res)
         for d in range(jac.shape[0]):
-            jb, je, r = jac[d][:, free], jac[d][:, cols], res[d]
+            jb, je = jac[d][:, free], jac[d][:, cols]
             if je.shape[1]:
                 evals, evecs = np.linalg.eigh(je.T @ je)
                 visible += max(float(evals[-1]), 0.0)
@@ -233,24 +373,12 @@ def score_candidates(fit: Fit, candidates, *, rank_tol: float = 1e-4) -> tuple[C
                     f = je @ evecs[:, -1]
                     c = np.linalg.lstsq(jb, f, rcond=None)[0]
                     share += c * (jb.T @ f)
-            if jb.shape[1]:
-                q, _ = np.linalg.qr(jb)
-                je = je - q @ (q.T @ je)
-            info = je.T @ je
-            evals, evecs = np.linalg.eigh(info)
-            typical += max(float(evals[-1]), 0.0) if evals.size else 0.0
-            keep = evals > rank_tol
-            if not keep.any():
-                continue
-            inv = (evecs[:, keep] / evals[keep]) @ evecs[:, keep].T
-            s = je.T @ r
-            stat += float(s @ inv @ s)
-            df += int(keep.sum())
-            fingerprint[d] = je @ (inv @ s)
+        scored = score_columns(jac[:, :, free], jac[:, :, cols], res, rank_tol=rank_tol)
         order = np.argsort(-share)
         absorbed_by = tuple(names_free[k] for k in order if share[k] > 0.1 * max(np.sum(share), 0.0))
-        out.append(CandidateScore(name, stat, df, chi2_sf(stat, df), df > 0, fingerprint, EFFECTS[name].description,
-                                  typical, visible, absorbed_by))
+        out.append(CandidateScore(name, scored.statistic, scored.df, scored.p_value, scored.df > 0,
+                                  scored.fingerprint, EFFECTS[name].description, scored.information, visible,
+                                  absorbed_by))
     return tuple(sorted(out, key=lambda c: (not c.testable, c.p_value, -c.statistic)))
 
 
@@ -268,10 +396,129 @@ def _separating_sweep(a, b, data: FitData, ambiguity):
     return best
 
 
+def _excess(fit: Fit) -> float:
+    return max(fit.chi2_total - fit.dof_total, 0.0)
+
+
+def _sweep_shares(fingerprint, data: FitData):
+    total = float(np.sum(fingerprint**2))
+    if total <= 0:
+        return ()
+    shares = [(sweep, float(np.sum(fingerprint[:, i:j] ** 2)) / total) for sweep, i, j in _row_blocks(data)]
+    return tuple(sorted(((s, f) for s, f in shares if f > 0.05), key=lambda x: -x[1]))
+
+
+def score_probes(fit: Fit, probes=PROBES, *, alpha: float = 0.01):
+    """Every probe scored against `fit`: (Discrepancy per probe, most explanatory first; their designs by
+    name). A probe is significant at p < alpha / (number of probes the data can test)."""
+    base = _base_columns(fit)
+    res = np.asarray(fit.residual_vector)
+    excess = _excess(fit)
+    designs, scored = {}, []
+    for probe in probes:
+        cols = design(fit, probe)
+        if cols.shape[-1] == 0 or not np.any(cols):
+            continue
+        designs[probe.name] = cols
+        scored.append((probe, score_columns(base, cols, res)))
+    testable = [x for x in scored if x[1].df > 0]
+    cut = alpha / max(len(testable), 1)
+    out = []
+    for probe, sc in testable:
+        coef = sc.coefficients
+        mag = coef[:, np.argmax(np.max(np.abs(coef), axis=0))] if coef.shape[1] > 1 else coef[:, 0]
+        share = min(max(sc.statistic - sc.df, 0.0) / excess, 1.0) if excess > 0 else 0.0
+        out.append(Discrepancy(probe.name, probe.coordinate, probe.shape, _sweep_shares(sc.fingerprint, fit.data),
+                               sc.statistic, sc.df, share, sc.p_value, sc.p_value < cut, float(np.mean(mag)),
+                               float(np.std(mag)) if len(mag) > 1 else 0.0, probe.unit, sc.fingerprint))
+    out.sort(key=lambda d: (not d.significant, -d.chi2_explained))
+    significant = [d for d in out if d.significant]
+    final = []
+    for d in out:
+        same = tuple(o.probe for o in significant
+                     if o is not d and d.significant and abs(_cos(o.fingerprint, d.fingerprint)) > SAME_SHAPE)
+        final.append(dataclasses.replace(d, same_shape_as=same))
+    return tuple(final), designs
+
+
+def _with_library(discrepancy, scores, rejected, max_multiple):
+    """The discrepancies with `library` filled in: which candidate has the same fingerprint, and why it does
+    not explain it (implausible size, rejected), or that none has it."""
+    reasons = {r.effect: r.reason for r in rejected}
+    out = []
+    for d in discrepancy:
+        if not d.significant:
+            out.append(d)
+            continue
+        matches = [c for c in scores if c.testable and abs(_cos(c.fingerprint, d.fingerprint)) > SAME_SHAPE]
+        if not matches:
+            text = "no effect in the library has this fingerprint"
+        else:
+            parts = []
+            for c in matches:
+                if c.effect in reasons:
+                    parts.append(f"{c.effect} has it but was not confirmed ({reasons[c.effect]})")
+                elif c.implied_multiple > max_multiple:
+                    parts.append(f"{c.effect} has it only at ~{c.implied_multiple:.3g}x its typical size")
+                else:
+                    parts.append(f"{c.effect} has it")
+            text = "; ".join(parts)
+        out.append(dataclasses.replace(d, library=text))
+    return tuple(out)
+
+
+def _probe_guard(fit, candidate: CandidateScore, discrepancy, designs, candidate_cut, alpha):
+    """A reason not to confirm `candidate`, or None: a significant probe explains the misfit the candidate is
+    credited with, and more (what the probe takes beyond the candidate is significant at alpha over the
+    probes), while the candidate adds nothing beyond the probe (not significant at `candidate_cut`)."""
+    base = _base_columns(fit)
+    res = np.asarray(fit.residual_vector)
+    je = np.asarray(fit.jacobian)[:, :, _effect_columns(fit, candidate.effect)]
+    probe_cut = alpha / max(len(discrepancy), 1)
+    worst = None
+    for d in (d for d in discrepancy if d.significant):
+        gp = designs[d.probe]
+        beyond_probe = score_columns(np.concatenate([base, gp], axis=-1), je, res)
+        beyond_candidate = score_columns(np.concatenate([base, je], axis=-1), gp, res)
+        if beyond_probe.p_value >= candidate_cut and beyond_candidate.p_value < probe_cut:
+            if worst is None or beyond_candidate.statistic > worst[1].statistic:
+                worst = (d, beyond_candidate, beyond_probe)
+    if worst is None:
+        return None
+    d, extra, own = worst
+    excess = _excess(fit)
+    share_c = min(candidate.statistic / excess, 1.0) if excess > 0 else 0.0
+    return (f"it would take {100 * share_c:.0f} % of the misfit, whose shape it does not have: {d.shape} "
+            f"({', '.join(s for s, _ in d.sweeps)}) explains {100 * d.share:.0f} %, leaves chi2 {extra.statistic:.4g} "
+            f"that {candidate.effect} cannot take (p = {extra.p_value:.2g}), and {candidate.effect} adds nothing "
+            f"beyond it (S = {own.statistic:.3g}, df {own.df}, p = {own.p_value:.2g})")
+
+
+def _sweep_chi2(fit: Fit) -> dict:
+    return {s: float(np.sum(np.asarray(fit.residuals[s]) ** 2)) for s in fit.data.sweeps}
+
+
+def _contradictions(before: Fit, after: Fit, alpha: float, df: int):
+    """Sweeps whose chi2 the refit raised by more than the (1 - alpha) quantile of chi2(df), df the step's
+    new parameters over the lot: a real effect, fitted, does not make a sweep's misfit significantly worse."""
+    limit = chi2_isf(alpha, max(df, 1))
+    a, b = _sweep_chi2(before), _sweep_chi2(after)
+    points = {s: int(np.asarray(before.data.blocks[s].mask).sum()) for s in a}
+    return tuple((s, a[s], b[s], points[s]) for s in a if b[s] - a[s] > limit)
+
+
+def _verdict(comparison, steps) -> str:
+    if not comparison.fails and not comparison.flagged:
+        return "explained"
+    return "partly explained" if steps else "unexplained"
+
+
 def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alpha: float = 0.01,
-             max_effects: int = 4, ambiguity: float = 0.95, min_typical_chi2: float = 1.0, starts: int = 1,
+             max_effects: int = 4, ambiguity: float = 0.95, min_typical_chi2: float = 1.0,
+             max_typical_multiple: float = MAX_TYPICAL_MULTIPLE, probes=PROBES, starts: int = 1,
              progress=None) -> Diagnosis:
-    r"""Compare `model` with `data`, rank every candidate effect, add the significant ones one at a time.
+    r"""Compare `model` with `data`, rank every candidate effect, add the significant ones one at a time, and
+    say where what is left lives.
 
     **Arguments:**
 
@@ -279,19 +526,30 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     - `model`: the baseline: a preset name, a `Gyroscope`, or a `gyrojax.Model` (its effects stay in).
     - `candidates`: effect names to consider (default: every registered effect the device supports).
     - `free`: baseline physical parameters free per device (see `gyrojax.identify`).
-    - `alpha`: family-wise significance per step; a candidate must reach p < alpha / n_candidates in the
-      score test and p < alpha in the likelihood-ratio test after its refit.
+    - `alpha`: family-wise significance per step, in (0, 0.5]; a candidate must reach p < alpha /
+      n_candidates in the score test and p < alpha in the likelihood-ratio test after its refit.
     - `max_effects`: stop after this many.
     - `ambiguity`: |cos| between fingerprints above which two candidates are reported as ambiguous.
     - `min_typical_chi2`: a candidate whose typical-size fingerprint, after the baseline took up what it
       could, changes the lot's chi2 by less than this (and whose score is not significant) is reported as
       not testable on this data.
+    - `max_typical_multiple`: a candidate whose score implies a size beyond this many times its typical
+      size is not confirmed (the reason says so).
+    - `probes`: the generic shapes scored beside the candidates (`gyrojax.PROBES`).
     - `progress`: optional callable taking a message, called before each (slow) fit.
 
-    **Returns:** a `Diagnosis`.
+    Guards before a candidate is confirmed: its implied size is plausible; no probe explains the misfit it is
+    credited with while it adds nothing beyond that probe; the refit passes the likelihood-ratio test and
+    converges; and no sweep's misfit gets significantly worse (else it is "contradicted by" that sweep).
+
+    **Returns:** a `Diagnosis` (with a `verdict`: explained, partly explained or unexplained).
     """
     from ._effects.registry import supported_effects
 
+    if not (isinstance(alpha, (int, float)) and 0.0 < alpha <= 0.5):
+        raise ValueError(f"alpha must be a significance level in (0, 0.5], got {alpha!r}.")
+    if not (isinstance(max_typical_multiple, (int, float)) and max_typical_multiple > 1.0):
+        raise ValueError(f"max_typical_multiple must be a number > 1, got {max_typical_multiple!r}.")
     base = _to_model(model)
     if isinstance(data, Table):
         data = fit_data(data)
@@ -325,6 +583,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     ranking0, untestable = None, ()
     selected: list[str] = []
     remaining = list(candidates)
+    discrepancy, designs = score_probes(fit, probes, alpha=alpha)
+    baseline_discrepancy = discrepancy
     while remaining and len(selected) < max_effects:
         scores = score_candidates(fit, remaining)
         threshold = alpha / len(remaining)
@@ -336,6 +596,18 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         if not significant:
             break
         best = significant[0]
+        if best.implied_multiple > max_typical_multiple:
+            rejected.append(Rejection(best.effect, (
+                f"it explains the misfit only at ~{best.implied_multiple:.3g}x its typical size, beyond "
+                f"{max_typical_multiple:g}x, where its physics does not reach: another effect, perhaps not in the "
+                "library, leaves a similar fingerprint")))
+            remaining.remove(best.effect)
+            continue
+        guard = _probe_guard(fit, best, discrepancy, designs, threshold, alpha)
+        if guard is not None:
+            rejected.append(Rejection(best.effect, guard))
+            remaining.remove(best.effect)
+            continue
         group = tuple(c.effect for c in significant[1:]
                       if abs(_cos(best.fingerprint, c.fingerprint)) > ambiguity)
         separated = None
@@ -343,7 +615,6 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
             others = [c for c in significant if c.effect in group]
             seps = {_separating_sweep(best.fingerprint, c.fingerprint, data, ambiguity) for c in others}
             separated = seps.pop() if len(seps) == 1 else None
-            ambiguous.append((best.effect,) + group)
         say(f"refitting with {best.effect}")
         new = fit_with(tuple(selected) + (best.effect,))
         lr = fit.chi2_total - new.chi2_total
@@ -353,39 +624,55 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         n_points = int(np.sum([np.asarray(b.mask).sum() for b in data.blocks.values()]))
         delta_bic = -lr + df_total * math.log(max(n_points, 2))
         remaining.remove(best.effect)
-        if df <= 0 or p_lr >= alpha or not new.all_converged:
-            why = ("its parameters are not identifiable once fitted" if df <= 0 else
-                   f"refit did not converge: {new.result_message}" if not new.all_converged else
-                   f"likelihood-ratio p = {p_lr:.3g} >= alpha")
-            rejected.append((best.effect, why))
+        if df <= 0:
+            rejected.append(Rejection(best.effect, (
+                "the refit cannot fix its parameters: a change of its typical size moves the chi2 by less than the "
+                f"noise does, so the score implies ~{best.implied_multiple:.3g}x its typical size")))
             continue
+        if not new.all_converged:
+            rejected.append(Rejection(best.effect, f"the refit did not converge: {new.result_message}"))
+            continue
+        if p_lr >= alpha:
+            rejected.append(Rejection(best.effect, f"likelihood-ratio p = {p_lr:.3g} >= alpha: the refit does not "
+                                                   "confirm what the score promised"))
+            continue
+        worse = _contradictions(fit, new, alpha, df_total)
+        if worse:
+            rejected.append(Rejection(best.effect, "contradicted by " + "; ".join(
+                f"{s} (its misfit rose from chi2 {a:.4g} to {b:.4g} over {n} points)" for s, a, b, n in worse),
+                tuple(s for s, _, _, _ in worse)))
+            continue
+        if group:
+            ambiguous.append((best.effect,) + group)
         selected.append(best.effect)
         fit = new
         fits.append(fit)
-        cols = [i for i, nm in enumerate(fit.names) if nm.startswith(best.effect + ".")]
+        cols = _effect_columns(fit, best.effect)
         multiple = float(np.max(np.abs(np.asarray(fit.u)[:, cols])))
         steps.append(Step(best.effect, best.statistic, best.p_value, lr, df_total, p_lr, delta_bic,
-                          fit.chi2_red_total, nonlinearity_residual_ppm(fit), scores, group, separated, multiple))
+                          fit.chi2_red_total, nonlinearity_residual_ppm(fit), scores, group, separated, multiple,
+                          best.implied_multiple))
+        discrepancy, designs = score_probes(fit, probes, alpha=alpha)
     if ranking0 is None:
         ranking0 = ()
+    # Which library effect has the shape of what is left: every candidate not selected, at the final fit.
+    others = [c for c in candidates if c not in selected]
+    final_scores = score_candidates(fit, others) if others else ()
+    baseline_discrepancy = _with_library(baseline_discrepancy, ranking0, rejected, max_typical_multiple)
+    discrepancy = _with_library(discrepancy, final_scores, rejected, max_typical_multiple)
+    comparisons = tuple(compare(f, alpha=alpha) for f in fits)
     return Diagnosis(baseline, fit, tuple(fits), ranking0, tuple(steps), tuple(ambiguous), untestable,
-                     tuple(rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2,
-                     tuple(compare(f, alpha=alpha) for f in fits))
+                     tuple(rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2, comparisons,
+                     baseline_discrepancy, discrepancy, _verdict(comparisons[-1], steps))
 
 
 def _is_lot(device):
-    import jax
-
     leaves = [x for x in jax.tree.leaves(device) if eqx.is_array(x)]
     return bool(leaves) and all(jnp.ndim(x) >= 1 for x in leaves)
 
 
 def _first(device):
-    import jax
-
     return jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, device)
-
-
 
 
 def write_report(diagnosis: Diagnosis, out_dir) -> dict:

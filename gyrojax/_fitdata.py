@@ -13,13 +13,21 @@ BIASED_SWEEPS = ("rate_table", "vcf_static")
 
 
 class SweepBlock(eqx.Module):
-    """One sweep kind of a lot, shape (device, run, point), aligned on `FitData.devices`."""
+    """One sweep kind of a lot, shape (device, run, point), aligned on `FitData.devices`.
+
+    Besides the input, every coordinate the data record for a point, to test the residuals against:
+    `temperatures` (deg C), `times` (s since the run's power-on), `drive_freqs` (Hz), NaN where not recorded,
+    and `order`, the point's position in its run in time order (by `time_s` where recorded, else file order).
+    """
 
     inputs: Float[Array, "device run point"]
     outputs: Float[Array, "device run point"]
     sigmas: Float[Array, "device run point"]
     temperatures: Float[Array, "device run point"]  # deg C, NaN where not recorded
     mask: Bool[Array, "device run point"]
+    times: Float[Array, "device run point"] | None = None  # s since power-on, NaN where not recorded
+    drive_freqs: Float[Array, "device run point"] | None = None  # Hz, NaN where not recorded
+    order: Float[Array, "device run point"] | None = None  # 0, 1, ... in time order within the run
 
 
 class FitData(eqx.Module):
@@ -49,6 +57,18 @@ class FitData(eqx.Module):
 
     def num_points(self):
         return int(sum(np.asarray(b.mask).sum() for b in self.blocks.values()))
+
+
+def _time_order(times, mask):
+    """Each real point's position in its run in time order: by `times` where every point of the run has one,
+    else the file order (a stable sort keeps file order among equal times)."""
+    order = np.zeros(mask.shape)
+    for d, k in np.ndindex(mask.shape[:2]):
+        m = mask[d, k]
+        t = times[d, k][m]
+        rank = np.argsort(np.argsort(t, kind="stable"), kind="stable") if np.all(np.isfinite(t)) else np.arange(t.size)
+        order[d, k][m] = rank
+    return order
 
 
 def fit_data(table: Table, sweeps=None) -> FitData:
@@ -89,11 +109,18 @@ def fit_data(table: Table, sweeps=None) -> FitData:
                 raise DataError(f"{table.source}: sweep {s!r}, device {arr.devices[d]!r}, run {arr.runs[d][r]}, "
                                 f"point {p}: output_sigma must be > 0 to weight a fit, got {sig[d, r, p]!r}.",
                                 source=table.source, column="output_sigma")
-        temps = np.asarray(arr.aux["temperature_c"]) if "temperature_c" in arr.aux else np.full(sig.shape, np.nan)
+        def column(name):
+            return np.asarray(arr.aux[name]) if name in arr.aux else np.full(sig.shape, np.nan)
+
+        temps, times, freqs = column("temperature_c"), column("time_s"), column("drive_freq_hz")
+        real = np.asarray(arr.mask)
         blocks[s] = SweepBlock(
             inputs=jnp.asarray(align(arr.inputs, 0.0)), outputs=jnp.asarray(align(arr.outputs, 0.0)),
-            sigmas=jnp.asarray(align(np.where(np.asarray(arr.mask), sig, 1.0), 1.0)),
-            temperatures=jnp.asarray(align(np.where(np.asarray(arr.mask), temps, 25.0), 25.0)),
-            mask=jnp.asarray(align(arr.mask, False)))
+            sigmas=jnp.asarray(align(np.where(real, sig, 1.0), 1.0)),
+            temperatures=jnp.asarray(align(np.where(real, temps, 25.0), 25.0)),
+            mask=jnp.asarray(align(arr.mask, False)),
+            times=jnp.asarray(align(np.where(real, times, np.nan), np.nan)),
+            drive_freqs=jnp.asarray(align(np.where(real, freqs, np.nan), np.nan)),
+            order=jnp.asarray(align(_time_order(times, real), 0.0)))
         runs[s] = tuple(arr.runs[i] if i >= 0 else () for i in index)
     return FitData(blocks, tuple(devices), tuple(runs.items()), weighted, table.source)

@@ -6,7 +6,10 @@ predictions and identification fits them, so data and model can never disagree a
 
 Each point is evaluated at its own die temperature (the `temperature_c` column): the device's temperature
 history is replaced by a constant at that temperature, since a settled point sees the temperature of its
-dwell. A NaN temperature means "not recorded" and falls back to the device's own history at power-on.
+dwell. A NaN temperature means "not recorded" and falls back to the device's own history at power-on. The
+point's time since power-on (the `time_s` column; 0 when not recorded) reaches the device's terms that
+depend on it (`gyrojax.AbstractRateTerm`, `AbstractOutputTerm`); the device's readout terms
+(`AbstractOutputTerm`) act on the settled rate output of rate-table and static-VCF points.
 """
 
 import equinox as eqx
@@ -18,6 +21,7 @@ from ._physics.thermal import ConstantTemperature
 from ._simulate.response import _linearise
 from ._simulate.tiers import AbstractTier, Settled, Steady
 from ._stimulus import Stimulus
+from ._terms import AbstractOutputTerm, PointConditions
 from ._units import DEG
 
 
@@ -35,31 +39,64 @@ def at_temperature(gyro: Gyroscope, temperature) -> Gyroscope:
     return eqx.tree_at(lambda g: g.temperature, gyro, ConstantTemperature(t))
 
 
-def rate_table_points(gyro: Gyroscope, rates_dps, temperatures, tier: AbstractTier = Steady()) -> Settled:
-    """Settled rate-table points: table rates in deg/s, one die temperature (deg C) per point."""
-    def one(rate, temp):
-        return at_temperature(gyro, temp), Stimulus(rate=rate * DEG)
+def _times(times, like):
+    """Times since power-on (s) per point; not recorded (None or NaN) is 0."""
+    t = jnp.zeros_like(like) if times is None else jnp.broadcast_to(jnp.asarray(times, dtype=float), like.shape)
+    return jnp.where(jnp.isnan(t), 0.0, t)
 
-    return tier.settle_points(*jax.vmap(one)(jnp.asarray(rates_dps, dtype=float),
-                                             jnp.asarray(temperatures, dtype=float)))
+
+def _read_out(gyro: Gyroscope, settled: Settled, sweep: str, inputs, temperatures, times) -> Settled:
+    """The settled rate output through the device's readout terms (`AbstractOutputTerm`)."""
+    terms = gyro.terms_of(AbstractOutputTerm)
+    if not terms:
+        return settled
+    temps = jnp.where(jnp.isnan(temperatures), gyro.temperature(0.0), temperatures)
+
+    def one(output, x, temp, t):
+        cond = PointConditions(sweep, x, temp, t)
+        for term in terms:
+            output = term(gyro, output, cond)
+        return output
+
+    return eqx.tree_at(lambda s: s.rate, settled, jax.vmap(one)(settled.rate, inputs, temps, times))
+
+
+def rate_table_points(gyro: Gyroscope, rates_dps, temperatures, tier: AbstractTier = Steady(), *,
+                      times=None) -> Settled:
+    """Settled rate-table points: table rates in deg/s, one die temperature (deg C) and optionally one time
+    since power-on (s) per point."""
+    rates = jnp.asarray(rates_dps, dtype=float)
+    temps = jnp.asarray(temperatures, dtype=float)
+    t = _times(times, rates)
+
+    def one(rate, temp, time):
+        return at_temperature(gyro, temp), Stimulus(rate=rate * DEG, time=time)
+
+    settled = tier.settle_points(*jax.vmap(one)(rates, temps, t))
+    return _read_out(gyro, settled, "rate_table", rates, temps, t)
 
 
 def vcf_static_points(gyro: Gyroscope, amplitudes_v, temperatures, tier: AbstractTier = Steady(),
-                      carrier_v=VCF_CARRIER_V) -> Settled:
+                      carrier_v=VCF_CARRIER_V, *, times=None) -> Settled:
     """Settled static virtual-Coriolis points (seed 003 Eq. 7): the virtual-rate voltage V_ac (V, signed)
-    times the fixed carrier V_fc, one die temperature per point."""
-    def one(v, temp):
-        return at_temperature(gyro, temp), Stimulus(vcf_ac=v, vcf_fc=carrier_v)
+    times the fixed carrier V_fc, one die temperature and optionally one time since power-on per point."""
+    volts = jnp.asarray(amplitudes_v, dtype=float)
+    temps = jnp.asarray(temperatures, dtype=float)
+    t = _times(times, volts)
 
-    return tier.settle_points(*jax.vmap(one)(jnp.asarray(amplitudes_v, dtype=float),
-                                             jnp.asarray(temperatures, dtype=float)))
+    def one(v, temp, time):
+        return at_temperature(gyro, temp), Stimulus(vcf_ac=v, vcf_fc=carrier_v, time=time)
+
+    settled = tier.settle_points(*jax.vmap(one)(volts, temps, t))
+    return _read_out(gyro, settled, "vcf_static", volts, temps, t)
 
 
 def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz, temperatures, amplitude_v=VCF_DYNAMIC_AMPLITUDE_V,
                        carrier_v=VCF_CARRIER_V):
     """Dynamic virtual-Coriolis test (seed 003 Eq. 6): the rate output's amplitude (LSB) and phase (deg)
     for V_ac = `amplitude_v` modulated at each frequency (Hz), from the averaged model linearised at rest at
-    the die temperature of each point (deg C; one value for every point linearises once)."""
+    the die temperature of each point (deg C; one value for every point linearises once). A lock-in reads
+    the output at the modulation frequency: a zero-rate output and the readout terms do not reach it."""
     def response(f, temperature):
         ss = _linearise(at_temperature(gyro, temperature), Stimulus(), "vcf")
         h = ss.response(2.0 * jnp.pi * f) * (amplitude_v * carrier_v)

@@ -25,11 +25,12 @@ def predict_block(gyro: Gyroscope, sweep: str, block: SweepBlock, tier=Steady())
     points that did not settle."""
     shape = block.inputs.shape
     x, temps = jnp.ravel(block.inputs), jnp.ravel(block.temperatures)
+    times = None if block.times is None else jnp.ravel(block.times)
     if sweep == "rate_table":
-        s = rate_table_points(gyro, x, temps, tier)
+        s = rate_table_points(gyro, x, temps, tier, times=times)
         pred, bad = s.rate, s.result != RESULTS.successful
     elif sweep == "vcf_static":
-        s = vcf_static_points(gyro, x, temps, tier)
+        s = vcf_static_points(gyro, x, temps, tier, times=times)
         pred, bad = s.rate, s.result != RESULTS.successful
     elif sweep == "vcf_dynamic":
         # Each point at its own die temperature, as measured and simulated: one mean temperature per sweep

@@ -53,6 +53,12 @@ VCF_DYNAMIC_SAMPLE_RATE_HZ = 10_000.0
 """Hz, ASSUMPTION: output sampling of the dynamic test, 20x the highest modulation frequency; seed 003 §3
 samples with an NI-DAQ 6366 (up to 2 MS/s), its rate is not printed."""
 
+ORDERS = ("listed", "reversed", "alternating", "shuffled")
+"""The orders a sweep's points can be applied in (`Protocol.order`)."""
+
+ORDER_STREAM = 7919  # a random stream of its own for shuffled orders, apart from the noise streams
+_SWEEP_KINDS = ("rate_table", "vcf_static", "vcf_dynamic", "dac")
+
 WARMUP_RISE_K = 2.0
 """K, ASSUMPTION: die self-heating after power-on ("a couple of kelvin"; neither seed gives a figure)."""
 
@@ -135,6 +141,12 @@ class Protocol(eqx.Module):
     - `dynamic_dwell_s`, `dynamic_sample_rate_hz`: the same for a dynamic (lock-in) point.
     - `warmup`: the die's warm-up per run (`RunWarmup`), or None to use the device's own `temperature`
       history for every run.
+    - `order`: the order the points of a settled or dynamic sweep are applied in, per run (`ORDERS`):
+      `"listed"` (default: as listed above, ascending for the default lists), `"reversed"`, `"alternating"`
+      (listed in even runs, reversed in odd ones: up-down) or `"shuffled"` (a random order per run, drawn
+      from the campaign's seed). A sweep applied in one direction only ties its input to time and
+      temperature within a run: drift then looks like a shape in the input. The DAC sweep is a bench
+      measurement without a time axis.
 
     Defaults: seed 000 §5 for the rate table (1 min warm-up, 2 min per rate at 100 Hz); seed 003 §3 for the
     virtual-Coriolis tests; the static VCF sweep reuses the rate table's timing (ASSUMPTION: seed 003 prints
@@ -152,6 +164,7 @@ class Protocol(eqx.Module):
     dynamic_dwell_s: float = VCF_DYNAMIC_DWELL_S
     dynamic_sample_rate_hz: float = VCF_DYNAMIC_SAMPLE_RATE_HZ
     warmup: RunWarmup | None = RunWarmup()
+    order: str = eqx.field(static=True, default="listed")
 
     def __check_init__(self):
         for name, what in (("rates_dps", "table rates (deg/s)"), ("vcf_rates_dps", "virtual rates (deg/s)"),
@@ -182,6 +195,8 @@ class Protocol(eqx.Module):
                                    "dynamic_dwell_s x dynamic_sample_rate_hz")):
             if round(dwell * rate) < 1:
                 raise ValueError(f"Protocol: {name} = {dwell * rate:g} gives no sample per point.")
+        if self.order not in ORDERS:
+            raise ValueError(f"Protocol.order must be one of {', '.join(ORDERS)}, got {self.order!r}.")
         if self.warmup is not None and not isinstance(self.warmup, RunWarmup):
             raise ValueError(f"Protocol.warmup must be a RunWarmup or None, got {self.warmup!r}.")
 
@@ -232,6 +247,24 @@ class Protocol(eqx.Module):
         """Samples averaged per point of `sweep`."""
         rate = self.dynamic_sample_rate_hz if sweep == "vcf_dynamic" else self.sample_rate_hz
         return int(round(self.dwell(sweep) * rate))
+
+    def point_order(self, sweep: str, runs: int, seed: int = 0) -> np.ndarray:
+        """Indices into `inputs(sweep)` of the points in the order applied, shape (runs, points); `seed` draws
+        the `"shuffled"` orders (each run and sweep kind its own)."""
+        n = self.n_points(sweep)
+        listed = np.arange(n)
+        rows = []
+        for r in range(runs):
+            if self.order == "listed" or sweep == "dac":
+                rows.append(listed)
+            elif self.order == "reversed" or (self.order == "alternating" and r % 2 == 1):
+                rows.append(listed[::-1])
+            elif self.order == "alternating":
+                rows.append(listed)
+            else:
+                rng = np.random.default_rng([int(seed) % 2**63, ORDER_STREAM, _SWEEP_KINDS.index(sweep), r])
+                rows.append(rng.permutation(n))
+        return np.stack(rows)
 
     def point_times(self, sweep: str) -> np.ndarray:
         """Time since power-on of the middle of each point's dwell, s: warmup + (i + 1/2) dwell."""

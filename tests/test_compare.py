@@ -58,7 +58,8 @@ def test_pure_noise_flags_nothing_and_spreads_the_misfit():
     # family-wise alpha 0.01 over 40 lots: about 0.4 expected; 3 or more has probability < 1 %
     assert false_alarms <= 2
     c = compare_residuals(*_lot(1), devices=DEVICES)
-    assert {f.test for f in c.findings} == {"runs", "trend", "even bow", "odd cubic", "odd part", "even part"}
+    assert {f.test for f in c.findings} == {"runs", "trend", "even bow", "odd cubic", "odd part", "even part",
+                                           "sign gain"}
     assert c.points == 4 * 2 * 22 and "no structure in the residuals" in c.summary()
     assert not c.fails and "at the noise level" in c.summary() and "misfit by" not in c.summary()
 

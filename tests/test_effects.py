@@ -48,7 +48,7 @@ HOME = {
     "dac_inl": "paper-qmg", "pushpull_mismatch": "paper-qmg", "comb_gap": "qmg-leaky",
     "thermal_drift": "vcf-2018", "agc_finite_gain": "vcf-2018", "duffing_drive": "paper-qmg",
     "duffing_sense": "vcf-2018", "quadrature_phase": "paper-qmg", "damping_coupling": "paper-qmg",
-    "vref_drift": "paper-qmg",
+    "vref_drift": "paper-qmg", "zro_tempco": "paper-qmg", "feedback_compression": "paper-qmg",
 }
 
 T_HOT = 35.0  # deg C: 10 K above the resonators' t_ref
@@ -151,7 +151,7 @@ def _fit_line(x, y):
 def test_registry_names_every_effect_of_design_table():
     assert list(gj.EFFECTS) == ["dac_inl", "pushpull_mismatch", "comb_gap", "thermal_drift", "agc_finite_gain",
                                 "duffing_drive", "duffing_sense", "quadrature_phase", "damping_coupling",
-                                "vref_drift"]
+                                "vref_drift", "zro_tempco", "feedback_compression"]
     for name, cls in gj.EFFECTS.items():
         assert cls.name == name
         assert cls.description and "\n" not in cls.description and len(cls.description) < 110
@@ -167,10 +167,11 @@ def test_registry_names_every_effect_of_design_table():
 
 def test_supported_effects_per_device():
     assert gj.supported_effects(QMG) == ("dac_inl", "pushpull_mismatch", "thermal_drift", "agc_finite_gain",
-                                         "duffing_drive", "quadrature_phase", "damping_coupling", "vref_drift")
+                                         "duffing_drive", "quadrature_phase", "damping_coupling", "vref_drift",
+                                         "zro_tempco", "feedback_compression")
     assert gj.supported_effects(LEAKY) == tuple(gj.EFFECTS)
     assert gj.supported_effects(VCF) == ("thermal_drift", "agc_finite_gain", "duffing_drive", "duffing_sense",
-                                         "quadrature_phase", "damping_coupling")
+                                         "quadrature_phase", "damping_coupling", "zro_tempco")
 
 
 @pytest.mark.parametrize("name, device, needs", [
@@ -180,6 +181,7 @@ def test_supported_effects_per_device():
     ("comb_gap", "vcf-2018", "a closed-loop device whose rebalance loop has a finite DC gain"),
     ("comb_gap", "paper-qmg", r"a closed-loop device whose rebalance loop has a finite DC gain \(RebalanceLoop\.leak"),
     ("duffing_sense", "paper-qmg", "a moving sense mass"),
+    ("feedback_compression", "vcf-2018", "a closed-loop device"),
 ])
 def test_unsupported_device_is_refused(name, device, needs):
     with pytest.raises(ValueError, match=rf"effect '{name}' cannot act on device '{device}': it needs {needs}"):
@@ -196,7 +198,25 @@ def _supported_pairs():
     return [(n, b) for n, c in gj.EFFECTS.items() for b, g in BASES.items() if c.supports(g)]
 
 
-@pytest.mark.parametrize("name, base_name", _supported_pairs())
+def _is_term(cls):
+    return issubclass(cls, gj.AbstractTerm)
+
+
+@pytest.mark.parametrize("name, base_name", [p for p in _supported_pairs() if _is_term(gj.EFFECTS[p[0]])])
+def test_term_effects_add_one_term_of_the_same_structure_at_any_size(name, base_name):
+    """An effect that needs a new term adds itself to the device's `terms` slot: the same structure at zero
+    and at typical size (so the diagnosis compiles one model), and its only change is that term."""
+    base = BASES[base_name]
+    cls = gj.EFFECTS[name]
+    zero, typ = cls.typical(0.0).apply(base), cls.typical(1.0).apply(base)
+    assert zero.terms[:-1] == base.terms and isinstance(zero.terms[-1], cls)
+    assert jax.tree.structure(zero) == jax.tree.structure(typ)
+    assert [jax.typeof(x) for x in jax.tree.leaves(zero)] == [jax.typeof(x) for x in jax.tree.leaves(typ)]
+    assert eqx.tree_equal(eqx.tree_at(lambda g: g.terms, zero, ()), base)
+    assert len(cls.typical(1.0).apply(typ).terms) == len(base.terms) + 2
+
+
+@pytest.mark.parametrize("name, base_name", [p for p in _supported_pairs() if not _is_term(gj.EFFECTS[p[0]])])
 def test_nested_at_zero_and_structure_kept(name, base_name):
     base = BASES[base_name]
     cls = gj.EFFECTS[name]
@@ -457,8 +477,8 @@ def test_steady_and_averaged_agree_open_loop():
 # The effects with carrier-level physics (harmonics, DC and 2w forces that averaging drops), and the two
 # bases they sit on.
 CARRIER_LEVEL = (("dac_inl", "paper-qmg"), ("pushpull_mismatch", "paper-qmg"), ("comb_gap", "qmg-leaky"),
-                 ("duffing_drive", "paper-qmg"), ("duffing_sense", "qmg-leaky"), (None, "paper-qmg"),
-                 (None, "qmg-leaky"))
+                 ("duffing_drive", "paper-qmg"), ("duffing_sense", "qmg-leaky"), ("feedback_compression", "paper-qmg"),
+                 (None, "paper-qmg"), (None, "qmg-leaky"))
 FULL_RATES_DPS = (-50.0, 200.0)
 
 
@@ -476,7 +496,10 @@ def _full_stack(devices, rates):
 
 
 def test_full_waveform_agrees_with_steady_for_carrier_level_effects():
-    devices = [gj.EFFECTS[n].typical().apply(BASES[b]) if n else BASES[b] for n, b in CARRIER_LEVEL]
+    # every device carries the feedback term (at zero where it is not the effect): one structure to stack
+    with_term = {b: gj.FeedbackCompression.typical(0.0).apply(g) for b, g in BASES.items()}
+    devices = [gj.FeedbackCompression.typical().apply(BASES[b]) if n == "feedback_compression" else
+               gj.EFFECTS[n].typical().apply(with_term[b]) if n else with_term[b] for n, b in CARRIER_LEVEL]
     stack = jax.tree.map(lambda *x: jnp.stack(x), *devices)
     full = dict(zip(CARRIER_LEVEL, np.asarray(_full_stack(stack, jnp.asarray(FULL_RATES_DPS) * DEG))))
     index = [list(RATES_DPS).index(r) for r in FULL_RATES_DPS]

@@ -11,17 +11,20 @@ from .dac_inl import DacInl
 from .damping_coupling import DampingCoupling
 from .duffing_drive import DuffingDrive
 from .duffing_sense import DuffingSense
+from .feedback_compression import FeedbackCompression
 from .pushpull_mismatch import PushPullMismatch
 from .quadrature_phase import QuadraturePhase
 from .thermal_drift import ThermalDrift
 from .vref_drift import VrefDrift
+from .zro_tempco import ZroTempco
 
 
 EFFECTS: dict[str, type[AbstractEffect]] = {cls.name: cls for cls in (
     DacInl, PushPullMismatch, CombGap, ThermalDrift, AgcFiniteGain, DuffingDrive, DuffingSense,
-    QuadraturePhase, DampingCoupling, VrefDrift,
+    QuadraturePhase, DampingCoupling, VrefDrift, ZroTempco, FeedbackCompression,
 )}
-"""The candidate effects by name, in the order of DESIGN.md §2's table."""
+"""The candidate effects by name: the physical effects of the model's sources, then the classic error sources
+that need a term of their own (a temperature-dependent zero-rate output, compression after the DAC)."""
 
 
 def register_effect(cls: type[AbstractEffect]) -> type[AbstractEffect]:

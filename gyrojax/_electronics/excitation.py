@@ -25,7 +25,10 @@ class FTRExcitation(eqx.Module):
         check_finite("FTRExcitation", "branch_gain_error_plus", self.branch_gain_error_plus)
         check_finite("FTRExcitation", "branch_gain_error_minus", self.branch_gain_error_minus)
 
-    def branch_voltages(self, dac_voltage):
-        """AC parts of V_f+ and of -(V_f-) for a DAC output voltage: `(v_plus, v_minus)`."""
+    def branch_voltages(self, dac_voltage, after_amplifier=None):
+        """AC parts of V_f+ and of -(V_f-) for a DAC output voltage: `(v_plus, v_minus)`. `after_amplifier`
+        (optional) maps the amplifier output V_fa before the split (the device's feedback terms)."""
         v = self.amplifier_gain * dac_voltage
+        if after_amplifier is not None:
+            v = after_amplifier(v)
         return v * (1.0 + self.branch_gain_error_plus), v * (1.0 + self.branch_gain_error_minus)

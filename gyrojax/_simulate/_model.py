@@ -25,6 +25,7 @@ import jax.numpy as jnp
 
 from .._gyroscope import Gyroscope
 from .._stimulus import Stimulus
+from .._terms import AbstractRateTerm
 
 
 def _c(v):
@@ -148,9 +149,17 @@ def _sense_force(gyro, y, word, carrier_phase, omega, temperature):
     r = gyro.resonator
     force = -r.mass * r.duffing_y * y**3
     if gyro.closed_loop:
-        v_plus, v_minus = gyro.excitation.branch_voltages(_dac_voltage(gyro, word, carrier_phase, omega))
+        v_plus, v_minus = gyro.feedback_voltages(_dac_voltage(gyro, word, carrier_phase, omega))
         force = force + gyro.feedback_electrode.force(y, v_plus, v_minus, temperature - r.t_ref)
     return force
+
+
+def _rate_equivalent(gyro, temperature, time, rate):
+    """Om_eq (rad/s) of the device's rate terms: the sense feels the Coriolis force of rate + Om_eq."""
+    total = jnp.zeros(())
+    for term in gyro.terms_of(AbstractRateTerm):
+        total = total + jnp.asarray(term.rate(gyro, temperature, time, rate), dtype=float)
+    return total
 
 
 def _phase_grid(n):
@@ -175,14 +184,16 @@ def sense_force_fundamental(gyro, sense_phasor, word, omega, omega_y, temperatur
 
 def averaged_field(t, state: SlowState, gyro: Gyroscope, stim: Stimulus):
     """Slow-flow vector field; returns `(dstate, outputs)`."""
-    r = gyro.resonator
     temp = gyro.temperature(stim.time + t)
+    gyro = gyro.at_die_temperature(temp)
+    r = gyro.resonator
     wx, wy, qx, qy = r.at_temperature(temp)
     ctl = _controls(gyro, state.loops)
     w = ctl.omega
     m = r.mass
     X, Y = _c(state.drive), _c(state.sense)
     om = stim.rate_at(t)
+    om_sense = om + _rate_equivalent(gyro, temp, stim.time + t, om)
     gx, gy = wx / (2 * qx), wy / (2 * qy)
     dx, dy = (wx**2 - w**2) / (2 * w), (wy**2 - w**2) / (2 * w)
     c, kap, ag = r.damping_coupling, r.stiffness_coupling, r.angular_gain
@@ -194,7 +205,7 @@ def averaged_field(t, state: SlowState, gyro: Gyroscope, stim: Stimulus):
 
     force_gain = _cj(0.0, 2 * w * m)
     dX = -_cj(gx, -dx) * X + _cj(ag * om - c / 2, kap / (2 * w)) * Y + f_x / force_gain
-    dY = -_cj(gy, -dy) * Y - _cj(ag * om + c / 2, -kap / (2 * w)) * X + f_y / force_gain
+    dY = -_cj(gy, -dy) * Y - _cj(ag * om_sense + c / 2, -kap / (2 * w)) * X + f_y / force_gain
 
     drive_demod = gyro.drive_frontend.phasor_gain(w) * X
     sense_demod = gyro.sense_frontend.phasor_gain(w) * Y
@@ -204,8 +215,9 @@ def averaged_field(t, state: SlowState, gyro: Gyroscope, stim: Stimulus):
 
 def full_field(t, state: WaveState, gyro: Gyroscope, stim: Stimulus):
     """Carrier-level vector field; returns `(dstate, outputs)`."""
-    r = gyro.resonator
     temp = gyro.temperature(stim.time + t)
+    gyro = gyro.at_die_temperature(temp)
+    r = gyro.resonator
     wx, wy, qx, qy = r.at_temperature(temp)
     ctl = _controls(gyro, state.loops)
     m = r.mass
@@ -213,13 +225,14 @@ def full_field(t, state: WaveState, gyro: Gyroscope, stim: Stimulus):
     y, vy = state.sense[0], state.sense[1]
     theta = state.phase
     om = stim.rate_at(t)
+    om_sense = om + _rate_equivalent(gyro, temp, stim.time + t, om)
     c, kap, ag = r.damping_coupling, r.stiffness_coupling, r.angular_gain
 
     f_x = gyro.drive_electrode.force(ctl.drive_voltage) * (-jnp.sin(theta)) - m * r.duffing_x * x**3
     f_y = (_sense_force(gyro, y, ctl.word, theta, ctl.omega, temp)
            + gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t) * jnp.sin(theta))
     ax = f_x / m - (wx / qx) * vx - wx**2 * x - c * vy - kap * y + 2 * ag * om * vy
-    ay = f_y / m - (wy / qy) * vy - wy**2 * y - c * vx - kap * x - 2 * ag * om * vx
+    ay = f_y / m - (wy / qy) * vy - wy**2 * y - c * vx - kap * x - 2 * ag * om_sense * vx
 
     # Demodulation: 2 v cos(theta) and -2 v sin(theta) are the phasor's re/im parts plus 2w ripple.
     carrier = 2.0 * _expj(-theta)
@@ -241,9 +254,10 @@ def operating_point(gyro: Gyroscope, stim: Stimulus):
     Returns a `SlowState`. It is the starting point of every tier; the nonlinear and loop effects are
     then settled by each tier on its own.
     """
+    temp = gyro.temperature(stim.time)
+    gyro = gyro.at_die_temperature(temp)
     r = gyro.resonator
     dl = gyro.drive_loop
-    temp = gyro.temperature(stim.time)
     wx, wy, qx, qy = r.at_temperature(temp)
     w = wx
     m = r.mass
@@ -258,9 +272,10 @@ def operating_point(gyro: Gyroscope, stim: Stimulus):
     w = wx * jnp.sqrt(1.0 + 0.75 * r.duffing_x * a**2 / wx**2)
     X = _cx(a)
     om = stim.rate_at(0.0)
+    om_sense = om + _rate_equivalent(gyro, temp, stim.time, om)
     vcf = gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(0.0)
     dy = (wy**2 - w**2) / (2 * w)
-    coupling = _cj((r.angular_gain * om + r.damping_coupling / 2) * a, -r.stiffness_coupling * a / (2 * w))
+    coupling = _cj((r.angular_gain * om_sense + r.damping_coupling / 2) * a, -r.stiffness_coupling * a / (2 * w))
     drive_meas = gyro.drive_frontend.phasor_gain(w) * X
     if gyro.closed_loop:
         Y = jnp.zeros((), dtype=complex)
@@ -277,7 +292,8 @@ def operating_point(gyro: Gyroscope, stim: Stimulus):
         # seconds after any frequency step.
         w = w - (r.angular_gain * om) ** 2 / dy
         dy = (wy**2 - w**2) / (2 * w)
-        coupling = _cj((r.angular_gain * om + r.damping_coupling / 2) * a, -r.stiffness_coupling * a / (2 * w))
+        coupling = _cj((r.angular_gain * om_sense + r.damping_coupling / 2) * a,
+                       -r.stiffness_coupling * a / (2 * w))
         force = -coupling - _cx(vcf / (2 * w * m))
         Y = force / _cj(gy, -dy)
         for _ in range(3):  # the sense's cubic stiffness: d_y + 3/8 duffing_y |Y|^2 / w, by fixed point

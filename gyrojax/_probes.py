@@ -1,0 +1,367 @@
+r"""Shape probes: generic terms, scored like the candidate effects, that say where an unexplained misfit lives.
+
+The library of physical effects will never hold every effect a real device has. A probe is a small generic
+basis of what a missing term could add to the predictions - a bias or a gain linear in the die temperature or
+in the time since power-on, a gain per run, an odd cubic of the force path after the DAC or of the DAC itself,
+an even bow, a gain that differs for positive and negative inputs - with its coefficient in physical units.
+Each is scored from the baseline fit with the same score (Lagrange-multiplier) test as the effects: what the
+fit's free parameters and run biases could already absorb is projected out, and
+
+    S = r^T G' (G'^T G')^+ G'^T r ~ chi2(rank G')
+
+is the chi2 the probe would remove, where G' is the probe's design (its effect on the standardised residuals
+per unit coefficient) after the projection. Its share of the chi2 in excess of the degrees of freedom says
+how much of the misfit has that shape, and the fitted coefficient G'^+ r says how large the missing term is.
+
+A probe's design is computed from the fit alone (its predictions, scale factor and the data's coordinates),
+so probes cost no compile and no refit.
+"""
+
+import abc
+import dataclasses
+from typing import ClassVar
+
+import equinox as eqx
+import numpy as np
+
+from ._compare import chi2_sf
+from ._fitdata import BIASED_SWEEPS
+
+
+RATE_SWEEPS = ("rate_table", "vcf_static")
+"""Sweeps read from the rate output, with a turn-on bias per run."""
+
+GAIN_SWEEPS = ("rate_table", "vcf_static", "vcf_dynamic")
+"""Sweeps whose output scales with the gain of the rate path."""
+
+
+class AbstractProbe(eqx.Module):
+    """A generic shape a missing term could add to the predictions.
+
+    **Class attributes:** `name`, `coordinate` (the data column it runs along, or `"order"`, `"run"`),
+    `shape` (in words), `unit` (of its coefficient), `sweeps` (those it acts on).
+    """
+
+    name: ClassVar[str]
+    coordinate: ClassVar[str]
+    shape: ClassVar[str]
+    unit: ClassVar[str]
+    sweeps: ClassVar[tuple[str, ...]]
+
+    @abc.abstractmethod
+    def changes(self, fit, sweep: str) -> np.ndarray | None:
+        """The change of the predictions of `sweep` per unit coefficient, shape (device, run, point, k) in the
+        sweep's output unit; None when the probe does not act on this sweep or the data lack its
+        coordinate."""
+
+
+def _coordinate(block, field):
+    values = getattr(block, field, None)
+    if values is None:
+        return None
+    values = np.asarray(values, float)
+    mask = np.asarray(block.mask)
+    if not mask.any() or not np.all(np.isfinite(values[mask])):
+        return None
+    return np.where(mask, values, 0.0)
+
+
+def _sf(fit):
+    """Each device's scale factor, LSB per deg/s (device, 1, 1)."""
+    return np.asarray(fit.scale_factor, float)[:, None, None]
+
+
+def _full_scale_word(fit):
+    """The full-scale rebalance word (LSB) of a closed-loop device, else None."""
+    device = fit.model.device
+    if device.excitation is None:
+        return None
+    return 2.0 ** (device.excitation.dac.word_bits - 1)
+
+
+class _AbstractBiasLinear(AbstractProbe):
+    """A bias (in deg/s of equivalent rate, through each device's scale factor) linear in a coordinate."""
+
+    field: ClassVar[str]  # the SweepBlock field of the coordinate
+    per: ClassVar[float]  # coordinate units per unit of the coefficient
+    origin: ClassVar[float | None]  # where the term is zero; None: the device's mean
+
+    def changes(self, fit, sweep):
+        if sweep not in self.sweeps or sweep not in fit.data.blocks:
+            return None
+        c = _coordinate(fit.data.blocks[sweep], self.field)
+        return None if c is None else (_sf(fit) * (c - self.origin) / self.per)[..., None]
+
+
+class _AbstractGainLinear(AbstractProbe):
+    """A relative gain (ppm) linear in a coordinate."""
+
+    field: ClassVar[str]
+    per: ClassVar[float]
+    origin: ClassVar[float | None]
+
+    def changes(self, fit, sweep):
+        if sweep not in self.sweeps or sweep not in fit.data.blocks:
+            return None
+        c = _coordinate(fit.data.blocks[sweep], self.field)
+        if c is None:
+            return None
+        origin = self.origin
+        if origin is None:  # the lot's mean of the coordinate (e.g. the drive frequency)
+            mask = np.asarray(fit.data.blocks[sweep].mask)
+            origin = np.sum(np.where(mask, c, 0.0), axis=(1, 2), keepdims=True) / np.maximum(
+                mask.sum(axis=(1, 2), keepdims=True), 1)
+        return (np.asarray(fit.predictions[sweep]) * (c - origin) * 1e-6 / self.per)[..., None]
+
+
+class BiasVsTemperature(_AbstractBiasLinear):
+    name = "bias_vs_temperature"
+    coordinate = "temperature_c"
+    shape = "a bias linear in die temperature"
+    unit = "(deg/s)/K"
+    sweeps = RATE_SWEEPS
+    field, per, origin = "temperatures", 1.0, 25.0
+
+
+class GainVsTemperature(_AbstractGainLinear):
+    name = "gain_vs_temperature"
+    coordinate = "temperature_c"
+    shape = "a gain linear in die temperature"
+    unit = "ppm/K"
+    sweeps = GAIN_SWEEPS
+    field, per, origin = "temperatures", 1.0, 25.0
+
+
+class BiasVsTime(_AbstractBiasLinear):
+    name = "bias_vs_time"
+    coordinate = "time_s"
+    shape = "a bias linear in time since power-on"
+    unit = "(deg/s)/h"
+    sweeps = RATE_SWEEPS
+    field, per, origin = "times", 3600.0, 0.0
+
+
+class GainVsTime(_AbstractGainLinear):
+    name = "gain_vs_time"
+    coordinate = "time_s"
+    shape = "a gain linear in time since power-on"
+    unit = "ppm/h"
+    sweeps = GAIN_SWEEPS
+    field, per, origin = "times", 3600.0, 0.0
+
+
+class GainVsDriveFrequency(_AbstractGainLinear):
+    name = "gain_vs_drive_frequency"
+    coordinate = "drive_freq_hz"
+    shape = "a gain linear in the drive frequency (beyond the model's own)"
+    unit = "ppm/Hz"
+    sweeps = RATE_SWEEPS
+    field, per, origin = "drive_freqs", 1.0, None
+
+
+class GainPerRun(AbstractProbe):
+    name = "gain_per_run"
+    coordinate = "run"
+    shape = "a gain that changes from run to run"
+    unit = "ppm"
+    sweeps = GAIN_SWEEPS + ("dac",)
+
+    def changes(self, fit, sweep):
+        if sweep not in self.sweeps or sweep not in fit.data.blocks:
+            return None
+        f = np.asarray(fit.predictions[sweep]) * 1e-6
+        runs = f.shape[1]
+        if runs < 2:
+            return None
+        return f[..., None] * np.eye(runs)[None, :, None, :]
+
+
+class BiasPerRun(AbstractProbe):
+    name = "bias_per_run"
+    coordinate = "run"
+    shape = "an offset that changes from run to run (sweeps read without a turn-on bias)"
+    unit = "output unit"
+    sweeps = ("vcf_dynamic", "dac")
+
+    def changes(self, fit, sweep):
+        if sweep not in self.sweeps or sweep not in fit.data.blocks:
+            return None
+        mask = np.asarray(fit.data.blocks[sweep].mask)
+        runs = mask.shape[1]
+        if runs < 2:
+            return None
+        return np.broadcast_to(np.eye(runs)[None, :, None, :], mask.shape + (runs,)).astype(float)
+
+
+class CubicAfterDac(AbstractProbe):
+    """Closed loop: an odd cubic of the force path after the DAC (amplifier, electrodes) compresses the
+    feedback force, so the loop raises the word: the rate output grows by +c (w/W)^3 W (W the full-scale
+    word); the DAC sweep, read before it, does not move. Open loop: an odd cubic of the readout."""
+
+    name = "cubic_after_dac"
+    coordinate = "input"
+    shape = "an odd cubic of the force path after the DAC (or of an open-loop readout), not seen by the DAC sweep"
+    unit = "ppm of full scale"
+    sweeps = RATE_SWEEPS
+
+    def changes(self, fit, sweep):
+        if sweep not in self.sweeps or sweep not in fit.data.blocks:
+            return None
+        f = np.asarray(fit.predictions[sweep])
+        w = _full_scale_word(fit)
+        if w is None:  # open loop: relative to the largest rate-table output of the device
+            ref = fit.predictions.get("rate_table", f)
+            mask = fit.data.blocks["rate_table" if "rate_table" in fit.predictions else sweep].mask
+            w = np.max(np.where(np.asarray(mask), np.abs(np.asarray(ref)), 0.0), axis=(1, 2), keepdims=True)
+            w = np.where(w > 0, w, 1.0)
+        return (f * (f / w) ** 2 * 1e-6)[..., None]
+
+
+class CubicOfDac(AbstractProbe):
+    """Closed loop: an odd cubic of the DAC's own transfer v = k (w + c w^3 / W^2): the DAC sweep reads it
+    directly, and the loop answers it with the opposite sign, -c (w/W)^3 W, on the rate output."""
+
+    name = "cubic_of_dac"
+    coordinate = "input"
+    shape = "an odd cubic of the DAC itself (rate output and DAC sweep, with opposite signs)"
+    unit = "ppm of full scale"
+    sweeps = RATE_SWEEPS + ("dac",)
+
+    def changes(self, fit, sweep):
+        w = _full_scale_word(fit)
+        if w is None or sweep not in self.sweeps or sweep not in fit.data.blocks:
+            return None
+        f = np.asarray(fit.predictions[sweep])
+        if sweep == "dac":
+            words = np.asarray(fit.data.blocks[sweep].inputs)
+            return (f * (words / w) ** 2 * 1e-6)[..., None]
+        return (-f * (f / w) ** 2 * 1e-6)[..., None]
+
+
+class EvenBow(AbstractProbe):
+    name = "even_bow"
+    coordinate = "input"
+    shape = "an even bow in the input"
+    unit = "ppm of full scale"
+    sweeps = RATE_SWEEPS
+
+    def changes(self, fit, sweep):
+        if sweep not in self.sweeps or sweep not in fit.data.blocks:
+            return None
+        block = fit.data.blocks[sweep]
+        mask = np.asarray(block.mask)
+        x = np.asarray(block.inputs)
+        f = np.asarray(fit.predictions[sweep])
+        span = np.max(np.where(mask, np.abs(x), 0.0), axis=(1, 2), keepdims=True)
+        top = np.max(np.where(mask, np.abs(f), 0.0), axis=(1, 2), keepdims=True)
+        return (top * (x / np.where(span > 0, span, 1.0)) ** 2 * 1e-6)[..., None]
+
+
+class SignGain(AbstractProbe):
+    name = "sign_gain"
+    coordinate = "input"
+    shape = "a gain that differs for positive and negative inputs (K+ vs K-)"
+    unit = "ppm"
+    sweeps = RATE_SWEEPS
+
+    def changes(self, fit, sweep):
+        if sweep not in self.sweeps or sweep not in fit.data.blocks:
+            return None
+        x = np.asarray(fit.data.blocks[sweep].inputs)
+        return (np.asarray(fit.predictions[sweep]) * (x > 0) * 1e-6)[..., None]
+
+
+PROBES: tuple[AbstractProbe, ...] = (
+    BiasVsTemperature(), GainVsTemperature(), BiasVsTime(), GainVsTime(), GainVsDriveFrequency(),
+    GainPerRun(), BiasPerRun(), CubicAfterDac(), CubicOfDac(), EvenBow(), SignGain(),
+)
+"""The generic shapes every diagnosis scores beside the candidate effects."""
+
+
+def _standardised(fit, sweep, g):
+    """A change of the predictions (device, run, point, k) as columns of the standardised residuals (what
+    the data carry beyond the model per unit coefficient), with each run's bias projected out as the fit
+    does for biased sweeps."""
+    block = fit.data.blocks[sweep]
+    mask = np.asarray(block.mask)[..., None]
+    sig = np.asarray(block.sigmas)[..., None]
+    g = np.where(mask, np.nan_to_num(np.asarray(g, float)), 0.0)
+    if sweep in BIASED_SWEEPS:
+        w = np.where(mask, 1.0 / sig**2, 0.0)
+        g = g - np.sum(w * g, axis=2, keepdims=True) / np.maximum(np.sum(w, axis=2, keepdims=True), 1e-300)
+    return np.where(mask, g / sig, 0.0)
+
+
+def design(fit, probe: AbstractProbe) -> np.ndarray:
+    """The probe's columns in the fit's residual layout (device, residual, k): each sweep's (run, point)
+    block in the order of `fit.data.sweeps`, then zeros for the prior rows."""
+    n = len(fit.devices)
+    parts, k = [], None
+    for sweep in fit.data.sweeps:
+        block = fit.data.blocks[sweep]
+        rows = int(np.prod(np.shape(block.inputs)[1:]))
+        g = probe.changes(fit, sweep)
+        if g is None:
+            parts.append(None)
+            continue
+        cols = _standardised(fit, sweep, g)
+        k = cols.shape[-1] if k is None else k
+        parts.append(cols.reshape(n, rows, -1))
+    total = np.asarray(fit.residual_vector).shape[1]
+    if k is None:
+        return np.zeros((n, total, 0))
+    out = np.zeros((n, total, k))
+    row = 0
+    for sweep, part in zip(fit.data.sweeps, parts):
+        rows = int(np.prod(np.shape(fit.data.blocks[sweep].inputs)[1:]))
+        if part is not None:
+            out[:, row:row + rows, :part.shape[-1]] = part
+        row += rows
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class Projected:
+    """A block of columns scored against a fit: its score S, degrees of freedom, p-value, fingerprint (the
+    residual change it would explain, (device, residual)), fitted coefficients (device, k) and the largest
+    eigenvalue of its projected information (summed over devices)."""
+
+    statistic: float
+    df: int
+    p_value: float
+    fingerprint: np.ndarray
+    coefficients: np.ndarray
+    information: float
+
+
+def project_out(cols, against):
+    """`cols` (rows, k) with the span of `against` (rows, m) removed."""
+    if against.shape[1] == 0:
+        return cols
+    q, r = np.linalg.qr(against)
+    keep = np.abs(np.diag(r)) > 1e-12 * max(np.max(np.abs(np.diag(r))), 1e-300)
+    q = q[:, keep]
+    return cols - q @ (q.T @ cols)
+
+
+def score_columns(base, cols, residuals, *, rank_tol: float = 1e-4) -> Projected:
+    """Score test of the columns `cols` (device, residual, k) against residuals (device, residual) after
+    projecting out `base` (device, residual, m): the chi2 they would remove, and their fingerprint."""
+    stat, df, info = 0.0, 0, 0.0
+    n, rows, k = cols.shape
+    fingerprint = np.zeros((n, rows))
+    coef = np.zeros((n, k))
+    for d in range(n):
+        je = project_out(cols[d], base[d])
+        evals, evecs = np.linalg.eigh(je.T @ je)
+        info += max(float(evals[-1]), 0.0) if evals.size else 0.0
+        keep = evals > rank_tol
+        if not keep.any():
+            continue
+        inv = (evecs[:, keep] / evals[keep]) @ evecs[:, keep].T
+        s = je.T @ residuals[d]
+        stat += float(s @ inv @ s)
+        df += int(keep.sum())
+        coef[d] = inv @ s
+        fingerprint[d] = je @ coef[d]
+    return Projected(stat, df, chi2_sf(stat, df), fingerprint, coef, info)
