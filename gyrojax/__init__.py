@@ -140,6 +140,10 @@ from ._simulate.tiers import (  # noqa: E402
     Steady as Steady,
     settle as settle,
 )
+from ._plugins import (  # noqa: E402
+    load_effect_entry_points as load_effect_entry_points,
+    load_effects_module as load_effects_module,
+)
 from ._probes import PROBES as PROBES, AbstractProbe as AbstractProbe  # noqa: E402
 from ._solution import RESULTS as RESULTS  # noqa: E402
 from ._stimulus import Stimulus as Stimulus  # noqa: E402

@@ -125,6 +125,7 @@ class Discrepancy:
     fingerprint: np.ndarray
     same_shape_as: tuple = ()  # other significant probes this data cannot tell from it
     library: str = ""  # which library effect has this fingerprint, and at what size
+    within: str = ""  # a more explanatory probe this one adds nothing beyond (it is part of that misfit)
 
     @property
     def description(self) -> str:
@@ -134,7 +135,7 @@ class Discrepancy:
             size += f" (device spread {self.coefficient_spread:.2g})"
         text = f"{100 * self.share:.0f} % of the misfit is {self.shape} ({where}): about {size}"
         if self.same_shape_as:
-            text += f"; indistinguishable here from {', '.join(self.same_shape_as)}"
+            text += f"; this data cannot tell it from {', '.join(self.same_shape_as)}"
         return text + (f"; {self.library}" if self.library else "")
 
     def to_json(self) -> dict:
@@ -142,7 +143,7 @@ class Discrepancy:
                 "chi2_explained": self.chi2_explained, "share": self.share, "p": self.p_value,
                 "description": self.description, "probe": self.probe, "df": self.df,
                 "coefficient": self.coefficient, "coefficient_spread": self.coefficient_spread, "unit": self.unit,
-                "same_shape_as": list(self.same_shape_as), "library": self.library}
+                "same_shape_as": list(self.same_shape_as), "within": self.within, "library": self.library}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -152,6 +153,7 @@ class Rejection:
     effect: str
     reason: str
     contradicted_by: tuple = ()  # sweeps whose misfit the refit made significantly worse
+    kind: str = ""  # the reason in two words: "implausible size", "not its shape", "contradicted", ...
 
 
 @dataclasses.dataclass(frozen=True)
@@ -214,8 +216,9 @@ class Diagnosis:
 
     @property
     def remaining(self) -> tuple:
-        """The significant discrepancies of the final fit, most explanatory first."""
-        return tuple(d for d in self.discrepancy if d.significant)
+        """The significant discrepancies of the final fit, most explanatory first (a shape that is only part of
+        a more explanatory one is left out)."""
+        return tuple(d for d in self.discrepancy if d.significant and not d.within)
 
     def verdict_text(self) -> str:
         final = self.comparisons[-1] if self.comparisons else None
@@ -235,12 +238,14 @@ class Diagnosis:
                     f"the baseline's excess misfit, but the model still fails{tail}{where}")
         return f"verdict: unexplained: no library effect is confirmed and the model fails{tail}{where}"
 
-    def summary(self) -> str:
+    def summary(self, comparisons: bool = True) -> str:
+        """A few dozen lines for a terminal; `comparisons=False` leaves out the `compare` blocks of the baseline
+        and the final fit."""
         lines = [f"baseline: chi2_red {self.baseline.chi2_red_total:.3f}, model-vs-measurement nonlinearity "
                  f"{self.baseline_nonlinearity_ppm:.2f} ppm"]
-        if self.comparisons:
+        if self.comparisons and comparisons:
             lines += ["  " + x for x in self.comparisons[0].summary().splitlines()]
-        found = [d for d in self.baseline_discrepancy if d.significant]
+        found = [d for d in self.baseline_discrepancy if d.significant and not d.within]
         if found:
             lines.append("where the misfit lives (generic shapes, score test, no refit):")
             lines += [f"  {d.coordinate:<14} {d.description} (S = {d.chi2_explained:.4g}, p = {d.p_value:.2g})"
@@ -273,7 +278,7 @@ class Diagnosis:
         for r in self.rejected:
             lines.append(f"  not confirmed: {r.effect}: {r.reason}")
         lines.append(f"final: chi2_red {self.final.chi2_red_total:.3f}, selected: {', '.join(self.selected) or 'none'}")
-        if self.steps and self.comparisons:
+        if self.steps and self.comparisons and comparisons:
             lines += ["  " + x for x in self.comparisons[-1].summary().splitlines()]
         lines.append(self.verdict_text())
         return "\n".join(lines)
@@ -311,7 +316,7 @@ class Diagnosis:
             "verdict": self.verdict,
             "verdict_text": self.verdict_text(),
             "discrepancy": [d.to_json() for d in self.remaining],
-            "baseline_discrepancy": [d.to_json() for d in self.baseline_discrepancy if d.significant],
+            "baseline_discrepancy": [d.to_json() for d in self.baseline_discrepancy if d.significant and not d.within],
             "compare": [c.to_json() for c in self.comparisons],
         }
 
@@ -432,19 +437,32 @@ def score_probes(fit: Fit, probes=PROBES, *, alpha: float = 0.01):
                                sc.statistic, sc.df, share, sc.p_value, sc.p_value < cut, float(np.mean(mag)),
                                float(np.std(mag)) if len(mag) > 1 else 0.0, probe.unit, sc.fingerprint))
     out.sort(key=lambda d: (not d.significant, -d.chi2_explained))
+    # A significant shape that adds nothing beyond a more explanatory one is part of it (a drift in time seen
+    # through an input swept in time order); two that add nothing beyond each other are the same shape here.
+    within, same = {}, {d.probe: [] for d in out}
     significant = [d for d in out if d.significant]
-    final = []
-    for d in out:
-        same = tuple(o.probe for o in significant
-                     if o is not d and d.significant and abs(_cos(o.fingerprint, d.fingerprint)) > SAME_SHAPE)
-        final.append(dataclasses.replace(d, same_shape_as=same))
-    return tuple(final), designs
+    for i, d in enumerate(significant):
+        for e in significant[:i]:
+            if e.probe in within:
+                continue
+            d_beyond = score_columns(np.concatenate([base, designs[e.probe]], -1), designs[d.probe], res)
+            if d_beyond.p_value < cut:
+                continue
+            e_beyond = score_columns(np.concatenate([base, designs[d.probe]], -1), designs[e.probe], res)
+            if e_beyond.p_value < cut:
+                within[d.probe] = e.probe
+                break
+            same[d.probe].append(e.probe)
+            same[e.probe].append(d.probe)
+    final = tuple(dataclasses.replace(d, same_shape_as=tuple(same[d.probe]), within=within.get(d.probe, ""))
+                  for d in out)
+    return final, designs
 
 
 def _with_library(discrepancy, scores, rejected, max_multiple):
     """The discrepancies with `library` filled in: which candidate has the same fingerprint, and why it does
     not explain it (implausible size, rejected), or that none has it."""
-    reasons = {r.effect: r.reason for r in rejected}
+    reasons = {r.effect: r.kind or r.reason for r in rejected}
     out = []
     for d in discrepancy:
         if not d.significant:
@@ -600,12 +618,12 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
             rejected.append(Rejection(best.effect, (
                 f"it explains the misfit only at ~{best.implied_multiple:.3g}x its typical size, beyond "
                 f"{max_typical_multiple:g}x, where its physics does not reach: another effect, perhaps not in the "
-                "library, leaves a similar fingerprint")))
+                "library, leaves a similar fingerprint"), kind=f"only at ~{best.implied_multiple:.3g}x its typical size"))
             remaining.remove(best.effect)
             continue
         guard = _probe_guard(fit, best, discrepancy, designs, threshold, alpha)
         if guard is not None:
-            rejected.append(Rejection(best.effect, guard))
+            rejected.append(Rejection(best.effect, guard, kind="not its shape"))
             remaining.remove(best.effect)
             continue
         group = tuple(c.effect for c in significant[1:]
@@ -627,20 +645,22 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         if df <= 0:
             rejected.append(Rejection(best.effect, (
                 "the refit cannot fix its parameters: a change of its typical size moves the chi2 by less than the "
-                f"noise does, so the score implies ~{best.implied_multiple:.3g}x its typical size")))
+                f"noise does, so the score implies ~{best.implied_multiple:.3g}x its typical size"),
+                kind="not determined by the data"))
             continue
         if not new.all_converged:
-            rejected.append(Rejection(best.effect, f"the refit did not converge: {new.result_message}"))
+            rejected.append(Rejection(best.effect, f"the refit did not converge: {new.result_message}",
+                                      kind="refit did not converge"))
             continue
         if p_lr >= alpha:
             rejected.append(Rejection(best.effect, f"likelihood-ratio p = {p_lr:.3g} >= alpha: the refit does not "
-                                                   "confirm what the score promised"))
+                                                   "confirm what the score promised", kind="refit rejects it"))
             continue
         worse = _contradictions(fit, new, alpha, df_total)
         if worse:
             rejected.append(Rejection(best.effect, "contradicted by " + "; ".join(
                 f"{s} (its misfit rose from chi2 {a:.4g} to {b:.4g} over {n} points)" for s, a, b, n in worse),
-                tuple(s for s, _, _, _ in worse)))
+                tuple(s for s, _, _, _ in worse), kind="contradicted by " + ", ".join(s for s, _, _, _ in worse)))
             continue
         if group:
             ambiguous.append((best.effect,) + group)
@@ -676,54 +696,81 @@ def _first(device):
 
 
 def write_report(diagnosis: Diagnosis, out_dir) -> dict:
-    """A report folder: `diagnosis.md`, `diagnosis.json` and PNG plots (residuals before and after, the
-    ranking, the fingerprints, the error falling). Every file is written atomically. Returns the JSON."""
+    """A report folder: `diagnosis.md`, `diagnosis.json` and PNG plots (residuals before and after, where the
+    misfit lives, the ranking, the fingerprints, the error falling). The folder appears whole or not at all
+    (`out_dir` may be new, empty, or a folder gyrojax wrote before, which is replaced). Returns the JSON."""
     import os
 
     import matplotlib.pyplot as plt
 
     from . import plot
-    from ._io import atomic_write_bytes, atomic_write_json
+    from ._io import atomic_directory, atomic_write_bytes, atomic_write_json
 
-    os.makedirs(out_dir, exist_ok=True)
-    sweeps = diagnosis.baseline.data.sweeps
-    figures = []
-    fig, axes = plt.subplots(len(sweeps), 2, figsize=(12, 3.2 * len(sweeps)), squeeze=False)
-    for i, sweep in enumerate(sweeps):
-        plot.residuals(diagnosis.baseline, sweep, ax=axes[i, 0])
-        axes[i, 0].set_title(f"baseline {sweep}: chi2_red {diagnosis.baseline.chi2_red_total:.3g}", fontsize=9)
-        plot.residuals(diagnosis.final, sweep, ax=axes[i, 1])
-        axes[i, 1].set_title(f"final {sweep}: chi2_red {diagnosis.final.chi2_red_total:.3g}", fontsize=9)
-    plot.save(fig, os.path.join(out_dir, "residuals.png"))
-    figures.append(("Model against measurement, before and after", "residuals.png"))
-    if diagnosis.ranking:
-        plot.save(plot.ranking(diagnosis.ranking), os.path.join(out_dir, "ranking.png"))
-        figures.append(("Candidate effects ranked by the score test", "ranking.png"))
-        plot.save(plot.fingerprints(diagnosis), os.path.join(out_dir, "fingerprints.png"))
-        figures.append(("Predicted residual shape of the top candidates against the residual", "fingerprints.png"))
-    plot.save(plot.error_fall(diagnosis), os.path.join(out_dir, "error_fall.png"))
-    figures.append(("The error falling step by step", "error_fall.png"))
-    report = diagnosis.to_json()
-    atomic_write_json(report, os.path.join(out_dir, "diagnosis.json"))
-    lines = ["# gyrojax diagnosis", "", f"Data: `{diagnosis.baseline.data.source}`, "
-             f"{len(diagnosis.baseline.devices)} device(s), sweeps {', '.join(sweeps)}.", "",
-             "## Summary", "", "```", diagnosis.summary(), "```", "",
-             "## Where the model fails", "",
-             "Misfit by sweep, device, run and input band (share of the chi2 in excess of the point count), and "
-             "structure tests on the residuals ordered by input (`gyrojax.compare`), fit by fit:", ""]
-    for k, c in enumerate(diagnosis.comparisons):
-        name = "baseline" if k == 0 else f"+ {diagnosis.steps[k - 1].effect}"
-        lines += [f"### {name}", "", "```", c.summary(), "```", ""]
-    lines += ["## Step by step", "", "| step | effect | chi2_red | nonlinearity residual (ppm) |", "|---|---|---|---|",
-              f"| 0 | baseline | {diagnosis.baseline.chi2_red_total:.3f} | {diagnosis.baseline_nonlinearity_ppm:.2f} |"]
-    for k, s in enumerate(diagnosis.steps, 1):
-        lines.append(f"| {k} | + {s.effect} | {s.chi2_red_after:.3f} | {s.nonlinearity_ppm_after:.2f} |")
-    lines += ["", "Effects marked *not testable* leave no fingerprint that the baseline's free parameters "
-              "(gains, per-run biases) cannot absorb on this data. What absorbs each, and the measurement that "
-              "would reveal it:", ""]
-    lines += [f"- `{name}`: {why}." for name, why in diagnosis.absorptions.items()]
-    lines += [""]
-    for title, name in figures:
-        lines += [f"## {title}", "", f"![{title}]({name})", ""]
-    atomic_write_bytes(os.path.join(out_dir, "diagnosis.md"), "\n".join(lines).encode())
+    with atomic_directory(out_dir) as folder:
+        sweeps = diagnosis.baseline.data.sweeps
+        figures = []
+        fig, axes = plt.subplots(len(sweeps), 2, figsize=(12, 3.2 * len(sweeps)), squeeze=False)
+        for i, sweep in enumerate(sweeps):
+            plot.residuals(diagnosis.baseline, sweep, ax=axes[i, 0])
+            axes[i, 0].set_title(f"baseline {sweep}: chi2_red {diagnosis.baseline.chi2_red_total:.3g}", fontsize=9)
+            plot.residuals(diagnosis.final, sweep, ax=axes[i, 1])
+            axes[i, 1].set_title(f"final {sweep}: chi2_red {diagnosis.final.chi2_red_total:.3g}", fontsize=9)
+        plot.save(fig, os.path.join(folder, "residuals.png"))
+        figures.append(("Model against measurement, before and after", "residuals.png"))
+        if any(d.significant for d in diagnosis.baseline_discrepancy):
+            fig, axes = plt.subplots(1, 2, figsize=(12, 3.8))
+            plot.discrepancy(diagnosis, final=False, ax=axes[0])
+            plot.discrepancy(diagnosis, final=True, ax=axes[1])
+            plot.save(fig, os.path.join(folder, "discrepancy.png"))
+            figures.append(("Where the misfit lives: the leading generic shape, at the baseline and at the end",
+                            "discrepancy.png"))
+        if diagnosis.ranking:
+            plot.save(plot.ranking(diagnosis.ranking, alpha=diagnosis.alpha), os.path.join(folder, "ranking.png"))
+            figures.append(("Candidate effects ranked by the score test", "ranking.png"))
+            plot.save(plot.fingerprints(diagnosis), os.path.join(folder, "fingerprints.png"))
+            figures.append(("Predicted residual shape of the top candidates against the residual, per device",
+                            "fingerprints.png"))
+        plot.save(plot.error_fall(diagnosis), os.path.join(folder, "error_fall.png"))
+        figures.append(("The error falling step by step", "error_fall.png"))
+        report = diagnosis.to_json()
+        atomic_write_json(report, os.path.join(folder, "diagnosis.json"))
+        data = diagnosis.baseline.data
+        lines = ["# gyrojax diagnosis", "", f"Data: `{data.source}`, {len(diagnosis.baseline.devices)} device(s), "
+                 f"sweeps {', '.join(sweeps)}.", "", f"**{diagnosis.verdict_text()}**", ""]
+        left = diagnosis.remaining
+        found = [d for d in diagnosis.baseline_discrepancy if d.significant and not d.within]
+        lines += ["## Where the misfit lives", "",
+                  "Generic shapes (a bias or gain in die temperature, time since power-on, drive frequency or run; "
+                  "odd cubics after and of the DAC; an even bow; K+ vs K-), scored from the same fit as the "
+                  "candidate effects, with the share of the misfit each explains and the size of the term it "
+                  "implies.", ""]
+        for title, items in (("At the baseline", found), ("What is left at the end", left)):
+            lines += [f"{title}:", ""]
+            lines += [f"- `{d.coordinate}`: {d.description} (S = {d.chi2_explained:.4g}, p = {d.p_value:.2g})"
+                      for d in items] or ["- nothing significant"]
+            lines.append("")
+        lines += ["## Summary", "", "```", diagnosis.summary(comparisons=False), "```", "",
+                  "## Where the model fails, fit by fit", "",
+                  "Misfit by sweep, device, run and input band (share of the chi2 in excess of the point count), "
+                  "and structure tests on the residuals along every recorded coordinate (`gyrojax.compare`):", ""]
+        for k, c in enumerate(diagnosis.comparisons):
+            name = "baseline" if k == 0 else f"+ {diagnosis.steps[k - 1].effect}"
+            lines += [f"### {name}", "", "```", c.summary(), "```", ""]
+        lines += ["## Step by step", "", "| step | effect | chi2_red | nonlinearity residual (ppm) |",
+                  "|---|---|---|---|",
+                  f"| 0 | baseline | {diagnosis.baseline.chi2_red_total:.3f} | "
+                  f"{diagnosis.baseline_nonlinearity_ppm:.2f} |"]
+        for k, s in enumerate(diagnosis.steps, 1):
+            lines.append(f"| {k} | + {s.effect} | {s.chi2_red_after:.3f} | {s.nonlinearity_ppm_after:.2f} |")
+        if diagnosis.rejected:
+            lines += ["", "Candidates not confirmed, and why:", ""]
+            lines += [f"- `{r.effect}`: {r.reason}." for r in diagnosis.rejected]
+        lines += ["", "Effects marked *not testable* leave no fingerprint that the baseline's free parameters "
+                  "(gains, per-run biases) cannot absorb on this data. What absorbs each, and the measurement that "
+                  "would reveal it:", ""]
+        lines += [f"- `{name}`: {why}." for name, why in diagnosis.absorptions.items()] or ["- none"]
+        lines += [""]
+        for title, name in figures:
+            lines += [f"## {title}", "", f"![{title}]({name})", ""]
+        atomic_write_bytes(os.path.join(folder, "diagnosis.md"), "\n".join(lines).encode())
     return report

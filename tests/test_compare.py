@@ -87,3 +87,70 @@ def test_an_even_bow_is_named_even():
 def test_compare_is_public_and_documented():
     assert gj.compare is not None and gj.Comparison is not None
     assert "Bonferroni" in gj.compare.__doc__
+
+
+# --- every recorded coordinate ---------------------------------------------------------------------------
+
+def _warm_lot(noise_seed, shape=None, order="listed", devices=4, runs=2):
+    """A rate-table-like sweep whose points are applied one per 120 s after a 60 s warm-up, in `order`, while
+    the die warms by 2 K (tau 300 s): the input, time and temperature coordinates; residuals are unit noise
+    plus `shape(x, temperature, time)`, each run's bias removed."""
+    rng = np.random.default_rng(noise_seed)
+    n = RATES.size
+    time = 60.0 + 120.0 * (np.arange(n) + 0.5)
+    temp = 25.0 + 2.0 * (1.0 - np.exp(-time / 300.0))
+    x = np.empty((devices, runs, n))
+    for d in range(devices):
+        for k in range(runs):
+            x[d, k] = RATES if order == "listed" else rng.permutation(RATES)
+    t = np.broadcast_to(time, x.shape)
+    T = np.broadcast_to(temp, x.shape)
+    r = rng.normal(size=x.shape) + (0.0 if shape is None else shape(x, T, t))
+    r -= r.mean(axis=-1, keepdims=True)
+    coords = {"rate_table": {"temperature_c": T, "time_s": t, "order": np.broadcast_to(np.arange(n, dtype=float), x.shape)}}
+    return ({"rate_table": r}, {"rate_table": x}, {"rate_table": np.ones(x.shape, bool)}), coords
+
+
+def test_noise_flags_nothing_along_any_coordinate():
+    false_alarms = 0
+    for seed in range(30):
+        arrays, coords = _warm_lot(100 + seed, order="shuffled")
+        c = compare_residuals(*arrays, devices=DEVICES, coordinates=coords)
+        false_alarms += bool(c.flagged)
+        assert {f.coordinate for f in c.findings} == {"input", "temperature_c", "time_s", "order"}
+    assert false_alarms <= 2  # family-wise 0.01 over 30 lots: 0.3 expected
+
+
+def test_a_bias_in_temperature_is_found_along_temperature_not_the_input_when_the_order_is_shuffled():
+    """A bias of 4 sigma per kelvin: along the die temperature (and time, which rises with it) it is flagged
+    far above anything along the input (an excess that large fails every white-noise test a little, so the
+    input's tests are only much weaker), and the comparison says that temperature and time move together but
+    the input, applied in shuffled order, does not move with them."""
+    arrays, coords = _warm_lot(7, lambda x, T, t: 4.0 * (T - 25.0), order="shuffled")
+    c = compare_residuals(*arrays, devices=DEVICES, coordinates=coords)
+    flagged = {(f.test, f.coordinate) for f in c.flagged}
+    assert ("linear", "temperature_c") in flagged and ("linear", "time_s") in flagged
+    best = min(c.flagged, key=lambda f: f.p_value)
+    assert best.coordinate in ("temperature_c", "time_s", "order")
+    along_input = min((f.p_value for f in c.findings if f.coordinate == "input"), default=1.0)
+    assert best.p_value < 1e-10 * along_input
+    pairs = {frozenset((k.first, k.second)) for k in c.confounded}
+    assert frozenset(("temperature_c", "time_s")) in pairs
+    assert not any("input" in p for p in pairs)
+
+
+def test_an_input_swept_in_time_order_is_reported_confounded_with_time():
+    arrays, coords = _warm_lot(8, lambda x, T, t: 4.0 * (T - 25.0))
+    c = compare_residuals(*arrays, devices=DEVICES, coordinates=coords)
+    pairs = {frozenset((k.first, k.second)) for k in c.confounded}
+    assert frozenset(("input", "time_s")) in pairs and frozenset(("input", "temperature_c")) in pairs
+    text = c.summary()
+    assert "move together in every run" in text and "order='alternating' or 'shuffled'" in text
+
+
+def test_a_gain_that_differs_for_positive_inputs_is_flagged_as_such():
+    """K+ != K-: residual 6 sigma x (x / 200) on positive inputs only (after the fit took the mean gain)."""
+    arrays, coords = _warm_lot(9, lambda x, T, t: np.where(x > 0, 6.0 * x / 200.0, 0.0) - 3.0 * x / 200.0,
+                               order="shuffled")
+    c = compare_residuals(*arrays, devices=DEVICES, coordinates=coords)
+    assert ("sign gain", "input") in {(f.test, f.coordinate) for f in c.flagged}
