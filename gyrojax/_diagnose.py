@@ -469,17 +469,20 @@ def _with_library(discrepancy, scores, rejected, max_multiple):
             out.append(d)
             continue
         matches = [c for c in scores if c.testable and abs(_cos(c.fingerprint, d.fingerprint)) > SAME_SHAPE]
+        parts, plausible = [], False
+        for c in matches:
+            if c.effect in reasons:
+                parts.append(f"{c.effect} has it but was not confirmed ({reasons[c.effect]})")
+            elif c.implied_multiple > max_multiple:
+                parts.append(f"{c.effect} has it only at ~{c.implied_multiple:.3g}x its typical size")
+            else:
+                parts.append(f"{c.effect} has it")
+                plausible = True
         if not matches:
             text = "no effect in the library has this fingerprint"
+        elif not plausible:
+            text = "no effect in the library explains it: " + "; ".join(parts)
         else:
-            parts = []
-            for c in matches:
-                if c.effect in reasons:
-                    parts.append(f"{c.effect} has it but was not confirmed ({reasons[c.effect]})")
-                elif c.implied_multiple > max_multiple:
-                    parts.append(f"{c.effect} has it only at ~{c.implied_multiple:.3g}x its typical size")
-                else:
-                    parts.append(f"{c.effect} has it")
             text = "; ".join(parts)
         out.append(dataclasses.replace(d, library=text))
     return tuple(out)

@@ -76,7 +76,7 @@ def test_a_zero_rate_tempco_outside_the_library_confirms_nothing_and_is_located(
     assert (top.probe, top.coordinate) == ("bias_vs_temperature", "temperature_c")
     assert top.share > 0.9 and {s for s, _ in top.sweeps} == {"rate_table", "vcf_static"}
     assert top.coefficient == pytest.approx(B_T, rel=0.05)  # measured 0.00204
-    assert "no effect in the library has this fingerprint" in top.library
+    assert top.library.startswith("no effect in the library")  # damping_coupling has it only at ~1200x
     text = d.summary()
     assert "verdict: unexplained" in text and "a bias linear in die temperature" in text
     report = json.loads(json.dumps(d.to_json()))
