@@ -5,17 +5,24 @@ A fit file is one binary file:
     GYROJAX-FIT\\n  <8-byte little-endian header length>  <JSON header>  <equinox leaves>
 
 The header holds everything static (preset and effect names, parameter names, devices, entries, messages,
-unidentifiable directions, the data's runs and source, the gyrojax version), a description of every leaf
-(kind, shape, dtype) and a SHA-256 of the leaves; the leaves are `eqx.tree_serialise_leaves` of the `Fit`.
-Loading rebuilds the skeleton from the preset (`gyrojax.preset`) and the effects (`zero_effect`), lays the
-described leaves into it and deserialises: values are bit-for-bit those saved.
+unidentifiable directions, each device's status and warnings, the data's runs, source and recorded fields,
+the gyrojax version), a description of every leaf (kind, shape, dtype) and a SHA-256 of the leaves; the leaves
+are `eqx.tree_serialise_leaves` of the `Fit`. Loading rebuilds the skeleton from the preset (`gyrojax.preset`)
+and the effects (`zero_effect`), lays the described leaves into it and deserialises: values are bit-for-bit
+those saved.
+
+Format versions: 2 adds each device's status and warnings (and the arrays that go with them); version 1 files
+are still read, with every device's status `"unknown"`. A file whose devices are not all `"ok"` loads with a
+`UserWarning` naming them: a failed fit is saved like a good one, but never read back silently.
 """
 
+import dataclasses
 import hashlib
 import io
 import json
 import os
 import struct
+import warnings
 
 import equinox as eqx
 import jax
@@ -29,7 +36,13 @@ from ._parameters import Entry, Model, zero_effect
 
 
 MAGIC = b"GYROJAX-FIT\n"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+READABLE_VERSIONS = (1, 2)
+
+# The fields of a SweepBlock that version 1 files stored (later fields were added to the class since).
+_V1_BLOCK_FIELDS = ("inputs", "outputs", "sigmas", "temperatures", "mask")
+_V1_NOTE = ("this fit file (format version 1) predates the status checks: its scale factor was not checked for "
+            "being determined by the data, for misfit or for plausibility")
 
 
 def _unbatched_device(model: Model):
@@ -83,16 +96,31 @@ def _entry_from(d: dict) -> Entry:
                  bool(d["shared"]), tuple(float(s) for s in d["scale"]))
 
 
+def _block_fields(block: SweepBlock) -> list[str]:
+    """The fields a sweep block holds data in (optional ones may be None)."""
+    return [f.name for f in dataclasses.fields(SweepBlock) if getattr(block, f.name) is not None]
+
+
 def _skeleton_fit(header: dict, model: Model) -> Fit:
     """A `Fit` with the header's static fields, `model`, and zero-size placeholders for every other leaf
-    (replaced by the described leaves before deserialising)."""
+    (replaced by the described leaves before deserialising). A version 1 header gives None for the arrays that
+    version added (no leaves: the payload has none for them); `_from_v1` fills them."""
     z = np.zeros(())
+    v1 = header["format_version"] == 1
     sweeps = header["sweeps"]
-    block = SweepBlock(z, z, z, z, z)
-    data = FitData({s: block for s in sweeps}, tuple(header["devices"]),
+    stored = header.get("block_fields") or {s: list(_V1_BLOCK_FIELDS) for s in sweeps}
+    unknown = sorted({nm for s in sweeps for nm in stored[s]} - {f.name for f in dataclasses.fields(SweepBlock)})
+    if unknown:
+        raise ValueError(f"the file's data hold fields this gyrojax does not know: {', '.join(unknown)}")
+    # By name, so that fields added to SweepBlock later are None (not stored) rather than misplaced.
+    blocks = {s: SweepBlock(**{f.name: (z if f.name in stored[s] else None) for f in dataclasses.fields(SweepBlock)})
+              for s in sweeps}
+    data = FitData(blocks, tuple(header["devices"]),
                    tuple((s, tuple(tuple(r) for r in runs)) for s, runs in header["data_runs"]),
                    bool(header["data_weighted"]), header["data_source"])
     per_sweep = {s: z for s in header["result_sweeps"]}
+    n = len(header["devices"])
+    new = None if v1 else z
     return Fit(model=model, names=tuple(header["names"]), lot_names=tuple(header["lot_names"]), values=z,
                stderr=z, lot_values=z, lot_stderr=z, free=tuple(bool(f) for f in header["free"]), covariance=z,
                u=z, u_lot=z, residuals=dict(per_sweep), predictions=dict(per_sweep), biases=dict(per_sweep),
@@ -102,7 +130,42 @@ def _skeleton_fit(header: dict, model: Model) -> Fit:
                                                  for u in header["unidentifiable"]),
                scale_factor=z, scale_factor_stderr=z, devices=tuple(header["devices"]), data=data,
                entries=tuple(_entry_from(e) for e in header["entries"]), weighted=bool(header["weighted"]),
-               jacobian=z, residual_vector=z)
+               jacobian=z, residual_vector=z,
+               status=("unknown",) * n if v1 else tuple(header["status"]),
+               warnings=((_V1_NOTE,),) * n if v1 else tuple(tuple(w) for w in header["warnings"]),
+               reject_alpha=float("nan") if v1 else float(header["reject_alpha"]),
+               stderr_scaled=new, lot_stderr_scaled=new, scale_factor_stderr_scaled=new, noise_dof=new)
+
+
+def _from_v1(fit: Fit) -> Fit:
+    """A version 1 fit with the arrays version 2 added: unscaled errors (nothing was tested), and the noise
+    taken as given (a version 1 fit of data without output_sigma had its covariance scaled by chi2_red)."""
+    return dataclasses.replace(fit, stderr_scaled=fit.stderr, lot_stderr_scaled=fit.lot_stderr,
+                               scale_factor_stderr_scaled=fit.scale_factor_stderr,
+                               noise_dof=jnp.full(len(fit.devices), jnp.inf))
+
+
+def _header(fit: Fit, preset_name: str) -> dict:
+    """Everything static of `fit` for the file's header (without the leaves' description and checksum)."""
+    from . import __version__
+
+    held = [nm for nm, f in zip(fit.names, fit.free) if not f]
+    return {
+        "format": "gyrojax-fit", "format_version": FORMAT_VERSION, "gyrojax_version": __version__,
+        "preset": preset_name, "effects": list(fit.model.effect_names),
+        "free": [bool(f) for f in fit.free], "held": held, "shared": list(fit.lot_names),
+        "names": list(fit.names), "lot_names": list(fit.lot_names), "devices": list(fit.devices),
+        "result_message": list(fit.result_message),
+        "status": list(fit.status), "warnings": [list(w) for w in fit.warnings],
+        "reject_alpha": float(fit.reject_alpha),
+        "block_fields": {s: _block_fields(b) for s, b in fit.data.blocks.items()},
+        "unidentifiable": [{"parameters": list(u.parameters), "held": u.held, "singular_value": float(u.singular_value)}
+                           for u in fit.unidentifiable],
+        "entries": [_entry_json(e) for e in fit.entries], "weighted": bool(fit.weighted),
+        "sweeps": list(fit.data.blocks), "result_sweeps": list(fit.residuals),
+        "data_runs": [[s, [list(r) for r in runs]] for s, runs in fit.data.runs],
+        "data_weighted": bool(fit.data.weighted), "data_source": fit.data.source,
+    }
 
 
 def save_fit(fit: Fit, path) -> None:
@@ -116,8 +179,6 @@ def save_fit(fit: Fit, path) -> None:
     """
     if not isinstance(fit, Fit):
         raise TypeError(f"save_fit: fit must be a gyrojax.Fit, got {type(fit).__name__}.")
-    from . import __version__
-
     n = len(fit.devices)
     preset_name = _preset_of(fit.model)
     effects = fit.model.effect_names
@@ -128,29 +189,17 @@ def save_fit(fit: Fit, path) -> None:
     buf = io.BytesIO()
     eqx.tree_serialise_leaves(buf, fit)
     payload = buf.getvalue()
-    held = [nm for nm, f in zip(fit.names, fit.free) if not f]
-    header = {
-        "format": "gyrojax-fit", "format_version": FORMAT_VERSION, "gyrojax_version": __version__,
-        "preset": preset_name, "effects": list(effects),
-        "free": [bool(f) for f in fit.free], "held": held, "shared": list(fit.lot_names),
-        "names": list(fit.names), "lot_names": list(fit.lot_names), "devices": list(fit.devices),
-        "result_message": list(fit.result_message),
-        "unidentifiable": [{"parameters": list(u.parameters), "held": u.held, "singular_value": float(u.singular_value)}
-                           for u in fit.unidentifiable],
-        "entries": [_entry_json(e) for e in fit.entries], "weighted": bool(fit.weighted),
-        "sweeps": list(fit.data.blocks), "result_sweeps": list(fit.residuals),
-        "data_runs": [[s, [list(r) for r in runs]] for s, runs in fit.data.runs],
-        "data_weighted": bool(fit.data.weighted), "data_source": fit.data.source,
-        "leaves": [_leaf_spec(x) for x in jax.tree.leaves(fit)],
-        "sha256": hashlib.sha256(payload).hexdigest(),
-    }
+    header = _header(fit, preset_name) | {"leaves": [_leaf_spec(x) for x in jax.tree.leaves(fit)],
+                                          "sha256": hashlib.sha256(payload).hexdigest()}
     head = json.dumps(header, allow_nan=False).encode()
     atomic_write_bytes(path, MAGIC + struct.pack("<Q", len(head)) + head + payload)
 
 
 def load_fit(path) -> Fit:
     """Read a fit written by `save_fit`. Raises a `ValueError` naming the file if it is not a gyrojax fit
-    file, is truncated or corrupt, or was written by an incompatible format version."""
+    file, is truncated or corrupt, or was written by an incompatible format version. Warns (`UserWarning`,
+    naming the file and the devices) when some device's status is not `"ok"`, and for a version 1 file, whose
+    results predate the status checks."""
     path = os.fspath(path)
     with open(path, "rb") as f:
         raw = f.read()
@@ -166,9 +215,9 @@ def load_fit(path) -> Fit:
             raise ValueError("the header does not describe a gyrojax fit")
     except (struct.error, UnicodeDecodeError, json.JSONDecodeError, ValueError, AttributeError) as e:
         raise ValueError(f"{path}: corrupt gyrojax fit file: unreadable header ({e}).") from None
-    if header.get("format_version") != FORMAT_VERSION:
+    if header.get("format_version") not in READABLE_VERSIONS:
         raise ValueError(f"{path}: fit file format version {header.get('format_version')!r}; this gyrojax reads "
-                         f"version {FORMAT_VERSION}.")
+                         f"versions {', '.join(map(str, READABLE_VERSIONS))}.")
     if hashlib.sha256(payload).hexdigest() != header.get("sha256"):
         raise ValueError(f"{path}: corrupt gyrojax fit file: the stored arrays do not match the header's "
                          "checksum (truncated or modified).")
@@ -180,7 +229,18 @@ def load_fit(path) -> Fit:
         if len(specs) != len(leaves):
             raise ValueError(f"the header describes {len(specs)} arrays, the rebuilt fit has {len(leaves)}")
         like = jax.tree.unflatten(treedef, [_placeholder(s, x) for s, x in zip(specs, leaves)])
-        return eqx.tree_deserialise_leaves(io.BytesIO(payload), like)
+        fit = eqx.tree_deserialise_leaves(io.BytesIO(payload), like)
     except (KeyError, TypeError, ValueError, RuntimeError) as e:
         raise ValueError(f"{path}: cannot rebuild the fit (preset {header.get('preset')!r}, effects "
                          f"{header.get('effects')!r}): {e}.") from None
+    if header["format_version"] == 1:
+        fit = _from_v1(fit)
+        warnings.warn(f"{path}: {_V1_NOTE}; its {len(fit.devices)} device(s) have status 'unknown'. Fit the data "
+                      "again to have them checked.", UserWarning, stacklevel=2)
+        return fit
+    bad = [f"{d} ({s}: {w[0]})" if w else f"{d} ({s})"
+           for d, s, w in zip(fit.devices, fit.status, fit.warnings) if s != "ok"]
+    if bad:
+        warnings.warn(f"{path}: {len(bad)} of {len(fit.devices)} device(s) are not 'ok': " + "; ".join(bad),
+                      UserWarning, stacklevel=2)
+    return fit

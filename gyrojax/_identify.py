@@ -6,11 +6,25 @@ when some parameters are shared. Before solving, the weighted Jacobian at the st
 direction of parameter space the data cannot fix to better than its natural size (singular value below
 `identifiability_threshold` in internal units) is named, and the parameter of it that comes last in
 `gyrojax.PARAMETERS`' order of preference is held at its start value, so the fit does not wander along it.
+
+What the fit reports is checked before it is called a result (`Fit.status`, `Fit.warnings`):
+
+- **determined**: the scale factor is reported only if the data fix it. Its gradient over the parameters that
+  were candidates for the fit must have no part along the directions the data cannot fix (those held as
+  unidentifiable); else it rests on a design value and is NaN, with the reason.
+- **misfit**: the chi2 of each device is tested (`reject_alpha`); a rejected model keeps its fitted standard
+  errors and gets them scaled by sqrt(chi2_red) too (`stderr_scaled`).
+- **noise**: data without `output_sigma` get their noise estimated per sweep from a first fit's residuals
+  (`_noise_scales`), then are re-weighted and fitted again, so that the chi2 tests the model.
+- **plausibility**: fitted physical parameters far outside `Parameter.plausible` of their design values are
+  flagged with a likely cause; outputs absurdly far from the rest of their run, and outputs whose slope has the
+  opposite sign of the model's, are refused before fitting (`ValueError`: no fit could mean anything).
 """
 
 
 import contextlib
 import dataclasses
+import math
 
 import equinox as eqx
 import jax
@@ -18,9 +32,10 @@ import jax.numpy as jnp
 import lineax as lx
 import numpy as np
 import optimistix as optx
+import scipy.stats
 
 from ._dataset import Table
-from ._fitdata import FitData, fit_data
+from ._fitdata import BIASED_SWEEPS, FitData, fit_data
 from ._gyroscope import Gyroscope
 from ._linsolve import PivotedLU
 from ._lm import LevenbergMarquardt
@@ -44,6 +59,25 @@ from ._residuals import (
 from ._simulate.tiers import Steady
 
 SOLVERS = ("levenberg-marquardt", "gauss-newton", "bfgs")
+
+STATUSES = ("ok", "model rejected", "not determined", "not converged")
+"""A device's `Fit.status`: `"ok"`; `"model rejected"` (fitted, but its chi2 is too large for the noise at
+`reject_alpha`, or a fitted parameter is implausible); `"not determined"` (the data do not fix the scale factor,
+or its uncertainty: it is NaN); `"not converged"` (the solve failed). A fit read from a file written before
+these checks has `"unknown"`."""
+
+EXIT_CODES = {"ok": 0, "not converged": 1, "model rejected": 3, "not determined": 4, "unknown": 5}
+"""Exit code of a command for a fit whose devices all have this status (see `Fit.exit_status`): 0 every device
+`"ok"`; 1 a computation failed (the solve did not converge, as for any failed computation); 3 fitted, but the
+model does not describe the data; 4 the data do not determine the scale factor; 5 the fit predates these
+checks. (2 stays a usage or data error.)"""
+
+EXIT_PRECEDENCE = ("not converged", "not determined", "unknown", "model rejected", "ok")
+"""When devices differ, the first of these statuses present gives the exit code: a failed solve over a number
+that is missing, over one that is unchecked, over one that is there but with a model the data reject."""
+
+HELD_LABEL = "held at the design value, not determined by the data"
+"""How summaries and reports label a parameter the fit did not move (held as unidentifiable, or by `hold`)."""
 
 
 def _solver(solver, rtol, atol):
@@ -90,8 +124,19 @@ class Fit(eqx.Module):
       `summary()`); `num_steps`: solver steps;
       `unsettled`: points whose steady state failed at the solution.
     - `unidentifiable`: tuple of `Unidentifiable`.
-    - `scale_factor`, `scale_factor_stderr`: (device,) LSB per deg/s of the fitted model at zero rate.
-    - `devices`: names; `data`: the `FitData`.
+    - `scale_factor`, `scale_factor_stderr`: (device,) LSB per deg/s of the fitted model at zero rate; NaN
+      for a device whose status is `"not determined"`.
+    - `devices`: names; `data`: the `FitData` (for data without `output_sigma`, with the estimated noise
+      as its sigmas: the residuals are in units of it).
+    - `status`: per device, one of `STATUSES`; `warnings`: per device, a tuple of sentences (why the status is
+      not `"ok"`, the noise estimate, implausible values); `reject_alpha`: the significance level of the chi2
+      test.
+    - `stderr_scaled`, `lot_stderr_scaled`, `scale_factor_stderr_scaled`: the standard errors times
+      sqrt(chi2_red) where the chi2 test rejects the model (the lot's for shared parameters); equal to the
+      fitted ones elsewhere.
+    - `noise_dof`: (device,) effective degrees of freedom of the estimated noise (inf where the data gave
+      `output_sigma`); `p_value`, `p_value_total`: of the chi2 per device and for the lot (an F test where
+      the noise was estimated; NaN without degrees of freedom).
     """
 
     model: Model
@@ -123,6 +168,13 @@ class Fit(eqx.Module):
     weighted: bool = eqx.field(static=True)
     jacobian: jax.Array  # (device, residual, n) d(residual)/du for every per-device entry, held ones too
     residual_vector: jax.Array  # (device, residual): all standardised residuals (data then priors)
+    status: tuple[str, ...] = eqx.field(static=True)
+    warnings: tuple[tuple[str, ...], ...] = eqx.field(static=True)
+    reject_alpha: float = eqx.field(static=True)
+    stderr_scaled: jax.Array
+    lot_stderr_scaled: jax.Array
+    scale_factor_stderr_scaled: jax.Array
+    noise_dof: jax.Array
 
     @property
     def chi2_red(self):
@@ -150,6 +202,27 @@ class Fit(eqx.Module):
     def all_converged(self) -> bool:
         return bool(np.all(np.asarray(self.converged)))
 
+    @property
+    def p_value(self) -> np.ndarray:
+        """(device,) p-value of each device's chi2 (see `_p_value`)."""
+        return _p_value(np.asarray(self.chi2), np.asarray(self.dof), np.asarray(self.noise_dof))
+
+    @property
+    def p_value_total(self) -> float:
+        """p-value of the lot's chi2 (the noise estimates' degrees of freedom pooled as in `_pooled_dof`)."""
+        dof = np.asarray(self.dof, dtype=float)
+        nu = _pooled_dof(np.asarray(self.noise_dof, dtype=float), dof)
+        return float(_p_value(np.asarray(self.chi2_total), np.asarray(self.dof_total), np.asarray(nu)))
+
+    @property
+    def exit_status(self) -> int:
+        """The exit code for a command that made this fit (`EXIT_CODES`): 0 only when every device is `"ok"`;
+        when devices differ, the first status of `EXIT_PRECEDENCE` present decides."""
+        for status in EXIT_PRECEDENCE:
+            if status in self.status:
+                return EXIT_CODES[status]
+        raise ValueError(f"unknown device status in {self.status!r}; expected those of {EXIT_PRECEDENCE}.")
+
     def value(self, name: str, device: int | None = None):
         """Fitted physical value of a parameter (all devices, or one)."""
         if name in self.lot_names:
@@ -160,24 +233,511 @@ class Fit(eqx.Module):
         return v if device is None else v[device]
 
     def check(self) -> "Fit":
-        """Raise a RuntimeError naming the devices whose fit did not converge, and what to try."""
+        """Raise a RuntimeError naming the devices whose fit did not converge, or whose scale factor the data
+        do not determine, and why."""
         if not self.all_converged:
-            bad = [f"{d}: {m}" for d, m, ok in zip(self.devices, self.result_message, np.asarray(self.converged))
-                   if not ok]
-            raise RuntimeError("the fit did not converge for " + "; ".join(bad))
+            parts = []
+            unsolved = [f"{d}: {m}" for d, m, s in zip(self.devices, self.result_message, self.status)
+                        if s != "not determined"]
+            if unsolved:
+                parts.append("the fit did not converge for " + "; ".join(unsolved))
+            undetermined = [f"{d}: {w[0] if w else 'no reason recorded'}"
+                            for d, w, s in zip(self.devices, self.warnings, self.status) if s == "not determined"]
+            if undetermined:
+                parts.append("the data do not determine the scale factor of " + "; ".join(undetermined))
+            raise RuntimeError(". ".join(parts))
         return self
 
     def summary(self) -> str:
-        """A few lines for a terminal."""
+        """A few lines for a terminal: per device its status, and the scale factor only where the data
+        determine it."""
+        p_lot = self.p_value_total
         lines = [f"fit of {len(self.devices)} device(s) from {self.data.source}: chi2_red "
-                 f"{self.chi2_red_total:.3f} (chi2 {self.chi2_total:.1f} / dof {self.dof_total})"]
+                 f"{self.chi2_red_total:.3f} (chi2 {self.chi2_total:.1f} / dof {self.dof_total}, {_p_text(p_lot)})"]
+        p = self.p_value
         for i, d in enumerate(self.devices):
-            ok = self.result_message[i] if bool(self.converged[i]) else f"NOT CONVERGED ({self.result_message[i]})"
-            lines.append(f"  {d}: chi2_red {float(self.chi2_red[i]):.3f}, SF {float(self.scale_factor[i]):.6f} "
-                         f"+/- {float(self.scale_factor_stderr[i]):.2g} LSB/(deg/s), {ok}")
+            status, message = self.status[i], self.result_message[i]
+            chi = f"chi2_red {float(self.chi2_red[i]):.3f} ({_p_text(p[i])})"
+            sf, se = float(self.scale_factor[i]), float(self.scale_factor_stderr[i])
+            se_scaled = float(self.scale_factor_stderr_scaled[i])
+            if status == "not converged":
+                lines.append(f"  {d}: NOT CONVERGED ({message}); {chi}; no scale factor reported")
+            elif status == "not determined":
+                lines.append(f"  {d}: SF NOT DETERMINED (no scale factor reported, see the warning); {chi}")
+            elif status == "unknown":
+                lines.append(f"  {d}: STATUS UNKNOWN: {chi}, SF {sf:.6f} +/- {se:.2g} LSB/(deg/s) (unchecked); "
+                             f"{message}")
+            else:
+                error = f"+/- {se:.2g} LSB/(deg/s)"
+                if se_scaled != se:
+                    error = (f"+/- {se_scaled:.2g} LSB/(deg/s) (the fit's {se:.2g} x sqrt(chi2_red): the model "
+                             "does not describe the data)")
+                head = "ok" if status == "ok" else "MODEL REJECTED"
+                lines.append(f"  {d}: {head}: {chi}, SF {sf:.6f} {error}; {message}")
+            lines += [f"      warning: {w}" for w in self.warnings[i]]
+        held = [e.label for e in self.entries if not e.shared
+                and any(not self.free[self.names.index(nm)] for nm in e.names())]
+        if held:
+            lines.append(f"  {HELD_LABEL}: {', '.join(held)}")
         for u in self.unidentifiable:
             lines.append(f"  unidentifiable: {' x '.join(u.parameters)} (held {u.held}, s = {u.singular_value:.2g})")
         return "\n".join(lines)
+
+
+def _p_text(p) -> str:
+    p = float(p)
+    if not math.isfinite(p):
+        return "no degrees of freedom to test the model"
+    return "p < 1e-300" if p == 0.0 else f"p = {p:.2g}"
+
+
+def _p_value(chi2, dof, noise_dof):
+    """p-value of a chi2 over `dof` degrees of freedom. With known sigmas (`noise_dof` inf) the chi2 test;
+    with the noise estimated from `noise_dof` effective degrees of freedom, the F test of chi2 / dof against
+    the estimate. The F test takes the two as independent; they share the residuals and correlate
+    positively, which narrows their ratio, so it is conservative (it rejects a right model less often than
+    the level says). NaN where `dof` <= 0 (nothing to test)."""
+    chi2, dof, nu = np.broadcast_arrays(np.asarray(chi2, dtype=float), np.asarray(dof, dtype=float),
+                                        np.asarray(noise_dof, dtype=float))
+    out = np.full(chi2.shape, np.nan)
+    for i in np.ndindex(chi2.shape):
+        c, d, v = float(chi2[i]), float(dof[i]), float(nu[i])
+        if d <= 0 or math.isnan(c):
+            continue
+        if math.isinf(v):
+            out[i] = scipy.stats.chi2.sf(c, d)
+        elif v > 0:
+            out[i] = scipy.stats.f.sf(c / d, d, v)
+    return out
+
+
+def _pooled_dof(noise_dof, weight):
+    """Effective degrees of freedom of a sum of chi2 parts, each over its own noise estimate with `noise_dof`,
+    weighted by its share `weight` of the degrees of freedom (Satterthwaite: var(sum w_i s_i^2 / s^2) =
+    sum w_i^2 2 / nu_i); inf when every part had known sigmas."""
+    nu = np.asarray(noise_dof, dtype=float)
+    w = np.asarray(weight, dtype=float)
+    w = w / w.sum() if w.sum() > 0 else np.full(w.shape, 1.0 / max(w.size, 1))
+    inv = float(np.sum(np.where(np.isinf(nu), 0.0, w**2 / np.where(nu > 0, nu, np.nan))))
+    return np.inf if inv == 0.0 else (1.0 / inv if math.isfinite(inv) else 0.0)
+
+
+# --- the noise of data without output_sigma -------------------------------------------------------------
+
+# Inputs of two runs closer than this (relative to the sweep's largest |input|) are the same setting.
+_SAME_INPUT_RTOL = 1e-9
+
+
+# Within a run, each contrast spans this degree + 2 neighbouring inputs and cancels polynomials of this degree.
+# On seed 000's 22-point rate table (log-spaced, +/-0.1 to 200 deg/s) the estimate then takes up 1/299 of a
+# cubic misfit's share of the residual (1/1190 of a tanh, 1/76 of x^5), against 1/5 with degree 1 and 1/1.3
+# with plain neighbour differences; its effective degrees of freedom fall only from 10.7 (degree 1) to 8.8.
+_LOCAL_DEGREE = 2
+
+
+def _contrasts(x, mask):
+    """Contrasts of one device's sweep block (`x`, `mask` of shape (run, point)) whose mean square measures
+    the noise while a misfit of the model barely reaches it: rows over the block's flattened (run, point)
+    positions, and how they were made.
+
+    - Where two runs repeat an input, the difference of their residuals there: any misfit that repeats from
+      run to run (every error of the model that depends on the input) cancels exactly.
+    - Else, within each run in input order, the combination of every `_LOCAL_DEGREE` + 2 neighbouring
+      residuals that cancels a polynomial of degree `_LOCAL_DEGREE` through them: a misfit smooth over a few
+      neighbouring inputs barely enters, however widely they are spaced."""
+    n_run, n_pt = x.shape
+    runs = [k for k in range(n_run) if mask[k].any()]
+    tol = _SAME_INPUT_RTOL * max(float(np.max(np.abs(x[mask]))) if mask.any() else 0.0, np.finfo(float).tiny)
+    rows = []
+    for a, b in zip(runs, runs[1:]):
+        left = list(np.flatnonzero(mask[a]))
+        for j in np.flatnonzero(mask[b]):
+            same = [i for i in left if abs(x[a, i] - x[b, j]) <= tol]
+            if same:
+                left.remove(same[0])
+                row = np.zeros(n_run * n_pt)
+                row[b * n_pt + j], row[a * n_pt + same[0]] = 1.0, -1.0
+                rows.append(row)
+    if rows:
+        return np.asarray(rows), "differences between runs at equal inputs"
+    width = _LOCAL_DEGREE + 2
+    for k in runs:
+        idx = np.flatnonzero(mask[k])
+        idx = idx[np.argsort(x[k, idx], kind="stable")]
+        for i in range(idx.size - width + 1):
+            window = idx[i:i + width]
+            xs = x[k, window] - np.mean(x[k, window])
+            span = np.max(np.abs(xs))
+            # the null vector of the window's Vandermonde rows: sum_i c_i p(x_i) = 0 for every p of the degree
+            _, _, vt = np.linalg.svd(np.vander(xs / span if span > 0 else xs, _LOCAL_DEGREE + 1, increasing=True).T)
+            row = np.zeros(n_run * n_pt)
+            row[k * n_pt + window] = vt[-1]
+            rows.append(row)
+    return (np.asarray(rows).reshape(-1, n_run * n_pt),
+            f"combinations of {width} neighbouring inputs within each run that cancel a local polynomial of degree "
+            f"{_LOCAL_DEGREE}")
+
+
+def _noise_scales(residual, jac, blocks):
+    """Per sweep of one device, the factor kappa by which the variance of its standardised residuals exceeds
+    1 (for unit weights: the noise variance in output units), unbiased for white noise.
+
+    `residual` (rows,) are the standardised residuals of a fit, `jac` (rows, free) their Jacobian (data rows
+    only, free parameters only), both over the concatenated blocks' flattened (run, point) positions; `blocks`
+    a list of `(x, mask, inv_sigma, biased)` per sweep, each (run, point). Near the solution r = M e, with e
+    the standardised noise and M = P_b - J J^+ the projector that removes the run biases (P_b) and what the
+    free parameters absorb. For contrasts C_s of sweep s (`_contrasts`), E |C_s r|^2 = sum_t kappa_t
+    tr(C_s M E_t M C_s^T), E_t selecting sweep t's rows: the method of moments solves these equations for
+    kappa, exactly unbiased for the linearised fit (prior rows are left out of M: a prior holds the fit back
+    a little, which can only raise the estimate).
+
+    **Returns:** `(kappa, nu, methods)`: kappa per sweep (NaN where a sweep has no contrast: too few points),
+    the effective degrees of freedom of each estimate (Satterthwaite: tr(S)^2 / tr(S^2) with S the
+    covariance of the contrasts), and how each was made."""
+    sizes = [b[0].size for b in blocks]
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    real = np.concatenate([np.ravel(b[1]) for b in blocks]).astype(bool)
+    idx = np.flatnonzero(real)
+    pos = np.full(real.size, -1)
+    pos[idx] = np.arange(idx.size)
+    n = idx.size
+    proj = np.eye(n)
+    for s, (x, mask, inv_sigma, biased) in enumerate(blocks):
+        if not biased:
+            continue
+        for k in range(x.shape[0]):
+            local = pos[offsets[s] + k * x.shape[1] + np.flatnonzero(mask[k])]
+            if local.size:
+                w = np.ravel(inv_sigma[k][mask[k]])
+                proj[np.ix_(local, local)] -= np.outer(w, w) / (w @ w)
+    j = np.asarray(jac, dtype=float)[idx]
+    if j.size and np.all(np.isfinite(j)):
+        u, sv, _ = np.linalg.svd(j, full_matrices=False)
+        u = u[:, sv > sv[:1] * max(j.shape) * np.finfo(float).eps] if sv.size else u[:, :0]
+        resid_maker = proj - u @ u.T
+    else:
+        resid_maker = proj
+    r = np.asarray(residual, dtype=float)[idx]
+    selects = [(pos[offsets[s]:offsets[s + 1]] >= 0) for s in range(len(blocks))]
+    cm, q, methods, size = [], [], [], []
+    for s, (x, mask, _, _) in enumerate(blocks):
+        rows, method = _contrasts(np.asarray(x, dtype=float), np.asarray(mask, dtype=bool))
+        c = np.zeros((rows.shape[0], n))
+        c[:, pos[offsets[s]:offsets[s + 1]][selects[s]]] = rows[:, selects[s]]
+        cm.append(c @ resid_maker)
+        q.append(float(np.sum((c @ r) ** 2)))
+        methods.append(method)
+        size.append(float(np.sum(c**2)))
+    sel = [pos[offsets[t]:offsets[t + 1]][selects[t]] for t in range(len(blocks))]
+    a = np.array([[float(np.sum(cm[s][:, sel[t]] ** 2)) for t in range(len(blocks))] for s in range(len(blocks))])
+    q = np.asarray(q)
+    # A sweep whose contrasts the fit absorbs entirely (as many parameters as points) measures nothing; the
+    # cut is far above round-off of M (~1e-15) and far below any contrast that sees noise.
+    has = np.diag(a) > 1e-9 * np.asarray(size)
+    kappa = np.full(len(blocks), np.nan)
+    if has.any():
+        sub = np.ix_(has, has)
+        try:
+            kappa[has] = np.linalg.solve(a[sub], q[has])
+        except np.linalg.LinAlgError:
+            kappa[has] = np.nan
+        if not np.all(np.isfinite(kappa[has]) & (kappa[has] > 0)):
+            # Each sweep on its own, ignoring what leaks in from the others' noise: an overestimate.
+            kappa[has] = q[has] / np.diag(a)[has]
+    nu = np.full(len(blocks), np.nan)
+    weights = np.zeros(n)
+    for t in range(len(blocks)):
+        weights[sel[t]] = kappa[t] if np.isfinite(kappa[t]) else 0.0
+    for s in range(len(blocks)):
+        if has[s]:
+            cov = (cm[s] * weights) @ cm[s].T
+            tr2 = float(np.sum(cov * cov))
+            nu[s] = float(np.trace(cov)) ** 2 / tr2 if tr2 > 0 else np.nan
+    return kappa, nu, methods
+
+
+_SWEEP_WORDS = {"rate_table": "rate-table", "vcf_static": "static-VCF", "vcf_dynamic": "dynamic-VCF", "dac": "DAC"}
+
+
+def _estimated_noise(fit: "Fit"):
+    """Per device, the noise of each sweep estimated from `fit` (`_noise_scales`): `(kappa (device, sweep),
+    noise_dof (device,), warnings per device, determined per device)`."""
+    data = fit.data
+    sweeps = data.sweeps
+    rows = sum(int(np.prod(data.blocks[s].inputs.shape[1:])) for s in sweeps)
+    free = np.asarray(fit.free)
+    kappa = np.ones((len(data.devices), len(sweeps)))
+    noise_dof = np.full(len(data.devices), np.inf)
+    notes, determined = [], []
+    for d in range(len(data.devices)):
+        blocks = [(np.asarray(data.blocks[s].inputs[d]), np.asarray(data.blocks[s].mask[d]),
+                   1.0 / np.asarray(data.blocks[s].sigmas[d]), s in BIASED_SWEEPS) for s in sweeps]
+        res = np.asarray(fit.residual_vector[d])[:rows]
+        jac = np.asarray(fit.jacobian[d])[:rows][:, free]
+        if not (np.all(np.isfinite(res)) and np.all(np.isfinite(jac))):
+            k, nu, methods = np.full(len(sweeps), np.nan), np.full(len(sweeps), np.nan), [""] * len(sweeps)
+        else:
+            k, nu, methods = _noise_scales(res, jac, blocks)
+        points = np.array([int(np.sum(b[1])) for b in blocks], dtype=float)
+        present = points > 0
+        ok = present & np.isfinite(k) & (k > 0) & np.isfinite(nu)
+        kappa[d] = np.where(ok, k, 1.0)
+        noise_dof[d] = _pooled_dof(np.where(ok, nu, 0.0)[present], points[present])
+        unit = "x the given output_sigma" if data.weighted else "output units"
+        parts = [f"{s} {math.sqrt(k[i]):.3g} {unit} from {nu[i]:.3g} effective degrees of freedom ({methods[i]})"
+                 for i, s in enumerate(sweeps) if ok[i]]
+        bad = [s for i, s in enumerate(sweeps) if present[i] and not ok[i]]
+        text = []
+        if parts:
+            what = "no output_sigma" if not data.weighted else "estimate_noise=True"
+            text.append(f"{what}: the noise was estimated from the residuals of a first fit: " + "; ".join(parts)
+                        + "; the points were weighted by it and fitted again, and the chi2 is tested against it "
+                        "(an F test)")
+        if bad:
+            text.append(f"no output_sigma, and the data leave nothing to estimate the noise of {', '.join(bad)} "
+                        "from (too few points, or a first fit that failed): the uncertainties are not determined")
+        notes.append(tuple(text))
+        determined.append(not bad)
+    return kappa, noise_dof, notes, determined
+
+
+def _reweighted(data: FitData, kappa) -> FitData:
+    """`data` with each device's sigmas of each sweep multiplied by sqrt(kappa) (device, sweep)."""
+    sweeps = data.sweeps
+    new = []
+    for i, s in enumerate(sweeps):
+        block = data.blocks[s]
+        scale = jnp.sqrt(jnp.asarray(kappa[:, i]))[:, None, None]
+        new.append(jnp.where(block.mask, block.sigmas * scale, block.sigmas))
+    return eqx.tree_at(lambda dd: [dd.blocks[s].sigmas for s in sweeps], data, new)
+
+
+# --- checks of the data before fitting ------------------------------------------------------------------
+
+# A reading this many times the largest other reading of its run is refused: a 24-bit readout spans 1.7e7
+# levels, so no genuine reading exceeds another of the same run by 1e8.
+_ABSURD_RATIO = 1e8
+
+
+def _check_absurd_outputs(data: FitData):
+    """Raise a ValueError naming each device, run and input whose output is absurdly far from the rest of its
+    run (`_ABSURD_RATIO`): one such point decides every fit it enters (its chi2 alone can overflow), so no fit
+    is attempted."""
+    bad = []
+    for s in data.sweeps:
+        block = data.blocks[s]
+        y, x, m = (np.asarray(a) for a in (block.outputs, block.inputs, block.mask))
+        runs = data.run_ids(s)
+        for d, k in np.ndindex(m.shape[:2]):
+            idx = np.flatnonzero(m[d, k])
+            if idx.size < 2:
+                continue
+            mag = np.abs(y[d, k, idx])
+            for j, i in enumerate(idx):
+                others = np.max(np.delete(mag, j))
+                if others > 0 and mag[j] > _ABSURD_RATIO * others:
+                    bad.append(f"sweep {s!r}, device {data.devices[d]!r}, run {runs[d][k]}, input {x[d, k, i]:.6g}: "
+                               f"output {y[d, k, i]:.6g} is {mag[j] / others:.2g} times the largest other output "
+                               f"of its run ({others:.6g})")
+    if bad:
+        raise ValueError(f"identify: {data.source}: {len(bad)} output(s) are no reading on the scale of the rest "
+                         f"of their run (more than {_ABSURD_RATIO:.0e} times the largest other): " + "; ".join(bad[:5])
+                         + ("; ..." if len(bad) > 5 else "") + ". A typo or a failed acquisition? Fix or remove "
+                         "these rows; no fit is made with them.")
+
+
+# The data's slope must have the model's sign at 5 standard errors before it counts as flipped: a right table
+# reads the wrong sign that clearly once in ~3.5 million runs.
+_FLIP_SIGMAS = 5.0
+_SIGNED_SWEEPS = ("rate_table", "vcf_static", "dac")
+
+
+def _slope(x, y, w):
+    """Weighted least-squares slope of y on (1, x), its standard error from the given weights (`known`) and
+    from the scatter about the line (NaN with fewer than 3 points)."""
+    sw = np.sum(w)
+    xm = np.sum(w * x) / sw
+    sxx = np.sum(w * (x - xm) ** 2)
+    if sxx <= 0:
+        return np.nan, np.nan, np.nan
+    b = np.sum(w * (x - xm) * y) / sxx
+    resid = y - np.sum(w * y) / sw - b * (x - xm)
+    scatter = np.sqrt(np.sum(w * resid**2) / (x.size - 2) / sxx) if x.size > 2 else np.nan
+    return b, np.sqrt(1.0 / sxx), scatter
+
+
+def _check_signs(data: FitData, predictions, model_name: str):
+    """Raise a ValueError naming each device and run whose outputs run against the input with the opposite
+    sign of the start model's predictions (`_FLIP_SIGMAS`): a sign convention of the data (output, or
+    input) flipped against the model's, which no positive gain or factor of the model can fit."""
+    bad = []
+    for s in data.sweeps:
+        if s not in _SIGNED_SWEEPS or s not in predictions:
+            continue
+        block = data.blocks[s]
+        x, y, m, sig = (np.asarray(a) for a in (block.inputs, block.outputs, block.mask, block.sigmas))
+        pred = np.asarray(predictions[s])
+        runs = data.run_ids(s)
+        for d, k in np.ndindex(m.shape[:2]):
+            sel = m[d, k] & np.isfinite(pred[d, k])
+            if sel.sum() < 2:
+                continue
+            w = 1.0 / sig[d, k][sel] ** 2
+            b, known, scatter = _slope(x[d, k][sel], y[d, k][sel], w)
+            b_model, _, _ = _slope(x[d, k][sel], pred[d, k][sel], w)
+            se = known if data.weighted else scatter
+            if (np.isfinite(b) and np.isfinite(b_model) and np.isfinite(se) and se > 0 and b * b_model < 0
+                    and abs(b) > _FLIP_SIGMAS * se):
+                bad.append(f"sweep {s!r}, device {data.devices[d]!r}, run {runs[d][k]}: slope {b:.6g} +/- {se:.2g} "
+                           f"per input unit, the model's {b_model:.6g}")
+    if bad:
+        raise ValueError(f"identify: {data.source}: the outputs change with the input with the opposite sign of "
+                         f"the model {model_name!r} (by more than {_FLIP_SIGMAS:g} standard errors) in {len(bad)} "
+                         "run(s): " + "; ".join(bad[:5]) + ("; ..." if len(bad) > 5 else "") + ". The data's sign "
+                         "convention is flipped against the model's (the output's, or the input's: a rate table "
+                         "turning the other way): negate the output (or input) column of these runs, or use a model "
+                         "of this device's polarity. No fit is made: no positive gain of the model can fit them.")
+
+
+# --- checks of the result -------------------------------------------------------------------------------
+
+# A held direction moves the scale factor by g.v per natural unit of the parameters (one internal unit: an
+# e-fold of a positive parameter, `scale` of a signed one). Below a tenth of the SF's standard error, a design
+# value off by that much would add under 1 % to the SF's variance: immaterial. Above it the SF rests on the
+# design value.
+_SF_HELD_TOL = 0.1
+
+
+def _sf_determinacy(jac, jac_lot, grad, grad_lot, sf_stderr, threshold):
+    """Per device, whether the scale factor is estimable: its gradient `grad` (device, candidate) over the
+    candidate parameters (free, or held as unidentifiable) must lie in the row space of the weighted Jacobian
+    `jac` (device, residual, candidate), up to the directions the data fix (singular value >= `threshold`).
+    A joint fit's lot-shared columns (`jac_lot`, `grad_lot`) make one Jacobian of the whole lot.
+
+    **Returns:** `(determined (device,), weak part of the gradient (device, candidate + lot), weak singular
+    values per device)`. Determined: some free parameter the data fix moves the SF (`sf_stderr` > 0) and the
+    weak part is below `_SF_HELD_TOL` standard errors per natural unit."""
+    jac, grad = np.asarray(jac, dtype=float), np.asarray(grad, dtype=float)
+    n, _, nc = jac.shape
+    n_lot = np.shape(jac_lot)[-1] if jac_lot is not None else 0
+    weak_part = np.zeros((n, nc + n_lot))
+    weak_s = []
+    if n_lot:
+        full = _joint_jacobian(jac, np.asarray(jac_lot, dtype=float))
+        ok = np.all(np.isfinite(full))
+        s, vt = _singular(np.where(np.isfinite(full), full, 0.0))
+        v = vt[s < threshold]
+        for d in range(n):
+            g = np.zeros(full.shape[1])
+            g[d * nc:(d + 1) * nc], g[n * nc:] = grad[d], np.asarray(grad_lot, dtype=float)[d]
+            part = v.T @ (v @ g) if ok else g
+            weak_part[d] = np.concatenate([part[d * nc:(d + 1) * nc], part[n * nc:]])
+            weak_s.append(s[s < threshold])
+    else:
+        for d in range(n):
+            j = jac[d]
+            if not np.all(np.isfinite(j)) or not np.all(np.isfinite(grad[d])):
+                weak_part[d] = np.where(np.isfinite(grad[d]), grad[d], np.inf)
+                weak_s.append(np.zeros(0))
+                continue
+            s, vt = _singular(j) if nc else (np.zeros(0), np.zeros((0, 0)))
+            v = vt[s < threshold]
+            weak_part[d] = v.T @ (v @ grad[d])
+            weak_s.append(s[s < threshold])
+    se = np.asarray(sf_stderr, dtype=float)
+    size = np.linalg.norm(weak_part, axis=1)
+    determined = np.isfinite(se) & (se > 0) & (size <= _SF_HELD_TOL * se)
+    return determined, weak_part, weak_s
+
+
+def _count_text(data: FitData, d: int) -> tuple[str, int, int]:
+    """('22 rate-table points and 4 DAC points', points, run biases) of device `d`."""
+    parts, points, biases = [], 0, 0
+    for s in data.sweeps:
+        m = np.asarray(data.blocks[s].mask[d])
+        k = int(m.sum())
+        if k:
+            parts.append(f"{k} {_SWEEP_WORDS.get(s, s)} point{'s' if k != 1 else ''}")
+            points += k
+            if s in BIASED_SWEEPS:
+                biases += int(np.sum(np.any(m, axis=-1)))
+    text = " and ".join([", ".join(parts[:-1]), parts[-1]] if len(parts) > 1 else parts) or "no points"
+    return text, points, biases
+
+
+def _undetermined_reason(data, d, names, weak_part, n_free, threshold) -> str:
+    """Why device `d`'s scale factor is not determined, naming the parameters it rests on (those of the
+    gradient's part along the directions the data do not fix, `weak_part`)."""
+    size = np.abs(weak_part)
+    involved = [names[k] for k in np.flatnonzero(size > 0.3 * size.max())] if size.max() > 0 else []
+    counts, points, biases = _count_text(data, d)
+    if not involved:
+        return (f"the scale factor moves with no parameter the data fix ({counts}): it is the design value, not a "
+                "measurement")
+    what = " x ".join(involved)
+    left = points - biases - n_free
+    if points - biases <= 0:
+        why = (f"{counts} and {biases} free run bias{'es' if biases != 1 else ''} leave no degree of freedom")
+    elif left < 0:
+        why = f"{counts} leave {points - biases} independent residual(s) after the run biases, too few"
+    else:
+        why = (f"the data do not change along {'this combination' if len(involved) > 1 else 'it'} (singular value "
+               f"below identifiability_threshold = {threshold:g}); a prior (priors=...) or a sweep that sees it "
+               "would fix it")
+    return f"the data cannot fix {what}: {why}; the printed design value would not be a measurement"
+
+
+def _power_hint(ratio: float) -> str:
+    """What a ratio of a fitted value to its design value near a power of 10 or of 2 suggests."""
+    # Within 5 %: a unit or word-width error is exact up to the device's own deviation from design, a few
+    # percent at most (the lot spread of a scale factor is about 1 %).
+    hints = []
+    k10 = round(math.log10(ratio))
+    if k10 != 0 and abs(math.log(ratio / 10.0**k10)) < math.log(1.05):
+        hints.append(f"10^{k10}")
+    k2 = round(math.log2(ratio))
+    if abs(k2) >= 1 and abs(math.log(ratio / 2.0**k2)) < math.log(1.05):
+        hints.append(f"2^{k2}")
+    if not hints:
+        return "the preset may not describe this device (or the data's units differ from the preset's)"
+    return (f"the ratio is within 5 % of {' = '.join(hints)}: a unit or scaling error in the data is likely "
+            "(outputs or inputs in other units, or another word width, than the preset's); else the preset does "
+            "not describe this device")
+
+
+def _implausible(entries, start, values, lot_values, free, n):
+    """Per device, sentences for each fitted physical parameter outside `Parameter.plausible` of its start
+    (design) value."""
+    from ._parameters import PARAMETERS
+
+    out = [[] for _ in range(n)]
+    k_dev = k_lot = 0
+    for e, p0 in zip(entries, start):
+        k = k_lot if e.shared else k_dev
+        if e.shared:
+            k_lot += e.size
+        else:
+            k_dev += e.size
+        par = PARAMETERS.get(e.label) if e.effect_index is None else None
+        if par is None or par.plausible is None or (not e.shared and not free[k]):
+            continue
+        p0 = np.reshape(np.asarray(p0), (-1,))
+        for d in range(n):
+            v = float(lot_values[k]) if e.shared else float(values[d, k])
+            ref = float(p0[d] if p0.size == n else p0[0])
+            unit = f" {par.unit}" if par.unit else ""
+            if e.transform == "log":
+                ratio = v / ref if ref != 0 else np.inf
+                if ratio > 0 and 1.0 / par.plausible <= ratio <= par.plausible:
+                    continue
+                hint = _power_hint(ratio) if ratio > 0 and math.isfinite(ratio) else "the fit ran off"
+                out[d].append(f"{e.label} = {v:.4g}{unit} is {ratio:.3g} x its design value {ref:.4g}{unit}, "
+                              f"outside the plausible factor of {par.plausible:g} ({par.plausible_why}): {hint}")
+            elif abs(v - ref) > par.plausible:
+                out[d].append(f"{e.label} = {v:.4g}{unit} is {v - ref:+.3g}{unit} from its design value "
+                              f"{ref:.4g}{unit}, beyond the plausible {par.plausible:g}{unit} ({par.plausible_why}): "
+                              "the preset may not describe this device, or the data's units differ from its")
+    return out
 
 
 def _message(converged, result_text, unsettled):
@@ -508,7 +1068,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
              max_steps: int = 200, identifiability_threshold: float = 1.0, hold=(), tier=Steady(),
              evaluate_only: bool = False, lot_solve: str = "vmap", shard: bool | None = None,
              lot_chunk: int | None | str = "auto", restart_runoffs: bool = True,
-             retry_solver: str | None = "gauss-newton", decrement_tol: float = 1e-6) -> Fit:
+             retry_solver: str | None = "gauss-newton", decrement_tol: float = 1e-6, reject_alpha: float = 0.01,
+             estimate_noise: bool | None = None) -> Fit:
     r"""Fit the free parameters of `model` to every sweep in `data`, per device (vmapped) or jointly.
 
     **Arguments:**
@@ -559,14 +1120,32 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
       rtol/atol, which the round-off of the steady-state solves can keep failing on a large joint fit.
     - `evaluate_only`: do not solve; return the `Fit` at the start (residuals, Jacobian, covariance there),
       e.g. to test a candidate effect at zero against an already fitted model.
+    - `reject_alpha`: significance level of each device's chi2 test (and the lot's): p below it marks the
+      device `"model rejected"` and scales its standard errors by sqrt(chi2_red) in `stderr_scaled`. Each
+      device is tested at this level, so a lot of N devices with a right model has about N x reject_alpha
+      rejected by chance.
+    - `estimate_noise`: estimate each sweep's noise per device from the residuals of a first fit, re-weight
+      and fit again (`_noise_scales`: differences between runs at repeated inputs, else of neighbouring inputs
+      within a run; unbiased for white noise). `None` (default): when the data have no `output_sigma`.
+      `False` takes the data's sigmas as the noise (unit weights for a table without `output_sigma`, so the
+      chi2 then tests nothing; e.g. for `fit.data` of an earlier fit, whose sigmas were estimated already).
 
-    **Returns:** a `Fit`. It never raises on non-convergence: check `fit.converged` or call `fit.check()`.
+    **Returns:** a `Fit`. It never raises on non-convergence: read `fit.status` (or `fit.converged`, or call
+    `fit.check()`). A scale factor the data do not determine is NaN, with the reason in `fit.warnings`.
+
+    **Raises:** `ValueError` before fitting for data no fit could mean anything with: an output more than
+    `_ABSURD_RATIO` times the largest other output of its run, or outputs whose slope has the opposite sign of
+    the model's (both named by device, run and input).
     """
     model = _to_model(model)
     if isinstance(data, Table):
         data = fit_data(data)
     if not isinstance(data, FitData):
         raise TypeError(f"data must be a gyrojax.Table or FitData, got {type(data).__name__}.")
+    if not (isinstance(reject_alpha, (int, float)) and 0.0 < reject_alpha < 1.0):
+        raise ValueError(f"reject_alpha must be a significance level in (0, 1), got {reject_alpha!r}.")
+    if estimate_noise not in (None, True, False):
+        raise ValueError(f"estimate_noise must be None, True or False, got {estimate_noise!r}.")
     if lot_solve not in ("loop", "vmap"):
         raise ValueError(f"lot_solve must be 'loop' or 'vmap', got {lot_solve!r}.")
     if shard and lot_solve == "loop":
@@ -575,6 +1154,27 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         raise ValueError(f"lot_chunk must be 'auto', None or an integer >= 1, got {lot_chunk!r}.")
     if not isinstance(starts, int) or starts < 1:
         raise ValueError(f"starts must be an integer >= 1, got {starts!r}.")
+    _check_absurd_outputs(data)
+    options = dict(free=free, shared=shared, priors=priors, solver=solver, starts=starts, start_spread=start_spread,
+                   seed=seed, rtol=rtol, atol=atol, max_steps=max_steps,
+                   identifiability_threshold=identifiability_threshold, hold=hold, tier=tier,
+                   evaluate_only=evaluate_only, lot_solve=lot_solve, shard=shard, lot_chunk=lot_chunk,
+                   restart_runoffs=restart_runoffs, retry_solver=retry_solver, decrement_tol=decrement_tol,
+                   reject_alpha=reject_alpha)
+    if not (not data.weighted if estimate_noise is None else estimate_noise):
+        return _identify(model, data, noise=None, **options)
+    # The noise from a first fit's residuals; then the points weighted by it and fitted again. The second fit
+    # has the first's shapes: it reuses every compiled function.
+    first = _identify(model, data, noise=None, **options)
+    kappa, noise_dof, notes, determined = _estimated_noise(first)
+    return _identify(model, _reweighted(data, kappa), noise=(noise_dof, notes, determined), **options)
+
+
+def _identify(model, data, *, free, shared, priors, solver, starts, start_spread, seed, rtol, atol, max_steps,
+              identifiability_threshold, hold, tier, evaluate_only, lot_solve, shard, lot_chunk, restart_runoffs,
+              retry_solver, decrement_tol, reject_alpha, noise) -> Fit:
+    """One fit of `identify` (arguments checked there) with the data's sigmas as they are; `noise`: the
+    estimated noise's (degrees of freedom, warnings, determined) per device, or None for given sigmas."""
     n = len(data.devices)
     model = _batched(model, n)
     one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, model)
@@ -636,6 +1236,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     problem_all_s, zeros_s, t_sf_s = spread.pad(problem_all, jnp.zeros((n, n_dev)), t_sf)
     with _nonfinite_explained("at the start"):
         at_start = spread.unpad(_evaluate(problem_all_s, zeros_s, jnp.zeros(n_lot), t_sf_s, spread.chunk))
+    _check_signs(data, {s: np.asarray(v) for s, v in at_start.predictions.items()},
+                 model.device.name)
     # Identifiability at the start: hold what the data cannot see.
     candidates = [i for i, nm in enumerate(names_dev)
                   if not any(nm == h or nm.startswith(h + "[") or nm.startswith(h + ".") for h in hold)]
@@ -763,7 +1365,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
                                                             "first solve ran off along it" if b else "")))
                          for note, nm, b in zip(notes, names_runoff, better)]
     return _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full, np.asarray(u_lot), code,
-                   steps, final, held_reports, identifiability_threshold, tuple(notes))
+                   steps, final, held_reports, identifiability_threshold, tuple(notes), candidates, reject_alpha,
+                   noise)
 
 
 def _sf_temperature(data):
@@ -777,15 +1380,16 @@ def _sf_temperature(data):
 
 
 def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full, u_lot, code, steps, final,
-            held_reports, threshold, notes):
+            held_reports, threshold, notes, candidates, reject_alpha, noise):
     n, n_dev, n_lot = len(data.devices), len(names_dev), len(names_lot)
     f = np.asarray(free_index, dtype=int)
     jac = np.asarray(final.jac)[:, :, f]  # (device, residual, free)
     jac_lot = np.asarray(final.jac_lot)
     chi2 = np.sum(np.asarray(final.residuals) ** 2, axis=-1)
     dof = np.asarray(num_points(data) - num_biases(data)) - f.size
-    # Covariance of the internal coordinates: (J^T J)^-1, block-diagonal over devices unless some entries
-    # are shared (then the whole lot's normal matrix is inverted). Unweighted data: scaled by chi2_red.
+    # Covariance of the internal coordinates: (J^T J)^+, block-diagonal over devices unless some entries
+    # are shared (then the whole lot's normal matrix is inverted). Data without output_sigma were weighted by
+    # their estimated noise before this (`identify`), so the covariance is that of the weights in both cases.
     if n_lot:
         cov_all = _covariance(_joint_jacobian(jac, jac_lot))
         cov_dev = np.stack([cov_all[d * f.size:(d + 1) * f.size, d * f.size:(d + 1) * f.size] for d in range(n)])
@@ -795,11 +1399,6 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
         cov_dev = _covariance(jac)
         cov_lot = np.zeros((0, 0))
         cross = np.zeros((n, f.size, 0))
-    if not data.weighted:
-        scale = chi2 / np.maximum(dof, 1)
-        cov_dev = cov_dev * scale[:, None, None]
-        cov_lot = cov_lot * (chi2.sum() / max(int(dof.sum()) - n_lot, 1))
-        cross = cross * scale[:, None, None]
     cov_full = np.zeros((n, n_dev, n_dev))
     cov_full[:, f[:, None], f[None, :]] = cov_dev
     values, stderr = _physical(problem_all.start, entries, u_full, cov_full, f, shared=False)
@@ -816,6 +1415,7 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
     var = np.einsum("di,dij,dj->d", g, cov_dev, g)
     if n_lot:
         var = var + np.einsum("di,ij,dj->d", g_lot, cov_lot, g_lot) + 2 * np.einsum("di,dij,dj->d", g, cross, g_lot)
+    sf_stderr = np.sqrt(np.maximum(var, 0.0))
     failed = np.asarray(final.failed)
     ok = np.asarray(code) == optx.RESULTS.successful._value
     messages = [_message(bool(o), "" if o else optx.RESULTS._index_to_message[int(c)].split(".")[0], int(fl))
@@ -824,15 +1424,62 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
     messages = tuple(m if not w else f"{m}; but {w}" for m, w in zip(messages, weak))
     messages = tuple(m if not note else f"{m} ({note})" for m, note in zip(messages, notes))
     free_mask = tuple(bool(i in set(f.tolist())) for i in range(n_dev))
+
+    # What the data determine: the scale factor's gradient over every candidate parameter (free, or held as
+    # unidentifiable) against the weighted Jacobian's row space.
+    cand = np.asarray(candidates, dtype=int)
+    determined, weak_part, _ = _sf_determinacy(
+        np.asarray(final.jac)[:, :, cand], jac_lot if n_lot else None, np.asarray(final.sf_grad)[:, cand],
+        g_lot if n_lot else None, sf_stderr, threshold)
+    noise_dof, noise_notes, noise_ok = noise if noise is not None else (np.full(n, np.inf), [()] * n, [True] * n)
+    p_value = _p_value(chi2, dof, noise_dof)
+    chi2_red = chi2 / np.maximum(dof, 1)
+    rejected = np.nan_to_num(p_value, nan=1.0) < reject_alpha
+    implausible = _implausible(entries, problem_all.start, values, lot_values[0], free_mask, n)
+    status, warnings = [], []
+    for d in range(n):
+        notes_d = []
+        if not ok[d] or failed[d]:
+            status.append("not converged")
+        elif not determined[d] or not noise_ok[d]:
+            status.append("not determined")
+            if not determined[d]:
+                notes_d.append(_undetermined_reason(data, d, [names_dev[i] for i in cand] + list(names_lot),
+                                                    weak_part[d], f.size, threshold))
+        elif rejected[d] or implausible[d]:
+            status.append("model rejected")
+        else:
+            status.append("ok")
+        if rejected[d] and status[d] != "not converged":
+            notes_d.append(f"the model does not describe the data: chi2 {chi2[d]:.4g} over {int(dof[d])} degrees of "
+                           f"freedom has {_p_text(p_value[d])} < reject_alpha = {reject_alpha:g}; the standard errors "
+                           f"are also given scaled by sqrt(chi2_red) = {math.sqrt(chi2_red[d]):.3g} (stderr_scaled). "
+                           "gyrojax.compare shows where the misfit sits")
+        if dof[d] <= 0 and status[d] != "not converged":
+            notes_d.append(f"no degrees of freedom are left ({int(dof[d])}): nothing tests the model")
+        notes_d += implausible[d] + list(noise_notes[d])
+        warnings.append(tuple(notes_d))
+    undetermined = np.array([s == "not determined" for s in status])
+    scale = np.where(rejected, np.sqrt(np.maximum(chi2_red, 1.0)), 1.0)
+    sf = np.where(undetermined, np.nan, np.asarray(final.scale_factor))
+    sf_stderr = np.where(undetermined, np.nan, sf_stderr)
+    lot_rejected = bool(n_lot) and np.nan_to_num(
+        _p_value(chi2.sum(), int(dof.sum()) - n_lot, _pooled_dof(noise_dof, dof)), nan=1.0) < reject_alpha
+    lot_scale = math.sqrt(max(float(chi2.sum()) / max(int(dof.sum()) - n_lot, 1), 1.0)) if lot_rejected else 1.0
     return Fit(model=fitted, names=names_dev, lot_names=names_lot, values=values[:, :n_dev],
                stderr=stderr[:, :n_dev], lot_values=lot_values[0], lot_stderr=lot_stderr[0], free=free_mask,
                covariance=jnp.asarray(cov_full), u=jnp.asarray(u_full), u_lot=jnp.asarray(u_lot),
                residuals=residuals, predictions=dict(final.predictions), biases=dict(final.biases),
-               chi2=jnp.asarray(chi2), dof=jnp.asarray(dof), converged=jnp.asarray(ok & (failed == 0)),
+               chi2=jnp.asarray(chi2), dof=jnp.asarray(dof),
+               converged=jnp.asarray(ok & (failed == 0) & ~undetermined),
                result_message=messages, num_steps=jnp.asarray(steps), unsettled=jnp.asarray(failed),
-               unidentifiable=held_reports, scale_factor=final.scale_factor,
-               scale_factor_stderr=jnp.asarray(np.sqrt(np.maximum(var, 0.0))), devices=data.devices, data=data,
-               entries=entries, weighted=data.weighted, jacobian=final.jac, residual_vector=final.residuals)
+               unidentifiable=held_reports, scale_factor=jnp.asarray(sf), scale_factor_stderr=jnp.asarray(sf_stderr),
+               devices=data.devices, data=data, entries=entries, weighted=data.weighted, jacobian=final.jac,
+               residual_vector=final.residuals, status=tuple(status), warnings=tuple(warnings),
+               reject_alpha=float(reject_alpha), stderr_scaled=jnp.asarray(stderr[:, :n_dev] * scale[:, None]),
+               lot_stderr_scaled=jnp.asarray(lot_stderr[0] * lot_scale),
+               scale_factor_stderr_scaled=jnp.asarray(sf_stderr * scale),
+               noise_dof=jnp.asarray(np.asarray(noise_dof, dtype=float)))
 
 
 def _decrement(jac, jac_lot, residuals, *, joint):

@@ -39,3 +39,7 @@ def _release_compiled_code():
     if _map_count() > MAP_COUNT_CLEAR:
         jax.clear_caches()
         gc.collect()
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "slow: takes over ~30 s (compiles a fit); deselect with -m 'not slow'")

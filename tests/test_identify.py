@@ -410,7 +410,12 @@ def test_open_loop_dynamic_sweep_fits_where_the_first_solve_runs_off():
     table = gj.simulate_table(gj.vcf_2018(), sweeps=("vcf_dynamic",), **lot_spec)
     truth = gj.campaign_lot(gj.vcf_2018(), devices=lot_spec["devices"], seed=lot_spec["seed"])
     fit = gj.identify("vcf-2018", table)
-    assert bool(np.all(np.asarray(fit.converged))), fit.summary()
+    # The solve converges everywhere; the rate-table scale factor does not follow: a VCF sweep sees only
+    # sense_gain x vcf_gain, and the SF moves with sense_gain alone (it would rest on K_svf's design value).
+    assert all(m.startswith("converged") for m in fit.result_message), fit.summary()
+    assert fit.status == ("not determined",) * 3, fit.summary()
+    assert all(w[0].startswith("the data cannot fix sense_gain x vcf_gain") for w in fit.warnings), fit.summary()
+    assert np.all(np.isnan(np.asarray(fit.scale_factor)))
     assert np.all(np.abs(np.asarray(fit.chi2) / np.asarray(fit.dof) - 1.0) < 0.5), fit.summary()
     restarted = [m for m in fit.result_message if "restarted with q_y held" in m]
     assert restarted, fit.summary()  # the design start does run off on this lot
