@@ -8,6 +8,7 @@ import jax as _jax
 
 # ppm-level work needs float64; gyrojax switches it on at import.
 _jax.config.update("jax_enable_x64", True)
+from ._cache import compilation_cache as compilation_cache  # noqa: E402  (importing it turns the cache on)
 
 from . import _units as units  # noqa: E402
 from ._campaign import (  # noqa: E402

@@ -1,0 +1,171 @@
+"""Compile once per machine: gyrojax turns on JAX's persistent compilation cache when it is imported.
+
+A first `identify`, `simulate_table` or `diagnose` spends most of its time tracing and XLA-compiling programs
+(about a minute per entry point on a 2-core CPU). The persistent cache keeps the compiled executables on disk,
+keyed by the program, the backend and the JAX version, so a later process with the same shapes loads them
+instead of compiling again; tracing still happens in every process.
+
+**Where.** On import, unless disabled, the cache goes to a per-user folder:
+
+- Linux and other Unix: `$XDG_CACHE_HOME/gyrojax/jax`, or `~/.cache/gyrojax/jax`;
+- macOS: `~/Library/Caches/gyrojax/jax`;
+- Windows: `%LOCALAPPDATA%\\gyrojax\\Cache\\jax`.
+
+**Controls.**
+
+- The environment variable `GYROJAX_CACHE_DIR` moves it (a path), or disables it (`off`, or empty).
+- `gyrojax.compilation_cache(path)` moves it, `gyrojax.compilation_cache(None)` disables it, and
+  `gyrojax.compilation_cache()` says where it is.
+- A cache that JAX was already given (`JAX_COMPILATION_CACHE_DIR`, `jax.config.update(
+  "jax_compilation_cache_dir", ...)` before gyrojax is imported, or `JAX_ENABLE_COMPILATION_CACHE=false`) is
+  left exactly as it is: gyrojax sets nothing then.
+
+A folder that cannot be written does not stop the import: gyrojax warns once and runs without the cache. The
+folder may be deleted at any time (it is only a cache); it grows by one file per compiled program (a few MB
+for a fit) and JAX never trims it unless `jax_compilation_cache_max_size` is set (that needs the `filelock`
+package). Anyone who can write to the folder can make your JAX processes run code of their choosing: keep it
+private (gyrojax creates it with mode 0o700), never shared with users you do not trust.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import warnings
+
+import jax
+from jax.experimental.compilation_cache import compilation_cache as _jax_cache
+
+
+ENV_VAR = "GYROJAX_CACHE_DIR"
+"""The environment variable that moves the cache (a path) or disables it (`off` or empty)."""
+
+OFF_VALUES = ("", "off", "0", "false", "no", "none")
+"""Values of `GYROJAX_CACHE_DIR` (case-insensitive) that disable the cache."""
+
+MIN_COMPILE_TIME_S = 0.0
+"""Every compiled program is written, however fast it compiled (JAX's default keeps only those over 1 s).
+Measured on a 2-core CPU: one `settle` on the steady tier compiles 115 programs, one large root find and 114
+small ones (eager array operations, about 20 ms each); with only the large one cached a second process still
+spends 2.3 s compiling, with all of them 0.3 s (640 kB of cache)."""
+
+
+def default_cache_dir() -> str:
+    """The per-user cache folder for this platform (not created).
+
+    **Returns:** the absolute path, ending in `gyrojax/jax` (`gyrojax/Cache/jax` on Windows).
+    """
+    if sys.platform == "win32":
+        base = os.environ.get("LOCALAPPDATA") or os.path.join(os.path.expanduser("~"), "AppData", "Local")
+        return os.path.join(base, "gyrojax", "Cache", "jax")
+    if sys.platform == "darwin":
+        return os.path.join(os.path.expanduser("~"), "Library", "Caches", "gyrojax", "jax")
+    base = os.environ.get("XDG_CACHE_HOME", "")
+    if not os.path.isabs(base):  # the XDG spec: a relative value is invalid and ignored
+        base = os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "gyrojax", "jax")
+
+
+def _writable(path: str) -> str | None:
+    """Create `path` if needed and write a probe file in it; `None` if that worked, otherwise the reason.
+    (`os.access` is not enough: it says yes to root on a read-only file system.)"""
+    try:
+        os.makedirs(path, mode=0o700, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as e:
+        return f"{type(e).__name__}: {e.strerror or e}"
+    return None
+
+
+def _use(path: str | None) -> None:
+    """Point JAX's persistent cache at `path` (`None`: no cache) and make the change take effect even after
+    a compilation (JAX opens its cache once, at the first compile)."""
+    jax.config.update("jax_compilation_cache_dir", path)
+    if path is not None:
+        jax.config.update("jax_enable_compilation_cache", True)
+    _jax_cache.reset_cache()
+
+
+def _jax_already_configured() -> bool:
+    """Whether JAX was given a cache folder, or told not to cache, before gyrojax was imported."""
+    return bool(jax.config.jax_compilation_cache_dir) or not jax.config.jax_enable_compilation_cache
+
+
+def _thresholds() -> None:
+    # Only JAX's defaults are replaced: a value the user set (JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS, or
+    # jax.config) stays.
+    if ("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ
+            and jax.config.jax_persistent_cache_min_compile_time_secs == 1.0):
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", MIN_COMPILE_TIME_S)
+
+
+def enable_default() -> str | None:
+    """Configure the cache as gyrojax's import does: `GYROJAX_CACHE_DIR`, else the per-user folder, unless
+    JAX's own settings say otherwise. Called once, on import.
+
+    **Returns:** the folder in use, or `None` (disabled, JAX's own settings kept, or not writable: then a
+    `RuntimeWarning` says why).
+    """
+    if _jax_already_configured():
+        return jax.config.jax_compilation_cache_dir or None
+    value = os.environ.get(ENV_VAR)
+    if value is not None and value.strip().lower() in OFF_VALUES:
+        return None
+    path = os.path.abspath(os.path.expanduser(value)) if value is not None else default_cache_dir()
+    problem = _writable(path)
+    if problem is not None:
+        origin = f"{ENV_VAR}={value!r}" if value is not None else f"the default (set {ENV_VAR} to move it)"
+        warnings.warn(f"gyrojax: the compilation cache folder {path} from {origin} cannot be written ({problem}); "
+                      "running without the persistent compilation cache, so every new process compiles again.",
+                      RuntimeWarning, stacklevel=2)
+        return None
+    _thresholds()
+    _use(path)
+    return path
+
+
+_UNSET = object()
+
+
+def compilation_cache(path=_UNSET) -> str | None:
+    """Where gyrojax's compiled programs are kept between processes; move the cache or switch it off.
+
+    gyrojax turns JAX's persistent compilation cache on when it is imported (a per-user folder, e.g.
+    `~/.cache/gyrojax/jax` on Linux; the environment variable `GYROJAX_CACHE_DIR` moves it, `off` disables
+    it; a cache JAX was already given is left alone). A process that runs the same shapes as an earlier one
+    loads the compiled programs instead of compiling them: the first fit of a session takes seconds instead
+    of a minute. Tracing is not cached.
+
+    **Arguments:**
+
+    - `path`: a folder (created if needed, mode 0o700) to keep the cache in from now on, or `None` to stop
+      using a persistent cache in this process. Omitted: change nothing, only report.
+
+    **Returns:** the folder in use now, or `None` when no persistent cache is used.
+
+    Raises `ValueError` if `path` is given and the folder cannot be created or written (nothing is changed
+    then), `TypeError` if it is not a path.
+
+    The cache is trusted code: whoever can write to the folder can make your JAX processes run code of their
+    choosing, so do not point it at a folder shared with users you do not trust.
+    """
+    if path is _UNSET:
+        return jax.config.jax_compilation_cache_dir or None
+    if path is None:
+        _use(None)
+        return None
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"compilation_cache: path must be a folder path (str or os.PathLike) or None, "
+                        f"got {type(path).__name__}.")
+    folder = os.path.abspath(os.path.expanduser(os.fspath(path)))
+    problem = _writable(folder)
+    if problem is not None:
+        raise ValueError(f"compilation_cache: path {folder} cannot be used as a cache folder ({problem}).")
+    _thresholds()
+    _use(folder)
+    return folder
+
+
+enable_default()
