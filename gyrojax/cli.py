@@ -201,7 +201,7 @@ def _run_list(text):
 def _compensation_na(run: dict, when: str) -> str:
     """Why a run's nonlinearity before/after compensation is None."""
     if when == "after" and run.get("converged") is False:
-        return "the compensation did not converge on this run"
+        return "the compensation did not converge for this device (see its message)"
     if run.get(f"scale_factor_{when}") == 0:
         return ("the outputs do not change with the input" if when == "before"
                 else "the compensated rates do not change with the input")
@@ -234,6 +234,9 @@ def _cmd_compensate(args):
     if args.json:
         _write_json(result.to_json(), args.json)
         print(f"wrote {args.json}")
+    for d in result.devices:
+        if d.get("converged") is False:
+            print(f"gyrojax compensate: device {d['device']}: {d['message']}", file=sys.stderr)
     if undetermined:
         print(f"gyrojax compensate: {undetermined} run(s) gave no nonlinearity (n/a above)", file=sys.stderr)
         return EXIT_FAILED

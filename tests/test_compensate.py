@@ -336,3 +336,16 @@ def test_table3_experiment_reproduces_the_ordering(tmp_path, capsys):
     for name in ("table3.json", "table3.md", "fig10.png", "data.csv"):
         assert (tmp_path / name).stat().st_size > 0
     assert "REPRODUCED" in capsys.readouterr().out
+
+
+def test_a_run_whose_outputs_do_not_change_is_refused_by_name():
+    """A disconnected or saturated output gives the same value at every rate: no scale factor to compensate,
+    so no 'after' figure may be computed from round-off (it was 3.5 ppm from a 1e-11 slope)."""
+    rates = np.asarray(gj.SEED000_RATES_DPS)
+    records = [{"device": "d", "run": r, "sweep": "rate_table", "input": x,
+                "output": 13709.8 * x if r == 0 else 5.0, "drive_freq_hz": 4634.0 + 1e-3 * i}
+               for r in (0, 1) for i, x in enumerate(rates)]
+    table = gj.Table.from_records(records, source="constant.csv")
+    with pytest.raises(gj.DataError, match=r"constant.csv: data row 23.*device 'd', run 1: the rate_table outputs "
+                                           r"are all 5.0, the same at every rate"):
+        gj.compensate(table, method="composite")

@@ -115,6 +115,21 @@ def _resolve_train_runs(train_runs, devices, runs_of) -> dict[str, tuple[int, ..
     return out
 
 
+def _ppm_list(fit):
+    """A run's residuals in ppm of full scale, None where a value is not finite (JSON has no NaN)."""
+    full = float(fit.full_scale)
+    if not (math.isfinite(full) and full > 0):
+        return None
+    return [_num(v) for v in 1e6 * np.asarray(fit.residuals) / full]
+
+
+def _worst(values):
+    """The largest value, or None when there is none or one is not a number (max() with NaN depends on order)."""
+    if not values or not all(math.isfinite(v) for v in values):
+        return None
+    return max(values)
+
+
 def compensate(table: Table, *, method: str | AbstractCompensator = "composite", train_runs=None,
                full_scale: str = "half_range") -> CompensationResult:
     """Fit a scale-factor compensator on each device's training runs and judge it on its held-out runs.
@@ -167,6 +182,12 @@ def compensate(table: Table, *, method: str | AbstractCompensator = "composite",
             raise DataError(f"{table.locate(int(rows[0]))}: device {dev!r}, run {run} has {len(rows)} rate_table "
                             f"point(s); judging a compensation needs at least {MIN_POINTS_LINEAR}.",
                             source=table.source, row=int(rows[0]) + 1)
+        out = table["output"][rows]
+        if np.ptp(out) == 0.0:
+            raise DataError(f"{table.locate(int(rows[0]), 'output')}: device {dev!r}, run {run}: the rate_table outputs "
+                            f"are all {float(out[0])!r}, the same at every rate: there is no scale factor to compensate "
+                            "(a disconnected or saturated output?). Remove the run or fix the file.",
+                            source=table.source, row=int(rows[0]) + 1, column="output")
         for name in compensator.requires:
             values = table[name][rows] if name in table else np.full(len(rows), np.nan)
             bad = rows[~np.isfinite(values)]
@@ -219,9 +240,8 @@ def compensate(table: Table, *, method: str | AbstractCompensator = "composite",
                 "nonlinearity_rms_ppm_before": _num(before.nonlinearity_rms_ppm),
                 "nonlinearity_rms_ppm_after": post("nonlinearity_rms_ppm"),
                 "rates_dps": [float(v) for v in x],
-                "residuals_ppm_before": [float(v) for v in 1e6 * before.residuals / before.full_scale],
-                "residuals_ppm_after": ([float(v) for v in 1e6 * after.residuals / after.full_scale]
-                                        if converged else None),
+                "residuals_ppm_before": _ppm_list(before),
+                "residuals_ppm_after": _ppm_list(after) if converged else None,
             })
         sf_before, sf_after, held = np.asarray(sf_before), np.asarray(sf_after), np.asarray(held)
 
@@ -236,8 +256,8 @@ def compensate(table: Table, *, method: str | AbstractCompensator = "composite",
             "repeatability_ppm_before": rep(sf_before), "repeatability_ppm_after": rep(sf_after),
             "repeatability_ppm_before_held_out": rep(sf_before, held),
             "repeatability_ppm_after_held_out": rep(sf_after, held),
-            "worst_nonlinearity_max_ppm_held_out_before": max(worst_before) if worst_before else None,
-            "worst_nonlinearity_max_ppm_held_out_after": max(worst_after) if worst_after else None,
+            "worst_nonlinearity_max_ppm_held_out_before": _worst(worst_before),
+            "worst_nonlinearity_max_ppm_held_out_after": _worst(worst_after),
             "compensator": solution.summary(), "converged": converged, "message": message,
         })
     return CompensationResult(method=compensator.name, runs=tuple(run_records), devices=tuple(device_records),
