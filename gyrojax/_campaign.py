@@ -27,7 +27,7 @@ from ._units import DEG
 
 
 SIMULATED_SWEEPS = ("rate_table", "vcf_static", "vcf_dynamic", "dac")
-"""Sweeps `simulate_table` can produce (DESIGN.md §6)."""
+"""Sweeps `simulate_table` can produce (the data format, docs/data_format.md)."""
 
 CAMPAIGN_TIER = Steady(rtol=1e-10, atol=1e-10)
 """The default tier of `simulate_table`: `Steady` at 1e-10 (1e-4 ppm of the O(1)-scaled states). Measured:
@@ -137,7 +137,7 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
                    spread: ProcessSpread | WaferProcess = ProcessSpread(),
                    device_prefix: str | None = None, protocol: Protocol = Protocol(),
                    voltmeter_sigma_v: float = DAC_VOLTMETER_SIGMA_V) -> Table:
-    """Simulate a measurement campaign and return it in the tidy format of DESIGN.md §6.
+    """Simulate a measurement campaign and return it in the tidy data format (docs/data_format.md).
 
     **Arguments:**
 

@@ -1,4 +1,4 @@
-"""Measured data: the tidy table of DESIGN.md §6, its validation, its file formats and its padded array form.
+"""Measured data: the tidy table of docs/data_format.md, its validation, its file formats and its padded array form.
 
 One row is one settled point of one sweep. Required columns are `device` (str), `run` (int), `sweep` (one of
 [`SWEEPS`][]), `input` and `output`; the optional columns are [`OPTIONAL_COLUMNS`][]; any other column is kept
@@ -36,7 +36,7 @@ from ._io import atomic_open, atomic_path
 
 
 SWEEPS = ("rate_table", "vcf_static", "vcf_dynamic", "dac")
-"""The sweep kinds of DESIGN.md §6."""
+"""The sweep kinds of the data format (docs/data_format.md)."""
 
 REQUIRED_COLUMNS = ("device", "run", "sweep", "input", "output")
 """Columns every table must have."""
@@ -406,7 +406,7 @@ def _validate(raw: Mapping[str, Any], source: str, lines: Sequence[int] | None,
         if s == "rate_table" and _looks_like_rad_s(inputs[rows]):
             raise DataError(
                 f"{source}: {_rows_text(where, rows)}, column 'input': device {dev!r} run {r} rate_table inputs "
-                f"look like rad/s, but rate-table inputs are deg/s (DESIGN.md §6): max |input| = "
+                f"look like rad/s, but rate-table inputs are deg/s (docs/data_format.md): max |input| = "
                 f"{np.abs(inputs[rows]).max():.6g} < 2 pi and every input x 180/pi is a round deg/s value "
                 f"(e.g. {inputs[rows][np.argmax(np.abs(inputs[rows]))]:.6g} -> "
                 f"{np.abs(inputs[rows]).max() * 180 / math.pi:.6g} deg/s) to 1e-6. Convert with "
@@ -431,7 +431,7 @@ def _group_rows(columns: Mapping[str, np.ndarray]) -> dict[tuple[str, int, str],
 
 @final
 class Table:
-    """A validated tidy table of settled points (DESIGN.md §6): plain NumPy columns, immutable.
+    """A validated tidy table of settled points (docs/data_format.md): plain NumPy columns, immutable.
 
     Build one with [`gyrojax.read_table`][], `Table.from_columns` or `Table.from_records`; every constructor
     validates (see [`gyrojax.DataError`][]). Columns are read-only NumPy arrays: `device` and `sweep` str,
@@ -635,7 +635,7 @@ class SweepArrays(eqx.Module):
 
     **Fields:**
 
-    - `inputs`, `outputs`: float64 (see DESIGN.md §6 for units per sweep kind).
+    - `inputs`, `outputs`: float64 (see the data format, docs/data_format.md, for units per sweep kind).
     - `sigmas`: float64 `output_sigma` (NaN where not given), or None if the table had no such column.
     - `mask`: bool, True on real points.
     - `aux`: the other optional columns the table had (`n_samples`, `rate_dps`, ...), float64, NaN where a
@@ -724,7 +724,7 @@ def _format_suffix(path: str | os.PathLike, what: str) -> str:
 
 
 def read_table(path: str | os.PathLike) -> Table:
-    """Read and validate a tidy table of settled points (DESIGN.md §6) from CSV or Parquet.
+    """Read and validate a tidy table of settled points (docs/data_format.md) from CSV or Parquet.
 
     **Arguments:**
 

@@ -458,7 +458,7 @@ def _why_not(rec: dict[str, Any], outputs: np.ndarray, inputs: np.ndarray) -> di
 
 def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bool = False,
                    common_bias: bool = True, ddof: int = 1) -> dict[str, Any]:
-    """The `metrics` JSON of DESIGN.md §7 for a table: per-sweep metrics and per-device repeatability.
+    """The `metrics` JSON of docs/cli.md for a table: per-sweep metrics and per-device repeatability.
 
     **Arguments:**
 

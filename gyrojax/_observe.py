@@ -1,4 +1,4 @@
-"""The measurement model: what each sweep kind of DESIGN.md §6 reads from a device.
+"""The measurement model: what each sweep kind of the data format (docs/data_format.md) reads from a device.
 
 One function per sweep, for one device and a vector of points, noise-free and without the per-run bias (the
 turn-on bias belongs to the run, not to the device). The simulator (`simulate_table`) adds noise to these

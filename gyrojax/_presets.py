@@ -50,7 +50,7 @@ QMG_VCF_DPS_PER_V2 = 100.0  # deg/s per V^2 of V_ac V_fc, ASSUMPTION: seed 000 h
 #                             electrode; a self-test electrode like seed 003's, sized so that V_fc = 1 V and
 #                             V_ac = +/-2 V span +/-200 deg/s. Closed-loop VCF sweeps separate a drift of
 #                             the feedback gain (vref_drift) from one of the drive frequency (thermal_drift)
-SILICON_TCF = -30e-6  # 1/K, silicon resonators, about -30 ppm/K (DESIGN.md §2)
+SILICON_TCF = -30e-6  # 1/K, silicon resonators, about -30 ppm/K (the physics, docs/physics.md)
 SILICON_TCQ = -3e-3  # 1/K, ASSUMPTION: Q ~ 1/T_abs near room temperature (thermoelastic and gas damping both
 #                      grow with temperature): -1/(298 K) = -3.4e-3/K, rounded. It moves no settled output of
 #                      the ideal loops; a finite-gain AGC (agc_finite_gain) turns it into a gain drift

@@ -1,6 +1,6 @@
 """The candidate-effects library: every effect nested at zero, structure-preserving, with a first-order
 fingerprint (jacfwd against finite differences), the same in every tier, and with the fingerprint shape that
-DESIGN.md §2 claims.
+docs/physics.md states.
 
 Compile budget: one values-and-Jacobian program per device structure (closed loop, open loop) serves the
 nested-at-zero, fingerprint, finite-difference and shape tests; the tier checks reuse `gj.rate_sweep`'s
@@ -281,7 +281,7 @@ def test_first_order_fingerprint_matches_finite_differences(name):
         np.testing.assert_allclose(col, fd, rtol=2e-4, atol=2e-4 * np.max(np.abs(col)))
 
 
-# --- fingerprint shapes (DESIGN.md §2) -----------------------------------------------------------------
+# --- fingerprint shapes (docs/physics.md) --------------------------------------------------------------
 
 def test_damping_coupling_is_a_pure_bias():
     bias = float(gj.DampingCoupling.typical().c / 2)  # rad/s of equivalent rate (Ag = 1 on both presets)
@@ -497,7 +497,7 @@ def _full_stack(devices, rates):
 
 def test_full_waveform_agrees_with_steady_for_carrier_level_effects():
     # every device carries the feedback term (at zero where it is not the effect): one structure to stack
-    with_term = {b: gj.FeedbackCompression.typical(0.0).apply(g) for b, g in BASES.items()}
+    with_term = {b: gj.FeedbackCompression.typical(0.0).apply(BASES[b]) for b in ("paper-qmg", "qmg-leaky")}
     devices = [gj.FeedbackCompression.typical().apply(BASES[b]) if n == "feedback_compression" else
                gj.EFFECTS[n].typical().apply(with_term[b]) if n else with_term[b] for n, b in CARRIER_LEVEL]
     stack = jax.tree.map(lambda *x: jnp.stack(x), *devices)

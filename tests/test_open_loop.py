@@ -23,7 +23,7 @@ def _split(dev):
 @pytest.mark.parametrize("tier", [gj.Steady(), gj.Averaged(settle_time=0.1)], ids=["steady", "averaged"])
 def test_coriolis_frequency_pulling(device, tier):
     """Levels repel: the drive resonance is pulled down by (Ag Om)^2 / dw, the split widens, and the
-    open-loop scale factor FALLS as SF0 (1 - Ag^2 Om^2 / dw^2). (DESIGN.md and the issue write 1 +; the
+    open-loop scale factor FALLS as SF0 (1 - Ag^2 Om^2 / dw^2) (docs/physics.md). (Not 1 +: the
     full-waveform tier below settles the sign.)"""
     s = gj.rate_sweep(device, RATES, tier=tier)
     sf = np.asarray(s.rate) / RATES

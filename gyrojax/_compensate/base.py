@@ -36,7 +36,7 @@ class AbstractCompensation(eqx.Module):
 class AbstractCompensator(eqx.Module):
     """A compensation method (a strategy, holding only its settings); `fit` returns the fitted solution.
 
-    `name` is the method's name on the command line; `requires` lists the side columns (of DESIGN.md §6)
+    `name` is the method's name on the command line; `requires` lists the side columns (docs/data_format.md)
     every point must carry, for fitting and for applying.
     """
 

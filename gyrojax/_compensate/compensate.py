@@ -69,7 +69,7 @@ class CompensationResult(eqx.Module):
     full_scale: str = eqx.field(static=True, default="half_range")
 
     def to_json(self) -> dict[str, Any]:
-        """The `compensate` JSON of DESIGN.md §7 (Python numbers, None for "not applicable")."""
+        """The `compensate` JSON of docs/cli.md (Python numbers, None for "not applicable")."""
         return {"method": self.method, "runs": [dict(r) for r in self.runs],
                 "devices": [dict(d) for d in self.devices],
                 "conventions": {

@@ -1,6 +1,6 @@
 r"""`model`: model-based compensation: invert an identified physical model of the closed-loop output.
 
-**The model** (DESIGN.md §2, seed 000 Eq. 2 and §3.3). In force-to-rebalance operation the rate loop
+**The model** (docs/physics.md, seed 000 Eq. 2 and §3.3). In force-to-rebalance operation the rate loop
 settles the word $W$ (the gyro output, LSB) where the carrier fundamental of the FTR DAC's output balances the
 Coriolis force. With the DAC's integral nonlinearity acting on the instantaneous carrier samples
 $W \sin\theta$, that balance reads

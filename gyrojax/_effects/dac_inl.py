@@ -12,7 +12,7 @@ from .base import AbstractEffect
 # A typical INL bow of a 16-bit R-2R DAC: a few LSB across the range used at +/-200 deg/s (a third of full
 # scale), an odd S-curve plus an even bow. Sized so that on paper-qmg at scale 1 the closed-loop
 # nonlinearity over +/-200 deg/s is about 460 ppm (max residual / full scale), the DAC share that seed 000
-# §3.3 reports; the even term is invisible in AC amplitude sweeps (DESIGN.md §2).
+# §3.3 reports; the even term is invisible in AC amplitude sweeps (docs/physics.md).
 _TYPICAL_INL = (11.4, -1063.6, 0.0, 3418.6)  # LSB coefficients of u^2, u^3, u^4, u^5
 
 
