@@ -1,4 +1,4 @@
-"""The `gyrojax` command line (DESIGN.md §7).
+"""The `gyrojax` command line (docs/cli.md).
 
 Exit codes:
 
@@ -321,7 +321,7 @@ def build_parser():
     parser = argparse.ArgumentParser(
         prog="gyrojax", epilog=_EXIT_CODES,
         description="Differentiable simulation and identification of MEMS Coriolis vibratory gyroscopes. "
-                    "Data files are the tidy table of DESIGN.md §6 (CSV or Parquet): rates in deg/s, "
+                    "Data files are the tidy table of docs/data_format.md (CSV or Parquet): rates in deg/s, "
                     "gyro outputs in LSB, DAC amplitudes in V.")
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -377,7 +377,7 @@ def build_parser():
                       help="baseline device preset (default paper-qmg)")
     diag.add_argument("--alpha", type=_alpha, default=0.01,
                       help="family-wise significance per step, in (0, 0.5] (default 0.01)")
-    diag.add_argument("--json", help="write the diagnosis as JSON here (DESIGN.md §7 keys)")
+    diag.add_argument("--json", help="write the diagnosis as JSON here (keys in docs/diagnosis.md)")
     diag.add_argument("--report", metavar="DIR",
                       help="write a Markdown report with PNG plots into the folder DIR (new, empty, or written by "
                            "gyrojax before: it is replaced as a whole)")
@@ -396,7 +396,7 @@ def build_parser():
                           "k_vf,sense_gain,vcf_gain,dac_gain_error,omega_y,q_y, those the device has)")
     idf.add_argument("--effect", action="append", default=[], metavar="NAME",
                      help="add an effect (from zero) and fit its parameters too (repeatable), e.g. dac_inl")
-    idf.add_argument("--json", help="write the report (DESIGN.md §7 identify keys) as JSON here")
+    idf.add_argument("--json", help="write the report (keys in docs/cli.md) as JSON here")
     idf.add_argument("--save", metavar="FIT", help="save the fit here (read back with gyrojax.load_fit)")
     _effects_module_option(idf)
     idf.set_defaults(func=_cmd_identify)
