@@ -123,7 +123,8 @@ def _cmd_simulate(args):
     for name, scale in args.effect:
         gyro = gj.add_effect(gyro, name, scale)
     table = simulate_table(gyro, devices=args.devices, runs=args.runs, sweeps=args.sweeps,
-                           tier=tiers[args.tier], noise_free=args.noise_free, seed=args.seed)
+                           tier=tiers[args.tier], noise_free=args.noise_free, seed=args.seed,
+                           protocol=gj.Protocol(order=args.order))
     write_table(table, args.out)
     print(f"wrote {len(table)} points ({args.devices} device(s) x {args.runs} run(s), sweeps "
           f"{', '.join(args.sweeps)}, tier {args.tier}) to {args.out}")
@@ -342,6 +343,10 @@ def build_parser():
     sim.add_argument("--effect", type=_parse_effect, action="append", default=[], metavar="NAME[=SCALE]",
                      help="add a physical effect at its typical size times SCALE (repeatable); e.g. dac_inl=2")
     sim.add_argument("--noise-free", action="store_true", help="no measurement noise, no turn-on bias")
+    sim.add_argument("--order", choices=("listed", "reversed", "alternating", "shuffled"), default="listed",
+                     help="the order the points of each run are applied in: listed (ascending, default), reversed, "
+                          "alternating (up in even runs, down in odd ones) or shuffled; an input swept one way ties it "
+                          "to time and temperature (drift looks like a shape in the input)")
     sim.add_argument("--seed", type=int, default=0, help="PRNG seed for the lot and the noise (default 0)")
     sim.add_argument("--out", required=True, help="output file, .csv or .parquet")
     _effects_module_option(sim)

@@ -155,6 +155,21 @@ def test_cli_diagnose_json_and_report(hidden_dac_inl, tmp_path):
     md = (tmp_path / "rep" / "diagnosis.md").read_text()
     assert "## Where the model fails" in md and "### + dac_inl" in md
     assert len(report["compare"]) == 2 and report["compare"][0]["findings"]
+    # the verdict and where the misfit lived: at the baseline an odd cubic (the INL), nothing left at the end
+    assert report["verdict"] == "explained" and report["discrepancy"] == []
+    assert report["steps"][0]["contradicted_by"] == []
+    first = report["baseline_discrepancy"][0]
+    assert first["coordinate"] == "input" and first["probe"] in ("cubic_of_dac", "cubic_after_dac")
+    assert md.count("model against measurement: chi2") == 2  # once per fit, no repeated summary block
+    assert "**verdict: explained" in md and "Data: `" + str(path) + "`" in md
+    assert (tmp_path / "rep" / "discrepancy.png").stat().st_size > 0
+
+
+def test_alpha_is_a_significance_level(hidden_dac_inl):
+    table, _ = hidden_dac_inl
+    for bad in (0.0, 5.0, -0.1, 0.6):
+        with pytest.raises(ValueError, match=r"alpha must be a significance level in \(0, 0.5\]"):
+            diagnose(table, "paper-qmg", alpha=bad)
 
 
 def test_bad_candidate_names(hidden_dac_inl):
