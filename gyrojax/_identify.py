@@ -1446,6 +1446,8 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
             if not determined[d]:
                 notes_d.append(_undetermined_reason(data, d, [names_dev[i] for i in cand] + list(names_lot),
                                                     weak_part[d], f.size, threshold))
+            else:  # the reason first: the noise (hence every uncertainty) is what the data leave open
+                notes_d.append(noise_notes[d][-1])
         elif rejected[d] or implausible[d]:
             status.append("model rejected")
         else:
@@ -1457,7 +1459,7 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
                            "gyrojax.compare shows where the misfit sits")
         if dof[d] <= 0 and status[d] != "not converged":
             notes_d.append(f"no degrees of freedom are left ({int(dof[d])}): nothing tests the model")
-        notes_d += implausible[d] + list(noise_notes[d])
+        notes_d += implausible[d] + [w for w in noise_notes[d] if w not in notes_d]
         warnings.append(tuple(notes_d))
     undetermined = np.array([s == "not determined" for s in status])
     scale = np.where(rejected, np.sqrt(np.maximum(chi2_red, 1.0)), 1.0)

@@ -277,6 +277,23 @@ def test_without_output_sigma_a_strong_cubic_is_rejected_and_clean_data_are_ok(c
                                np.asarray(clean.data.blocks["rate_table"].sigmas), rtol=0.3)
 
 
+@slow
+def test_without_output_sigma_too_few_points_leave_the_uncertainty_undetermined(columns, unweighted):
+    """Three points of one run (the unweighted arrays, the rest masked out): a slope and a bias leave one
+    residual, but no four neighbours and no repeated input to measure the noise from. The SF would have no
+    honest uncertainty: not determined, and the reason says so first."""
+    data = fit_data(_table(columns, "three points, no output_sigma", drop=("output_sigma",)))
+    block = data.blocks["rate_table"]
+    keep = np.zeros(block.mask.shape, bool)
+    keep[0, 0, [0, 10, 21]] = True
+    fit = gj.identify("paper-qmg", eqx.tree_at(lambda d: d.blocks["rate_table"].mask, data, jnp.asarray(keep)))
+    assert fit.status == ("not determined",)
+    assert fit.warnings[0][0].startswith("no output_sigma, and the data leave nothing to estimate the noise of "
+                                         "rate_table"), fit.warnings
+    assert np.isnan(float(fit.scale_factor[0])) and np.isnan(fit.p_value[0])
+    assert "SF NOT DETERMINED" in fit.summary()
+
+
 # --- 4. plausibility and the data's conventions --------------------------------------------------------
 
 @slow
