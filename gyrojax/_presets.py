@@ -154,7 +154,7 @@ def vcf_2018(**resonator_overrides) -> Gyroscope:
     nominal point. Seed 003's band-pass filter ("15000 Hz to 22000 Hz") would reject its own 1.8 kHz drive
     carrier, so it is not modelled; the 2 kHz LPF is. Seed 003 reports a 354.3 Hz measured and 349.5 Hz
     simulated rate bandwidth; the model with Table 2's numbers gives about 97 Hz (1.55 x the 62 Hz
-    split); see `experiments/seed003_bandwidth.py`.
+    split); see `experiments/seed_closure.py`.
     """
     resonator = Resonator(**(dict(mass=VCF_MASS, omega_x=VCF_WD, omega_y=VCF_WS, q_x=VCF_QD, q_y=VCF_QS,
                                   angular_gain=1.0, tcf=SILICON_TCF, tcq=SILICON_TCQ) | resonator_overrides))
