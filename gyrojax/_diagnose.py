@@ -537,7 +537,7 @@ def _verdict(comparison, steps) -> str:
 def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alpha: float = 0.01,
              max_effects: int = 4, ambiguity: float = 0.95, min_typical_chi2: float = 1.0,
              max_typical_multiple: float = MAX_TYPICAL_MULTIPLE, probes=PROBES, starts: int = 1,
-             progress=None) -> Diagnosis:
+             fit: Fit | None = None, progress=None) -> Diagnosis:
     r"""Compare `model` with `data`, rank every candidate effect, add the significant ones one at a time, and
     say where what is left lives.
 
@@ -557,6 +557,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     - `max_typical_multiple`: a candidate whose score implies a size beyond this many times its typical
       size is not confirmed (the reason says so).
     - `probes`: the generic shapes scored beside the candidates (`gyrojax.PROBES`).
+    - `fit`: a `gyrojax.Fit` of this data (from `identify`, or `gyrojax.load_fit`) to use as the baseline
+      instead of fitting it again; its model replaces `model`, and its parameters are the refits' start.
     - `progress`: optional callable taking a message, called before each (slow) fit.
 
     Guards before a candidate is confirmed: its implied size is plausible; no probe explains the misfit it is
@@ -571,9 +573,12 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         raise ValueError(f"alpha must be a significance level in (0, 0.5], got {alpha!r}.")
     if not (isinstance(max_typical_multiple, (int, float)) and max_typical_multiple > 1.0):
         raise ValueError(f"max_typical_multiple must be a number > 1, got {max_typical_multiple!r}.")
-    base = _to_model(model)
     if isinstance(data, Table):
         data = fit_data(data)
+    if fit is not None:
+        base = _from_fit(fit, data)
+    else:
+        base = _to_model(model)
     device = base.device
     one = device if not _is_lot(device) else _first(device)
     available = supported_effects(one)
@@ -593,12 +598,16 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     full = Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates))
     say = progress or (lambda msg: None)
 
-    def fit_with(selected):
+    def fit_with(selected, evaluate_only=False):
         held = tuple(c for c in candidates if c not in selected)
-        return identify(full, data, free=free, hold=held, starts=starts)
+        return identify(full, data, free=free, hold=held, starts=starts, evaluate_only=evaluate_only)
 
-    say("fitting the baseline")
-    fit = fit_with(())
+    if fit is None:
+        say("fitting the baseline")
+        fit = fit_with(())
+    else:  # the saved fit is the baseline: evaluated where it ended, with the candidates at zero
+        say("evaluating the given baseline fit with every candidate at zero")
+        fit = fit_with((), evaluate_only=True)
     baseline = fit
     fits, steps, ambiguous, rejected = [fit], [], [], []
     ranking0, untestable = None, ()
@@ -687,6 +696,24 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     return Diagnosis(baseline, fit, tuple(fits), ranking0, tuple(steps), tuple(ambiguous), untestable,
                      tuple(rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2, comparisons,
                      baseline_discrepancy, discrepancy, _verdict(comparisons[-1], steps))
+
+
+def _from_fit(fit: Fit, data: FitData) -> Model:
+    """The fitted model of `fit` as the diagnosis's baseline, after checking that it was fitted to `data`."""
+    if not isinstance(fit, Fit):
+        raise TypeError(f"fit must be a gyrojax.Fit (from identify or load_fit), got {type(fit).__name__}.")
+    if tuple(fit.devices) != tuple(data.devices):
+        raise ValueError(f"fit: it was fitted to devices {list(fit.devices)}, the data have {list(data.devices)}; "
+                         "give the fit of this data (or no fit, to fit the baseline here).")
+    theirs = {s: int(np.asarray(fit.data.blocks[s].mask).sum()) for s in fit.data.sweeps}
+    ours = {s: int(np.asarray(data.blocks[s].mask).sum()) for s in data.sweeps}
+    if theirs != ours:
+        raise ValueError(f"fit: it was fitted to {theirs} points per sweep, the data have {ours}; give the fit of "
+                         "this data (or no fit, to fit the baseline here).")
+    # Effects held at exactly zero (a previous diagnosis's candidates) were never fitted: candidates again.
+    kept = tuple(e for e in fit.model.effects
+                 if any(np.any(np.asarray(x) != 0) for x in jax.tree.leaves(e)))
+    return Model(fit.model.device, kept)
 
 
 def _is_lot(device):

@@ -251,7 +251,19 @@ def _cmd_diagnose(args):
     _check_outputs(("--json", args.json, False), ("--report", args.report, True))
     _load_effects(args)
     table = read_table(args.data)
-    diag = diagnose(table, args.model, alpha=args.alpha, progress=lambda m: print(f"... {m}", flush=True))
+    fit = None
+    if args.fit:
+        import warnings
+
+        from ._fitio import load_fit
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            fit = load_fit(args.fit)
+        for w in caught:
+            print(f"gyrojax diagnose: warning: {w.message}", file=sys.stderr)
+    diag = diagnose(table, args.model, alpha=args.alpha, fit=fit,
+                    progress=None if args.quiet else (lambda m: print(f"... {m}", flush=True)))
     print(diag.summary())
     if args.report:
         with atomic_directory(args.report) as folder:  # the report folder appears whole or not at all
@@ -386,6 +398,9 @@ def build_parser():
     diag.add_argument("--report", metavar="DIR",
                       help="write a Markdown report with PNG plots into the folder DIR (new, empty, or written by "
                            "gyrojax before: it is replaced as a whole)")
+    diag.add_argument("--fit", metavar="FIT", help="a fit of this data saved by `gyrojax identify --save`: the "
+                                                  "baseline, instead of fitting it again (its preset replaces --model)")
+    diag.add_argument("--quiet", action="store_true", help="no progress messages")
     _effects_module_option(diag)
     diag.set_defaults(func=_cmd_diagnose)
 

@@ -217,3 +217,20 @@ def test_each_hidden_effect_is_found_or_absorbed(hidden_dac_inl, preset, hidden)
             assert row["absorption"][h].endswith("Revealed by: " + gj.EFFECTS[h].revealed_by)
     if not hidden:
         assert row["selected"] == []
+
+
+def test_a_saved_baseline_fit_is_not_fitted_again(hidden_dac_inl, tmp_path):
+    """`diagnose(fit=...)` (the CLI's `--fit FILE`) starts from a given fit of the same data: the baseline is that
+    fit evaluated where it ended (same chi2), and the diagnosis reaches the same conclusion. A fit of other data
+    is refused by name."""
+    table, d = hidden_dac_inl
+    path = tmp_path / "baseline.fit"
+    gj.save_fit(d.baseline, path)
+    with pytest.warns(UserWarning, match=r"baseline.fit: 3 of 3 device\(s\) are not 'ok': paper-qmg-000 \(model rejected"):
+        saved = gj.load_fit(path)  # the baseline the INL breaks: the file says so, and loading warns
+    again = diagnose(table, fit=saved)
+    assert again.baseline.chi2_total == pytest.approx(d.baseline.chi2_total, rel=1e-9)
+    assert again.selected == ("dac_inl",) and again.verdict == "explained"
+    other = table.select(np.flatnonzero(table["device"] != table["device"][0]))
+    with pytest.raises(ValueError, match=r"fit: it was fitted to devices \['paper-qmg-000'"):
+        diagnose(other, fit=d.baseline)
