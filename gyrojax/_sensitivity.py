@@ -11,10 +11,21 @@ contributes 460.679 ppm of the 539.281 ppm measured for the whole loop, a share 
 
 and from each rate-table curve the scale-factor nonlinearity of [`gyrojax.fit_scale_factor`][] (least-squares
 line, max |residual| / full scale, and the RMS figure beside it). An effect's *own* curve is its alone residual
-minus the base residual (what it adds), and its share is, as in seed 000, its own figure over the joint
-figure. Shares need not add to 100 %: a max (or RMS) of a sum is not the sum of the maxima, and effects can
-cancel; `interaction_ppm` says how far the joint residual is from the base plus the sum of the own curves
-(zero to first order in the effects' sizes).
+minus the base residual (what it adds). The joint curve is exactly the base curve plus the sum of the own
+curves plus an *interaction* curve (zero to first order in the effects' sizes; `interaction_ppm` is its max):
+one effect can change the operating point another acts at (a gain error moves the DAC word the INL bends).
+
+Shares. Seed 000's share is a source's figure over the whole loop's (460.679 / 539.281 = 85.424 %). Over
+several effects such ratios do not add up to 100 %, and one of them can exceed 100 %: a max of a sum is not
+the sum of the maxima, and an effect that does not bend the curve itself can still shrink another's (on
+paper-qmg, `pushpull_mismatch` and `duffing_drive` are pure gain changes alone, but with the INL present
+they move the word the DAC sees: at typical sizes on seed 000's 22 rates the INL's own 459.856 ppm is
+100.04 % of the joint 459.664 ppm). So a
+share here is of the *stack-up*: the sum of the max figures of the parts the joint curve is made of (base,
+each effect's own curve, the interaction), the worst case the joint could reach if every part peaked at the
+same rate with the same sign (the joint max never exceeds it). The shares of the base, of every effect and
+of the interaction are between 0 and 100 % and add to 100 %; with one dominant source the stack-up is close
+to the joint figure, and its share to seed 000's ratio.
 
 The gradient of the joint nonlinearity (max definition) with respect to every physical parameter of
 `gyrojax.PARAMETERS` that the device has and to every parameter of every effect is taken with `jax.grad`
@@ -49,7 +60,8 @@ class EffectContribution(eqx.Module):
 
     **Fields:** `name`; `alone_max_ppm`, `alone_rms_ppm` (the device with this effect only);
     `own_max_ppm`, `own_rms_ppm` (its own residual curve: alone minus base); `share_pct` (own max over the
-    joint max, in %, seed 000 §3's way); `own_residual_ppm` (the own curve per rate, ppm of full scale).
+    stack-up `NonlinearityBudget.stack_ppm`, in %: between 0 and 100, and with the base's and the
+    interaction's shares adding to 100); `own_residual_ppm` (the own curve per rate, ppm of full scale).
     """
 
     name: str = eqx.field(static=True)
@@ -71,6 +83,8 @@ class NonlinearityBudget(eqx.Module):
     - `joint_max_ppm`, `joint_rms_ppm`: with all of them.
     - `effects`: one `EffectContribution` per effect, in the order given.
     - `interaction_ppm`: max |joint - base - sum of own curves| / full scale, ppm.
+    - `stack_ppm` (property): base max + the own maxima + the interaction, ppm: what the shares are of;
+      `base_share_pct`, `interaction_share_pct` (properties): the base's and the interaction's shares.
     - `residual_ppm`: dict `"base"`, `"joint"` and each effect name (alone) -> residual per rate, ppm of full
       scale.
     - `gradient`: dict parameter name -> d(joint_max_ppm)/d(parameter), in ppm per unit of the parameter
@@ -92,16 +106,33 @@ class NonlinearityBudget(eqx.Module):
     relative_gradient: dict
     full_scale: str = eqx.field(static=True)
 
+    @property
+    def stack_ppm(self) -> float:
+        return self.base_max_ppm + sum(e.own_max_ppm for e in self.effects) + self.interaction_ppm
+
+    @property
+    def base_share_pct(self) -> float:
+        return _share(self.base_max_ppm, self.stack_ppm)
+
+    @property
+    def interaction_share_pct(self) -> float:
+        return _share(self.interaction_ppm, self.stack_ppm)
+
     def table(self) -> str:
-        """The budget as a plain-text table."""
+        """The budget as a plain-text table. Figures below 0.0005 ppm (round-off of the steady-state root
+        finds, about 1e-10 ppm, for an effect that does not bend the curve) read "< 0.001"."""
         lines = [f"{'source':<20} {'alone max':>10} {'own max':>9} {'own rms':>9} {'share':>8}",
-                 f"{'':<20} {'ppm':>10} {'ppm':>9} {'ppm':>9} {'% joint':>8}",
-                 f"{'base (no effect)':<20} {self.base_max_ppm:10.3f} {'':>9} {'':>9} {'':>8}"]
+                 f"{'':<20} {'ppm':>10} {'ppm':>9} {'ppm':>9} {'% stack':>8}",
+                 f"{'base (no effect)':<20} {_fmt(self.base_max_ppm, 10)} {_fmt(self.base_max_ppm, 9)} "
+                 f"{_fmt(self.base_rms_ppm, 9)} {_fmt(self.base_share_pct, 8)}"]
         for e in self.effects:
-            lines.append(f"{e.name:<20} {e.alone_max_ppm:10.3f} {e.own_max_ppm:9.3f} {e.own_rms_ppm:9.3f} "
-                         f"{e.share_pct:8.3f}")
-        lines.append(f"{'joint':<20} {self.joint_max_ppm:10.3f} {'':>9} {'':>9} {'100':>8}")
-        lines.append(f"interaction (joint - base - sum of own curves): {self.interaction_ppm:.3f} ppm")
+            lines.append(f"{e.name:<20} {_fmt(e.alone_max_ppm, 10)} {_fmt(e.own_max_ppm, 9)} "
+                         f"{_fmt(e.own_rms_ppm, 9)} {_fmt(e.share_pct, 8)}")
+        lines.append(f"{'interaction':<20} {'':>10} {_fmt(self.interaction_ppm, 9)} {'':>9} "
+                     f"{_fmt(self.interaction_share_pct, 8)}")
+        lines.append(f"{'joint':<20} {_fmt(self.joint_max_ppm, 10)} {'':>9} {_fmt(self.joint_rms_ppm, 9)} {'':>8}")
+        lines.append(f"shares are of the stack-up, base + own maxima + interaction = {self.stack_ppm:.3f} ppm "
+                     f"(the joint max, {self.joint_max_ppm:.3f} ppm, is at most that)")
         return "\n".join(lines)
 
     def to_json(self) -> dict:
@@ -114,9 +145,24 @@ class NonlinearityBudget(eqx.Module):
                          "own_max_ppm": e.own_max_ppm, "own_rms_ppm": e.own_rms_ppm, "share_pct": e.share_pct}
                         for e in self.effects],
             "interaction_ppm": self.interaction_ppm,
+            "stack_ppm": self.stack_ppm,
+            "base_share_pct": self.base_share_pct,
+            "interaction_share_pct": self.interaction_share_pct,
             "gradient_ppm_per_unit": self.gradient,
             "relative_gradient_ppm": self.relative_gradient,
         }
+
+
+def _share(ppm, stack_ppm):
+    """ppm as a percentage of the stack-up (NaN when the stack-up is zero)."""
+    return 100.0 * ppm / stack_ppm if stack_ppm > 0 else float("nan")
+
+
+def _fmt(value, width):
+    """A ppm or % figure to 3 decimals; below 0.0005 (round-off for a curve that does not bend) "< 0.001"."""
+    if not np.isfinite(value):
+        return f"{'n/a':>{width}}"
+    return f"{value:{width}.3f}" if abs(value) >= 5e-4 else f"{'< 0.001':>{width}}"
 
 
 def _split(model, effects, device):
@@ -242,13 +288,13 @@ def nonlinearity_budget(model, effects: Sequence | None = None, *, rates_dps=SEE
     res, mx, rms = (np.asarray(a) for a in _curves(base, effs, jnp.asarray(on), x_dps, rates, full_scale))
     own = res[1:n + 1] - res[0]
     joint_max = float(mx[n + 1])
-    contributions = []
-    for k, e in enumerate(effs):
-        own_max = float(np.max(np.abs(own[k])))
-        contributions.append(EffectContribution(
-            e.name, float(mx[1 + k]), float(rms[1 + k]), own_max, float(np.sqrt(np.mean(own[k] ** 2))),
-            100.0 * own_max / joint_max if joint_max > 0 else float("nan"), own[k]))
     interaction = float(np.max(np.abs(res[n + 1] - res[0] - own.sum(axis=0))))
+    own_max = [float(np.max(np.abs(own[k]))) for k in range(n)]
+    stack = float(mx[0]) + sum(own_max) + interaction  # = NonlinearityBudget.stack_ppm
+    contributions = tuple(
+        EffectContribution(e.name, float(mx[1 + k]), float(rms[1 + k]), own_max[k],
+                           float(np.sqrt(np.mean(own[k] ** 2))), _share(own_max[k], stack), own[k])
+        for k, e in enumerate(effs))
     residual = {"base": res[0], "joint": res[n + 1]} | {e.name: res[1 + k] for k, e in enumerate(effs)}
     gradient, relative = {}, {}
     if gradients:
@@ -266,5 +312,5 @@ def nonlinearity_budget(model, effects: Sequence | None = None, *, rates_dps=SEE
                     continue
                 val = np.asarray(val)
                 gradient[f"{e.name}.{f}"] = float(val) if val.ndim == 0 else val.tolist()
-    return NonlinearityBudget(x, float(mx[0]), float(rms[0]), joint_max, float(rms[n + 1]), tuple(contributions),
+    return NonlinearityBudget(x, float(mx[0]), float(rms[0]), joint_max, float(rms[n + 1]), contributions,
                               interaction, residual, gradient, relative, full_scale)
