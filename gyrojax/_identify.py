@@ -273,6 +273,8 @@ class Fit(eqx.Module):
                     error = (f"+/- {se_scaled:.2g} LSB/(deg/s) (the fit's {se:.2g} x sqrt(chi2_red): the model "
                              "does not describe the data)")
                 head = "ok" if status == "ok" else "MODEL REJECTED"
+                if status == "model rejected" and not p[i] < self.reject_alpha:
+                    head += " (implausible values, see the warning)"
                 lines.append(f"  {d}: {head}: {chi}, SF {sf:.6f} {error}; {message}")
             lines += [f"      warning: {w}" for w in self.warnings[i]]
         held = [e.label for e in self.entries if not e.shared
