@@ -20,6 +20,7 @@ from ._lot import ProcessSpread, as_arrays, make_lot
 from ._noise import DAC_VOLTMETER_SIGMA_V, RateNoise
 from ._observe import dac_points, rate_table_points, vcf_dynamic_points, vcf_static_points
 from ._process import WaferProcess
+from ._progress import as_progress
 from ._simulate.tiers import AbstractTier, Steady
 from ._solution import RESULTS
 from ._sweeps import Protocol
@@ -136,7 +137,7 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
                    noise_free: bool = False, seed: int = 0,
                    spread: ProcessSpread | WaferProcess = ProcessSpread(),
                    device_prefix: str | None = None, protocol: Protocol = Protocol(),
-                   voltmeter_sigma_v: float = DAC_VOLTMETER_SIGMA_V) -> Table:
+                   voltmeter_sigma_v: float = DAC_VOLTMETER_SIGMA_V, progress=True) -> Table:
     """Simulate a measurement campaign and return it in the tidy data format (docs/data_format.md).
 
     **Arguments:**
@@ -161,6 +162,8 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     - `device_prefix`: device ids are `{prefix}-{i:03d}` (default the device's name).
     - `protocol`: inputs, timing and warm-up of each sweep kind (`gyrojax.Protocol`).
     - `voltmeter_sigma_v`: reading noise of the DAC sweep's AC voltmeter, V.
+    - `progress`: `True` (default) reports each sweep on standard error, `False` is silent, a callable gets
+      the messages (see `gyrojax.identify`).
 
     **Returns:** a `gyrojax.Table` with `output_sigma` (the standard uncertainty of each point about its
     run's constant bias), `n_samples`, `temperature_c` (die temperature at the middle of the dwell), `time_s`
@@ -197,7 +200,15 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
         raise ValueError(f"a vcf_dynamic sweep needs a virtual-Coriolis electrode; {gyro.name!r} has "
                          "vcf_electrode.force_per_volt2 = 0.")
 
+    say = as_progress(progress, "gyrojax.simulate_table")
     lot = campaign_lot(gyro, devices=devices, seed=seed, spread=spread)
+    structure = jax.tree.structure(eqx.filter(lot, eqx.is_array))
+
+    def announce(sweep, k):
+        say(f"sweep {k}/{len(sweeps)}: {sweep}, {devices} device(s) x {runs} run(s) x "
+            f"{protocol.n_points(sweep)} points")
+        say.compiling(("simulate", sweep, structure, devices, runs, protocol.n_points(sweep), tier),
+                      f"the {sweep} measurement model")
     prefix = device_prefix or gyro.name
     names = np.asarray([f"{prefix}-{i:03d}" for i in range(devices)])
     shape_runs = (devices, runs)
@@ -218,6 +229,7 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     if "rate_table" in sweeps or (not noise_free and {"vcf_static", "vcf_dynamic"} & set(sweeps)):
         # The rate-table sweep: an output, and each device's scale factor for the noise in LSB.
         rate_tier = tier if "rate_table" in sweeps else CAMPAIGN_TIER
+        announce("rate_table", sweeps.index("rate_table") + 1 if "rate_table" in sweeps else 0)
         rate_settled = _lot_rate_table(lot, jnp.asarray(rates_run), jnp.asarray(temperatures("rate_table")),
                                        rate_tier, jnp.asarray(times("rate_table")))
         _raise_unsettled(rate_settled.result, "rate-table" if "rate_table" in sweeps
@@ -226,7 +238,9 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
                    else np.abs(_slope(rates_run[0], np.asarray(rate_settled.rate[:, 0], dtype=float))))
 
     columns = []
-    for sweep in sweeps:
+    for k, sweep in enumerate(sweeps, 1):
+        if sweep != "rate_table":
+            announce(sweep, k)
         temps = temperatures(sweep)
         rng = _rng(seed, sweep)
         n = protocol.n_points(sweep)

@@ -36,6 +36,7 @@ from ._fitdata import FitData, fit_data
 from ._identify import Fit, _to_model, identify
 from ._parameters import DEFAULT_FREE, Model, zero_effect
 from ._probes import PROBES, design, score_columns
+from ._progress import as_progress
 
 
 # ASSUMPTION: each effect's `typical(1.0)` is a realistic size with a provenance; a device more than 20 times
@@ -537,7 +538,7 @@ def _verdict(comparison, steps) -> str:
 def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alpha: float = 0.01,
              max_effects: int = 4, ambiguity: float = 0.95, min_typical_chi2: float = 1.0,
              max_typical_multiple: float = MAX_TYPICAL_MULTIPLE, probes=PROBES, starts: int = 1,
-             fit: Fit | None = None, progress=None) -> Diagnosis:
+             fit: Fit | None = None, progress=True) -> Diagnosis:
     r"""Compare `model` with `data`, rank every candidate effect, add the significant ones one at a time, and
     say where what is left lives.
 
@@ -559,7 +560,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     - `probes`: the generic shapes scored beside the candidates (`gyrojax.PROBES`).
     - `fit`: a `gyrojax.Fit` of this data (from `identify`, or `gyrojax.load_fit`) to use as the baseline
       instead of fitting it again; its model replaces `model`, and its parameters are the refits' start.
-    - `progress`: optional callable taking a message, called before each (slow) fit.
+    - `progress`: `True` (default) reports each step on standard error (fits, compiles, what was confirmed),
+      `False` is silent, a callable receives the messages.
 
     Guards before a candidate is confirmed: its implied size is plausible; no probe explains the misfit it is
     credited with while it adds nothing beyond that probe; the refit passes the likelihood-ratio test and
@@ -596,14 +598,16 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     if not candidates:
         raise ValueError("diagnose needs at least one candidate effect not already in the model.")
     full = Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates))
-    say = progress or (lambda msg: None)
+    say = as_progress(progress, "gyrojax.diagnose")
 
     def fit_with(selected, evaluate_only=False):
         held = tuple(c for c in candidates if c not in selected)
         return identify(full, data, free=free, hold=held, starts=starts, evaluate_only=evaluate_only)
 
     if fit is None:
-        say("fitting the baseline")
+        say(f"fitting the baseline: {len(data.devices)} device(s), {data.num_points()} points, every one of "
+            f"{len(candidates)} candidate effects held at zero")
+        say.compiling(("identify", full_key(full, data)), "the lot's fit with every candidate")
         fit = fit_with(())
     else:  # the saved fit is the baseline: evaluated where it ended, with the candidates at zero
         say("evaluating the given baseline fit with every candidate at zero")
@@ -645,7 +649,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
             others = [c for c in significant if c.effect in group]
             seps = {_separating_sweep(best.fingerprint, c.fingerprint, data, ambiguity) for c in others}
             separated = seps.pop() if len(seps) == 1 else None
-        say(f"refitting with {best.effect}")
+        say(f"refitting with {best.effect} (step {len(selected) + 1}; score S = {best.statistic:.4g}, "
+            f"p = {best.p_value:.2g})")
         new = fit_with(tuple(selected) + (best.effect,))
         lr = fit.chi2_total - new.chi2_total
         df = int(np.sum(new.free)) - int(np.sum(fit.free))
@@ -693,9 +698,17 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     baseline_discrepancy = _with_library(baseline_discrepancy, ranking0, rejected, max_typical_multiple)
     discrepancy = _with_library(discrepancy, final_scores, rejected, max_typical_multiple)
     comparisons = tuple(compare(f, alpha=alpha) for f in fits)
+    say(f"done: {_verdict(comparisons[-1], steps)}; selected {', '.join(selected) or 'none'}")
     return Diagnosis(baseline, fit, tuple(fits), ranking0, tuple(steps), tuple(ambiguous), untestable,
                      tuple(rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2, comparisons,
                      baseline_discrepancy, discrepancy, _verdict(comparisons[-1], steps))
+
+
+def full_key(model: Model, data: FitData):
+    """What decides whether a fit of `model` to `data` compiles anew: the model's structure and the data's
+    shapes."""
+    shapes = tuple((s, tuple(np.shape(data.blocks[s].inputs))) for s in data.sweeps)
+    return jax.tree.structure(eqx.filter(model, eqx.is_array)), shapes
 
 
 def _from_fit(fit: Fit, data: FitData) -> Model:

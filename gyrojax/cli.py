@@ -124,7 +124,7 @@ def _cmd_simulate(args):
         gyro = gj.add_effect(gyro, name, scale)
     table = simulate_table(gyro, devices=args.devices, runs=args.runs, sweeps=args.sweeps,
                            tier=tiers[args.tier], noise_free=args.noise_free, seed=args.seed,
-                           protocol=gj.Protocol(order=args.order))
+                           protocol=gj.Protocol(order=args.order), progress=not args.quiet)
     write_table(table, args.out)
     print(f"wrote {len(table)} points ({args.devices} device(s) x {args.runs} run(s), sweeps "
           f"{', '.join(args.sweeps)}, tier {args.tier}) to {args.out}")
@@ -215,7 +215,8 @@ def _cmd_compensate(args):
 
     _check_outputs(("--json", args.json, False))
     _load_effects(args)
-    result = compensate(read_table(args.data), method=args.method, train_runs=args.train_runs)
+    result = compensate(read_table(args.data), method=args.method, train_runs=args.train_runs,
+                        progress=not args.quiet)
     undetermined = 0
     print(f"{'device':>16} {'run':>4} {'use':>8}  worst nonlinearity before -> after (ppm)")
     for r in result.runs:
@@ -262,8 +263,7 @@ def _cmd_diagnose(args):
             fit = load_fit(args.fit)
         for w in caught:
             print(f"gyrojax diagnose: warning: {w.message}", file=sys.stderr)
-    diag = diagnose(table, args.model, alpha=args.alpha, fit=fit,
-                    progress=None if args.quiet else (lambda m: print(f"... {m}", flush=True)))
+    diag = diagnose(table, args.model, alpha=args.alpha, fit=fit, progress=not args.quiet)
     print(diag.summary())
     if args.report:
         with atomic_directory(args.report) as folder:  # the report folder appears whole or not at all
@@ -316,7 +316,7 @@ def _cmd_demo(args):
 
     _check_outputs(("--out", args.out, True))
     with atomic_directory(args.out) as folder:  # the demo folder appears whole or not at all
-        run_demo(folder, full_tier=args.full and not args.no_full,
+        run_demo(folder, full_tier=args.full and not args.no_full, progress=not args.quiet,
                  log=lambda m: print(m.replace(folder, args.out), flush=True))
     return EXIT_OK
 
@@ -355,6 +355,7 @@ def build_parser():
     sim.add_argument("--effect", type=_parse_effect, action="append", default=[], metavar="NAME[=SCALE]",
                      help="add a physical effect at its typical size times SCALE (repeatable); e.g. dac_inl=2")
     sim.add_argument("--noise-free", action="store_true", help="no measurement noise, no turn-on bias")
+    sim.add_argument("--quiet", action="store_true", help="no progress messages (on standard error)")
     sim.add_argument("--order", choices=("listed", "reversed", "alternating", "shuffled"), default="listed",
                      help="the order the points of each run are applied in: listed (ascending, default), reversed, "
                           "alternating (up in even runs, down in odd ones) or shuffled; an input swept one way ties it "
@@ -382,6 +383,7 @@ def build_parser():
     comp.add_argument("--train-runs", type=_run_list, default=None, metavar="LIST",
                       help="comma-separated run ids to fit on, e.g. 0,1 (default: each device's first run)")
     comp.add_argument("--json", help="write the report as JSON here")
+    comp.add_argument("--quiet", action="store_true", help="no progress messages (on standard error)")
     _effects_module_option(comp)
     comp.set_defaults(func=_cmd_compensate)
 
@@ -400,7 +402,7 @@ def build_parser():
                            "gyrojax before: it is replaced as a whole)")
     diag.add_argument("--fit", metavar="FIT", help="a fit of this data saved by `gyrojax identify --save`: the "
                                                   "baseline, instead of fitting it again (its preset replaces --model)")
-    diag.add_argument("--quiet", action="store_true", help="no progress messages")
+    diag.add_argument("--quiet", action="store_true", help="no progress messages (on standard error)")
     _effects_module_option(diag)
     diag.set_defaults(func=_cmd_diagnose)
 
@@ -433,6 +435,7 @@ def build_parser():
     demo.add_argument("--full", action="store_true",
                       help="also run the (slow, ~1 min) full-waveform tier in the three-tier comparison")
     demo.add_argument("--no-full", action="store_true", help="skip the full-waveform tier (the default)")
+    demo.add_argument("--quiet", action="store_true", help="only the steps and their results, no progress messages")
     demo.set_defaults(func=_cmd_demo)
     return parser
 

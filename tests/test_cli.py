@@ -2,6 +2,7 @@
 n/a instead of crashes, writes through links with the usual modes, user effects (--effects-module)."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -145,22 +146,19 @@ def test_metrics_on_constant_outputs_prints_na_and_exits_1(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("method", ["polynomial", "composite"])
-def test_compensate_with_a_dead_held_out_run_prints_na(tmp_path, capsys, method):
+def test_compensate_refuses_a_dead_run_by_name(tmp_path, capsys, method):
+    """A run whose outputs do not change with the rate has no scale factor to compensate: refused before any
+    fit (exit 2), naming the file, row, device and run, rather than reporting a compensated figure from
+    round-off; nothing is written."""
     rows = [("A", 0, "rate_table", x, x * 13771.0 + 1e-3 * x**3, 4000.0 + 1e-4 * x) for x in RATES]
     rows += [("A", 1, "rate_table", x, 7.0, 4000.0) for x in RATES]  # a dead run: nothing changes
     data = _write_csv(tmp_path / "dead.csv", rows)
-    assert main(["compensate", str(data), "--method", method]) == 1
-    out, err = capsys.readouterr()
-    assert ("held-out  n/a (the outputs do not change with the input) -> n/a (the compensated rates do not change "
-            "with the input)") in out
-    assert "1 run(s) gave no nonlinearity" in err
     js = tmp_path / "c.json"
-    rc = main(["compensate", str(data), "--method", method, "--json", str(js)])
+    assert main(["compensate", str(data), "--method", method, "--json", str(js)]) == 2
     err = capsys.readouterr().err
-    if js.exists():  # valid JSON or nothing (a NaN in the result is refused, naming the file and the key)
-        json.loads(js.read_text())
-    else:
-        assert rc == 1 and f"{js}: not written: runs[1]." in err
+    assert re.search(r"dead.csv: data row \d+ \(line \d+\), column 'output': device 'A', run 1: the rate_table "
+                     r"outputs are all 7.0, the same at every rate", err)
+    assert "Traceback" not in err and not js.exists()
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -14,6 +14,7 @@ from .._metrics import (
     fit_scale_factor,
     repeatability,
 )
+from .._progress import as_progress
 from .base import AbstractCompensation, AbstractCompensator
 from .composite import CompositeCompensator
 from .model import ModelCompensator
@@ -131,7 +132,7 @@ def _worst(values):
 
 
 def compensate(table: Table, *, method: str | AbstractCompensator = "composite", train_runs=None,
-               full_scale: str = "half_range") -> CompensationResult:
+               full_scale: str = "half_range", progress=True) -> CompensationResult:
     """Fit a scale-factor compensator on each device's training runs and judge it on its held-out runs.
 
     Only the `rate_table` rows are used. For each device the compensator is fitted on the points of its
@@ -151,6 +152,8 @@ def compensate(table: Table, *, method: str | AbstractCompensator = "composite",
     - `train_runs`: run ids to fit on, the same for every device (default: each device's first run, as a
       factory calibration followed by use). Every device must have them.
     - `full_scale`: nonlinearity full-scale convention of [`gyrojax.fit_scale_factor`][].
+    - `progress`: `True` (default) reports each device on standard error, `False` is silent, a callable gets
+      the messages.
 
     **Returns:** a [`gyrojax.CompensationResult`][]. A device whose fit does not converge (an iterative
     method, `model`) does not stop the others: its record says so (`converged`, `message`, no `_after`
@@ -198,7 +201,10 @@ def compensate(table: Table, *, method: str | AbstractCompensator = "composite",
     train = _resolve_train_runs(train_runs, devices, runs_of)
 
     run_records, device_records, solutions = [], [], {}
-    for dev in devices:
+    say = as_progress(progress, "gyrojax.compensate")
+    for k, dev in enumerate(devices, 1):
+        say(f"device {k}/{len(devices)} ({dev}): fitting the {compensator.name} compensator on runs "
+            f"{', '.join(map(str, train[dev]))}")
         pts = rate_points(table, dev)
         is_train = np.isin(pts.run, train[dev])
         try:
