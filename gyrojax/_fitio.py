@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._fitdata import FitData, SweepBlock
-from ._identify import Fit, Unidentifiable, _batched
+from ._identify import Fit, Unidentifiable, _batched, _p_value
 from ._io import atomic_write_bytes
 from ._parameters import Entry, Model, zero_effect
 
@@ -134,15 +134,20 @@ def _skeleton_fit(header: dict, model: Model) -> Fit:
                status=("unknown",) * n if v1 else tuple(header["status"]),
                warnings=((_V1_NOTE,),) * n if v1 else tuple(tuple(w) for w in header["warnings"]),
                reject_alpha=float("nan") if v1 else float(header["reject_alpha"]),
-               stderr_scaled=new, lot_stderr_scaled=new, scale_factor_stderr_scaled=new, noise_dof=new)
+               stderr_scaled=new, lot_stderr_scaled=new, scale_factor_stderr_scaled=new, noise_dof=new,
+               p_value=new, p_value_total=new)
 
 
 def _from_v1(fit: Fit) -> Fit:
-    """A version 1 fit with the arrays version 2 added: unscaled errors (nothing was tested), and the noise
-    taken as given (a version 1 fit of data without output_sigma had its covariance scaled by chi2_red)."""
+    """A version 1 fit with the arrays version 2 added: unscaled errors (nothing was tested), the noise taken
+    as given and the chi2 test's p-values (a version 1 fit of data without output_sigma had unit weights and
+    its covariance scaled by chi2_red: its p-values mean nothing, which its status "unknown" says)."""
+    inf = np.full(len(fit.devices), np.inf)
+    p = _p_value(np.asarray(fit.chi2), np.asarray(fit.dof), inf)
+    p_total = _p_value(np.asarray(fit.chi2_total), np.asarray(fit.dof_total), np.asarray(np.inf))
     return dataclasses.replace(fit, stderr_scaled=fit.stderr, lot_stderr_scaled=fit.lot_stderr,
-                               scale_factor_stderr_scaled=fit.scale_factor_stderr,
-                               noise_dof=jnp.full(len(fit.devices), jnp.inf))
+                               scale_factor_stderr_scaled=fit.scale_factor_stderr, noise_dof=jnp.asarray(inf),
+                               p_value=jnp.asarray(p), p_value_total=jnp.asarray(p_total))
 
 
 def _header(fit: Fit, preset_name: str) -> dict:
