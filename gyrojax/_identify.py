@@ -15,7 +15,8 @@ What the fit reports is checked before it is called a result (`Fit.status`, `Fit
 - **misfit**: the chi2 of each device is tested (`reject_alpha`); a rejected model keeps its fitted standard
   errors and gets them scaled by sqrt(chi2_red) too (`stderr_scaled`).
 - **noise**: data without `output_sigma` get their noise estimated per sweep from a first fit's residuals
-  (`_noise_scales`), then are re-weighted and fitted again, so that the chi2 tests the model.
+  (`_noise_scales`), then are re-weighted and fitted again, so that the chi2 tests the model (against its
+  Monte Carlo null distribution, since the estimate shares the residuals).
 - **plausibility**: fitted physical parameters far outside `Parameter.plausible` of their design values are
   flagged with a likely cause; outputs absurdly far from the rest of their run, and outputs whose slope has the
   opposite sign of the model's, are refused before fitting (`ValueError`: no fit could mean anything).
@@ -579,8 +580,9 @@ def _check_absurd_outputs(data: FitData):
             if idx.size < 2:
                 continue
             mag = np.abs(y[d, k, idx])
+            top = np.argsort(mag)[-2:]  # the largest other than the largest is the second largest
             for j, i in enumerate(idx):
-                others = np.max(np.delete(mag, j))
+                others = mag[top[0]] if j == top[1] else mag[top[1]]
                 if others > 0 and mag[j] > _ABSURD_RATIO * others:
                     bad.append(f"sweep {s!r}, device {data.devices[d]!r}, run {runs[d][k]}, input {x[d, k, i]:.6g}: "
                                f"output {y[d, k, i]:.6g} is {mag[j] / others:.2g} times the largest other output "
