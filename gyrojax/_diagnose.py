@@ -600,9 +600,12 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     full = Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates))
     say = as_progress(progress, "gyrojax.diagnose")
 
+    weights = {"data": data, "estimate_noise": None}
+
     def fit_with(selected, evaluate_only=False):
         held = tuple(c for c in candidates if c not in selected)
-        return identify(full, data, free=free, hold=held, starts=starts, evaluate_only=evaluate_only)
+        return identify(full, weights["data"], free=free, hold=held, starts=starts, evaluate_only=evaluate_only,
+                        estimate_noise=weights["estimate_noise"])
 
     if fit is None:
         say(f"fitting the baseline: {len(data.devices)} device(s), {data.num_points()} points, every one of "
@@ -613,6 +616,11 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         say("evaluating the given baseline fit with every candidate at zero")
         fit = fit_with((), evaluate_only=True)
     baseline = fit
+    if not data.weighted:
+        # The noise was estimated from the baseline's residuals: every refit keeps those weights, so that the
+        # likelihood-ratio tests compare fits of the same weighted data.
+        weights.update(data=baseline.data, estimate_noise=False)
+        say("the data give no output_sigma: every fit uses the noise estimated from the baseline's residuals")
     fits, steps, ambiguous, rejected = [fit], [], [], []
     ranking0, untestable = None, ()
     selected: list[str] = []
@@ -665,7 +673,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
                 f"noise does, so the score implies ~{best.implied_multiple:.3g}x its typical size"),
                 kind="not determined by the data"))
             continue
-        if not new.all_converged:
+        if "not converged" in new.status:
             rejected.append(Rejection(best.effect, f"the refit did not converge: {new.result_message}",
                                       kind="refit did not converge"))
             continue

@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import lineax as lx
 import numpy as np
 import optimistix as optx
-import scipy.stats
+from jax.scipy.special import betainc, gammaincc
 
 from ._dataset import Table
 from ._fitdata import BIASED_SWEEPS, FitData, fit_data
@@ -41,6 +41,7 @@ from ._gyroscope import Gyroscope
 from ._linsolve import PivotedLU
 from ._lm import LevenbergMarquardt
 from ._observe import rate_table_points
+from ._progress import as_progress
 from ._parameters import (
     DEFAULT_FREE,
     PARAMETERS,
@@ -300,9 +301,9 @@ def _p_value(chi2, dof, noise_dof):
         if d <= 0 or math.isnan(c):
             continue
         if math.isinf(v):
-            out[i] = scipy.stats.chi2.sf(c, d)
-        elif v > 0:
-            out[i] = scipy.stats.f.sf(c / d, d, v)
+            out[i] = float(gammaincc(d / 2.0, max(c, 0.0) / 2.0))
+        elif v > 0:  # the F distribution's survival: I_{v / (v + d x)}(v / 2, d / 2), x = c / d
+            out[i] = float(betainc(v / 2.0, d / 2.0, v / (v + max(c, 0.0))))
     return out
 
 
@@ -1117,7 +1118,7 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
              evaluate_only: bool = False, lot_solve: str = "vmap", shard: bool | None = None,
              lot_chunk: int | None | str = "auto", restart_runoffs: bool = True,
              retry_solver: str | None = "gauss-newton", decrement_tol: float = 1e-6, reject_alpha: float = 0.01,
-             estimate_noise: bool | None = None) -> Fit:
+             estimate_noise: bool | None = None, progress=True) -> Fit:
     r"""Fit the free parameters of `model` to every sweep in `data`, per device (vmapped) or jointly.
 
     **Arguments:**
@@ -1178,6 +1179,9 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
       `False` takes the data's sigmas as the noise (unit weights for a table without `output_sigma`, so the
       chi2 then tests nothing; e.g. for `fit.data` of an earlier fit, whose sigmas were estimated already).
 
+    - `progress`: `True` (default) reports the fit's steps on standard error (what it fits, when it compiles,
+      the statuses at the end, the elapsed time), `False` is silent, a callable receives the messages.
+
     **Returns:** a `Fit`. It never raises on non-convergence: read `fit.status` (or `fit.converged`, or call
     `fit.check()`). A scale factor the data do not determine is NaN, with the reason in `fit.warnings`.
 
@@ -1209,13 +1213,24 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
                    evaluate_only=evaluate_only, lot_solve=lot_solve, shard=shard, lot_chunk=lot_chunk,
                    restart_runoffs=restart_runoffs, retry_solver=retry_solver, decrement_tol=decrement_tol,
                    reject_alpha=reject_alpha)
+    say = as_progress(progress, "gyrojax.identify")
+    say(f"{'evaluating' if evaluate_only else 'fitting'} {len(data.devices)} device(s), {data.num_points()} points "
+        f"({', '.join(data.sweeps)})")
+    say.compiling(("identify", jax.tree.structure(eqx.filter(model, eqx.is_array)), tuple(free), tuple(shared),
+                   tuple((s, tuple(np.shape(data.blocks[s].inputs))) for s in data.sweeps)), "the fit")
     if not (not data.weighted if estimate_noise is None else estimate_noise):
-        return _identify(model, data, noise=None, **options)
-    # The noise from a first fit's residuals; then the points weighted by it and fitted again. The second fit
-    # has the first's shapes: it reuses every compiled function.
-    first = _identify(model, data, noise=None, **options)
-    kappa, noise = _estimated_noise(first, seed)
-    return _identify(model, _reweighted(data, kappa), noise=noise, **options)
+        fit = _identify(model, data, noise=None, **options)
+    else:
+        # The noise from a first fit's residuals; then the points weighted by it and fitted again. The second
+        # fit has the first's shapes: it reuses every compiled function.
+        first = _identify(model, data, noise=None, **options)
+        say("estimating the noise from the first fit's residuals (the data give no output_sigma); fitting again "
+            "with those weights")
+        kappa, noise = _estimated_noise(first, seed)
+        fit = _identify(model, _reweighted(data, kappa), noise=noise, **options)
+    counts = {st: fit.status.count(st) for st in dict.fromkeys(fit.status)}
+    say("done: " + ", ".join(f"{k} device(s) {st}" for st, k in counts.items()))
+    return fit
 
 
 def _identify(model, data, *, free, shared, priors, solver, starts, start_spread, seed, rtol, atol, max_steps,

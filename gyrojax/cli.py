@@ -8,6 +8,13 @@ Exit codes:
   and the reason). Files written before the failure are complete.
 - 2: a usage or data error (bad argument, unreadable or invalid file, an output path that cannot be written),
   reported without a traceback; output paths are checked before any data is read or any work is done.
+- 3 (`identify`): fitted, but the model does not describe the data (its chi2 is too large for the noise, or a
+  fitted parameter is implausible); the standard errors are also given scaled by sqrt(chi2_red).
+- 4 (`identify`): the data do not determine the scale factor (it is printed as NaN, with the reason).
+- 5 (`identify`): a fit file that predates these checks (status unknown).
+  When devices differ, the worst status decides: not converged (1), not determined (4), unknown (5), model
+  rejected (3). `diagnose` exits 0 whatever its verdict (explained, partly explained, unexplained: the
+  diagnosis itself succeeded), 1 if its final fit did not converge.
 - 128 + N: stopped by signal N (130 for SIGINT, 143 for SIGTERM). The signal is turned into an exception, so
   the file being written is discarded (its temporary file removed) and the previous version is kept; it is
   acted on when the running computation returns to Python. A second signal during that cleanup is ignored.
@@ -27,7 +34,8 @@ EXIT_SIGNAL_BASE = 128
 
 _EXIT_CODES = """exit codes: 0 success; 1 a computation failed, or a number the data should give could not be
 determined (printed as n/a with the reason); 2 a usage or data error (no traceback; output paths are checked
-before any work); 128+N stopped by signal N (130 SIGINT, 143 SIGTERM; the file being written is discarded, the
+before any work); identify: 3 fitted but the model does not describe the data, 4 the scale factor is not
+determined by the data, 5 a fit file without status; 128+N stopped by signal N (130 SIGINT, 143 SIGTERM; the file being written is discarded, the
 previous one kept)."""
 
 
@@ -272,8 +280,10 @@ def _cmd_diagnose(args):
     if args.json:
         _write_json(diag.to_json(), args.json)
         print(f"wrote {args.json}")
-    if not diag.final.all_converged:
-        print(f"gyrojax diagnose: the final fit did not converge: {diag.final.result_message}", file=sys.stderr)
+    if "not converged" in diag.final.status:
+        bad = [f"{d}: {m}" for d, m, st in zip(diag.final.devices, diag.final.result_message, diag.final.status)
+               if st == "not converged"]
+        print(f"gyrojax diagnose: the final fit did not converge: {'; '.join(bad)}", file=sys.stderr)
         return EXIT_FAILED
     return EXIT_OK
 
@@ -307,8 +317,11 @@ def _cmd_identify(args):
     if args.save:
         save_fit(fit, args.save)
         print(f"wrote {args.save}")
-    fit.check()  # a RuntimeError naming the devices and what to try: exit 1
-    return EXIT_OK
+    bad = [f"{d}: {st}" for d, st in zip(fit.devices, fit.status) if st != "ok"]
+    if bad:
+        print("gyrojax identify: " + "; ".join(bad) + " (see the warnings above; the files written say so too)",
+              file=sys.stderr)
+    return fit.exit_status
 
 
 def _cmd_demo(args):

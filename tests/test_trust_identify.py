@@ -434,3 +434,27 @@ def test_report_gives_status_and_warnings_and_keeps_its_keys(cubic):
     assert d["parameters"]["q_y"]["note"] == HELD_LABEL and d["parameters"]["q_y"]["stderr"] is None
     assert d["scale_factor_stderr_scaled"] == float(cubic.scale_factor_stderr_scaled[0])
     assert report["exit_status"] == 3
+
+
+@slow
+def test_the_cli_exit_code_says_whether_the_result_is_a_measurement(columns, tmp_path, capsys):
+    """`gyrojax identify` exits 0 only when every device is "ok": 3 when the model is rejected (a cubic the
+    preset lacks), 4 when the scale factor is not determined (one rate-table point); the JSON and the saved fit
+    carry the status either way, and stderr names the device."""
+    from gyrojax.cli import main
+
+    cubic = tmp_path / "cubic.csv"
+    gj.write_table(_table(columns, "cubic", output=lambda c: c["output"] + CUBIC * c["input"] ** 3), cubic)
+    out, saved = tmp_path / "cubic.json", tmp_path / "cubic.fit"
+    assert main(["identify", str(cubic), "--json", str(out), "--save", str(saved)]) == 3
+    err = capsys.readouterr().err
+    assert "gyrojax identify: paper-qmg-000: model rejected" in err
+    assert json.loads(out.read_text())["devices"][0]["status"] == "model rejected"
+    with pytest.warns(UserWarning, match="not 'ok'"):
+        gj.load_fit(saved)
+    one = tmp_path / "one.csv"
+    rows = {k: v[:1] for k, v in columns.items()}
+    gj.write_table(gj.Table(rows, source="one"), one)
+    assert main(["identify", str(one)]) == 4
+    captured = capsys.readouterr()
+    assert "SF NOT DETERMINED" in captured.out and "not determined" in captured.err
