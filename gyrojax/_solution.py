@@ -15,3 +15,7 @@ class RESULTS(eqxi.Enumeration):
     solver_failed = ("The ODE solver failed (step size collapsed or non-finite state). The loops may be "
                      "unstable for these parameters; check the loop gains and the stimulus amplitude.")
     nonfinite = "The result is NaN or infinite. Check the parameters for zeros and the stimulus for overload."
+
+
+# Shown as `gyrojax.RESULTS<message>` (the public name), not by the private module that defines it.
+RESULTS.__module__ = "gyrojax"

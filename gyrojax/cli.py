@@ -139,6 +139,10 @@ def _cmd_simulate(args):
     return EXIT_OK
 
 
+# The scale factor's unit per sweep kind: output unit per input unit (the data format's units).
+_SF_UNIT = {"rate_table": "LSB/(deg/s)", "vcf_static": "LSB/V", "dac": "V/LSB"}
+
+
 def _cmd_metrics(args):
     from ._dataset import read_table
     from ._metrics import metrics_report
@@ -154,7 +158,8 @@ def _cmd_metrics(args):
             continue
         if p["scale_factor"] is None or p["nonlinearity_max_ppm"] is None:
             undetermined += 1
-        sf = _na(p["scale_factor"], ".6g", why.get("scale_factor"))
+        unit = _SF_UNIT.get(p["sweep"], "")
+        sf = _na(p["scale_factor"], ".6g", why.get("scale_factor"), f" {unit}" if unit else "")
         if p["nonlinearity_max_ppm"] is None:
             print(f"{head} SF {sf}  NL n/a ({why.get('nonlinearity_max_ppm', 'not determined')})")
         else:

@@ -63,16 +63,23 @@ class Settled(eqx.Module):
     result: RESULTS
     num_steps: jax.Array
 
+    @property
+    def status(self) -> str:
+        """In words: "settled" when every point settled, else the reasons (eager use only)."""
+        import numpy as np
+
+        codes = np.atleast_1d(np.asarray(self.result._value))
+        bad = codes != RESULTS.successful._value
+        if not bad.any():
+            return "settled"
+        reasons = sorted({RESULTS._index_to_message[int(c)] for c in codes[bad]})
+        return f"{int(bad.sum())} of {codes.size} point(s) did not settle: " + " / ".join(reasons)
+
     def check(self):
         """Raise a RuntimeError with the reason if any point did not settle (eager use only; under jit
         inspect `result`)."""
-        import numpy as np
-
-        codes = np.asarray(self.result._value)
-        bad = codes != RESULTS.successful._value
-        if bad.any():
-            reasons = sorted({RESULTS._index_to_message[int(c)] for c in codes[bad]})
-            raise RuntimeError(f"{int(bad.sum())} of {codes.size} point(s) did not settle: " + " / ".join(reasons))
+        if self.status != "settled":
+            raise RuntimeError(self.status)
         return self
 
 
