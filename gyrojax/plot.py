@@ -75,9 +75,18 @@ def ranking(scores, *, alpha: float = 0.01, ax=None):
     cut = alpha / max(len(scores), 1)
     strength = [min(-math.log10(max(c.p_value, 1e-300)), 300.0) for c in testable]
     colours = [PALETTE[1] if c.p_value < cut else PALETTE[0] for c in testable]
-    ax.barh([c.effect for c in testable][::-1], strength[::-1], color=colours[::-1])
+    bars = ax.barh([c.effect for c in testable][::-1], strength[::-1], color=colours[::-1])
     ax.axvline(-math.log10(cut), color="k", ls="--", lw=0.8, label=f"significant: p < {alpha:g} / {len(scores)}")
-    ax.set_xlabel("-log10 p of the score test (no refit)")
+    # p underflows for strong candidates: the score S and the size it implies tell them apart
+    for bar, c in zip(bars, testable[::-1]):
+        size = getattr(c, "implied_multiple", math.inf)
+        text = f"S = {c.statistic:.3g}" + (f", ~{size:.3g}x typical" if math.isfinite(size) else "")
+        inside = bar.get_width() > 0.5 * ax.get_xlim()[1]
+        ax.annotate(text, (bar.get_width(), bar.get_y() + bar.get_height() / 2), xytext=(-4 if inside else 4, 0),
+                    textcoords="offset points", ha="right" if inside else "left", va="center", fontsize=7,
+                    color="white" if inside else "black")
+    capped = any(s >= 300.0 for s in strength)
+    ax.set_xlabel("-log10 p of the score test (no refit)" + ("; p < 1e-300 drawn at 300" if capped else ""))
     ax.set_title("which effect is missing?", fontsize=9)
     if untestable:
         ax.text(1.02, 0.0, "not testable on this data:\n" + "\n".join(c.effect for c in untestable),
@@ -91,7 +100,8 @@ def error_fall(diagnosis, *, axes=None):
     nonlinearity residual in ppm of full scale (right); the last point says what is left unexplained."""
     from ._diagnose import nonlinearity_residual_ppm
 
-    if axes is None:
+    own = axes is None
+    if own:
         _, axes = plt.subplots(1, 2, figsize=(9.6, 3.6))
     left, right = axes
     labels = ["baseline"] + [f"+ {s.effect}" for s in diagnosis.steps]
@@ -109,6 +119,9 @@ def error_fall(diagnosis, *, axes=None):
     left.set_title(f"watch the error fall ({left_text})", fontsize=8)
     for a in axes:
         a.tick_params(axis="x", labelsize=7, rotation=15)
+        a.set_xlabel("diagnosis step (effect added)")
+    if own:
+        left.figure.tight_layout()
     return axes
 
 
