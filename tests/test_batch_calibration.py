@@ -4,9 +4,12 @@ joint identify with a lot-shared readout gain (the only test of identify's share
 import math
 
 import numpy as np
+import pytest
 from _experiments import load_experiment
 
 import gyrojax as gj
+
+pytestmark = pytest.mark.slow
 
 
 def _load():

@@ -33,6 +33,7 @@ def test_simulate_then_metrics(tmp_path, capsys):
     assert {d["sweep"] for d in report["devices"]} >= {"rate_table"}
 
 
+@pytest.mark.slow
 def test_simulate_tiers_agree(tmp_path):
     a, b = tmp_path / "a.parquet", tmp_path / "b.csv"
     assert main(["simulate", "--preset", "paper-qmg", "--noise-free", "--out", str(a)]) == 0
@@ -275,6 +276,7 @@ def test_effects_module_errors_name_the_file(tmp_path, capsys, user_effects, no_
     assert gj.EFFECTS["dac_inl"].__module__.startswith("gyrojax.")  # a built-in is never replaced
 
 
+@pytest.mark.slow
 def test_demo_writes_its_report(tmp_path):
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--no-full"]) == 0

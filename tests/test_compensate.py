@@ -187,6 +187,7 @@ def test_model_recovers_inl_and_tcf_on_noise_free_data(warmup_table):
                                rtol=1e-12, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_model_identifies_the_frequency_exponent_and_reports_even_orders(warmup_table):
     cfg = gj.ModelCompensator(inl_orders=(2, 3, 5), frequency_exponent=None)
     sol = gj.compensate(warmup_table, method=cfg, train_runs=[0, 1]).solutions[_device(warmup_table)]
@@ -199,6 +200,7 @@ def test_model_identifies_the_frequency_exponent_and_reports_even_orders(warmup_
     assert float(sol.inl_lsb[2]) == pytest.approx(TYPICAL_INL[5], abs=0.5)
 
 
+@pytest.mark.slow
 def test_model_fit_is_differentiable_in_the_data(warmup_table):
     """d(fitted u^3 INL)/d(outputs) by forward mode through the Levenberg-Marquardt optimum (implicit
     differentiation) against central finite differences."""

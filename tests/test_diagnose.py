@@ -16,6 +16,7 @@ from gyrojax._diagnose import diagnose, nonlinearity_residual_ppm
 
 from _experiments import load_experiment
 
+pytestmark = pytest.mark.slow
 
 
 def _table(*effects):

@@ -242,6 +242,7 @@ def test_nested_at_zero_and_structure_kept(name, base_name):
 
 
 @pytest.mark.parametrize("base_name", list(BASES))
+@pytest.mark.slow
 def test_nested_at_zero_steady_outputs_are_identical(base_name):
     base = BASES[base_name]
     ref, _ = evaluate(base_name)
@@ -447,6 +448,7 @@ def test_comb_gap_needs_residual_motion_and_is_an_odd_cubic():
 
 # --- tiers ---------------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_steady_and_averaged_agree_closed_loop():
     rates = gj.seed000_rates()  # the shape test_tiers.py compiles for: shared programs
     for name, cls in gj.EFFECTS.items():
@@ -461,6 +463,7 @@ def test_steady_and_averaged_agree_closed_loop():
         assert np.max(np.abs(np.asarray(a.rate) - np.asarray(s.rate))) / full_scale < 1e-6, name
 
 
+@pytest.mark.slow
 def test_steady_and_averaged_agree_open_loop():
     rates = np.array([1.0, 50.0, 100.0, 200.0]) * DEG  # the shape test_open_loop.py compiles for
     tier = gj.Averaged(settle_time=0.1)
@@ -495,6 +498,7 @@ def _full_stack(devices, rates):
     return eqx.filter_vmap(lambda g: jax.vmap(lambda r: tier.settle(g, gj.Stimulus(rate=r)).rate)(rates))(devices)
 
 
+@pytest.mark.slow
 def test_full_waveform_agrees_with_steady_for_carrier_level_effects():
     # every device carries the feedback term (at zero where it is not the effect): one structure to stack
     with_term = {b: gj.FeedbackCompression.typical(0.0).apply(BASES[b]) for b in ("paper-qmg", "qmg-leaky")}
@@ -527,6 +531,7 @@ def test_full_waveform_agrees_with_steady_for_carrier_level_effects():
 GUIDE = pathlib.Path(__file__).resolve().parent.parent / "docs" / "adding_an_effect.md"
 
 
+@pytest.mark.slow
 def test_guide_code_runs():
     blocks = re.findall(r"```python\n(.*?)```", GUIDE.read_text(encoding="utf-8"), flags=re.S)
     assert len(blocks) >= 4

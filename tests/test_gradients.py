@@ -51,6 +51,7 @@ CASES = {
 
 
 @pytest.mark.parametrize("name", list(CASES))
+@pytest.mark.slow
 def test_grad_matches_finite_differences(device, name):
     tier, rel, tol = CASES[name]
     f = _output(tier)
@@ -62,6 +63,7 @@ def test_grad_matches_finite_differences(device, name):
     assert g[0] * float(p[0]) / float(f(p, device)) == pytest.approx(-1.0, rel=2e-2)
 
 
+@pytest.mark.slow
 def test_jacfwd_through_averaged_with_forward_mode(device):
     tier = gj.Averaged(settle_time=0.06, adjoint=diffrax.ForwardMode())
     f = _output(tier)
@@ -71,12 +73,14 @@ def test_jacfwd_through_averaged_with_forward_mode(device):
     assert np.allclose(jf, jr, rtol=1e-7)
 
 
+@pytest.mark.slow
 def test_jacfwd_through_steady_matches_grad(device):
     f = _output(gj.Steady())
     p = jnp.array([device.feedback_electrode.k_vf, device.excitation.dac.inl[1]])
     assert np.allclose(np.asarray(jax.jacfwd(f)(p, device)), np.asarray(jax.grad(f)(p, device)), rtol=1e-9)
 
 
+@pytest.mark.slow
 def test_vmap_over_devices_equals_loop(device):
     lot = gj.make_lot(device, 3, jax.random.PRNGKey(3))
     rates = jnp.array([-50.0, 10.0, 200.0]) * DEG
@@ -86,6 +90,7 @@ def test_vmap_over_devices_equals_loop(device):
         assert np.allclose(np.asarray(batched[i]), np.asarray(gj.rate_sweep(one, rates).rate), rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_steady_derivative_of_a_point_without_steady_state_is_nan_not_an_error(device):
     """A fit's trial step can reach parameters where a point has no steady state. Its value and derivative
     must come back NaN (the fit's trust region rejects the step), not raise inside the compiled fit (as

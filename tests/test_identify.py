@@ -65,6 +65,7 @@ def _slope(fn, gyro, temp):
                    (jnp.ones(()),))[1]
 
 
+@pytest.mark.slow
 def test_fit_converges_with_chi2_near_one(fit):
     assert fit.all_converged
     assert fit.check() is fit
@@ -73,6 +74,7 @@ def test_fit_converges_with_chi2_near_one(fit):
     assert fit.devices == tuple(f"paper-qmg-{i:03d}" for i in range(3))
 
 
+@pytest.mark.slow
 def test_scale_factor_recovered_within_three_sigma(fit, truth):
     """The fitted zero-rate SF against each true device's, both at the fit's reporting temperature."""
     from gyrojax._identify import _sf_temperature
@@ -89,6 +91,7 @@ def test_scale_factor_recovered_within_three_sigma(fit, truth):
     assert np.ptp(sfs) > 100 * float(np.max(fit.scale_factor_stderr))
 
 
+@pytest.mark.slow
 def test_vcf_ratio_and_dac_gain_recovered_within_three_sigma(fit, truth):
     """The VCF output sees K_svf / K_vf (virtual force balanced by the feedback force); the DAC sweep pins
     the DAC gain, whose true error is zero."""
@@ -103,6 +106,7 @@ def test_vcf_ratio_and_dac_gain_recovered_within_three_sigma(fit, truth):
         assert float(fit.stderr[i, i_dac]) < 1e-4
 
 
+@pytest.mark.slow
 def test_closed_loop_data_cannot_see_the_sense_mode(fit):
     """Force rebalance holds the sense mode at rest: omega_y and q_y are named and held, not fitted."""
     held = {u.held for u in fit.unidentifiable}
@@ -115,6 +119,7 @@ def test_closed_loop_data_cannot_see_the_sense_mode(fit):
     assert "unidentifiable: omega_y" in fit.summary()
 
 
+@pytest.mark.slow
 def test_product_combination_is_named_and_one_held(rate_only):
     """A rate table alone sees only Ag m a w / K_vf: with k_vf and angular_gain free, the direction is
     named with both and the later one in PARAMETERS' order (angular_gain) held."""
@@ -127,6 +132,7 @@ def test_product_combination_is_named_and_one_held(rate_only):
     assert "unidentifiable: k_vf x angular_gain" in f.summary()
 
 
+@pytest.mark.slow
 def test_a_prior_pulls_and_fixes_the_combination(rate_only):
     """A design value with a tight tolerance on angular_gain makes the product identifiable: Ag lands on
     the prior and K_vf follows, keeping the measured SF (Ag / K_vf)."""
@@ -144,6 +150,7 @@ def test_a_prior_pulls_and_fixes_the_combination(rate_only):
 NOT_CONVERGED = dict(free=("k_vf", "angular_gain"), priors=VAGUE, solver="bfgs", max_steps=5)
 
 
+@pytest.mark.slow
 def test_a_fit_that_cannot_converge_says_so(rate_only):
     f = gj.identify("paper-qmg", rate_only, retry_solver=None, **NOT_CONVERGED)
     assert not bool(np.any(np.asarray(f.converged)))
@@ -153,6 +160,7 @@ def test_a_fit_that_cannot_converge_says_so(rate_only):
     assert "NOT CONVERGED" in f.summary()
 
 
+@pytest.mark.slow
 def test_a_solve_stopped_near_the_minimum_is_certified_by_the_gauss_newton_decrement(rate_only):
     """A solve that stops at max_steps counts as converged when a full Gauss-Newton step from there would gain
     less than decrement_tol in chi2, device by device. The BFGS solve stopped at 5 steps above is left far
@@ -177,6 +185,7 @@ def test_a_solve_stopped_near_the_minimum_is_certified_by_the_gauss_newton_decre
     assert sum(np.asarray(g.converged)) == 2
 
 
+@pytest.mark.slow
 def test_a_solve_that_did_not_converge_is_retried_with_gauss_newton(rate_only):
     """BFGS stopped at max_steps=5 is solved again from the start with Gauss-Newton (5 steps here), which
     lands on the Levenberg-Marquardt fit, and the message says so; with retry_solver=None the failure
@@ -196,6 +205,7 @@ def test_a_solve_that_did_not_converge_is_retried_with_gauss_newton(rate_only):
     assert not any("re-solved" in m for m in g.result_message)
 
 
+@pytest.mark.slow
 def test_a_joint_solve_that_did_not_converge_is_retried_as_a_whole(table):
     """A joint fit (lot-shared DAC gain error) whose BFGS solve stops at max_steps=5 is solved again, all
     devices at once, with Gauss-Newton: the result is that of a Gauss-Newton fit, every device says so.
@@ -211,6 +221,7 @@ def test_a_joint_solve_that_did_not_converge_is_retried_as_a_whole(table):
     np.testing.assert_array_equal(np.asarray(f.u_lot), np.asarray(g.u_lot))
 
 
+@pytest.mark.slow
 def test_bad_names_are_refused(table):
     with pytest.raises(ValueError, match="unknown parameter 'k_vff' in free"):
         gj.identify("paper-qmg", table, free=("k_vff",))
@@ -220,6 +231,7 @@ def test_bad_names_are_refused(table):
         gj.identify("paper-qmg", table, starts=0)
 
 
+@pytest.mark.slow
 def test_save_load_round_trip_is_exact(fit, tmp_path):
     path = tmp_path / "lot.fit"
     gj.save_fit(fit, path)
@@ -235,6 +247,7 @@ def test_save_load_round_trip_is_exact(fit, tmp_path):
     assert back.summary() == fit.summary()
 
 
+@pytest.mark.slow
 def test_load_refuses_foreign_and_corrupt_files(fit, tmp_path):
     foreign = tmp_path / "data.csv"
     foreign.write_text("device,run\n")
@@ -254,6 +267,7 @@ def test_load_refuses_foreign_and_corrupt_files(fit, tmp_path):
         gj.load_fit(cut)
 
 
+@pytest.mark.slow
 def test_fit_report_json_keys(fit):
     report = gj.fit_report(fit)
     json.dumps(report, allow_nan=False)
@@ -271,6 +285,7 @@ def test_fit_report_json_keys(fit):
     assert not any(f["flagged"] for f in report["compare"]["findings"])
 
 
+@pytest.mark.slow
 def test_cli_identify(csv_path, tmp_path, capsys):
     from gyrojax.cli import main
 
@@ -309,6 +324,7 @@ json.dump({"values": np.asarray(fit.values).tolist(), "stderr": np.asarray(fit.s
 """
 
 
+@pytest.mark.slow
 def test_lot_sharded_over_eight_cpu_devices_gives_the_same_fit(rate_only, tmp_path):
     """The device axis over 8 forced CPU devices (3 devices padded to 8) against the one-device fit (the
     rate-only fit of the tests above: a fresh process compiles everything, and this is the smallest model)."""
@@ -358,6 +374,7 @@ def test_chunks_map_like_vmap_with_padding_and_empty_leaves():
     assert _LotSpread(n, 1, 16).chunk is None  # a chunk as large as the lot: one vmap
 
 
+@pytest.mark.slow
 def test_lot_chunk_is_checked(table):
     with pytest.raises(ValueError, match="lot_chunk must be .auto., None or an integer >= 1"):
         gj.identify("paper-qmg", table, lot_chunk=0)
@@ -399,6 +416,7 @@ def test_a_nonfinite_model_inside_the_compiled_fit_is_explained():
     assert isinstance(info.value.__cause__, eqx.EquinoxRuntimeError)
 
 
+@pytest.mark.slow
 def test_open_loop_dynamic_sweep_fits_where_the_first_solve_runs_off():
     """seed 003's dynamic VCF sweep on a vcf-2018 lot: the sense resonance is ~0.1 Hz wide and the process
     spread moves it by several widths, so from the design start Levenberg-Marquardt's first steps overshoot

@@ -5,6 +5,8 @@ are within 20 % of the scatter of the fitted values, and the scatter within 1.2x
 import pytest
 from _experiments import load_experiment
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def monte_carlo():

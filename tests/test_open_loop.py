@@ -35,6 +35,7 @@ def test_coriolis_frequency_pulling(device, tier):
     assert np.allclose(dw[1:], -(RATES[1:] ** 2) / _split(device), rtol=0.05)
 
 
+@pytest.mark.slow
 def test_pulling_sign_in_full_waveform(device):
     s = gj.rate_sweep(device, RATES[[0, 3]], tier=gj.FullWaveform(settle_time=0.05, average_periods=40))
     sf = np.asarray(s.rate) / RATES[[0, 3]]
@@ -44,6 +45,7 @@ def test_pulling_sign_in_full_waveform(device):
     assert change == pytest.approx(expected, rel=0.1)
 
 
+@pytest.mark.slow
 def test_bandwidth_against_seed003(device):
     """The model's rate bandwidth with Table 2's numbers is ~1.55 x the split (~97 Hz), not the paper's
     354.3 Hz (measured) / 349.5 Hz (simulated): seed 003's numbers do not close."""
@@ -55,6 +57,7 @@ def test_bandwidth_against_seed003(device):
     assert gj.bandwidth(device, input="vcf") == pytest.approx(bw, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_frequency_response_dc_gain_is_the_steady_slope(device):
     h0 = complex(np.asarray(gj.frequency_response(device, np.zeros(1)))[0])
     d = 1e-3
@@ -64,6 +67,7 @@ def test_frequency_response_dc_gain_is_the_steady_slope(device):
     assert abs(h0.imag) < 1e-9 * abs(h0.real)
 
 
+@pytest.mark.slow
 def test_closed_loop_bandwidth_is_set_by_the_rebalance_loop():
     bw = gj.bandwidth(gj.paper_qmg())
     # designed at wn = 100 Hz, zeta = 0.7, with four 1 kHz LPF stages: the rate output's -3 dB point

@@ -59,6 +59,7 @@ def _device(lot, d):
 # --- shapes, inputs and columns ------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_every_sweep_for_both_presets(qmg, vcf):
     p = gj.Protocol()
     for c, devices, runs, sweeps in ((qmg, QMG_DEVICES, QMG_RUNS, ALL), (vcf, VCF_DEVICES, VCF_RUNS, OPEN)):
@@ -88,6 +89,7 @@ def test_every_sweep_for_both_presets(qmg, vcf):
 # --- the measurement model ------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_noise_free_closed_loop_is_the_physics(qmg):
     """Closed loop, noise-free, each row from its own device at its own temperature, in closed form:
     rate word = SF(T) rate with SF = 2 Ag m a w(T) / G(w) (seed 000 Eq. 2); VCF word = K_svf V_fc V_ac / G(w);
@@ -108,6 +110,7 @@ def test_noise_free_closed_loop_is_the_physics(qmg):
 
 
 @pytest.mark.parametrize("which", ["qmg", "vcf"])
+@pytest.mark.slow
 def test_noise_free_outputs_are_the_observe_predictions(which, qmg, vcf):
     """Re-evaluate the measurement model (the vmapped `_observe` functions) on the table's own columns -
     device order, input, temperature_c - and get the table's outputs back bit for bit."""
@@ -136,6 +139,7 @@ def test_noise_free_outputs_are_the_observe_predictions(which, qmg, vcf):
 
 
 @pytest.mark.parametrize("which", ["qmg", "vcf"])
+@pytest.mark.slow
 def test_vcf_to_rate_scale_factor_ratio_is_physical(which, qmg, vcf):
     r"""Point by point (same protocol time, same temperature), the rate-table and static-VCF responses per
     unit input stand in the ratio of the forces per unit input, 2 Ag m a w / (K_svf V_fc) (V per rad/s):
@@ -173,6 +177,7 @@ def test_vcf_to_rate_scale_factor_ratio_is_physical(which, qmg, vcf):
 # --- temperature history --------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_temperature_follows_the_warm_up(qmg):
     t = qmg["noisy"]
     for sweep, dwell in (("rate_table", 120.0), ("vcf_static", 120.0), ("vcf_dynamic", 10.0)):
@@ -223,6 +228,7 @@ def _line_plus_run_bias_chi2(x, y, sigma):
     return float(r @ r), runs * n - (runs + 1), coef[1:]
 
 
+@pytest.mark.slow
 def test_reduced_chi2_of_noise_only_data_is_one(qmg):
     """Noise-only data of the ideal closed-loop device (noisy minus noise-free, same lot and temperatures):
     a line plus one bias per run, fitted with the table's output_sigma, leaves a reduced chi^2 near 1 -
@@ -278,6 +284,7 @@ def test_rate_noise_figures():
 # --- files ----------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_round_trip_csv_and_parquet(qmg, tmp_path):
     t = qmg["noisy"]
     for suffix in ("csv", "parquet"):
@@ -336,6 +343,7 @@ def test_simulate_table_refuses_bad_arguments():
 # --- command line ---------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_cli_simulates_every_sweep(tmp_path, qmg, vcf):
     import json
 
@@ -380,6 +388,7 @@ def _experiment():
     return load_experiment("seed003_batch_calibration")
 
 
+@pytest.mark.slow
 def test_seed003_batch_experiment_small(tmp_path, vcf, capsys):
     out = _experiment().main(["--devices", str(VCF_DEVICES), "--out", str(tmp_path)])
     assert len(out["devices"]) == VCF_DEVICES

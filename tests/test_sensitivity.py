@@ -25,6 +25,7 @@ def budget(gyro):
                                   rates_dps=RATES)
 
 
+@pytest.mark.slow
 def test_joint_matches_a_direct_simulation(gyro, budget):
     g = gj.add_effect(gj.add_effect(gyro, "dac_inl", 1.0), "pushpull_mismatch", 30.0)
     out = gj.rate_sweep(g, jnp.asarray(RATES) * gj.units.DEG).rate
@@ -35,6 +36,7 @@ def test_joint_matches_a_direct_simulation(gyro, budget):
     assert 100.0 < budget.joint_max_ppm < 2000.0
 
 
+@pytest.mark.slow
 def test_shares_are_consistent(budget):
     dac, pp = budget.effects
     assert (dac.name, pp.name) == ("dac_inl", "pushpull_mismatch")
@@ -62,6 +64,7 @@ def test_shares_are_consistent(budget):
     assert total == pytest.approx(100.0, abs=1e-9)
 
 
+@pytest.mark.slow
 def test_table_says_what_the_shares_are_of(gyro):
     # pushpull_mismatch at its typical size does not bend the curve (its own figure is round-off, ~1e-10 ppm)
     # but moves the word the INL acts at: the INL's own max is above the joint max, so seed 000's ratio
@@ -93,6 +96,7 @@ def test_one_effect_has_the_whole_share_and_scales(gyro):
     assert half.joint_max_ppm / full.joint_max_ppm == pytest.approx(0.5, rel=1e-2)
 
 
+@pytest.mark.slow
 def test_gradients_against_finite_differences(gyro, budget):
     effs = [gj.effect("dac_inl", 1.0), gj.effect("pushpull_mismatch", 30.0)]
 
@@ -121,6 +125,7 @@ def test_gradients_against_finite_differences(gyro, budget):
     assert "sense_gain" not in budget.gradient  # open-loop only
 
 
+@pytest.mark.slow
 def test_model_input_and_errors(gyro):
     model = Model(gyro, (gj.effect("dac_inl", 1.0), gj.effect("pushpull_mismatch", 0.0)))
     b = gj.nonlinearity_budget(model, rates_dps=RATES, gradients=False)

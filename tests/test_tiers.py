@@ -50,12 +50,14 @@ def test_preset_scale_factor_is_seed000(devices):
 
 
 @pytest.mark.parametrize("tier", list(TIERS))
+@pytest.mark.slow
 def test_ideal_scale_factor_matches_eq2(devices, sweeps, tier):
     ideal, _ = devices
     sf, _ = _fit(sweeps[tier, "ideal"].rate)
     assert abs(sf / float(ideal.ideal_scale_factor()) - 1) < 1e-6
 
 
+@pytest.mark.slow
 def test_chord_and_newton_steady_agree(devices, sweeps):
     """The default chord root find (one Jacobian) and Newton's method (a Jacobian per step) reach the same
     equilibrium: the sweeps agree far inside a ppm, and the chord takes at most a few more steps."""
@@ -69,6 +71,7 @@ def test_chord_and_newton_steady_agree(devices, sweeps):
     assert int(np.max(np.asarray(chord.num_steps))) <= int(np.max(np.asarray(newton.num_steps))) + 3
 
 
+@pytest.mark.slow
 def test_sweep_chord_matches_point_by_point_values_and_derivatives(devices):
     """`Steady.settle_points` (one chord Jacobian for the whole sweep, at its centre) against `settle` vmapped
     point by point (a chord Jacobian per point): the same rates far inside a ppm, and the same derivatives with
@@ -97,6 +100,7 @@ def test_sweep_chord_matches_point_by_point_values_and_derivatives(devices):
 
 
 @pytest.mark.parametrize("tier", ["averaged", "full"])
+@pytest.mark.slow
 def test_tiers_agree_with_inl(sweeps, tier):
     sf_s, nl_s = _fit(sweeps["steady", "inl"].rate)
     sf_t, nl_t = _fit(sweeps[tier, "inl"].rate)
@@ -108,6 +112,7 @@ def test_tiers_agree_with_inl(sweeps, tier):
     assert np.max(np.abs(np.asarray(sweeps[tier, "inl"].rate) - np.asarray(sweeps["steady", "inl"].rate))) / fs < 1e-6
 
 
+@pytest.mark.slow
 def test_loops_hold_their_set_points(devices, sweeps):
     ideal, _ = devices
     s = sweeps["full", "ideal"]
@@ -128,6 +133,7 @@ def test_loops_hold_their_set_points(devices, sweeps):
     assert np.max(np.hypot(y, vy / w)) < 1e-9 * open_loop
 
 
+@pytest.mark.slow
 def test_quadrature_loop_nulls_quadrature(devices):
     ideal, _ = devices
     kap = 2000.0  # rad^2/s^2 of stiffness coupling
@@ -145,6 +151,7 @@ def test_quadrature_loop_nulls_quadrature(devices):
     assert np.max(np.abs(np.asarray(quad.rate) - np.asarray(base.rate))) < 1e-6
 
 
+@pytest.mark.slow
 def test_carrier_phase_error_mixes_quadrature_into_rate(devices):
     ideal, _ = devices
     kap, phi = 2000.0, 0.01

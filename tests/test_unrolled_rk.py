@@ -50,6 +50,7 @@ def _solve_all(y0, args):
     return out, tight.ys[-1]
 
 
+@pytest.mark.slow
 def test_unrolled_matches_diffrax_step_for_step():
     y0 = jnp.array([1.0, 0.0])
     args = (jnp.asarray(7.0), jnp.asarray(0.05))
