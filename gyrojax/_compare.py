@@ -482,4 +482,8 @@ def recorded_coordinates(block) -> dict:
         values = np.asarray(values, float)
         if mask.any() and np.all(np.isfinite(values[mask])):
             out[name] = values
+    if "order" in out and not {"temperature_c", "time_s"} & set(out):
+        # Neither time nor temperature recorded (a bench sweep such as the DAC's): the file order is not known
+        # to be the time order, and nothing drifts along it in the model.
+        del out["order"]
     return out

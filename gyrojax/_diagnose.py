@@ -460,18 +460,27 @@ def score_probes(fit: Fit, probes=PROBES, *, alpha: float = 0.01):
     return final, designs
 
 
-def _with_library(discrepancy, scores, rejected, max_multiple):
-    """The discrepancies with `library` filled in: which candidate has the same fingerprint, and why it does
-    not explain it (implausible size, rejected), or that none has it."""
+def _with_library(fit, discrepancy, designs, scores, rejected, max_multiple, alpha):
+    """The discrepancies with `library` filled in: which candidate takes the whole of a shape's misfit (the
+    shape adds nothing beyond it, at the probes' significance), and why it does not explain it (implausible
+    size, refused), or that none does."""
     reasons = {r.effect: r.kind or r.reason for r in rejected}
+    base = _base_columns(fit)
+    res = np.asarray(fit.residual_vector)
+    jac = np.asarray(fit.jacobian)
+    cut = alpha / max(len(discrepancy), 1)
     out = []
     for d in discrepancy:
-        if not d.significant:
+        if not d.significant or d.within:
             out.append(d)
             continue
-        matches = [c for c in scores if c.testable and abs(_cos(c.fingerprint, d.fingerprint)) > SAME_SHAPE]
         parts, plausible = [], False
-        for c in matches:
+        for c in scores:
+            if not c.testable:
+                continue
+            je = jac[:, :, _effect_columns(fit, c.effect)]
+            if score_columns(np.concatenate([base, je], axis=-1), designs[d.probe], res).p_value < cut:
+                continue  # the shape leaves misfit that this candidate cannot take
             if c.effect in reasons:
                 parts.append(f"{c.effect} has it but was not confirmed ({reasons[c.effect]})")
             elif c.implied_multiple > max_multiple:
@@ -479,7 +488,7 @@ def _with_library(discrepancy, scores, rejected, max_multiple):
             else:
                 parts.append(f"{c.effect} has it")
                 plausible = True
-        if not matches:
+        if not parts:
             text = "no effect in the library has this fingerprint"
         elif not plausible:
             text = "no effect in the library explains it: " + "; ".join(parts)
@@ -605,7 +614,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     def fit_with(selected, evaluate_only=False):
         held = tuple(c for c in candidates if c not in selected)
         return identify(full, weights["data"], free=free, hold=held, starts=starts, evaluate_only=evaluate_only,
-                        estimate_noise=weights["estimate_noise"])
+                        estimate_noise=weights["estimate_noise"], progress=False)
 
     if fit is None:
         say(f"fitting the baseline: {len(data.devices)} device(s), {data.num_points()} points, every one of "
@@ -626,7 +635,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     selected: list[str] = []
     remaining = list(candidates)
     discrepancy, designs = score_probes(fit, probes, alpha=alpha)
-    baseline_discrepancy = discrepancy
+    baseline_discrepancy, baseline_designs = discrepancy, designs
     while remaining and len(selected) < max_effects:
         scores = score_candidates(fit, remaining)
         threshold = alpha / len(remaining)
@@ -703,8 +712,9 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     # Which library effect has the shape of what is left: every candidate not selected, at the final fit.
     others = [c for c in candidates if c not in selected]
     final_scores = score_candidates(fit, others) if others else ()
-    baseline_discrepancy = _with_library(baseline_discrepancy, ranking0, rejected, max_typical_multiple)
-    discrepancy = _with_library(discrepancy, final_scores, rejected, max_typical_multiple)
+    baseline_discrepancy = _with_library(baseline, baseline_discrepancy, baseline_designs, ranking0, rejected,
+                                         max_typical_multiple, alpha)
+    discrepancy = _with_library(fit, discrepancy, designs, final_scores, rejected, max_typical_multiple, alpha)
     comparisons = tuple(compare(f, alpha=alpha) for f in fits)
     say(f"done: {_verdict(comparisons[-1], steps)}; selected {', '.join(selected) or 'none'}")
     return Diagnosis(baseline, fit, tuple(fits), ranking0, tuple(steps), tuple(ambiguous), untestable,
