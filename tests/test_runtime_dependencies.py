@@ -10,7 +10,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_only_runtime_dependencies_are_imported():
+def test_only_runtime_dependencies_are_imported(tmp_path):
     meta = tomllib.loads((ROOT / "pyproject.toml").read_text())
     runtime = {d.split(">")[0].split("=")[0].split("[")[0].strip().lower() for d in meta["project"]["dependencies"]}
     test_only = {d.split(">")[0].split("=")[0].split("[")[0].strip().lower()
@@ -30,5 +30,6 @@ def test_only_runtime_dependencies_are_imported():
         "gyrojax.cli.build_parser()\n"
         "print('ok')\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
-                         env={"GYROJAX_CACHE_DIR": "off", "PATH": "/usr/bin:/bin", "HOME": str(ROOT)})
+                         env={"GYROJAX_CACHE_DIR": "off", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path),
+                              "MPLCONFIGDIR": str(tmp_path / "mpl")})
     assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-2000:]
