@@ -204,6 +204,7 @@ class Diagnosis:
     baseline_discrepancy: tuple = ()  # Discrepancy per probe at the baseline, most explanatory first
     discrepancy: tuple = ()  # the same at the final fit: where what is left lives
     verdict: str = "unexplained"
+    max_typical_multiple: float = MAX_TYPICAL_MULTIPLE
 
     @property
     def selected(self) -> tuple[str, ...]:
@@ -719,7 +720,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     say(f"done: {_verdict(comparisons[-1], steps)}; selected {', '.join(selected) or 'none'}")
     return Diagnosis(baseline, fit, tuple(fits), ranking0, tuple(steps), tuple(ambiguous), untestable,
                      tuple(rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2, comparisons,
-                     baseline_discrepancy, discrepancy, _verdict(comparisons[-1], steps))
+                     baseline_discrepancy, discrepancy, _verdict(comparisons[-1], steps), max_typical_multiple)
 
 
 def full_key(model: Model, data: FitData):
@@ -786,7 +787,9 @@ def write_report(diagnosis: Diagnosis, out_dir) -> dict:
             figures.append(("Where the misfit lives: the leading generic shape, at the baseline and at the end",
                             "discrepancy.png"))
         if diagnosis.ranking:
-            plot.save(plot.ranking(diagnosis.ranking, alpha=diagnosis.alpha), os.path.join(folder, "ranking.png"))
+            plot.save(plot.ranking(diagnosis.ranking, alpha=diagnosis.alpha,
+                                   max_typical_multiple=diagnosis.max_typical_multiple),
+                      os.path.join(folder, "ranking.png"))
             figures.append(("Candidate effects ranked by the score test", "ranking.png"))
             plot.save(plot.fingerprints(diagnosis), os.path.join(folder, "fingerprints.png"))
             figures.append(("Predicted residual shape of the top candidates against the residual, per device",

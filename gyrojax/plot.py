@@ -66,17 +66,32 @@ def residuals(fit, sweep: str = "rate_table", *, ax=None, device: int | None = N
     return ax
 
 
-def ranking(scores, *, alpha: float = 0.01, ax=None):
+def ranking(scores, *, alpha: float = 0.01, max_typical_multiple: float = 100.0, ax=None):
     """Candidate effects ranked by the p-value of their score test (-log10 p: longer is more significant),
-    the Bonferroni threshold drawn; candidates the data cannot test are listed apart with their reason."""
+    the Bonferroni threshold drawn; a significant candidate that would need more than `max_typical_multiple`
+    times its typical size is coloured apart (the diagnosis does not confirm it); candidates the data cannot
+    test are listed apart."""
     ax = _ax(ax)
     testable = [c for c in scores if c.testable]
     untestable = [c for c in scores if not c.testable]
     cut = alpha / max(len(scores), 1)
     strength = [min(-math.log10(max(c.p_value, 1e-300)), 300.0) for c in testable]
-    colours = [PALETTE[1] if c.p_value < cut else PALETTE[0] for c in testable]
+
+    def plausible(c):
+        return getattr(c, "implied_multiple", 0.0) <= max_typical_multiple
+
+    colours = [(PALETTE[1] if plausible(c) else PALETTE[4]) if c.p_value < cut else PALETTE[0] for c in testable]
     bars = ax.barh([c.effect for c in testable][::-1], strength[::-1], color=colours[::-1])
     ax.axvline(-math.log10(cut), color="k", ls="--", lw=0.8, label=f"significant: p < {alpha:g} / {len(scores)}")
+    # which colour means what, for the classes present
+    from matplotlib.patches import Patch
+
+    handles = [ax.get_legend_handles_labels()[0][0]]
+    for colour, label in ((PALETTE[1], "significant, at a plausible size"),
+                          (PALETTE[4], f"significant only beyond {max_typical_multiple:g}x its typical size"),
+                          (PALETTE[0], "not significant")):
+        if colour in colours:
+            handles.append(Patch(color=colour, label=label))
     # p underflows for strong candidates: the score S and the size it implies tell them apart
     for bar, c in zip(bars, testable[::-1]):
         size = getattr(c, "implied_multiple", math.inf)
@@ -91,7 +106,7 @@ def ranking(scores, *, alpha: float = 0.01, ax=None):
     if untestable:
         ax.text(1.02, 0.0, "not testable on this data:\n" + "\n".join(c.effect for c in untestable),
                 transform=ax.transAxes, fontsize=7, va="bottom")
-    ax.legend(fontsize=7, loc="lower right")
+    ax.legend(handles=handles, fontsize=7, loc="lower right")
     return ax
 
 
@@ -161,14 +176,18 @@ def fingerprints(diagnosis, *, top: int = 3, device: int | None = None, axes=Non
 
 
 def discrepancy(diagnosis, *, which: int = 0, final: bool = True, ax=None):
-    """Where what is left lives: the standardised residual of the final fit (or the baseline) against the
-    coordinate of its leading discrepancy, one colour per sweep, with the generic shape fitted to it."""
+    """Where the misfit lives: the standardised residual of the final fit (or the baseline) against the
+    coordinate of its leading discrepancy, one colour per sweep, with the generic shape fitted to it (crosses).
+    Along the input each sweep's input is divided by its largest |input|, so sweeps in different units share
+    the axis."""
     ax = _ax(ax)
-    found = diagnosis.remaining if final else tuple(d for d in diagnosis.baseline_discrepancy if d.significant)
+    found = diagnosis.remaining if final else tuple(d for d in diagnosis.baseline_discrepancy
+                                                    if d.significant and not d.within)
     fit = diagnosis.final if final else diagnosis.baseline
+    stage = "left after the diagnosis" if final else "at the baseline"
     if not found:
-        ax.text(0.5, 0.5, "no generic shape explains a significant part of the misfit", ha="center",
-                transform=ax.transAxes)
+        ax.text(0.5, 0.5, f"{stage}: no generic shape explains a significant part of the misfit", ha="center",
+                va="center", transform=ax.transAxes, fontsize=9)
         ax.set_axis_off()
         return ax
     d = found[which]
@@ -187,19 +206,21 @@ def discrepancy(diagnosis, *, which: int = 0, final: bool = True, ax=None):
             row += n
             continue
         coord = np.asarray(coord, float).reshape(len(fit.devices), -1)
+        if d.coordinate == "input":
+            span = np.max(np.abs(coord[mask])) if mask.any() else 1.0
+            coord = coord / (span if span > 0 else 1.0)
         r = np.asarray(fit.residual_vector)[:, row:row + n]
         fp = d.fingerprint[:, row:row + n]
-        if np.any(fp[mask] != 0):
-            ax.plot(coord[mask], r[mask], ".", ms=3, color=_colour(i), alpha=0.6, label=f"{sweep} residual")
-            order = np.argsort(coord[mask], kind="stable")
-            ax.plot(coord[mask][order], fp[mask][order], "-", lw=0.8, color=_colour(i),
-                    label=f"{sweep}: {d.shape} (fitted)")
+        if sweep in {name for name, _ in d.sweeps} and np.all(np.isfinite(coord[mask])):
+            ax.plot(coord[mask], r[mask], ".", ms=4, color=_colour(i), alpha=0.7, label=f"{sweep}: residual")
+            ax.plot(coord[mask], fp[mask], "x", ms=4, color=_colour(i), label=f"{sweep}: the shape, fitted")
         row += n
     ax.axhline(0.0, color="k", lw=0.6)
-    ax.set_xlabel(_COORDINATE_LABEL.get(d.coordinate, d.coordinate))
+    xlabel = ("input / largest |input| of its sweep" if d.coordinate == "input"
+              else _COORDINATE_LABEL.get(d.coordinate, d.coordinate))
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("standardised residual (sigma)")
-    ax.set_title(f"{'left after the diagnosis' if final else 'baseline'}: {100 * d.share:.0f} % of the misfit "
-                 f"is {d.shape}", fontsize=8)
+    ax.set_title(f"{stage}: {100 * d.share:.0f} % of the misfit is {d.shape}", fontsize=8)
     ax.legend(fontsize=6)
     return ax
 
