@@ -11,8 +11,8 @@ runs from the plain preset:
    the full library). It must confirm nothing that is absent, end `unexplained` (or `partly explained`), and
    name the coordinate and shape of the misfit, with the size of the term;
 2. **with it**: the effect added to the candidates, from the library (`zro`, `amp`) or from the user's own
-   module file (`time`: a zero-rate output drifting with time since power-on, written in one file as
-   `docs/adding_an_effect.md` shows). It must be found with chi2_red in [0.7, 1.4] and its size within
+   module file (`time`: a zero-rate output drifting with time since power-on, `experiments/user_effects.py`,
+   written in one file as `docs/adding_an_effect.md` shows). It must be found with chi2_red in [0.7, 1.4] and its size within
    3 sigma of the truth on every device.
 
 Cases (`--cases`): `zro` (a zero-rate output linear in the die temperature, 2e-3 (deg/s)/K on the rate and VCF
@@ -25,8 +25,6 @@ models; only located). Results go to DIR/open_world.json and .md after every cas
 import argparse
 import os
 import sys
-import tempfile
-import textwrap
 import time
 
 import numpy as np
@@ -39,38 +37,8 @@ TRUTH = {"zro": 2e-3, "amp": 1e-4, "time": 0.05, "sign": 20e-6}
 NEW = ("zro_tempco", "feedback_compression")
 W = 2.0**23  # paper-qmg's full-scale rebalance word
 
-USER_EFFECT = '''
-import equinox as eqx
-import jax
-import jax.numpy as jnp
-
-import gyrojax as gj
-
-
-class ZroTimeDrift(gj.AbstractEffect, gj.AbstractRateTerm):
-    """A zero-rate output linear in the time since power-on (rad/s per hour)."""
-
-    per_hour: jax.Array = eqx.field(converter=lambda x: jnp.asarray(x, dtype=float))
-
-    name = "zro_time_drift"
-    description = "zero-rate output linear in the time since power-on, (rad/s)/h"
-    plugs_into = "terms (a rate-equivalent sense force)"
-    revealed_by = "a long run at a constant chamber temperature"
-
-    @classmethod
-    def supports(cls, gyro):
-        return True
-
-    def apply(self, gyro):
-        return gyro.with_term(self)
-
-    def rate(self, gyro, temperature, time, rate):
-        return self.per_hour * time / 3600.0
-
-    @classmethod
-    def typical(cls, scale=1.0):
-        return cls(scale * 0.02 * gj.units.DEG)  # ASSUMPTION: 0.02 (deg/s)/h
-'''
+USER_EFFECTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "user_effects.py")
+"""The user's own module defining `zro_time_drift` (loaded as `--effects-module` would)."""
 
 
 def post_process(table, case):
@@ -177,30 +145,26 @@ def main(argv=None):
             atomic_write_json(out, os.path.join(args.out, "open_world.json"))
             atomic_write_bytes(os.path.join(args.out, "open_world.md"), markdown(rows, settings).encode())
 
-    with tempfile.TemporaryDirectory() as tmp:
-        module = os.path.join(tmp, "my_effects.py")
-        with open(module, "w") as f:
-            f.write(textwrap.dedent(USER_EFFECT))
-        for case in cases:
-            table = post_process(clean, case)
+    for case in cases:
+        table = post_process(clean, case)
+        t = time.perf_counter()
+        absent = _library_without(case)
+        d = gj.diagnose(table, "paper-qmg", candidates=absent)
+        record(row(case, "outside", d, time.perf_counter() - t, spurious_of=absent))
+        if case not in FOUND_AS:
+            continue
+        effect, truth = FOUND_AS[case]
+        if case == "time":
+            gj.load_effects_module(USER_EFFECTS)
+        try:
             t = time.perf_counter()
-            absent = _library_without(case)
-            d = gj.diagnose(table, "paper-qmg", candidates=absent)
-            record(row(case, "outside", d, time.perf_counter() - t, spurious_of=absent))
-            if case not in FOUND_AS:
-                continue
-            effect, truth = FOUND_AS[case]
-            if case == "time":
-                gj.load_effects_module(module)
-            try:
-                t = time.perf_counter()
-                d = gj.diagnose(table, "paper-qmg")
-                r = row(case, "with it", d, time.perf_counter() - t,
-                        spurious_of=[c for c in gj.supported_effects(gj.paper_qmg()) if c != effect])
-                r["size"] = _sizes(d, effect, truth)
-                record(r)
-            finally:
-                gj.EFFECTS.pop("zro_time_drift", None)
+            d = gj.diagnose(table, "paper-qmg")
+            r = row(case, "with it", d, time.perf_counter() - t,
+                    spurious_of=[c for c in gj.supported_effects(gj.paper_qmg()) if c != effect])
+            r["size"] = _sizes(d, effect, truth)
+            record(r)
+        finally:
+            gj.EFFECTS.pop("zro_time_drift", None)
     return rows
 
 

@@ -480,8 +480,11 @@ def _with_library(fit, discrepancy, designs, scores, rejected, max_multiple, alp
             if not c.testable:
                 continue
             je = jac[:, :, _effect_columns(fit, c.effect)]
-            if score_columns(np.concatenate([base, je], axis=-1), designs[d.probe], res).p_value < cut:
-                continue  # the shape leaves misfit that this candidate cannot take
+            left = score_columns(np.concatenate([base, je], axis=-1), designs[d.probe], res)
+            # the shape leaves misfit this candidate cannot take: significant, and more than a percent of what
+            # the shape explained (a misfit of 1e7 chi2 makes every model-shape difference significant)
+            if left.p_value < cut and left.statistic > 0.01 * d.chi2_explained:
+                continue
             if c.effect in reasons:
                 parts.append(f"{c.effect} has it but was not confirmed ({reasons[c.effect]})")
             elif c.implied_multiple > max_multiple:

@@ -60,7 +60,8 @@ def load_effects_module(path: str | os.PathLike) -> tuple[type[AbstractEffect], 
 
     Every concrete subclass of `gyrojax.AbstractEffect` defined in the file that is not registered yet is
     registered with `gyrojax.register_effect` (so the file may call `register_effect` itself, or just define
-    the classes). Loading the same file again returns the same classes without running it again.
+    the classes). Loading the same file again returns the same classes without running it again (registering
+    any of them that was removed from `gyrojax.EFFECTS` meanwhile).
 
     **Arguments:**
 
@@ -82,8 +83,10 @@ def load_effects_module(path: str | os.PathLike) -> tuple[type[AbstractEffect], 
     if not given.endswith(".py"):
         raise ValueError(f"{given}: not a .py file; --effects-module expects a Python file defining effects.")
     real = os.path.realpath(given)
-    if real in _loaded_files:
-        return _loaded_files[real]
+    if real in _loaded_files:  # not run again; its classes registered again if they were removed meanwhile
+        classes = _loaded_files[real]
+        _register_all([c for c in classes if EFFECTS.get(c.name) is not c], given)
+        return classes
     stem = re.sub(r"\W", "_", os.path.splitext(os.path.basename(real))[0])
     name = f"gyrojax_user_effects_{stem}_{hashlib.sha256(real.encode()).hexdigest()[:12]}"
     spec = importlib.util.spec_from_file_location(name, real)

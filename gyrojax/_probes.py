@@ -79,9 +79,11 @@ def _full_scale_word(fit):
     return 2.0 ** (device.excitation.dac.word_bits - 1)
 
 
-class _AbstractBiasLinear(AbstractProbe):
-    """A bias (in deg/s of equivalent rate, through each device's scale factor) linear in a coordinate."""
+class _AbstractLinear(AbstractProbe):
+    """A bias (deg/s of equivalent rate, through each device's scale factor) or a relative gain (ppm) linear
+    in a coordinate of the data."""
 
+    gain: ClassVar[bool]  # a gain (ppm of the prediction) rather than a bias (deg/s)
     field: ClassVar[str]  # the SweepBlock field of the coordinate
     per: ClassVar[float]  # coordinate units per unit of the coefficient
     origin: ClassVar[float | None]  # where the term is zero; None: the device's mean
@@ -90,73 +92,60 @@ class _AbstractBiasLinear(AbstractProbe):
         if sweep not in self.sweeps or sweep not in fit.data.blocks:
             return None
         c = _coordinate(fit.data.blocks[sweep], self.field)
-        return None if c is None else (_sf(fit) * (c - self.origin) / self.per)[..., None]
-
-
-class _AbstractGainLinear(AbstractProbe):
-    """A relative gain (ppm) linear in a coordinate."""
-
-    field: ClassVar[str]
-    per: ClassVar[float]
-    origin: ClassVar[float | None]
-
-    def changes(self, fit, sweep):
-        if sweep not in self.sweeps or sweep not in fit.data.blocks:
-            return None
-        c = _coordinate(fit.data.blocks[sweep], self.field)
         if c is None:
             return None
         origin = self.origin
-        if origin is None:  # the lot's mean of the coordinate (e.g. the drive frequency)
+        if origin is None:  # the device's mean of the coordinate (e.g. the drive frequency)
             mask = np.asarray(fit.data.blocks[sweep].mask)
             origin = np.sum(np.where(mask, c, 0.0), axis=(1, 2), keepdims=True) / np.maximum(
                 mask.sum(axis=(1, 2), keepdims=True), 1)
-        return (np.asarray(fit.predictions[sweep]) * (c - origin) * 1e-6 / self.per)[..., None]
+        scale = np.asarray(fit.predictions[sweep]) * 1e-6 if self.gain else _sf(fit)
+        return (scale * (c - origin) / self.per)[..., None]
 
 
-class BiasVsTemperature(_AbstractBiasLinear):
+class BiasVsTemperature(_AbstractLinear):
     name = "bias_vs_temperature"
     coordinate = "temperature_c"
     shape = "a bias linear in die temperature"
     unit = "(deg/s)/K"
     sweeps = RATE_SWEEPS
-    field, per, origin = "temperatures", 1.0, 25.0
+    gain, field, per, origin = False, "temperatures", 1.0, 25.0
 
 
-class GainVsTemperature(_AbstractGainLinear):
+class GainVsTemperature(_AbstractLinear):
     name = "gain_vs_temperature"
     coordinate = "temperature_c"
     shape = "a gain linear in die temperature"
     unit = "ppm/K"
     sweeps = GAIN_SWEEPS
-    field, per, origin = "temperatures", 1.0, 25.0
+    gain, field, per, origin = True, "temperatures", 1.0, 25.0
 
 
-class BiasVsTime(_AbstractBiasLinear):
+class BiasVsTime(_AbstractLinear):
     name = "bias_vs_time"
     coordinate = "time_s"
     shape = "a bias linear in time since power-on"
     unit = "(deg/s)/h"
     sweeps = RATE_SWEEPS
-    field, per, origin = "times", 3600.0, 0.0
+    gain, field, per, origin = False, "times", 3600.0, 0.0
 
 
-class GainVsTime(_AbstractGainLinear):
+class GainVsTime(_AbstractLinear):
     name = "gain_vs_time"
     coordinate = "time_s"
     shape = "a gain linear in time since power-on"
     unit = "ppm/h"
     sweeps = GAIN_SWEEPS
-    field, per, origin = "times", 3600.0, 0.0
+    gain, field, per, origin = True, "times", 3600.0, 0.0
 
 
-class GainVsDriveFrequency(_AbstractGainLinear):
+class GainVsDriveFrequency(_AbstractLinear):
     name = "gain_vs_drive_frequency"
     coordinate = "drive_freq_hz"
     shape = "a gain linear in the drive frequency (beyond the model's own)"
     unit = "ppm/Hz"
     sweeps = RATE_SWEEPS
-    field, per, origin = "drive_freqs", 1.0, None
+    gain, field, per, origin = True, "drive_freqs", 1.0, None
 
 
 class GainPerRun(AbstractProbe):

@@ -13,7 +13,7 @@ user's effect), one lot shape (the demo's), so each half compiles its model once
 """
 
 import json
-import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -111,46 +111,14 @@ def test_a_drift_in_time_that_no_library_holds_is_located(outside):
         assert top.coefficient == pytest.approx(DRIFT, rel=0.1)
 
 
-USER_EFFECT = '''
-import equinox as eqx
-import jax
-import jax.numpy as jnp
-
-import gyrojax as gj
-
-
-class ZroTimeDrift(gj.AbstractEffect, gj.AbstractRateTerm):
-    """A zero-rate output linear in the time since power-on (rad/s per hour)."""
-
-    per_hour: jax.Array = eqx.field(converter=lambda x: jnp.asarray(x, dtype=float))
-
-    name = "zro_time_drift"
-    description = "zero-rate output linear in the time since power-on, (rad/s)/h"
-    plugs_into = "terms (a rate-equivalent sense force)"
-    revealed_by = "a long run at a constant chamber temperature"
-
-    @classmethod
-    def supports(cls, gyro):
-        return True
-
-    def apply(self, gyro):
-        return gyro.with_term(self)
-
-    def rate(self, gyro, temperature, time, rate):
-        return self.per_hour * time / 3600.0
-
-    @classmethod
-    def typical(cls, scale=1.0):
-        return cls(scale * 0.02 * gj.units.DEG)  # 0.02 (deg/s)/h
-'''
+USER_EFFECTS = Path(__file__).resolve().parent.parent / "experiments" / "user_effects.py"
+"""The user's own module (`zro_time_drift`), as `--effects-module` loads it."""
 
 
 @pytest.fixture(scope="module")
-def inside(clean, tmp_path_factory):
-    path = tmp_path_factory.mktemp("user") / "my_effects.py"
-    path.write_text(textwrap.dedent(USER_EFFECT))
+def inside(clean):
     try:
-        (cls,) = gj.load_effects_module(path)
+        (cls,) = gj.load_effects_module(USER_EFFECTS)
         out = {kind: gj.diagnose(_post(clean, kind), "paper-qmg") for kind in ("zro", "amp", "time")}
         candidates = gj.supported_effects(gj.paper_qmg())
     finally:
