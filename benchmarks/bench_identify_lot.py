@@ -49,12 +49,12 @@ def _problems(fit, preset):
     import equinox as eqx
     import jax.numpy as jnp
 
-    from gyrojax._identify import _Problem, _batched, _to_model
-    from gyrojax._parameters import read_values
+    from gyrojax._identify import _Problem
+    from gyrojax._parameters import as_model, batched, read_values
     from gyrojax._simulate.tiers import Steady
 
     n = len(fit.devices)
-    model = _batched(_to_model(preset), n)
+    model = batched(as_model(preset), n)
     start = eqx.filter_vmap(lambda m: read_values(m, fit.entries))(model)
     data = dataclasses.replace(fit.data, devices=(), runs=(), source="")
     n_dev = len(fit.names)

@@ -65,7 +65,7 @@ import numpy as np
 import gyrojax as gj
 from gyrojax._fitdata import fit_data
 from gyrojax._io import atomic_write_bytes, atomic_write_json
-from gyrojax._observe import VCF_CARRIER_V, rate_table_points
+from gyrojax._observe import rate_table_points
 from gyrojax._units import DEG
 
 
@@ -111,7 +111,7 @@ def _lot_physics(lot):
     def one(g):
         r = g.resonator
         a = g.drive_amplitude(r.omega_x)
-        ratio = 2.0 * r.angular_gain * r.mass * a * r.omega_x / (g.vcf_electrode.force_per_volt2 * VCF_CARRIER_V)
+        ratio = 2.0 * r.angular_gain * r.mass * a * r.omega_x / (g.vcf_electrode.force_per_volt2 * gj.VCF_CARRIER_V)
         path = r.angular_gain * g.sense_frontend.current_per_velocity * a
         return ratio, path
 
@@ -304,7 +304,7 @@ def run(devices=64, rate_devices=4, seed=11, process=None, protocol=None):
     # --- seed 003: a constant ratio from the rate-table devices ---------------------------------------------
     design_volts_per_rad_s = float(2.0 * design.resonator.mass * design.resonator.angular_gain
                                    * design.drive_amplitude(design.resonator.omega_x) * design.resonator.omega_x
-                                   / (design.vcf_electrode.force_per_volt2 * VCF_CARRIER_V))
+                                   / (design.vcf_electrode.force_per_volt2 * gj.VCF_CARRIER_V))
     rate_devs, sf_rate = _slopes(table, "rate_table")
     vcf_devs, sf_volt = _slopes(table, "vcf_static")
     sf_virtual = dict(zip(vcf_devs, sf_volt * design_volts_per_rad_s * DEG))

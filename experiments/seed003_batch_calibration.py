@@ -47,7 +47,6 @@ import numpy as np
 import gyrojax as gj
 from gyrojax import _presets as P
 from gyrojax._io import atomic_write_bytes, atomic_write_json
-from gyrojax._observe import VCF_CARRIER_V
 from gyrojax._units import DEG
 
 
@@ -72,7 +71,7 @@ PAPER = {
     "bandwidth_simulated_hz": 349.5,  # seed 003 abstract, §3
 }
 
-DESIGN_VOLTS_PER_RAD_S = 2.0 * P.VCF_MASS * P.VCF_DRIVE_VELOCITY / (P.VCF_KSVF * VCF_CARRIER_V)
+DESIGN_VOLTS_PER_RAD_S = 2.0 * P.VCF_MASS * P.VCF_DRIVE_VELOCITY / (P.VCF_KSVF * gj.VCF_CARRIER_V)
 """Seed 003 Eq. (7) with Table 1's design values: the V_ac that stands for 1 rad/s of virtual rate."""
 
 
@@ -103,7 +102,7 @@ def run(devices=13, runs=1, seed=3):
         temp = float(np.mean(np.asarray(rate.aux["temperature_c"][d])))
         w = float(r.at_temperature(temp)[0])
         phys = (2.0 * float(r.angular_gain) * float(r.mass) * float(g.drive_amplitude(w)) * w
-                / (float(g.vcf_electrode.force_per_volt2) * VCF_CARRIER_V))
+                / (float(g.vcf_electrode.force_per_volt2) * gj.VCF_CARRIER_V))
         records.append({
             "device": table.to_arrays("rate_table").devices[d],
             "q_sense": float(r.q_y),

@@ -158,6 +158,8 @@ from ._terms import (  # noqa: E402
 )
 from ._sweeps import (  # noqa: E402
     SEED000_RATES_DPS as SEED000_RATES_DPS,
+    VCF_CARRIER_V as VCF_CARRIER_V,
+    VCF_DYNAMIC_AMPLITUDE_V as VCF_DYNAMIC_AMPLITUDE_V,
     VCF_DYNAMIC_FREQUENCIES_HZ as VCF_DYNAMIC_FREQUENCIES_HZ,
     VCF_STATIC_RATES_DPS as VCF_STATIC_RATES_DPS,
     Protocol as Protocol,
@@ -167,4 +169,4 @@ from ._sweeps import (  # noqa: E402
     seed000_rates as seed000_rates,
 )
 
-__version__ = "0.1.0"
+from ._version import __version__ as __version__  # noqa: E402

@@ -469,6 +469,19 @@ def compare(fit, *, alpha: float = 0.01) -> Comparison:
                              coordinates={s: recorded_coordinates(data.blocks[s]) for s in data.sweeps}, alpha=alpha)
 
 
+def nonlinearity_residual_ppm(fit) -> float:
+    """The worst model-vs-measurement residual of the rate-table points, as ppm of full scale
+    (max |y - f - bias| / (|SF| max |rate|)) of a `gyrojax.Fit`: the scale-factor nonlinearity the model leaves
+    unexplained."""
+    if "rate_table" not in fit.residuals:
+        return float("nan")
+    block = fit.data.blocks["rate_table"]
+    raw = np.abs(np.asarray(fit.residuals["rate_table"]) * np.asarray(block.sigmas))
+    full = np.abs(np.asarray(fit.scale_factor))[:, None, None] * np.max(
+        np.where(np.asarray(block.mask), np.abs(np.asarray(block.inputs)), 0.0), axis=(1, 2), keepdims=True)
+    return float(np.max(np.where(np.asarray(block.mask), raw / full, 0.0)) * 1e6)
+
+
 def recorded_coordinates(block) -> dict:
     """The coordinates of a sweep block other than the input that the data record (all real points given),
     as dict name -> (device, run, point): `temperature_c`, `time_s`, `drive_freq_hz`, and `order`."""

@@ -715,7 +715,8 @@ class SweepArrays(eqx.Module):
 # Files.
 
 
-def _format_suffix(path: str | os.PathLike, what: str) -> str:
+def table_format(path: str | os.PathLike, what: str) -> str:
+    """The table format of `path` from its suffix (".csv" or ".parquet"); `what` names the caller in the error."""
     suffix = os.path.splitext(os.fspath(path))[1].lower()
     if suffix not in (".csv", ".parquet"):
         raise ValueError(f"{what}: cannot tell the format of {os.fspath(path)!r} from its suffix "
@@ -740,7 +741,7 @@ def read_table(path: str | os.PathLike) -> Table:
     (device, run, sweep, input) points, and rate-table inputs that look like rad/s. Raises `ValueError` for an
     unknown suffix. Nothing is dropped silently (blank CSV lines hold nothing and are skipped).
     """
-    suffix = _format_suffix(path, "read_table")
+    suffix = table_format(path, "read_table")
     source = os.fspath(path)
     if os.path.isdir(source):
         raise DataError(f"{source} is a directory; give a .csv or .parquet file.", source=source)
@@ -862,7 +863,7 @@ def write_table(table: Table, path: str | os.PathLike) -> None:
     """
     if not isinstance(table, Table):
         raise TypeError(f"write_table expects a gyrojax.Table, got {type(table).__name__}.")
-    suffix = _format_suffix(path, "write_table")
+    suffix = table_format(path, "write_table")
     if suffix == ".csv":
         with atomic_open(path, "w", newline="", encoding="utf-8") as f:
             _write_csv(table, f)

@@ -29,12 +29,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._compare import chi2_sf, compare
+from ._compare import chi2_sf, compare, nonlinearity_residual_ppm
 from ._dataset import Table
 from ._effects.registry import EFFECTS
 from ._fitdata import FitData, fit_data
-from ._identify import Fit, _to_model, identify
-from ._parameters import DEFAULT_FREE, Model, zero_effect
+from ._identify import Fit, identify
+from ._parameters import DEFAULT_FREE, Model, as_model, zero_effect
 from ._probes import PROBES, design, score_columns
 from ._progress import as_progress
 
@@ -338,18 +338,6 @@ def _row_blocks(data: FitData):
     return out
 
 
-def nonlinearity_residual_ppm(fit: Fit) -> float:
-    """The worst model-vs-measurement residual of the rate-table points, as ppm of full scale
-    (max |y - f - bias| / (|SF| max |rate|)): the scale-factor nonlinearity the model leaves unexplained."""
-    if "rate_table" not in fit.residuals:
-        return float("nan")
-    block = fit.data.blocks["rate_table"]
-    raw = np.abs(np.asarray(fit.residuals["rate_table"]) * np.asarray(block.sigmas))
-    full = np.abs(np.asarray(fit.scale_factor))[:, None, None] * np.max(
-        np.where(np.asarray(block.mask), np.abs(np.asarray(block.inputs)), 0.0), axis=(1, 2), keepdims=True)
-    return float(np.max(np.where(np.asarray(block.mask), raw / full, 0.0)) * 1e6)
-
-
 def _effect_columns(fit: Fit, name: str) -> np.ndarray:
     return np.asarray([i for i, nm in enumerate(fit.names) if nm.startswith(name + ".")], dtype=int)
 
@@ -593,7 +581,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     if fit is not None:
         base = _from_fit(fit, data)
     else:
-        base = _to_model(model)
+        base = as_model(model)
     device = base.device
     one = device if not _is_lot(device) else _first(device)
     available = supported_effects(one)

@@ -30,9 +30,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._fitdata import FitData, SweepBlock
-from ._identify import Fit, Unidentifiable, _batched, _p_value
+from ._identify import Fit, Unidentifiable, chi2_p_value
 from ._io import atomic_write_bytes
-from ._parameters import Entry, Model, zero_effect
+from ._parameters import Entry, Model, batched, zero_effect
+from ._version import __version__
 
 
 MAGIC = b"GYROJAX-FIT\n"
@@ -64,7 +65,7 @@ def _preset_of(model: Model) -> str:
 def _skeleton_model(preset_name: str, effects: tuple[str, ...], n: int) -> Model:
     from ._presets import preset
 
-    return _batched(Model(preset(preset_name), tuple(zero_effect(e) for e in effects)), n)
+    return batched(Model(preset(preset_name), tuple(zero_effect(e) for e in effects)), n)
 
 
 def _leaf_spec(x):
@@ -143,8 +144,8 @@ def _from_v1(fit: Fit) -> Fit:
     as given and the chi2 test's p-values (a version 1 fit of data without output_sigma had unit weights and
     its covariance scaled by chi2_red: its p-values mean nothing, which its status "unknown" says)."""
     inf = np.full(len(fit.devices), np.inf)
-    p = _p_value(np.asarray(fit.chi2), np.asarray(fit.dof), inf)
-    p_total = _p_value(np.asarray(fit.chi2_total), np.asarray(fit.dof_total), np.asarray(np.inf))
+    p = chi2_p_value(np.asarray(fit.chi2), np.asarray(fit.dof), inf)
+    p_total = chi2_p_value(np.asarray(fit.chi2_total), np.asarray(fit.dof_total), np.asarray(np.inf))
     return dataclasses.replace(fit, stderr_scaled=fit.stderr, lot_stderr_scaled=fit.lot_stderr,
                                scale_factor_stderr_scaled=fit.scale_factor_stderr, noise_dof=jnp.asarray(inf),
                                p_value=jnp.asarray(p), p_value_total=jnp.asarray(p_total))
@@ -152,8 +153,6 @@ def _from_v1(fit: Fit) -> Fit:
 
 def _header(fit: Fit, preset_name: str) -> dict:
     """Everything static of `fit` for the file's header (without the leaves' description and checksum)."""
-    from . import __version__
-
     held = [nm for nm, f in zip(fit.names, fit.free) if not f]
     return {
         "format": "gyrojax-fit", "format_version": FORMAT_VERSION, "gyrojax_version": __version__,

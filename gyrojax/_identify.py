@@ -37,7 +37,6 @@ from jax.scipy.special import betainc, gammaincc
 
 from ._dataset import Table
 from ._fitdata import BIASED_SWEEPS, FitData, fit_data
-from ._gyroscope import Gyroscope
 from ._linsolve import PivotedLU
 from ._lm import LevenbergMarquardt
 from ._observe import rate_table_points
@@ -48,6 +47,8 @@ from ._parameters import (
     Entry,
     Model,
     apply_u,
+    as_model,
+    batched,
     build_entries,
     read_values,
 )
@@ -286,7 +287,7 @@ def _p_text(p) -> str:
     return "p < 1e-300" if p == 0.0 else f"p = {p:.2g}"
 
 
-def _p_value(chi2, dof, noise_dof):
+def chi2_p_value(chi2, dof, noise_dof):
     """p-value of a chi2 over `dof` degrees of freedom. With known sigmas (`noise_dof` inf) the chi2 test;
     with the noise estimated from `noise_dof` effective degrees of freedom, the F test of chi2 / dof against
     the estimate, which takes the two as independent. Where they share the residuals they correlate
@@ -492,7 +493,7 @@ def _mc_p_value(chi2, draws, dof, noise_dof):
     or the F test's where that is smaller (it is conservative, so an upper bound: it resolves the tail beyond
     the draws)."""
     mc = (np.sum(draws >= chi2) + 1.0) / (draws.size + 1.0)
-    return float(min(mc, _p_value(np.asarray(chi2), np.asarray(dof), np.asarray(noise_dof))[()]))
+    return float(min(mc, chi2_p_value(np.asarray(chi2), np.asarray(dof), np.asarray(noise_dof))[()]))
 
 
 def _estimated_noise(fit: "Fit", seed: int):
@@ -1085,33 +1086,6 @@ def _hold_unidentifiable(jac, names_free, threshold):
     return keep, tuple(reports)
 
 
-def _batched(model: Model, n: int) -> Model:
-    def lead(x):
-        x = jnp.asarray(x, dtype=x.dtype if hasattr(x, "dtype") else float)
-        return x if (x.ndim >= 1 and x.shape[0] == n) else jnp.broadcast_to(x, (n,) + x.shape)
-
-    # Effects are per device: broadcast their leaves; the device is batched already (a lot) or broadcast.
-    dev_leaves = jax.tree.leaves(model.device)
-    lot = bool(dev_leaves) and all(jnp.ndim(x) >= 1 and jnp.shape(x)[0] == n for x in dev_leaves
-                                   if eqx.is_array(x))
-    device = model.device if lot else jax.tree.map(lambda x: jnp.broadcast_to(x, (n,) + jnp.shape(x))
-                                                    if eqx.is_array(x) else x, model.device)
-    effects = tuple(jax.tree.map(lead, e) for e in model.effects)
-    return Model(device, effects)
-
-
-def _to_model(model) -> Model:
-    if isinstance(model, Model):
-        return model
-    if isinstance(model, Gyroscope):
-        return Model(model)
-    if isinstance(model, str):
-        from ._presets import preset
-
-        return Model(preset(model))
-    raise TypeError(f"model must be a gyrojax.Model, a Gyroscope or a preset name, got {type(model).__name__}.")
-
-
 def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="levenberg-marquardt",
              starts: int = 1, start_spread: float = 0.05, seed: int = 0, rtol: float = 1e-8, atol: float = 1e-8,
              max_steps: int = 200, identifiability_threshold: float = 1.0, hold=(), tier=Steady(),
@@ -1189,7 +1163,7 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     `_ABSURD_RATIO` times the largest other output of its run, or outputs whose slope has the opposite sign of
     the model's (both named by device, run and input).
     """
-    model = _to_model(model)
+    model = as_model(model)
     if isinstance(data, Table):
         data = fit_data(data)
     if not isinstance(data, FitData):
@@ -1240,7 +1214,7 @@ def _identify(model, data, *, free, shared, priors, solver, starts, start_spread
     estimated noise's `(degrees of freedom, warnings, determined, p-values)` per device and the lot's p-value
     (`_estimated_noise`), or None for given sigmas."""
     n = len(data.devices)
-    model = _batched(model, n)
+    model = batched(model, n)
     one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, model)
     free = tuple(name for name in free if PARAMETERS.get(name) is None or PARAMETERS[name].exists_on(one.device))
     for name in free:
@@ -1497,8 +1471,8 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
         g_lot if n_lot else None, sf_stderr, threshold)
     if noise is None:
         noise_dof, noise_notes, noise_ok = np.full(n, np.inf), [()] * n, [True] * n
-        p_value = _p_value(chi2, dof, noise_dof)
-        p_lot = float(_p_value(np.asarray(chi2.sum()), np.asarray(int(dof.sum()) - n_lot), np.asarray(np.inf)))
+        p_value = chi2_p_value(chi2, dof, noise_dof)
+        p_lot = float(chi2_p_value(np.asarray(chi2.sum()), np.asarray(int(dof.sum()) - n_lot), np.asarray(np.inf)))
     else:
         noise_dof, noise_notes, noise_ok, p_value, p_lot = noise
     chi2_red = chi2 / np.maximum(dof, 1)

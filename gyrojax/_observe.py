@@ -18,18 +18,12 @@ import jax.numpy as jnp
 
 from ._gyroscope import Gyroscope
 from ._physics.thermal import ConstantTemperature
-from ._simulate.response import _linearise
+from ._simulate.response import linearise
 from ._simulate.tiers import AbstractTier, Settled, Steady
 from ._stimulus import Stimulus
+from ._sweeps import VCF_CARRIER_V, VCF_DYNAMIC_AMPLITUDE_V, dac_sweep
 from ._terms import AbstractOutputTerm, PointConditions
 from ._units import DEG
-
-
-VCF_CARRIER_V = 1.0
-"""V, seed 003 §3: "Vfc = 1 V", the fixed carrier of the virtual-Coriolis multiplier."""
-
-VCF_DYNAMIC_AMPLITUDE_V = 0.02
-"""V, seed 003 §3: "Vac = 20 mV", the virtual-rate voltage of the dynamic (swept-frequency) test."""
 
 
 def at_temperature(gyro: Gyroscope, temperature) -> Gyroscope:
@@ -98,7 +92,7 @@ def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz, temperatures, amplitude_
     the die temperature of each point (deg C; one value for every point linearises once). A lock-in reads
     the output at the modulation frequency: a zero-rate output and the readout terms do not reach it."""
     def response(f, temperature):
-        ss = _linearise(at_temperature(gyro, temperature), Stimulus(), "vcf")
+        ss = linearise(at_temperature(gyro, temperature), Stimulus(), input="vcf")
         h = ss.response(2.0 * jnp.pi * f) * (amplitude_v * carrier_v)
         return jnp.abs(h), jnp.rad2deg(jnp.angle(h))
 
@@ -112,6 +106,4 @@ def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz, temperatures, amplitude_
 
 def dac_points(gyro: Gyroscope, words):
     """Seed 000 Table 2's DAC sweep: signed carrier-fundamental amplitude (V) for each word (LSB)."""
-    from ._sweeps import dac_sweep
-
     return dac_sweep(gyro, words)

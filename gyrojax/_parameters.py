@@ -132,6 +132,35 @@ class Model(eqx.Module):
         return tuple(e.name for e in self.effects)
 
 
+def as_model(model) -> Model:
+    """`model` as a `Model`: a `Model` as it is, a `Gyroscope` or a preset name without effects."""
+    if isinstance(model, Model):
+        return model
+    if isinstance(model, Gyroscope):
+        return Model(model)
+    if isinstance(model, str):
+        from ._presets import preset
+
+        return Model(preset(model))
+    raise TypeError(f"model must be a gyrojax.Model, a Gyroscope or a preset name, got {type(model).__name__}.")
+
+
+def batched(model: Model, n: int) -> Model:
+    """`model` with a leading axis of `n` devices on every leaf (a lot's device is kept as it is)."""
+    def lead(x):
+        x = jnp.asarray(x, dtype=x.dtype if hasattr(x, "dtype") else float)
+        return x if (x.ndim >= 1 and x.shape[0] == n) else jnp.broadcast_to(x, (n,) + x.shape)
+
+    # Effects are per device: broadcast their leaves; the device is batched already (a lot) or broadcast.
+    dev_leaves = jax.tree.leaves(model.device)
+    lot = bool(dev_leaves) and all(jnp.ndim(x) >= 1 and jnp.shape(x)[0] == n for x in dev_leaves
+                                   if eqx.is_array(x))
+    device = model.device if lot else jax.tree.map(lambda x: jnp.broadcast_to(x, (n,) + jnp.shape(x))
+                                                    if eqx.is_array(x) else x, model.device)
+    effects = tuple(jax.tree.map(lead, e) for e in model.effects)
+    return Model(device, effects)
+
+
 def effect_leaves(eff: AbstractEffect) -> tuple[str, ...]:
     """Names of the array fields of an effect (its parameters)."""
     return tuple(f.name for f in dataclasses.fields(eff)

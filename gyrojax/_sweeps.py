@@ -15,7 +15,6 @@ import numpy as np
 
 from ._checks import check_nonnegative, check_positive
 from ._gyroscope import Gyroscope
-from ._observe import VCF_CARRIER_V, VCF_DYNAMIC_AMPLITUDE_V
 from ._physics.thermal import AbstractTemperature, WarmupTemperature
 from ._simulate.tiers import AbstractTier, Settled, Steady
 from ._stimulus import Stimulus
@@ -40,6 +39,12 @@ VCF_STATIC_RATES_DPS = SEED000_RATES_DPS
 seed 003 Eq. (7), Om = K_svf V_fc V_ac / (2 m Ag a w_d), with the device's design values gives these rates
 (seed 000's 22). Seed 003 prints no static voltages. With Table 1's values (vcf-2018) 200 deg/s is
 V_ac = 6.546 mV at V_fc = 1 V; on paper-qmg's electrode (`gyrojax/_presets.py`) it is 2 V."""
+
+VCF_CARRIER_V = 1.0
+"""V, seed 003 §3: "Vfc = 1 V", the fixed carrier of the virtual-Coriolis multiplier."""
+
+VCF_DYNAMIC_AMPLITUDE_V = 0.02
+"""V, seed 003 §3: "Vac = 20 mV", the virtual-rate voltage of the dynamic (swept-frequency) test."""
 
 VCF_DYNAMIC_FREQUENCIES_HZ = tuple(10.0 * k for k in range(1, 51))
 """Hz, seed 003 §3: "we measured the dynamic response from 10Hz to 500Hz"; the 10 Hz step is an ASSUMPTION

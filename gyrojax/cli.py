@@ -115,9 +115,9 @@ def _sweep_list(text):
 
 
 def _cmd_simulate(args):
-    from ._dataset import _format_suffix
+    from ._dataset import table_format
 
-    _format_suffix(args.out, "--out")
+    table_format(args.out, "--out")
     _check_outputs(("--out", args.out, False))
     _load_effects(args)
 

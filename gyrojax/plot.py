@@ -9,6 +9,8 @@ import math
 import matplotlib.pyplot as plt
 import numpy as np
 
+from ._compare import nonlinearity_residual_ppm
+
 
 PALETTE = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#F0E442", "#000000")
 """Okabe-Ito: distinguishable with every common colour-vision deficiency."""
@@ -113,8 +115,6 @@ def ranking(scores, *, alpha: float = 0.01, max_typical_multiple: float = 100.0,
 def error_fall(diagnosis, *, axes=None):
     """Step by step: the reduced chi2 (left, with the noise level 1 marked) and the model-vs-measurement
     nonlinearity residual in ppm of full scale (right); the last point says what is left unexplained."""
-    from ._diagnose import nonlinearity_residual_ppm
-
     own = axes is None
     if own:
         _, axes = plt.subplots(1, 2, figsize=(9.6, 3.6))

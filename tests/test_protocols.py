@@ -18,7 +18,6 @@ from _experiments import load_experiment
 import gyrojax as gj
 from gyrojax import _campaign
 from gyrojax._noise import RateNoise
-from gyrojax._observe import VCF_CARRIER_V
 from gyrojax._units import DEG
 from gyrojax.cli import main as cli
 
@@ -104,7 +103,7 @@ def test_noise_free_closed_loop_is_the_physics(qmg):
         np.testing.assert_allclose(np.asarray(rate.outputs[d]), sf * np.asarray(rate.inputs[d]) * DEG, rtol=1e-8)
         np.testing.assert_allclose(np.asarray(rate.aux["drive_freq_hz"][d]), w / (2 * np.pi), rtol=1e-12)
         gain = np.asarray(g.rebalance_gain(jnp.asarray(w)))
-        word = float(g.vcf_electrode.force_per_volt2) * VCF_CARRIER_V * np.asarray(vcf_s.inputs[d]) / gain
+        word = float(g.vcf_electrode.force_per_volt2) * gj.VCF_CARRIER_V * np.asarray(vcf_s.inputs[d]) / gain
         np.testing.assert_allclose(np.asarray(vcf_s.outputs[d]), word, rtol=1e-8)
     assert np.all(np.asarray(t["output_sigma"]) == 0.0)
 
@@ -161,7 +160,7 @@ def test_vcf_to_rate_scale_factor_ratio_is_physical(which, qmg, vcf):
         w = np.asarray(r.at_temperature(jnp.asarray(temp))[0])
         a = np.asarray(g.drive_amplitude(jnp.asarray(w)))
         phys = 2 * float(r.angular_gain) * float(r.mass) * a * w / (float(g.vcf_electrode.force_per_volt2)
-                                                                   * VCF_CARRIER_V)
+                                                                   * gj.VCF_CARRIER_V)
         om = np.asarray(rate.inputs[d]) * DEG
         ratio = (np.asarray(rate.outputs[d]) / om) / (np.asarray(vs.outputs[d]) / np.asarray(vs.inputs[d]))
         if g.closed_loop:

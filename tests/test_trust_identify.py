@@ -27,8 +27,8 @@ from gyrojax._identify import (
     HELD_LABEL,
     _contrasts,
     _noise_scales,
-    _p_value,
     _sf_determinacy,
+    chi2_p_value,
 )
 
 slow = pytest.mark.slow
@@ -151,7 +151,7 @@ def test_a_misfit_rejects_the_model_and_scales_its_errors(clean, cubic):
     assert f"+/- {float(cubic.scale_factor_stderr_scaled[0]):.2g} LSB/(deg/s)" in text
     assert cubic.exit_status == EXIT_CODES["model rejected"] == 3 and clean.exit_status == 0
     # a lenient level accepts what a strict one rejects: the test is of the chi2 against reject_alpha
-    assert _p_value(np.array([30.0]), np.array([20]), np.array([np.inf]))[0] == pytest.approx(0.0699, abs=1e-4)
+    assert chi2_p_value(np.array([30.0]), np.array([20]), np.array([np.inf]))[0] == pytest.approx(0.0699, abs=1e-4)
 
 
 @slow
@@ -246,7 +246,7 @@ def test_the_chi2_test_with_estimated_noise_holds_its_level(runs):
         r = m @ (2.2 * rng.normal(size=runs * RATES.size))
         _, nu, _, (chi2, draws) = _noise_scales(r, j, blocks, draws=1000, rng=rng)
         p_mc.append(_mc_p_value(chi2, draws, dof, nu[0]))
-        p_f.append(_p_value(np.array(chi2), np.array(dof), np.array(nu[0]))[()])
+        p_f.append(chi2_p_value(np.array(chi2), np.array(dof), np.array(nu[0]))[()])
     rate = np.mean(np.array(p_mc) < 0.05)
     assert abs(rate - 0.05) < 3 * np.sqrt(0.05 * 0.95 / 1000), rate
     assert np.mean(np.array(p_f) < 0.05) < 0.03  # what the F test alone would have given
