@@ -42,6 +42,7 @@ def test_simulate_tiers_agree(tmp_path):
     assert np.max(np.abs(ya - yb)) / np.max(np.abs(ya)) < 1e-6
 
 
+@pytest.mark.slow
 def test_simulate_is_reproducible_byte_for_byte(tmp_path):
     argv = ["simulate", "--preset", "paper-qmg", "--seed", "5"]  # with noise: the seed fixes it
     first, second, other = tmp_path / "1.csv", tmp_path / "2.csv", tmp_path / "3.csv"

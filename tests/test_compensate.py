@@ -130,6 +130,7 @@ def test_composite_is_exact_on_a_piecewise_cubic_with_its_own_calibration():
         sol.rate(out_a)
 
 
+@pytest.mark.slow
 def test_composite_removes_the_warmup_and_most_of_the_inl(warmup_table):
     res = gj.compensate(warmup_table, method="composite", train_runs=[0, 1])
     held = [r for r in res.runs if not r["used_for_training"]]
@@ -160,6 +161,7 @@ def test_describing_function_matches_the_carrier_samples():
             assert float(got) == pytest.approx(expected, rel=1e-13, abs=1e-7)
 
 
+@pytest.mark.slow
 def test_model_recovers_inl_and_tcf_on_noise_free_data(warmup_table):
     res = gj.compensate(warmup_table, method="model", train_runs=[0, 1])
     sol = res.solutions[_device(warmup_table)]
@@ -238,6 +240,7 @@ def test_model_refuses_bad_settings():
 # compensate(): held-out judging and errors
 
 
+@pytest.mark.slow
 def test_compensate_flags_training_runs_and_defaults_to_the_first(warmup_table):
     res = gj.compensate(warmup_table, method="polynomial")
     assert [(r["run"], r["used_for_training"]) for r in res.runs] == [(0, True), (1, False), (2, False)]
@@ -255,6 +258,7 @@ def test_compensate_flags_training_runs_and_defaults_to_the_first(warmup_table):
     json.dumps(res.to_json(), allow_nan=False)
 
 
+@pytest.mark.slow
 def test_compensate_errors(warmup_table):
     with pytest.raises(gj.DataError, match=r"train_runs names run 7, which device 'paper-qmg.*' does not have "
                                            r"\(its rate_table runs: 0, 1, 2\)"):
@@ -279,6 +283,7 @@ def test_compensate_errors(warmup_table):
 # command line
 
 
+@pytest.mark.slow
 def test_cli_compensate_json(warmup_table, tmp_path, capsys):
     data, out = tmp_path / "runs.csv", tmp_path / "comp.json"
     gj.write_table(warmup_table, data)
@@ -298,6 +303,7 @@ def test_cli_compensate_json(warmup_table, tmp_path, capsys):
     (["--train-runs", "0,9"], "train_runs names run 9"),
     (["--method", "polynomial", "--train-runs", "2"], None),
 ])
+@pytest.mark.slow
 def test_cli_compensate_exit_codes(warmup_table, tmp_path, capsys, argv, message):
     data = tmp_path / "runs.csv"
     gj.write_table(warmup_table, data)
