@@ -49,9 +49,9 @@ def _problems(fit, preset):
     import equinox as eqx
     import jax.numpy as jnp
 
+    from gyrojax import Steady
     from gyrojax._identify import _Problem
     from gyrojax._parameters import as_model, batched, read_values
-    from gyrojax._simulate.tiers import Steady
 
     n = len(fit.devices)
     model = batched(as_model(preset), n)

@@ -56,12 +56,21 @@ import scipy  # noqa: E402
 from jax.flatten_util import ravel_pytree  # noqa: E402
 from scipy.integrate import odeint, solve_ivp  # noqa: E402
 
-from gyrojax._effects.dac_inl import DacInl  # noqa: E402
-from gyrojax._effects.registry import add_effect  # noqa: E402
+from gyrojax import (  # noqa: E402
+    RESULTS,
+    Averaged,
+    ConstantTemperature,
+    DacInl,
+    FullWaveform,
+    Steady,
+    Stimulus,
+    add_effect,
+    make_lot,
+    paper_qmg,
+    settle,
+    units,
+)
 from gyrojax._io import atomic_write_json  # noqa: E402
-from gyrojax._lot import make_lot  # noqa: E402
-from gyrojax._physics.thermal import ConstantTemperature  # noqa: E402
-from gyrojax._presets import paper_qmg  # noqa: E402
 from gyrojax._simulate._model import (  # noqa: E402
     Outputs,
     full_field,
@@ -70,10 +79,9 @@ from gyrojax._simulate._model import (  # noqa: E402
     wave_from_slow,
     wave_scales,
 )
-from gyrojax._simulate.tiers import Averaged, FullWaveform, Steady, settle  # noqa: E402
-from gyrojax._solution import RESULTS  # noqa: E402
-from gyrojax._stimulus import Stimulus  # noqa: E402
-from gyrojax._units import DEG  # noqa: E402
+
+
+DEG = units.DEG
 
 
 SWEEP_DPS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0)

@@ -38,7 +38,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import gyrojax as gj
-from gyrojax._diagnose import diagnose
 from gyrojax._io import atomic_write_bytes, atomic_write_json
 
 
@@ -139,7 +138,7 @@ def run_case(preset, hidden, *, devices, runs, seed, progress=None):
     t0 = time.perf_counter()
     table = gj.simulate_table(g, devices=devices, runs=runs, sweeps=SWEEPS[preset], seed=seed)
     t1 = time.perf_counter()
-    d = diagnose(table, base_device(preset), progress=progress)
+    d = gj.diagnose(table, base_device(preset), progress=progress)
     t2 = time.perf_counter()
     report = d.to_json()
     row = {"preset": preset, "hidden": list(hidden), "selected": list(d.selected),

@@ -65,8 +65,9 @@ import numpy as np
 import gyrojax as gj
 from gyrojax._fitdata import fit_data
 from gyrojax._io import atomic_write_bytes, atomic_write_json
-from gyrojax._observe import rate_table_points
-from gyrojax._units import DEG
+
+
+DEG = gj.units.DEG
 
 
 AS_BUILT_VCF_FACTOR = 0.183 / 0.104
@@ -98,7 +99,7 @@ def _zero_rate_sf(lot, temps):
     """d(output)/d(rate) at zero rate, LSB per deg/s, per device at its temperature (deg C)."""
     def one(g, t):
         def out(rate):
-            return rate_table_points(g, rate[None], t[None], gj.CAMPAIGN_TIER).rate[0]
+            return gj.rate_table_points(g, rate[None], t[None], gj.CAMPAIGN_TIER).rate[0]
 
         return jax.jvp(out, (jnp.zeros(()),), (jnp.ones(()),))[1]
 

@@ -29,8 +29,7 @@ except ImportError:  # running from a checkout without `pip install -e .`
 
 import jax.numpy as jnp
 
-from gyrojax._dataset import DAC_WORD_BITS, Table, read_table
-from gyrojax._metrics import FULL_SCALE_CONVENTIONS, fit_scale_factor
+from gyrojax import DAC_WORD_BITS, FULL_SCALE_CONVENTIONS, Table, fit_scale_factor, read_table
 
 
 PAPER_DAC_PPM = 460.679

@@ -47,7 +47,9 @@ import numpy as np
 import gyrojax as gj
 from gyrojax import _presets as P
 from gyrojax._io import atomic_write_bytes, atomic_write_json
-from gyrojax._units import DEG
+
+
+DEG = gj.units.DEG
 
 
 SEED003_SPREAD = gj.ProcessSpread(

@@ -21,7 +21,9 @@ import numpy as np
 import gyrojax as gj
 from gyrojax import _presets as P
 from gyrojax._io import atomic_write_json
-from gyrojax._units import DEG, hz_to_rad_s
+
+
+DEG, hz_to_rad_s = gj.units.DEG, gj.units.hz_to_rad_s
 
 
 def seed000():

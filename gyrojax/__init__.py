@@ -41,6 +41,7 @@ from ._control.drive import DriveLoop as DriveLoop  # noqa: E402
 from ._control.openloop import OpenLoopReadout as OpenLoopReadout  # noqa: E402
 from ._control.rebalance import RebalanceLoop as RebalanceLoop  # noqa: E402
 from ._dataset import (  # noqa: E402
+    DAC_WORD_BITS as DAC_WORD_BITS,
     OPTIONAL_COLUMNS as OPTIONAL_COLUMNS,
     REQUIRED_COLUMNS as REQUIRED_COLUMNS,
     SWEEPS as SWEEPS,

@@ -21,7 +21,9 @@ import pytest
 from jax.flatten_util import ravel_pytree
 
 import gyrojax as gj
-from gyrojax._units import DEG
+
+
+DEG = gj.units.DEG
 
 
 # --- devices -------------------------------------------------------------------------------------------

@@ -14,7 +14,7 @@ import re
 import numpy as np
 import pytest
 
-from gyrojax._dataset import DataError, read_table
+from gyrojax import DataError, read_table
 
 
 N_CASES = 900

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
-from gyrojax._units import DEG
+
+
+DEG = gj.units.DEG
 
 
 RATE = 100 * DEG

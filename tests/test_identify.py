@@ -15,7 +15,7 @@ import pytest
 
 
 import gyrojax as gj
-from gyrojax._observe import rate_table_points
+from gyrojax import rate_table_points
 
 
 

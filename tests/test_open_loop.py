@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
-from gyrojax._units import DEG
+
+
+DEG = gj.units.DEG
 
 
 RATES = np.array([1.0, 50.0, 100.0, 200.0]) * DEG

@@ -8,8 +8,8 @@ import textwrap
 import pytest
 
 import gyrojax as gj
-from gyrojax import _plugins
-from gyrojax._plugins import ENTRY_POINT_GROUP, load_effect_entry_points, load_effects_module
+from gyrojax import _plugins, load_effect_entry_points, load_effects_module
+from gyrojax._plugins import ENTRY_POINT_GROUP
 
 
 EFFECT = textwrap.dedent('''
@@ -62,7 +62,7 @@ def clean_registry(monkeypatch):
 def test_a_file_defining_classes_registers_them(tmp_path):
     path = tmp_path / "fx.py"
     path.write_text(effect_source() + textwrap.dedent('''
-        from gyrojax._effects.dac_inl import DacInl  # imported: not this file's, not registered again
+        from gyrojax import DacInl  # imported: not this file's, not registered again
 
         class AbstractUserThing(gj.AbstractEffect):  # abstract: a base for others, skipped
             pass

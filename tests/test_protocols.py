@@ -16,11 +16,11 @@ import pytest
 from _experiments import load_experiment
 
 import gyrojax as gj
-from gyrojax import _campaign
-from gyrojax._noise import RateNoise
-from gyrojax._units import DEG
+from gyrojax import RateNoise, _campaign
 from gyrojax.cli import main as cli
 
+
+DEG = gj.units.DEG
 QMG_DEVICES, QMG_RUNS = 3, 8  # 528 rate-table points: enough for a chi^2 test at +/-0.2
 VCF_DEVICES, VCF_RUNS = 3, 1  # the experiment's and the CLI test's sizes too (same compiled functions)
 ALL = ("rate_table", "vcf_static", "vcf_dynamic", "dac")

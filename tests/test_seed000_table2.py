@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 from _experiments import load_experiment
 
-from gyrojax._dataset import decode_dac_word
-from gyrojax._metrics import metrics_report
+from gyrojax import decode_dac_word, metrics_report
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
-from gyrojax._parameters import Model
+from gyrojax import Model
 
 
 RATES = (-200.0, -50.0, -5.0, 5.0, 50.0, 200.0)  # a few of seed 000's rates: one compiled shape for the file

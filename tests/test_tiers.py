@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
-from gyrojax._units import DEG
+
+
+DEG = gj.units.DEG
 
 
 RATES = gj.seed000_rates()
