@@ -331,6 +331,7 @@ def test_cli_compensate_usage_errors_exit_2(tmp_path, capsys, argv, message):
 # experiments/seed000_table3_compensation.py
 
 
+@pytest.mark.slow
 def test_table3_experiment_reproduces_the_ordering(tmp_path, capsys):
     out = EXPERIMENT.main(["--out", str(tmp_path), "--quick"])
     res = out["results"]
