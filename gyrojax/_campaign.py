@@ -22,7 +22,7 @@ from ._observe import dac_points, rate_table_points, vcf_dynamic_points, vcf_sta
 from ._process import WaferProcess
 from ._progress import as_progress
 from ._simulate.tiers import AbstractTier, Steady
-from ._solution import RESULTS
+from ._solution import RESULTS, result_code
 from ._sweeps import Protocol
 from ._units import DEG
 
@@ -92,9 +92,10 @@ def _lot_ideal_sf(lot):
 
 
 def _raise_unsettled(result, what):
-    bad = np.asarray(result._value) != RESULTS.successful._value
+    codes = np.asarray(result_code(result))
+    bad = codes != result_code(RESULTS.successful)
     if bad.any():
-        codes = np.asarray(result._value)[bad]
+        codes = codes[bad]
         raise RuntimeError(
             f"{int(bad.sum())} of {bad.size} {what} points did not settle (result code "
             f"{sorted(set(codes.tolist()))}). Steady() at rtol = atol = 1e-11 can stall at round-off (use "

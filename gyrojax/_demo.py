@@ -108,7 +108,7 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print, progress: bool 
     for name, tier in tiers.items():
         t = time.perf_counter()
         s = gj.rate_sweep(gyro, rates, tier=tier)
-        ok = bool(np.all(np.asarray(s.result._value) == gj.RESULTS.successful._value))
+        ok = bool(np.all(np.asarray(s.result == gj.RESULTS.successful)))
         fit = gj.fit_scale_factor(x, np.asarray(s.rate))
         curves[name] = (np.asarray(fit.residuals) / float(fit.full_scale) * 1e6, np.asarray(s.rate))
         tier_rows[name] = {"scale_factor_lsb_per_dps": float(fit.scale_factor),

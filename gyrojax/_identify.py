@@ -60,6 +60,7 @@ from ._residuals import (
     run_biases,
 )
 from ._simulate.tiers import Steady
+from ._solution import RESULTS, result_code, result_message
 
 SOLVERS = ("levenberg-marquardt", "gauss-newton", "bfgs")
 
@@ -973,7 +974,7 @@ def _solve_device(problem, y0, u_lot, solver, max_steps):
 
     sol = optx.least_squares(fn, solver, y0, max_steps=max_steps, throw=False)
     r = problem.residuals(sol.value, u_lot)
-    return sol.value, sol.result._value, sol.stats["num_steps"], jnp.sum(r**2)
+    return sol.value, result_code(RESULTS.promote(sol.result)), sol.stats["num_steps"], jnp.sum(r**2)
 
 
 @eqx.filter_jit
@@ -1002,7 +1003,7 @@ def _solve_joint(problem_batch, u0, u_lot0, solver, max_steps):
     sol = optx.least_squares(fn, solver, (u0, u_lot0), max_steps=max_steps, throw=False)
     r = fn(sol.value, None)
     n = u0.shape[0]
-    return (sol.value[0], sol.value[1], jnp.broadcast_to(sol.result._value, (n,)),
+    return (sol.value[0], sol.value[1], jnp.broadcast_to(result_code(RESULTS.promote(sol.result)), (n,)),
             jnp.broadcast_to(sol.stats["num_steps"], (n,)), jnp.sum(r**2, axis=-1))
 
 
@@ -1326,7 +1327,7 @@ def _identify(model, data, *, free, shared, priors, solver, starts, start_spread
             best = tuple(b if i == 1 else np.where(better.reshape((n,) + (1,) * (b.ndim - 1)), a, b)
                          for i, (a, b) in enumerate(zip(res, best)))
     if evaluate_only:
-        best = (np.zeros((n, n_dev)), np.zeros(n_lot), np.full(n, optx.RESULTS.successful._value),
+        best = (np.zeros((n, n_dev)), np.zeros(n_lot), np.full(n, result_code(RESULTS.successful)),
                 np.zeros(n, dtype=int), None)
     u_free, u_lot, code, steps, chi2 = best
     notes = [""] * n
@@ -1340,8 +1341,8 @@ def _identify(model, data, *, free, shared, priors, solver, starts, start_spread
                           spread.chunk))
 
     u_full, final = at(u_free, u_lot)
-    ok = optx.RESULTS.successful._value
-    stopped = (code == optx.RESULTS.nonlinear_max_steps_reached._value) & (np.asarray(final.failed) == 0)
+    ok = result_code(RESULTS.successful)
+    stopped = (code == result_code(RESULTS.nonlinear_max_steps_reached)) & (np.asarray(final.failed) == 0)
     if stopped.any():
         decrement = _decrement(np.asarray(final.jac)[:, :, free_index], np.asarray(final.jac_lot),
                                np.asarray(final.residuals), joint=bool(n_lot))
@@ -1455,8 +1456,8 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
         var = var + np.einsum("di,ij,dj->d", g_lot, cov_lot, g_lot) + 2 * np.einsum("di,dij,dj->d", g, cross, g_lot)
     sf_stderr = np.sqrt(np.maximum(var, 0.0))
     failed = np.asarray(final.failed)
-    ok = np.asarray(code) == optx.RESULTS.successful._value
-    messages = [_message(bool(o), "" if o else optx.RESULTS._index_to_message[int(c)].split(".")[0], int(fl))
+    ok = np.asarray(code) == result_code(RESULTS.successful)
+    messages = [_message(bool(o), "" if o else result_message(c).split(".")[0], int(fl))
                 for o, c, fl in zip(ok, np.asarray(code), failed)]
     weak = _weak_at_solution(jac, [names_dev[i] for i in f], threshold)
     messages = tuple(m if not w else f"{m}; but {w}" for m, w in zip(messages, weak))

@@ -458,9 +458,9 @@ def test_steady_and_averaged_agree_closed_loop():
         dev = _at(cls.typical().apply(base), T_HOT)
         s = gj.rate_sweep(dev, rates)
         a = gj.rate_sweep(dev, rates, tier=gj.Averaged())
-        assert np.all(np.asarray(a.result._value) == gj.RESULTS.successful._value), name
+        assert np.all(np.asarray(a.result == gj.RESULTS.successful)), name
         # every steady point settles (agc_finite_gain did not, at the AGC residual's round-off)
-        assert np.all(np.asarray(s.result._value) == gj.RESULTS.successful._value), name
+        assert np.all(np.asarray(s.result == gj.RESULTS.successful)), name
         full_scale = np.max(np.abs(np.asarray(s.rate)))
         assert np.max(np.abs(np.asarray(a.rate) - np.asarray(s.rate))) / full_scale < 1e-6, name
 

@@ -40,7 +40,7 @@ def sweeps(devices):
     for name, tier in TIERS.items():
         for label, dev in zip(("ideal", "inl"), devices):
             s = gj.rate_sweep(dev, RATES, tier=tier)
-            assert np.all(np.asarray(s.result._value) == gj.RESULTS.successful._value), (name, label)
+            assert np.all(np.asarray(s.result == gj.RESULTS.successful)), (name, label)
             out[name, label] = s
     return out
 

@@ -15,7 +15,7 @@ from jax.flatten_util import ravel_pytree
 from .._checks import check_positive
 from .._gyroscope import Gyroscope
 from .._linsolve import PivotedLU, lu_factor, lu_solve
-from .._solution import RESULTS
+from .._solution import RESULTS, result_code, result_message
 from .._stimulus import Stimulus
 from ._model import (
     Outputs,
@@ -68,11 +68,11 @@ class Settled(eqx.Module):
         """In words: "settled" when every point settled, else the reasons (eager use only)."""
         import numpy as np
 
-        codes = np.atleast_1d(np.asarray(self.result._value))
-        bad = codes != RESULTS.successful._value
+        codes = np.atleast_1d(np.asarray(result_code(self.result)))
+        bad = codes != result_code(RESULTS.successful)
         if not bad.any():
             return "settled"
-        reasons = sorted({RESULTS._index_to_message[int(c)] for c in codes[bad]})
+        reasons = sorted({result_message(c) for c in codes[bad]})
         return f"{int(bad.sum())} of {codes.size} point(s) did not settle: " + " / ".join(reasons)
 
     def check(self):
@@ -98,7 +98,7 @@ class AbstractTier(eqx.Module):
 
 def _finalise(rate, quad, freq, state, result, steps):
     bad = ~(jnp.isfinite(rate) & jnp.isfinite(quad) & jnp.isfinite(freq))
-    result = RESULTS.where(bad & (result == RESULTS.successful), RESULTS.nonfinite, result)
+    result = RESULTS.where(bad & (result == RESULTS.successful), RESULTS.nonfinite_output, result)
     return Settled(rate, quad, freq, state, result, steps)
 
 
@@ -131,9 +131,9 @@ class Steady(AbstractTier):
     def settle(self, gyro, stimulus):
         _check_constant(stimulus)
         orders = _orders(gyro)
-        z, (code, steps) = implicit_root((gyro, stimulus), find=ft.partial(_steady_find, self, orders),
-                                         residual=ft.partial(_steady_residual, orders))
-        return _steady_settled(gyro, stimulus, orders, z, code == optx.RESULTS.successful._value, steps)
+        z, (result, steps) = implicit_root((gyro, stimulus), find=ft.partial(_steady_find, self, orders),
+                                           residual=ft.partial(_steady_residual, orders))
+        return _steady_settled(gyro, stimulus, orders, z, result == RESULTS.successful, steps)
 
     def settle_points(self, gyros, stimuli):
         """A sweep's points from one Jacobian (`jacobian="once"`): formed and factorised at the sweep's centre
@@ -258,7 +258,7 @@ def _steady_find(tier, orders, inputs):
     sol = optx.root_find(ft.partial(_steady_residual, orders), method(rtol=tier.rtol, atol=tier.atol,
                          linear_solver=PivotedLU()), y0, inputs, max_steps=tier.max_steps, throw=False,
                          adjoint=optx.RecursiveCheckpointAdjoint())
-    return sol.value, (sol.result._value, sol.stats["num_steps"])
+    return sol.value, (RESULTS.promote(sol.result), sol.stats["num_steps"])
 
 
 # At equilibrium every demodulator low-pass stage equals its input (unit DC gain), so the root find solves for
@@ -317,13 +317,8 @@ def _ode_settle(tier, field, y0, scales, gyro, stimulus, average_time):
     )
     state = jax.tree.map(lambda s, x: s[-1] * x, sol.ys[0], scales)
     mean = jax.tree.map(lambda acc, s: (acc[1] - acc[0]) / average_time * s, sol.ys[1], out_scales)
-    result = RESULTS.where(
-        sol.result == diffrax.RESULTS.successful,
-        RESULTS.successful,
-        RESULTS.where(sol.result == diffrax.RESULTS.max_steps_reached, RESULTS.max_steps_reached,
-                      RESULTS.solver_failed),
-    )
-    return _finalise(mean.rate, mean.quadrature, mean.frequency, state, result, sol.stats["num_steps"])
+    return _finalise(mean.rate, mean.quadrature, mean.frequency, state, _ode_result(sol.result),
+                     sol.stats["num_steps"])
 
 
 class Averaged(AbstractTier):
@@ -351,13 +346,12 @@ class Averaged(AbstractTier):
         return _ode_settle(self, averaged_field, y0, slow_scales(gyro), gyro, stimulus, self.average_time)
 
 
-def _diffrax_result(result):
-    return RESULTS.where(
-        result == diffrax.RESULTS.successful,
-        RESULTS.successful,
-        RESULTS.where(result == diffrax.RESULTS.max_steps_reached, RESULTS.max_steps_reached,
-                      RESULTS.solver_failed),
-    )
+def _ode_result(result):
+    """A diffrax result in gyrojax's codes: a failure says what to try when settling (every diffrax failure
+    but max_steps is `solver_failed`)."""
+    result = RESULTS.promote(result)
+    failed = RESULTS.where(result == RESULTS.max_steps_reached, RESULTS.settle_max_steps, RESULTS.solver_failed)
+    return RESULTS.where(result == RESULTS.successful, result, failed)
 
 
 def _window_settle(tier, field, y0, scales, gyro, stimulus, average_time):
@@ -398,9 +392,9 @@ def _window_settle(tier, field, y0, scales, gyro, stimulus, average_time):
     zero = jnp.zeros(())
     spans = jnp.stack([jnp.stack([zero, settle_time]), jnp.stack([settle_time, settle_time + average_time])])
     z_end, (integrals, results, steps) = jax.lax.scan(segment, flat0, spans)
-    first, window = (jax.tree.map(lambda v: v[i], results) for i in (0, 1))
+    first, window = (_ode_result(jax.tree.map(lambda v: v[i], results)) for i in (0, 1))
     mean = integrals[1] / average_time * out_scale
-    result = RESULTS.where(first == diffrax.RESULTS.successful, _diffrax_result(window), _diffrax_result(first))
+    result = RESULTS.where(first == RESULTS.successful, window, first)
     return _finalise(mean[0], mean[1], mean[2], _mul(unravel(z_end), scales), result, jnp.sum(steps))
 
 
