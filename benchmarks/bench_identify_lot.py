@@ -126,14 +126,16 @@ def run(sizes, scipy_devices, seed=0, preset="paper-qmg", chunk=None, scipy_back
                "free_parameters": len(free), "simulate_s": t_sim, "gyrojax_first_call_s": t_first,
                "gyrojax_compile_s": t_first - t_gj, "gyrojax_s": t_gj, "gyrojax_per_device_ms": 1e3 * t_gj / n,
                "gyrojax_converged": int(np.sum(np.asarray(fit.converged))), "gyrojax_steps_max":
-               int(np.max(np.asarray(fit.num_steps))), "gyrojax_steps_mean": float(np.mean(np.asarray(fit.num_steps))), "scipy_devices_timed": m, "scipy_s": t_sp_n,
+               int(np.max(np.asarray(fit.num_steps))), "gyrojax_steps_mean": float(np.mean(np.asarray(fit.num_steps))),
+               "scipy_devices_timed": m, "scipy_s": t_sp_n,
                "scipy_scaled": m < n, "scipy_per_device_ms": 1e3 * t_sp / m, "scipy_nfev_per_device": nfev / m,
                "speedup": t_sp_n / t_gj, "worst_deviation_in_stderr": worst, "peak_rss_gb": rss_gb,
                "device_peak_gb": device_gb, "gyrojax_backend": jax.default_backend(),
                "scipy_backend": scipy_device.platform}
         rows.append(row)
         print(f"N={n:5d}  gyrojax {t_gj:8.2f} s ({1e3 * t_gj / n:7.1f} ms/device, compile {t_first - t_gj:6.1f} s, "
-              f"converged {row['gyrojax_converged']}/{n}, LM steps max {row['gyrojax_steps_max']})  scipy {t_sp_n:9.2f} s{' (scaled)' if m < n else ''} "
+              f"converged {row['gyrojax_converged']}/{n}, LM steps max {row['gyrojax_steps_max']})  "
+              f"scipy {t_sp_n:9.2f} s{' (scaled)' if m < n else ''} "
               f"({1e3 * t_sp / m:7.1f} ms/device, {nfev / m:.0f} evaluations)  speed-up {t_sp_n / t_gj:6.1f}x  "
               f"worst |du| {worst:.3f} sigma  peak RSS {rss_gb:.2f} GB"
               + ("" if device_gb is None else f", device peak {device_gb:.2f} GB"), flush=True)

@@ -786,7 +786,8 @@ def part2(gyro, args, accuracy):
                            "ratio": ratio, "meets_target": ratio >= TARGET_FULL_VS_SCIPY}
         for r in [ours] + theirs:
             r["time_over_gyrojax"] = None if r["time_s"] is None else r["time_s"] / ours["time_s"]
-            table.append([f"{label} (E {targets[label]:.4f})", r["method"], "" if r["tol"] is None else f"{r['tol']:.1e}",
+            table.append([f"{label} (E {targets[label]:.4f})", r["method"],
+                          "" if r["tol"] is None else f"{r['tol']:.1e}",
                           "not reached" if r["time_s"] is None else f"{r['time_s']:.4f}",
                           "" if r["nfev"] is None else r["nfev"], "" if r["steps"] is None else r["steps"],
                           "" if r["error_ppm"] is None else f"{r['error_ppm']:+.5f}",
@@ -795,7 +796,8 @@ def part2(gyro, args, accuracy):
     _print(_table(table, ["accuracy class (E, ppm FS)", "method", "rtol=atol", "time s", "nfev", "steps",
                           "error vs ref ppm", "vs steady ppm", "time / gyrojax"]))
     _print(f"(times: best of {args.rounds} interleaved rounds; gyrojax compile times: "
-           + ", ".join(f"{r['accuracy']} {r['compile_s']:.1f} s" for r in rows if r["method"].startswith("gyrojax")) + ")")
+           + ", ".join(f"{r['accuracy']} {r['compile_s']:.1f} s" for r in rows if r["method"].startswith("gyrojax"))
+           + ")")
     for label, v in verdicts.items():
         _print(f"at E = {v['E_ppm']:.5f} ppm ({label}): gyrojax {v['gyrojax_s'] * 1e3:.1f} ms, best scipy "
                f"{v['best_scipy']} at tol {v['best_scipy_tol']:.1e} {v['best_scipy_s']:.3f} s: {v['ratio']:.1f}x "
@@ -855,7 +857,8 @@ def part3(gyro, args, p1, p2, accuracy):
             seconds, ys, ye, nfev = _scipy_run(method, batch, batch.y0, problems[0].settle_time, problems[0].t1, tol)
             return seconds, batch.rates_from(problems[0], ys, ye), nfev
 
-        start = next((r["tol"] for r in p2["rows"] if r["method"] == f"scipy {method}" and r["accuracy"] == label), None)
+        start = next((r["tol"] for r in p2["rows"] if r["method"] == f"scipy {method}" and r["accuracy"] == label),
+                     None)
         if start is None:
             continue
         for name, run in (("point by point, scalar RHS", run_loop), ("stacked, vectorised RHS", run_stacked)):

@@ -10,8 +10,8 @@ case is the same lot with a different hidden effect) on the preset where the eff
 but the effects that act only on an open-loop readout, which go on seed 003's `vcf-2018` (rate table + static
 and dynamic VCF sweeps); comb_gap, which needs a residual sense motion, on `qmg-leaky` (paper-qmg with a leaky
 rebalance integrator, see `base_device`). `gyrojax.diagnose` then starts from the *plain* preset,
-every supported candidate considered, without being told what was hidden or the true parameters. Also: nothing hidden (on each preset),
-and two effects hidden at once (dac_inl + vref_drift on paper-qmg).
+every supported candidate considered, without being told what was hidden or the true parameters. Also: nothing hidden
+(on each preset), and two effects hidden at once (dac_inl + vref_drift on paper-qmg).
 
 Each row: hidden -> selected (in order), the ambiguity groups reported, the candidates the baseline absorbs
 (not testable on this data), rejected candidates, chi2_red before and after, and a verdict:
@@ -35,7 +35,6 @@ import traceback
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 
 import gyrojax as gj
 from gyrojax._io import atomic_write_bytes, atomic_write_json

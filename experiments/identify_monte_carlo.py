@@ -58,7 +58,8 @@ def run(draws=100, sweeps=("rate_table", "vcf_static", "dac"), runs=2, seed=0, p
     # and the zero-rate scale factor
     sf = np.asarray(fit.scale_factor)
     out["parameters"]["scale_factor"] = {
-        "scatter": float(np.std(sf, ddof=1)), "reported": float(np.sqrt(np.mean(np.asarray(fit.scale_factor_stderr)**2))),
+        "scatter": float(np.std(sf, ddof=1)),
+        "reported": float(np.sqrt(np.mean(np.asarray(fit.scale_factor_stderr)**2))),
         "crb": float(at_truth.scale_factor_stderr[0]),
     }
     p = out["parameters"]["scale_factor"]

@@ -179,8 +179,8 @@ def _slope_ratio(data, predictions, sweep):
 
 
 def linear_start(start, table, options):
-    """A start from the data's sense resonance and gains: the design starts 76 % off in K_svf and 2 % in the readout gain, and a
-    Levenberg-Marquardt step from there can leave the region where every point settles (the steady state's
+    """A start from the data's sense resonance and gains: the design starts 76 % off in K_svf and 2 % in the readout
+    gain, and a Levenberg-Marquardt step from there can leave the region where every point settles (the steady state's
     implicit derivative is then NaN, which raises inside identify). One evaluation of the design model
     (`evaluate_only`, the fit's own compiled pass) gives per device the measured/predicted slope of the static
     VCF sweep (~ sense gain x K_svf) and, on the rate-table devices, of the rate table (~ sense gain); the

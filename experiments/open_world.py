@@ -12,8 +12,8 @@ runs from the plain preset:
    name the coordinate and shape of the misfit, with the size of the term;
 2. **with it**: the effect added to the candidates, from the library (`zro`, `amp`) or from the user's own
    module file (`time`: a zero-rate output drifting with time since power-on, `experiments/user_effects.py`,
-   written in one file as `docs/adding_an_effect.md` shows). It must be found with chi2_red in [0.7, 1.4] and its size within
-   3 sigma of the truth on every device.
+   written in one file as `docs/adding_an_effect.md` shows). It must be found with chi2_red in [0.7, 1.4] and its size
+   within 3 sigma of the truth on every device.
 
 Cases (`--cases`): `zro` (a zero-rate output linear in the die temperature, 2e-3 (deg/s)/K on the rate and VCF
 rows), `amp` (a cubic compression of the feedback amplifier after the DAC: rate and VCF words raised by

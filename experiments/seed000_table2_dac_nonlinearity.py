@@ -22,6 +22,7 @@ import sys
 
 import numpy as np
 
+
 try:
     import gyrojax  # noqa: F401
 except ImportError:  # running from a checkout without `pip install -e .`
@@ -142,13 +143,15 @@ def main() -> dict:
     print(f"=> the paper's figure is the RMS residual over full-scale output (|K| x 200 deg/s, or max |Vac|: equal to "
           f"0.1%),\n   not the max residual ({nl[('rate', 'half_range')]['max']:.1f} ppm) and not over the span "
           f"({nl[('rate', 'span')]['rms']:.1f} ppm).")
-    print(f"   Against the rate it is closest: {hr:.3f} ppm with |K| max|rate| ({100 * (hr / PAPER_DAC_PPM - 1):+.2f}%), "
-          f"{res['closest_value']:.3f} ppm with max|Vac|; against the word\n   {nl[('word', 'half_range')]['rms']:.3f} ppm "
+    print(f"   Against the rate it is closest: {hr:.3f} ppm with |K| max|rate| "
+          f"({100 * (hr / PAPER_DAC_PPM - 1):+.2f}%), {res['closest_value']:.3f} ppm with max|Vac|; against the word"
+          f"\n   {nl[('word', 'half_range')]['rms']:.3f} ppm "
           f"({100 * (nl[('word', 'half_range')]['rms'] / PAPER_DAC_PPM - 1):+.1f}%), inside its band too: the table "
           "favours the rate axis but cannot prove it.")
     print(f"   Our value is {100 * hr / PAPER_CLOSED_LOOP_PPM:.1f}% of the closed-loop {PAPER_CLOSED_LOOP_PPM} ppm.")
     print("\nDecoding checks:")
-    print(f"  words / Vac (fit) = {res['words_per_volt_fit']:.0f} per V vs 2^23 / 5 V = {res['words_per_volt_ideal']:.1f}"
+    print(f"  words / Vac (fit) = {res['words_per_volt_fit']:.0f} per V vs 2^23 / 5 V = "
+          f"{res['words_per_volt_ideal']:.1f}"
           f" ({100 * (res['words_per_volt_fit'] / res['words_per_volt_ideal'] - 1):+.3f}%): a +-5 V full scale.")
     print(f"  words per deg/s (fit) = {res['words_per_dps']:.1f} (the paper's closed-loop SF: 13,709.853 LSB/(deg/s))")
     print("  word(-r) + word(+r): " + ", ".join(f"{r:g}: {s}" for r, s in res["pair_sums"].items()))

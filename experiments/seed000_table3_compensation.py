@@ -5,8 +5,8 @@ Run: python experiments/seed000_table3_compensation.py [--out DIR] [--inl-scale 
 The device is `paper_qmg()` with the typical FTR-DAC INL (`dac_inl`) and silicon's TCF; three rate-table runs
 (seed 000 §5: power-on, 1 min warm-up, 22 rates, 2 min each), each self-heating by the same rise, the first one
 slowly, so that it sweeps through its warm-up ("the longer time required for temperature stabilization during
-the first set", §5) while the next two settle within their first points. Every compensator is judged on held-out data only:
-leave-one-out, run k is compensated by a compensator fitted on the other two runs. Per method the table gives
+the first set", §5) while the next two settle within their first points. Every compensator is judged on held-out data
+only: leave-one-out, run k is compensated by a compensator fitted on the other two runs. Per method the table gives
 the worst nonlinearity of each run (max residual / full scale) and the repeatability (sample std of the three
 runs' scale factors over their mean), seed 000's definitions.
 
@@ -23,6 +23,7 @@ import numpy as np
 
 import gyrojax as gj
 from gyrojax._io import atomic_write_bytes, atomic_write_json
+
 
 # Seed 000 Table 3 (worst nonlinearity per group, ppm; scale factor, LSB/(deg/s); repeatability, ppm).
 SEED000_TABLE3 = {
@@ -175,7 +176,8 @@ def main(argv=None) -> dict:
           f"for run 1, {RUN_TIME_CONSTANT_S:.0f} s after); die "
           "temperature per run: " + ", ".join(f"{a:.1f}-{b:.1f} °C" for a, b in zip(temps, temps_hi)))
     print(text)
-    print(f"  ordering uncompensated > traditional > composite > model-based: {'REPRODUCED' if ordered else 'NOT reproduced'}")
+    print("  ordering uncompensated > traditional > composite > model-based: "
+          f"{'REPRODUCED' if ordered else 'NOT reproduced'}")
     rep_c, rep_m = results["composite"]["repeatability_ppm"], results["model"]["repeatability_ppm"]
     print(f"  model-based vs composite on held-out runs: worst nonlinearity {worst['composite']:.2f} -> "
           f"{worst['model']:.2f} ppm ({gain_nl:.1f}x {'better' if gain_nl > 1 else 'WORSE'}); repeatability "

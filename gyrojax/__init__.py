@@ -10,7 +10,7 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 from ._cache import compilation_cache as compilation_cache  # noqa: E402  (importing it turns the cache on)
 
-from . import _units as units  # noqa: E402
+from . import _units as units  # noqa: E402, F401  (the public gyrojax.units)
 from ._campaign import (  # noqa: E402
     CAMPAIGN_TIER as CAMPAIGN_TIER,
     SIMULATED_SWEEPS as SIMULATED_SWEEPS,

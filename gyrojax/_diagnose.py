@@ -15,7 +15,8 @@ that the most visible typical-size combination of the candidate would leave afte
 it could (`typical_chi2`). A candidate whose projected Jacobian is empty, or whose `typical_chi2` is below
 `min_typical_chi2` (a typical-size effect changes the lot's chi2 by less than the noise does) while its
 score is not significant, is reported as not testable (the baseline absorbs it, or this data cannot see
-it at a plausible size); it stays in the ranking and is still selected if significant. The best candidate with p below alpha / (number of candidates) is refitted; the likelihood-ratio test
+it at a plausible size); it stays in the ranking and is still selected if significant. The best candidate with p below
+alpha / (number of candidates) is refitted; the likelihood-ratio test
 (chi2 drop ~ chi2(df)) and BIC confirm it, and the loop repeats until no candidate is significant.
 Significant candidates whose fingerprints are nearly collinear (|cos| > `ambiguity`) are reported together,
 with the sweep of the data on which their fingerprints differ most, if any.
@@ -592,7 +593,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         candidates = tuple(candidates)
         for c in candidates:
             if c not in EFFECTS:
-                raise ValueError(f"unknown candidate effect {c!r}; expected names of gyrojax.EFFECTS: {', '.join(EFFECTS)}.")
+                raise ValueError(f"unknown candidate effect {c!r}; expected names of gyrojax.EFFECTS: "
+                                 f"{', '.join(EFFECTS)}.")
             if c not in available:
                 raise ValueError(f"candidate effect {c!r} cannot act on device {one.name!r} "
                                  f"(supported: {', '.join(available)}).")
@@ -643,7 +645,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
             rejected.append(Rejection(best.effect, (
                 f"it explains the misfit only at ~{best.implied_multiple:.3g}x its typical size, beyond "
                 f"{max_typical_multiple:g}x, where its physics does not reach: another effect, perhaps not in the "
-                "library, leaves a similar fingerprint"), kind=f"only at ~{best.implied_multiple:.3g}x its typical size"))
+                "library, leaves a similar fingerprint"),
+                kind=f"only at ~{best.implied_multiple:.3g}x its typical size"))
             remaining.remove(best.effect)
             continue
         guard = _probe_guard(fit, best, discrepancy, designs, threshold, alpha)

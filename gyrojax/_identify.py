@@ -40,7 +40,6 @@ from ._fitdata import BIASED_SWEEPS, FitData, fit_data
 from ._linsolve import PivotedLU
 from ._lm import LevenbergMarquardt
 from ._observe import rate_table_points
-from ._progress import as_progress
 from ._parameters import (
     DEFAULT_FREE,
     PARAMETERS,
@@ -52,6 +51,7 @@ from ._parameters import (
     build_entries,
     read_values,
 )
+from ._progress import as_progress
 from ._residuals import (
     block_residuals,
     device_residuals,
@@ -61,6 +61,7 @@ from ._residuals import (
 )
 from ._simulate.tiers import Steady
 from ._solution import RESULTS, result_code, result_message
+
 
 SOLVERS = ("levenberg-marquardt", "gauss-newton", "bfgs")
 

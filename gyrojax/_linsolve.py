@@ -36,9 +36,9 @@ def lu_factor(a: jax.Array) -> tuple[jax.Array, jax.Array]:
         pivot = lu[k, k]
         safe = jnp.where(pivot == 0, 1.0, pivot)
         below = idx > k
-        l = jnp.where(below, lu[:, k] / safe, 0.0)
-        lu = lu - l[:, None] * jnp.where(below, lu[k], 0.0)[None, :]
-        lu = lu.at[:, k].set(jnp.where(below, l, lu[:, k]))
+        factors = jnp.where(below, lu[:, k] / safe, 0.0)
+        lu = lu - factors[:, None] * jnp.where(below, lu[k], 0.0)[None, :]
+        lu = lu.at[:, k].set(jnp.where(below, factors, lu[:, k]))
         return lu, perm
 
     return jax.lax.fori_loop(0, n, column, (a, idx))

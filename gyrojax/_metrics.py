@@ -253,8 +253,8 @@ def asymmetry(inputs: Float[ArrayLike, "*batch point"], outputs: Float[ArrayLike
     **Returns:**
 
     Asymmetry in ppm, batch shape. NaN where a sweep has no positive or no negative input (not applicable: an
-    asymmetry needs both signs), where its outputs are all equal, or where it is fully masked. An error where it has both signs but too few points
-    (common bias: fewer than 3 in all; separate fits: fewer than 2 on a side).
+    asymmetry needs both signs), where its outputs are all equal, or where it is fully masked. An error where it has
+    both signs but too few points (common bias: fewer than 3 in all; separate fits: fewer than 2 on a side).
     """
     xp = _xp(inputs, outputs, mask, sigmas)
     x, y = xp.broadcast_arrays(_f64(inputs, xp), _f64(outputs, xp))

@@ -164,7 +164,8 @@ def batched(model: Model, n: int) -> Model:
 def effect_leaves(eff: AbstractEffect) -> tuple[str, ...]:
     """Names of the array fields of an effect (its parameters)."""
     return tuple(f.name for f in dataclasses.fields(eff)
-                 if not f.metadata.get("static", False) and isinstance(getattr(eff, f.name), (jax.Array, np.ndarray, float)))
+                 if not f.metadata.get("static", False)
+                 and isinstance(getattr(eff, f.name), (jax.Array, np.ndarray, float)))
 
 
 def zero_effect(name: str) -> AbstractEffect:

@@ -109,11 +109,12 @@ class WaferProcess(eqx.Module):
         def local(i):
             return 1.0 + self.mismatch * normal(i)
 
+        def leaves(g):
+            return (g.resonator.mass, g.resonator.omega_x, g.resonator.omega_y, g.resonator.q_x, g.resonator.q_y,
+                    g.resonator.angular_gain, g.drive_electrode.force_per_volt, g.drive_frontend.current_per_velocity,
+                    g.sense_frontend.current_per_velocity, g.vcf_electrode.force_per_volt2)
+
         r = b.resonator
-        leaves = (lambda g: (g.resonator.mass, g.resonator.omega_x, g.resonator.omega_y, g.resonator.q_x,
-                             g.resonator.q_y, g.resonator.angular_gain, g.drive_electrode.force_per_volt,
-                             g.drive_frontend.current_per_velocity, g.sense_frontend.current_per_velocity,
-                             g.vcf_electrode.force_per_volt2))
         values = (r.mass * t * area,
                   r.omega_x * freq,
                   r.omega_y * freq * (1.0 + self.split * normal(3)),

@@ -29,14 +29,15 @@ import warnings
 
 from ._io import OutputPathError, atomic_directory, atomic_write_json, check_output_paths
 
+
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 EXIT_SIGNAL_BASE = 128
 
 _EXIT_CODES = """exit codes: 0 success; 1 a computation failed, or a number the data should give could not be
 determined (printed as n/a with the reason); 2 a usage or data error (no traceback; output paths are checked
 before any work); identify: 3 fitted but the model does not describe the data, 4 the scale factor is not
-determined by the data, 5 a fit file without status; 128+N stopped by signal N (130 SIGINT, 143 SIGTERM; the file being written is discarded, the
-previous one kept)."""
+determined by the data, 5 a fit file without status; 128+N stopped by signal N (130 SIGINT, 143 SIGTERM; the file being
+written is discarded, the previous one kept)."""
 
 
 class _Interrupted(BaseException):

@@ -3,6 +3,7 @@
 import importlib.util
 import pathlib
 
+
 EXPERIMENTS = pathlib.Path(__file__).parent.parent / "experiments"
 
 

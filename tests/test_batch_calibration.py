@@ -9,6 +9,7 @@ from _experiments import load_experiment
 
 import gyrojax as gj
 
+
 pytestmark = pytest.mark.slow
 
 

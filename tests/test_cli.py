@@ -7,7 +7,6 @@ import re
 import numpy as np
 import pytest
 
-
 import gyrojax as gj
 from gyrojax.cli import main
 

@@ -107,7 +107,8 @@ def _warm_lot(noise_seed, shape=None, order="listed", devices=4, runs=2):
     T = np.broadcast_to(temp, x.shape)
     r = rng.normal(size=x.shape) + (0.0 if shape is None else shape(x, T, t))
     r -= r.mean(axis=-1, keepdims=True)
-    coords = {"rate_table": {"temperature_c": T, "time_s": t, "order": np.broadcast_to(np.arange(n, dtype=float), x.shape)}}
+    coords = {"rate_table": {"temperature_c": T, "time_s": t,
+                             "order": np.broadcast_to(np.arange(n, dtype=float), x.shape)}}
     return ({"rate_table": r}, {"rate_table": x}, {"rate_table": np.ones(x.shape, bool)}), coords
 
 

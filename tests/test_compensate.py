@@ -14,6 +14,7 @@ from gyrojax._compensate.model import _fit_arrays, _fundamental, describing_weig
 from gyrojax._presets import QMG_QUADRATURE_DPS
 from gyrojax.cli import main
 
+
 TYPICAL_INL = {3: -1063.6, 5: 3418.6}  # gyrojax.DacInl.typical(): LSB coefficients of u^3 and u^5
 TCF = -30e-6  # paper_qmg's silicon TCF, 1/K
 

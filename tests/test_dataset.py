@@ -9,8 +9,17 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from gyrojax import (DataError, SweepArrays, Table, _dataset, _io, aggregate_samples, decode_dac_word, read_table,
-                     write_table)
+from gyrojax import (
+    DataError,
+    SweepArrays,
+    Table,
+    _dataset,
+    _io,
+    aggregate_samples,
+    decode_dac_word,
+    read_table,
+    write_table,
+)
 
 
 HEADER = "device,run,sweep,input,output"

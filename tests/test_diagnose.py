@@ -8,13 +8,12 @@ import json
 
 import numpy as np
 import pytest
-
+from _experiments import load_experiment
 
 import gyrojax as gj
-from gyrojax._demo import DEMO_LOT
 from gyrojax._compare import nonlinearity_residual_ppm
+from gyrojax._demo import DEMO_LOT
 
-from _experiments import load_experiment
 
 pytestmark = pytest.mark.slow
 
@@ -227,7 +226,8 @@ def test_a_saved_baseline_fit_is_not_fitted_again(hidden_dac_inl, tmp_path):
     table, d = hidden_dac_inl
     path = tmp_path / "baseline.fit"
     gj.save_fit(d.baseline, path)
-    with pytest.warns(UserWarning, match=r"baseline.fit: 3 of 3 device\(s\) are not 'ok': paper-qmg-000 \(model rejected"):
+    with pytest.warns(UserWarning,
+                      match=r"baseline.fit: 3 of 3 device\(s\) are not 'ok': paper-qmg-000 \(model rejected"):
         saved = gj.load_fit(path)  # the baseline the INL breaks: the file says so, and loading warns
     again = gj.diagnose(table, fit=saved)
     assert again.baseline.chi2_total == pytest.approx(d.baseline.chi2_total, rel=1e-9)

@@ -57,7 +57,8 @@ T_HOT = 35.0  # deg C: 10 K above the resonators' t_ref
 RATES_DPS = np.array([-200.0, -100.0, -50.0, 50.0, 100.0, 200.0])
 # Points (rate deg/s, VCF V_ac with V_fc = 1 V, die temperature): the six rates at t_ref, 200 deg/s hot, and
 # closed loop a static VCF point (a 100 deg/s virtual rate on paper-qmg) cold and hot.
-CLOSED_POINTS = (np.r_[RATES_DPS, 200.0, 0.0, 0.0], np.r_[np.zeros(7), 1.0, 1.0], np.r_[np.full(6, 25.0), T_HOT, 25.0, T_HOT])
+CLOSED_POINTS = (np.r_[RATES_DPS, 200.0, 0.0, 0.0], np.r_[np.zeros(7), 1.0, 1.0],
+                 np.r_[np.full(6, 25.0), T_HOT, 25.0, T_HOT])
 OPEN_POINTS = (np.r_[RATES_DPS, 200.0], np.zeros(7), np.r_[np.full(6, 25.0), T_HOT])
 I_COLD, I_HOT, I_VCF, I_VCF_HOT = 5, 6, 7, 8  # 200 deg/s cold and hot, VCF cold and hot
 

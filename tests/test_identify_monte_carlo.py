@@ -5,12 +5,14 @@ are within 20 % of the scatter of the fitted values, and the scatter within 1.2x
 import pytest
 from _experiments import load_experiment
 
+
 pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
 def monte_carlo():
-    return load_experiment("identify_monte_carlo").run(draws=100, sweeps=("rate_table", "vcf_static", "dac"), runs=2, seed=0)
+    return load_experiment("identify_monte_carlo").run(draws=100, sweeps=("rate_table", "vcf_static", "dac"), runs=2,
+                                                       seed=0)
 
 
 def test_every_draw_converges_with_chi2_near_one(monte_carlo):

@@ -9,8 +9,17 @@ import threading
 import pytest
 
 from gyrojax import _io
-from gyrojax._io import (FOLDER_MARKER, OutputPathError, atomic_directory, atomic_open, atomic_path,
-                         atomic_write_bytes, atomic_write_json, check_output_path, check_output_paths)
+from gyrojax._io import (
+    FOLDER_MARKER,
+    OutputPathError,
+    atomic_directory,
+    atomic_open,
+    atomic_path,
+    atomic_write_bytes,
+    atomic_write_json,
+    check_output_path,
+    check_output_paths,
+)
 
 
 def test_umask_is_read_without_changing_it():

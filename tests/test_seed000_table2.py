@@ -9,6 +9,7 @@ from _experiments import load_experiment
 
 from gyrojax import decode_dac_word, metrics_report
 
+
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 # Table 2 as printed in the paper (rate deg/s, DA word, Vac V), typed again here so the data file is checked

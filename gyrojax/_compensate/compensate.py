@@ -21,6 +21,7 @@ from .model import ModelCompensator
 from .points import RatePoints
 from .polynomial import PolynomialCompensator
 
+
 COMPENSATORS: dict[str, type[AbstractCompensator]] = {
     cls.name: cls for cls in (PolynomialCompensator, CompositeCompensator, ModelCompensator)}
 """Compensation methods by name, each at its default settings."""
@@ -187,9 +188,9 @@ def compensate(table: Table, *, method: str | AbstractCompensator = "composite",
                             source=table.source, row=int(rows[0]) + 1)
         out = table["output"][rows]
         if np.ptp(out) == 0.0:
-            raise DataError(f"{table.locate(int(rows[0]), 'output')}: device {dev!r}, run {run}: the rate_table outputs "
-                            f"are all {float(out[0])!r}, the same at every rate: there is no scale factor to compensate "
-                            "(a disconnected or saturated output?). Remove the run or fix the file.",
+            raise DataError(f"{table.locate(int(rows[0]), 'output')}: device {dev!r}, run {run}: the rate_table "
+                            f"outputs are all {float(out[0])!r}, the same at every rate: there is no scale factor to "
+                            "compensate (a disconnected or saturated output?). Remove the run or fix the file.",
                             source=table.source, row=int(rows[0]) + 1, column="output")
         for name in compensator.requires:
             values = table[name][rows] if name in table else np.full(len(rows), np.nan)

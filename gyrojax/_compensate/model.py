@@ -60,6 +60,7 @@ from jaxtyping import Array, Bool, Float
 from .base import AbstractCompensation, AbstractCompensator, check_side, require_side
 from .points import RatePoints
 
+
 FREQ_SIGMA_REL = 1e-7
 """ASSUMPTION: relative standard uncertainty of a drive-frequency reading (0.46 mHz at 4634 Hz) because a PLL
 frequency averaged over a 2-minute dwell resolves far below 1 mHz. It only weights the TCF block against the

@@ -13,8 +13,8 @@ from .base import AbstractEffect
 # presets' 20 Hz AGC), the kind of leak an anti-windup or an analog integrator's finite gain gives. On
 # vcf-2018 (Q = 9824) the amplitude sags by ~550 ppm (a gain change), and with the presets' TCQ a 10 K
 # warm-up moves it by ~17 ppm. On paper-qmg (Q = 1e6, the drive needs almost no voltage) everything is
-# ~40x smaller (14 ppm of sag, 0.4 ppm per 10 K). The sag saturates at the proportional-only value (leak -> inf: 2300 ppm on vcf-2018), so the
-# effect is linear in `leak` only for leak << 60/s.
+# ~40x smaller (14 ppm of sag, 0.4 ppm per 10 K). The sag saturates at the proportional-only value (leak -> inf: 2300
+# ppm on vcf-2018), so the effect is linear in `leak` only for leak << 60/s.
 _TYPICAL_LEAK = 20.0
 
 

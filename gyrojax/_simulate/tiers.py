@@ -17,6 +17,8 @@ from .._gyroscope import Gyroscope
 from .._linsolve import PivotedLU, lu_factor, lu_solve
 from .._solution import RESULTS, result_code, result_message
 from .._stimulus import Stimulus
+from ._hairer_controller import HairerController
+from ._implicit import implicit_root
 from ._model import (
     Outputs,
     SlowState,
@@ -29,8 +31,6 @@ from ._model import (
     wave_from_slow,
     wave_scales,
 )
-from ._hairer_controller import HairerController
-from ._implicit import implicit_root
 from ._unrolled_rk import UnrolledRK
 
 
