@@ -13,6 +13,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float
 
 from ._dataset import Table
 from ._gyroscope import Gyroscope
@@ -134,8 +135,8 @@ def campaign_lot(gyro: Gyroscope, *, devices: int = 1, seed: int = 0,
 
 
 def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=("rate_table",),
-                   tier: AbstractTier = CAMPAIGN_TIER, rates_dps=None, noise: RateNoise = RateNoise(),
-                   noise_free: bool = False, seed: int = 0,
+                   tier: AbstractTier = CAMPAIGN_TIER, rates_dps: Float[ArrayLike, " point"] | None = None,
+                   noise: RateNoise = RateNoise(), noise_free: bool = False, seed: int = 0,
                    spread: ProcessSpread | WaferProcess = ProcessSpread(),
                    device_prefix: str | None = None, protocol: Protocol = Protocol(),
                    voltmeter_sigma_v: float = DAC_VOLTMETER_SIGMA_V, progress=True) -> Table:

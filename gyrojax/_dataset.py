@@ -30,7 +30,7 @@ from typing import Any, final
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ._io import atomic_open, atomic_path
 
@@ -930,8 +930,8 @@ def _write_parquet(table: Table, path: str) -> None:
 # Raw sample streams -> settled points.
 
 
-def aggregate_samples(device: str, run: int, sweep: str, input: Any, samples: Any, *, sample_rate_hz: float,
-                      discard_s: float = 0.0, n_batches: int = 20) -> dict[str, Any]:
+def aggregate_samples(device: str, run: int, sweep: str, input: Any, samples: Float[ArrayLike, " sample"], *,
+                      sample_rate_hz: float, discard_s: float = 0.0, n_batches: int = 20) -> dict[str, Any]:
     """Reduce one raw output stream of one settled point to a row of the tidy table.
 
     The mean is over every sample left after the settling time is discarded. Its standard error is estimated by

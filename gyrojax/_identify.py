@@ -34,6 +34,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 from jax.scipy.special import betainc, gammaincc
+from jaxtyping import Array, Bool, Float, Int
 
 from ._dataset import Table
 from ._fitdata import BIASED_SWEEPS, FitData, fit_data
@@ -148,41 +149,41 @@ class Fit(eqx.Module):
     model: Model
     names: tuple[str, ...] = eqx.field(static=True)
     lot_names: tuple[str, ...] = eqx.field(static=True)
-    values: jax.Array
-    stderr: jax.Array
-    lot_values: jax.Array
-    lot_stderr: jax.Array
+    values: Float[Array, "device param"]
+    stderr: Float[Array, "device param"]
+    lot_values: Float[Array, " lot"]
+    lot_stderr: Float[Array, " lot"]
     free: tuple[bool, ...] = eqx.field(static=True)
-    covariance: jax.Array
-    u: jax.Array
-    u_lot: jax.Array
+    covariance: Float[Array, "device param param"]
+    u: Float[Array, "device param"]
+    u_lot: Float[Array, " lot"]
     residuals: dict
     predictions: dict
     biases: dict
-    chi2: jax.Array
-    dof: jax.Array
-    converged: jax.Array
+    chi2: Float[Array, " device"]
+    dof: Int[Array, " device"]
+    converged: Bool[Array, " device"]
     result_message: tuple[str, ...] = eqx.field(static=True)
-    num_steps: jax.Array
-    unsettled: jax.Array
+    num_steps: Int[Array, " device"]
+    unsettled: Int[Array, " device"]
     unidentifiable: tuple = eqx.field(static=True)
-    scale_factor: jax.Array
-    scale_factor_stderr: jax.Array
+    scale_factor: Float[Array, " device"]
+    scale_factor_stderr: Float[Array, " device"]
     devices: tuple[str, ...] = eqx.field(static=True)
     data: FitData
     entries: tuple[Entry, ...] = eqx.field(static=True)
     weighted: bool = eqx.field(static=True)
-    jacobian: jax.Array  # (device, residual, n) d(residual)/du for every per-device entry, held ones too
-    residual_vector: jax.Array  # (device, residual): all standardised residuals (data then priors)
+    jacobian: Float[Array, "device residual param"]  # d(residual)/du for every per-device entry, held ones too
+    residual_vector: Float[Array, "device residual"]  # all standardised residuals (data then priors)
     status: tuple[str, ...] = eqx.field(static=True)
     warnings: tuple[tuple[str, ...], ...] = eqx.field(static=True)
     reject_alpha: float = eqx.field(static=True)
-    stderr_scaled: jax.Array
-    lot_stderr_scaled: jax.Array
-    scale_factor_stderr_scaled: jax.Array
-    noise_dof: jax.Array
-    p_value: jax.Array
-    p_value_total: jax.Array
+    stderr_scaled: Float[Array, "device param"]
+    lot_stderr_scaled: Float[Array, " lot"]
+    scale_factor_stderr_scaled: Float[Array, " device"]
+    noise_dof: Float[Array, " device"]
+    p_value: Float[Array, " device"]
+    p_value_total: Float[Array, ""]
 
     @property
     def chi2_red(self):

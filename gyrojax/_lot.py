@@ -3,6 +3,7 @@
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import PRNGKeyArray
 
 from ._checks import check_nonnegative
 from ._gyroscope import Gyroscope
@@ -53,7 +54,7 @@ class ProcessSpread(eqx.Module):
             check_nonnegative("ProcessSpread", name, getattr(self, name))
 
 
-def make_lot(gyro: Gyroscope, n: int, key, spread: ProcessSpread = ProcessSpread()) -> Gyroscope:
+def make_lot(gyro: Gyroscope, n: int, key: PRNGKeyArray, spread: ProcessSpread = ProcessSpread()) -> Gyroscope:
     """`n` devices drawn around `gyro` with `spread`; returns one Gyroscope whose array leaves have a
     leading axis of size `n` (the loops' firmware gains stay those of the design)."""
     if not isinstance(n, int) or n < 1:

@@ -15,6 +15,7 @@ depend on it (`gyrojax.AbstractRateTerm`, `AbstractOutputTerm`); the device's re
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float, Real
 
 from ._gyroscope import Gyroscope
 from ._physics.thermal import ConstantTemperature
@@ -55,8 +56,8 @@ def _read_out(gyro: Gyroscope, settled: Settled, sweep: str, inputs, temperature
     return eqx.tree_at(lambda s: s.rate, settled, jax.vmap(one)(settled.rate, inputs, temps, times))
 
 
-def rate_table_points(gyro: Gyroscope, rates_dps, temperatures, tier: AbstractTier = Steady(), *,
-                      times=None) -> Settled:
+def rate_table_points(gyro: Gyroscope, rates_dps: Float[ArrayLike, " point"], temperatures: Float[ArrayLike, " point"],
+                      tier: AbstractTier = Steady(), *, times: Float[ArrayLike, "*#point"] | None = None) -> Settled:
     """Settled rate-table points: table rates in deg/s, one die temperature (deg C) and optionally one time
     since power-on (s) per point."""
     rates = jnp.asarray(rates_dps, dtype=float)
@@ -70,8 +71,9 @@ def rate_table_points(gyro: Gyroscope, rates_dps, temperatures, tier: AbstractTi
     return _read_out(gyro, settled, "rate_table", rates, temps, t)
 
 
-def vcf_static_points(gyro: Gyroscope, amplitudes_v, temperatures, tier: AbstractTier = Steady(),
-                      carrier_v=VCF_CARRIER_V, *, times=None) -> Settled:
+def vcf_static_points(gyro: Gyroscope, amplitudes_v: Float[ArrayLike, " point"],
+                      temperatures: Float[ArrayLike, " point"], tier: AbstractTier = Steady(), carrier_v=VCF_CARRIER_V,
+                      *, times: Float[ArrayLike, "*#point"] | None = None) -> Settled:
     """Settled static virtual-Coriolis points (seed 003 Eq. 7): the virtual-rate voltage V_ac (V, signed)
     times the fixed carrier V_fc, one die temperature and optionally one time since power-on per point."""
     volts = jnp.asarray(amplitudes_v, dtype=float)
@@ -85,8 +87,9 @@ def vcf_static_points(gyro: Gyroscope, amplitudes_v, temperatures, tier: Abstrac
     return _read_out(gyro, settled, "vcf_static", volts, temps, t)
 
 
-def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz, temperatures, amplitude_v=VCF_DYNAMIC_AMPLITUDE_V,
-                       carrier_v=VCF_CARRIER_V):
+def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz: Float[ArrayLike, " point"],
+                       temperatures: Float[ArrayLike, "*#point"], amplitude_v=VCF_DYNAMIC_AMPLITUDE_V,
+                       carrier_v=VCF_CARRIER_V) -> tuple[Float[Array, " point"], Float[Array, " point"]]:
     """Dynamic virtual-Coriolis test (seed 003 Eq. 6): the rate output's amplitude (LSB) and phase (deg)
     for V_ac = `amplitude_v` modulated at each frequency (Hz), from the averaged model linearised at rest at
     the die temperature of each point (deg C; one value for every point linearises once). A lock-in reads
@@ -104,6 +107,6 @@ def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz, temperatures, amplitude_
     return amp[:, 0], phase[:, 0]
 
 
-def dac_points(gyro: Gyroscope, words):
+def dac_points(gyro: Gyroscope, words: Real[ArrayLike, " word"]) -> Float[Array, " word"]:
     """Seed 000 Table 2's DAC sweep: signed carrier-fundamental amplitude (V) for each word (LSB)."""
     return dac_sweep(gyro, words)

@@ -39,6 +39,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float
 
 from ._effects.base import AbstractEffect
 from ._effects.registry import EFFECTS, effect as _named_effect
@@ -70,7 +71,7 @@ class EffectContribution(eqx.Module):
     own_max_ppm: float
     own_rms_ppm: float
     share_pct: float
-    own_residual_ppm: np.ndarray
+    own_residual_ppm: Float[np.ndarray, " point"]
 
 
 class NonlinearityBudget(eqx.Module):
@@ -94,7 +95,7 @@ class NonlinearityBudget(eqx.Module):
     - `full_scale`: the convention of [`gyrojax.fit_scale_factor`][].
     """
 
-    rates_dps: np.ndarray
+    rates_dps: Float[np.ndarray, " point"]
     base_max_ppm: float
     base_rms_ppm: float
     joint_max_ppm: float
@@ -253,8 +254,9 @@ def _joint_max_ppm(params, base, effects, x_dps, rates, full_scale, where):
 _joint_grad = eqx.filter_jit(eqx.filter_grad(_joint_max_ppm))
 
 
-def nonlinearity_budget(model, effects: Sequence | None = None, *, rates_dps=SEED000_RATES_DPS,
-                        device: int | None = None, full_scale: str = "half_range",
+def nonlinearity_budget(model, effects: Sequence | None = None, *,
+                        rates_dps: Float[ArrayLike, " point"] = SEED000_RATES_DPS, device: int | None = None,
+                        full_scale: str = "half_range",
                         gradients: bool = True) -> NonlinearityBudget:
     r"""Scale-factor nonlinearity of each effect alone and of all jointly, shares and gradients.
 

@@ -12,6 +12,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float, Real
 
 from ._checks import check_nonnegative, check_positive
 from ._gyroscope import Gyroscope
@@ -295,7 +296,8 @@ def _rate_sweep(gyro, rates, times, tier):
     return tier.settle_points(*jax.vmap(one)(rates, times))
 
 
-def rate_sweep(gyro: Gyroscope, rates, *, tier: AbstractTier = Steady(), times=None) -> Settled:
+def rate_sweep(gyro: Gyroscope, rates: Float[ArrayLike, " point"], *, tier: AbstractTier = Steady(),
+               times: Float[ArrayLike, "*#point"] | None = None) -> Settled:
     """Settle `gyro` at each table rate (rad/s), vmapped, with one compiled call per shape and tier.
 
     **Arguments:**
@@ -315,7 +317,7 @@ def rate_sweep(gyro: Gyroscope, rates, *, tier: AbstractTier = Steady(), times=N
     return _rate_sweep(gyro, rates, times, tier)
 
 
-def seed000_rates():
+def seed000_rates() -> Float[Array, " 22"]:
     """Seed 000's 22 table rates in rad/s."""
     return jnp.asarray(SEED000_RATES_DPS) * DEG
 
@@ -330,7 +332,7 @@ def _dac_fundamental(gyro, word):
     return 2.0 * jnp.mean(v * jnp.sin(theta))
 
 
-def dac_sweep(gyro: Gyroscope, words):
+def dac_sweep(gyro: Gyroscope, words: Real[ArrayLike, " word"]) -> Float[Array, " word"]:
     """Seed 000 Table 2's experiment: the FTR DAC fed with carrier sines of the given word amplitudes
     (LSB of the 24-bit word, signed), returning the measured AC amplitude (V) at the DAC output: the
     signed fundamental, including the hold's gain. Closed-loop devices only."""

@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
+from jaxtyping import Array, ArrayLike, Complex, Float
 
 from .._gyroscope import Gyroscope
 from .._linsolve import solve
@@ -20,12 +21,12 @@ class StateSpace(eqx.Module):
     """The averaged model linearised at an equilibrium: z' = A z + B u, y = C z + D u (scaled states,
     output in LSB per unit input)."""
 
-    a: jax.Array
-    b: jax.Array
-    c: jax.Array
-    d: jax.Array
+    a: Float[Array, "state state"]
+    b: Float[Array, " state"]
+    c: Float[Array, " state"]
+    d: Float[Array, ""]
 
-    def response(self, frequencies):
+    def response(self, frequencies: Float[ArrayLike, "*shape"]) -> Complex[Array, "*shape"]:
         """H(j w) = C (j w I - A)^{-1} B + D at angular frequencies `frequencies` (rad/s)."""
         w = jnp.asarray(frequencies, dtype=float)
         eye = jnp.eye(self.a.shape[0])
@@ -88,7 +89,8 @@ def _linearise(gyro, stimulus, input):
     return StateSpace(a, b, c, d)
 
 
-def frequency_response(gyro: Gyroscope, frequencies, stimulus: Stimulus = Stimulus(), *, input: str = "rate"):
+def frequency_response(gyro: Gyroscope, frequencies: Float[ArrayLike, "*shape"], stimulus: Stimulus = Stimulus(), *,
+                       input: str = "rate") -> Complex[Array, "*shape"]:
     r"""Complex response of the rate output to a sinusoidal input, from the averaged model linearised at
     the equilibrium under `stimulus`:  H(j w) = C (j w I - A)^{-1} B + D.
 

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
+from jaxtyping import Array, Float, Int
 
 from .._checks import check_positive
 from .._gyroscope import Gyroscope
@@ -56,12 +57,12 @@ class Settled(eqx.Module):
     - `num_steps`: solver steps (ODE steps or root-find iterations).
     """
 
-    rate: jax.Array
-    quadrature: jax.Array
-    frequency: jax.Array
+    rate: Float[Array, "*point"]
+    quadrature: Float[Array, "*point"]
+    frequency: Float[Array, "*point"]
     state: SlowState | WaveState
     result: RESULTS
-    num_steps: jax.Array
+    num_steps: Int[Array, "*point"]
 
     @property
     def status(self) -> str:
