@@ -138,7 +138,7 @@ def test_metrics_on_constant_outputs_prints_na_and_exits_1(tmp_path, capsys):
     js = tmp_path / "m.json"
     assert main(["metrics", str(data), "--json", str(js)]) == 1
     out, err = capsys.readouterr()
-    assert "SF 0  NL n/a (the outputs do not change with the input (scale factor 0)" in out
+    assert "SF 0 LSB/(deg/s)  NL n/a (the outputs do not change with the input (scale factor 0)" in out
     assert "repeatability n/a (the mean scale factor is 0" in out
     assert "2 sweep(s) gave no nonlinearity" in err
     report = json.loads(js.read_text())  # written, and true: null with the reason

@@ -111,7 +111,7 @@ SLOW_DEMO = textwrap.dedent("""
     import gyrojax.cli as cli
     from gyrojax import _demo
 
-    def slow(out_dir, full_tier=False, log=print):
+    def slow(out_dir, full_tier=False, log=print, progress=True):
         with open(os.path.join(out_dir, "report.md"), "w") as f:
             f.write("half a report")
         print("WRITING", flush=True)

@@ -51,6 +51,7 @@ def test_with_term_checks_what_it_is_given():
         QMG.with_term(gj.TemperatureCoefficient("drive_frontend.kind", 1e-5))
 
 
+@pytest.mark.slow
 def test_a_rate_term_reads_exactly_like_a_rate():
     """Om_eq enters the sense equation beside Ag Om: a constant term of 1 deg/s gives the outputs of the table
     rates shifted by 1 deg/s, in every settled tier."""
@@ -80,6 +81,7 @@ def test_an_output_term_reaches_the_rate_outputs_only():
     np.testing.assert_array_equal(np.asarray(amp), np.asarray(amp0))
 
 
+@pytest.mark.slow
 def test_a_temperature_coefficient_scales_its_leaf_at_the_die_temperature():
     """On the drive pick-off gain: the AGC holds the measured amplitude, so at dT = +10 K the real amplitude and
     the closed-loop scale factor fall by 1 / (1 + tc dT); at t_ref nothing moves. The rate-table output of a
@@ -115,6 +117,7 @@ def test_feedback_compression_compresses_the_carrier_and_leaves_the_dac_sweep():
     np.testing.assert_array_equal(np.asarray(gj.dac_points(g, words)), np.asarray(gj.dac_points(QMG, words)))
 
 
+@pytest.mark.slow
 def test_zro_tempco_is_a_bias_that_follows_the_die_temperature():
     """SF x b_T (T - t_ref) at every rate: 13709.8 LSB/(deg/s) x 1e-3 (deg/s)/K x 10 K = 137 LSB (a constant
     shift of the whole sweep), and nothing at t_ref; the gradient at zero matches a central difference."""
