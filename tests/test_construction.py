@@ -51,7 +51,8 @@ def test_dac_other_fields():
 def test_unknown_names():
     with pytest.raises(ValueError, match=r"unknown preset 'qmg'; expected one of \['paper-qmg', 'vcf-2018'\]"):
         gj.preset("qmg")
-    with pytest.raises(ValueError, match=r"unknown effect 'dac_inl2'; expected one of \[.*'dac_inl', .*'vref_drift', 'zro_tempco'\]"):
+    with pytest.raises(ValueError, match=r"unknown effect 'dac_inl2'; expected one of "
+                                         r"\[.*'dac_inl', .*'vref_drift', 'zro_tempco'\]"):
         gj.effect("dac_inl2")
     with pytest.raises(ValueError, match=r"FrontEnd\.kind must be one of"):
         gj.FrontEnd(1e-6, 1e11, 1e-7, kind="capacitive")
