@@ -6,7 +6,10 @@ The public API is re-exported here; everything else is private.
 import jax as _jax
 
 
-# ppm-level work needs float64; gyrojax switches it on at import.
+# ppm-level work needs float64, so importing gyrojax switches it on for the whole process (a JAX flag, not a
+# per-call setting): a context manager would let float64 results meet float32 code outside it, and a check that
+# raises would make every script start with the same line. Why, and what it means for other JAX code in the
+# process: docs/architecture.md, "Float64 for the whole process".
 _jax.config.update("jax_enable_x64", True)
 from ._cache import compilation_cache as compilation_cache  # noqa: E402  (importing it turns the cache on)
 
