@@ -61,7 +61,7 @@ def _problems(fit, preset):
     mask = jnp.broadcast_to(jnp.asarray(np.asarray(fit.free, dtype=float)), (n, n_dev))
     empty = jnp.zeros((n, 0))
     return _Problem(model, start, data, mask, n_dev, fit.entries, Steady(), jnp.zeros((n, 0), dtype=int), empty,
-                    jnp.ones((n, 0)))
+                    jnp.ones((n, 0)), sf_temperature=jnp.full((n,), 25.0))
 
 
 def _device_peak_gb():

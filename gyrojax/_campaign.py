@@ -19,7 +19,7 @@ from ._dataset import Table
 from ._gyroscope import Gyroscope
 from ._lot import ProcessSpread, as_arrays, make_lot
 from ._noise import DAC_VOLTMETER_SIGMA_V, RateNoise
-from ._observe import dac_points, rate_table_points, vcf_dynamic_points, vcf_static_points
+from ._observe import dac_points, steady_points, vcf_dynamic_points
 from ._process import WaferProcess
 from ._progress import as_progress
 from ._simulate.tiers import AbstractTier, Steady
@@ -46,28 +46,36 @@ def _per_run(x, temperatures):
 
 
 @eqx.filter_jit
+def _lot_steady(lot, requests, tier):
+    """`steady_points` for every device (axis 0) and run (axis 1), several steady sweeps in one call (one
+    compiled settle): `requests` is a tuple of `(sweep, inputs, temperatures, times)` with temperatures
+    (device, run, point) and inputs and times (point,) or (run, point) (times NaN: not recorded). Returns a
+    `Settled` per request, (device, run, point)."""
+    temps = tuple(r[2] for r in requests)
+    inputs = tuple(_per_run(r[1], t) for r, t in zip(requests, temps))
+    times = tuple(_per_run(r[3], t) for r, t in zip(requests, temps))
+    sweeps = tuple(r[0] for r in requests)
+
+    def device(g, dev_temps):
+        def run(xs, ts, tms):
+            return steady_points(g, tuple(zip(sweeps, xs, ts, tms)), tier)
+
+        return jax.vmap(run)(inputs, dev_temps, times)
+
+    return eqx.filter_vmap(device)(lot, temps)
+
+
 def _lot_rate_table(lot, rates_dps, temperatures, tier, times=None):
     """`rate_table_points` for every device (axis 0) and run (axis 1); temperatures (device, run, point);
     rates and times since power-on (point,) or (run, point) (default: times not recorded)."""
-    rates = _per_run(rates_dps, temperatures)
-    t = _per_run(jnp.nan if times is None else times, temperatures)
-
-    def device(g, temps):
-        return jax.vmap(lambda x, tp, tm: rate_table_points(g, x, tp, tier, times=tm))(rates, temps, t)
-
-    return eqx.filter_vmap(device)(lot, temperatures)
+    return _lot_steady(lot, (("rate_table", rates_dps, temperatures, jnp.nan if times is None else times),),
+                       tier)[0]
 
 
-@eqx.filter_jit
 def _lot_vcf_static(lot, amplitudes_v, temperatures, tier, times=None):
     """`vcf_static_points` for every device and run (shapes as `_lot_rate_table`)."""
-    volts = _per_run(amplitudes_v, temperatures)
-    t = _per_run(jnp.nan if times is None else times, temperatures)
-
-    def device(g, temps):
-        return jax.vmap(lambda x, tp, tm: vcf_static_points(g, x, tp, tier, times=tm))(volts, temps, t)
-
-    return eqx.filter_vmap(device)(lot, temperatures)
+    return _lot_steady(lot, (("vcf_static", amplitudes_v, temperatures, jnp.nan if times is None else times),),
+                       tier)[0]
 
 
 @eqx.filter_jit
@@ -206,11 +214,12 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     lot = campaign_lot(gyro, devices=devices, seed=seed, spread=spread)
     structure = jax.tree.structure(eqx.filter(lot, eqx.is_array))
 
-    def announce(sweep, k):
+    def announce(sweep, k, compiles=True):
         say(f"sweep {k}/{len(sweeps)}: {sweep}, {devices} device(s) x {runs} run(s) x "
-            f"{protocol.n_points(sweep)} points")
-        say.compiling(("simulate", sweep, structure, devices, runs, protocol.n_points(sweep), tier),
-                      f"the {sweep} measurement model")
+            f"{protocol.n_points(sweep)} points" + ("" if compiles else " (settled with the rate table)"))
+        if compiles:
+            say.compiling(("simulate", sweep, structure, devices, runs, protocol.n_points(sweep), tier),
+                          f"the {sweep} measurement model")
     prefix = device_prefix or gyro.name
     names = np.asarray([f"{prefix}-{i:03d}" for i in range(devices)])
     shape_runs = (devices, runs)
@@ -227,13 +236,21 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
 
     rates = np.asarray(protocol.rates_dps)
     rates_run = applied("rate_table", rates)
-    rate_settled = None
+    rate_settled = vcf_settled = None
     if "rate_table" in sweeps or (not noise_free and {"vcf_static", "vcf_dynamic"} & set(sweeps)):
-        # The rate-table sweep: an output, and each device's scale factor for the noise in LSB.
+        # The rate-table sweep: an output, and each device's scale factor for the noise in LSB. A static VCF
+        # sweep settles in the same call (one compiled program) when both use the same tier.
         rate_tier = tier if "rate_table" in sweeps else CAMPAIGN_TIER
         announce("rate_table", sweeps.index("rate_table") + 1 if "rate_table" in sweeps else 0)
-        rate_settled = _lot_rate_table(lot, jnp.asarray(rates_run), jnp.asarray(temperatures("rate_table")),
-                                       rate_tier, jnp.asarray(times("rate_table")))
+        requests = (("rate_table", jnp.asarray(rates_run), jnp.asarray(temperatures("rate_table")),
+                     jnp.asarray(times("rate_table"))),)
+        with_vcf = "vcf_static" in sweeps and rate_tier is tier
+        if with_vcf:
+            requests += (("vcf_static", jnp.asarray(applied("vcf_static", vcf_amplitudes)),
+                          jnp.asarray(temperatures("vcf_static")), jnp.asarray(times("vcf_static"))),)
+        steady = _lot_steady(lot, requests, rate_tier)
+        rate_settled = steady[0]
+        vcf_settled = steady[1] if with_vcf else None
         _raise_unsettled(rate_settled.result, "rate-table" if "rate_table" in sweeps
                          else "rate-table (the noise-free sweep whose scale factor converts the noise to LSB)")
     lsb_per_dps = (np.zeros(devices) if rate_settled is None
@@ -242,7 +259,7 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     columns = []
     for k, sweep in enumerate(sweeps, 1):
         if sweep != "rate_table":
-            announce(sweep, k)
+            announce(sweep, k, compiles=not (sweep == "vcf_static" and vcf_settled is not None))
         temps = temperatures(sweep)
         rng = _rng(seed, sweep)
         n = protocol.n_points(sweep)
@@ -253,8 +270,8 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
                 inputs, settled = rates_run, rate_settled
             else:
                 inputs = applied(sweep, vcf_amplitudes)
-                settled = _lot_vcf_static(lot, jnp.asarray(inputs), jnp.asarray(temps), tier,
-                                          jnp.asarray(times(sweep)))
+                settled = vcf_settled if vcf_settled is not None else _lot_vcf_static(
+                    lot, jnp.asarray(inputs), jnp.asarray(temps), tier, jnp.asarray(times(sweep)))
                 _raise_unsettled(settled.result, "vcf-static")
             out = np.asarray(settled.rate, dtype=float)
             dwell = protocol.dwell(sweep)

@@ -40,7 +40,6 @@ from ._dataset import Table
 from ._fitdata import BIASED_SWEEPS, FitData, fit_data
 from ._linsolve import PivotedLU
 from ._lm import LevenbergMarquardt
-from ._observe import rate_table_points
 from ._parameters import (
     DEFAULT_FREE,
     PARAMETERS,
@@ -869,10 +868,11 @@ class _Problem(eqx.Module):
     prior_index: jax.Array
     prior_mean: jax.Array
     prior_sigma: jax.Array
+    sf_temperature: jax.Array  # deg C: where the scale factor is reported (`_sf_temperature`)
 
     def _evaluate(self, u_free, u_lot):
         """Standardised residuals (data, then priors), the count of points that did not settle, the
-        predictions per sweep and the device."""
+        predictions per sweep, the device and its zero-rate scale factor (LSB per deg/s)."""
         return _evaluate_problem(self, u_free, u_lot)
 
     def residuals(self, u_free, u_lot):
@@ -886,9 +886,11 @@ class _Problem(eqx.Module):
 def _evaluate_problem(problem, u_free, u_lot):
     u = u_free * problem.free_mask
     gyro = apply_u(problem.model, problem.entries, problem.start, u, u_lot).gyroscope()
-    r, failed, preds = device_residuals(gyro, problem.data, problem.tier)
+    # The scale factor's two points settle with the data's (one program): the solve carries them too, at
+    # the cost of two points per device, so that the fit and its evaluation share every compiled settle.
+    r, failed, preds, sf = device_residuals(gyro, problem.data, problem.tier, problem.sf_temperature)
     prior = (u[problem.prior_index] - problem.prior_mean) / problem.prior_sigma
-    return jnp.concatenate([r, prior]), failed, preds, gyro
+    return jnp.concatenate([r, prior]), failed, preds, gyro, sf
 
 
 @jax.custom_jvp
@@ -947,17 +949,12 @@ def _map_devices(f, chunk, *trees):
 
 
 @eqx.filter_jit
-def _evaluate(problem_all, u_full, u_lot, t_sf, chunk):
+def _evaluate(problem_all, u_full, u_lot, chunk):
     """One compiled pass (used at the start and at the solution): residuals, the Jacobian with respect to
     every per-device and lot entry, the zero-rate scale factor and its gradient, predictions and biases."""
-    def one(problem, u, temp):
+    def one(problem, u):
         def outputs(uu, ul):
-            r, failed, preds, gyro = problem._evaluate(uu, ul)
-
-            def rate_out(rate):
-                return rate_table_points(gyro, rate[None], temp[None], problem.tier).rate[0]
-
-            sf = jax.jvp(rate_out, (jnp.zeros(()),), (jnp.ones(()),))[1]
+            r, failed, preds, _, sf = problem._evaluate(uu, ul)
             # The values as aux: jacfwd evaluates the sweeps once, for the Jacobian and the predictions.
             return (r, sf), (r, sf, failed, preds)
 
@@ -966,7 +963,7 @@ def _evaluate(problem_all, u_full, u_lot, t_sf, chunk):
         biases = {sweep: run_biases(sweep, problem.data.blocks[sweep], pred) for sweep, pred in preds.items()}
         return _Evaluation(r, j, j_lot, sf, g, g_lot, preds, biases, failed)
 
-    return _map_devices(one, chunk, problem_all, u_full, t_sf)
+    return _map_devices(one, chunk, problem_all, u_full)
 
 
 def _solve_device(problem, y0, u_lot, solver, max_steps):
@@ -1259,11 +1256,11 @@ def _identify(model, data, *, free, shared, priors, solver, starts, start_spread
                jnp.asarray(np.stack(prior_sd, -1) if prior_sd else np.ones((n, 0))))
         pri = (jnp.broadcast_to(pri[0], (n, len(prior_idx))), pri[1], pri[2])
         return _Problem(model, start, data_jit, jnp.broadcast_to(jnp.asarray(mask), (n, n_dev)),
-                        n_dev, entries, tier, *pri)
+                        n_dev, entries, tier, *pri, sf_temperature=t_sf)
 
     # One compiled evaluation, at the start and at the solution: the Jacobian over every per-device entry.
+    t_sf = jnp.asarray(_sf_temperature(data))
     problem_all = problem_for(list(range(n_dev)))
-    t_sf = _sf_temperature(data)
     shards = (len(jax.devices()) if shard is None or shard else 1) if lot_solve == "vmap" else 1
     if lot_chunk == "auto":
         independent = shards == 1 and not shared and lot_solve == "vmap"
@@ -1274,9 +1271,9 @@ def _identify(model, data, *, free, shared, priors, solver, starts, start_spread
         raise ValueError("lot_chunk applies to the vmapped solve of independent devices on one JAX device; "
                          "drop it, or drop shard / shared / lot_solve='loop'.")
     spread = _LotSpread(n, shards, lot_chunk)
-    problem_all_s, zeros_s, t_sf_s = spread.pad(problem_all, jnp.zeros((n, n_dev)), t_sf)
+    problem_all_s, zeros_s = spread.pad(problem_all, jnp.zeros((n, n_dev)))
     with _nonfinite_explained("at the start"):
-        at_start = spread.unpad(_evaluate(problem_all_s, zeros_s, jnp.zeros(n_lot), t_sf_s, spread.chunk))
+        at_start = spread.unpad(_evaluate(problem_all_s, zeros_s, jnp.zeros(n_lot), spread.chunk))
     _check_signs(data, {s: np.asarray(v) for s, v in at_start.predictions.items()},
                  model.device.name)
     # Identifiability at the start: hold what the data cannot see.
@@ -1339,7 +1336,7 @@ def _identify(model, data, *, free, shared, priors, solver, starts, start_spread
         u_full[:, free_index] = u_free[:, free_index]
         with _nonfinite_explained("at the solution"):
             return u_full, at_start if evaluate_only else spread.unpad(
-                _evaluate(problem_all_s, spread.pad(jnp.asarray(u_full))[0], jnp.asarray(u_lot), t_sf_s,
+                _evaluate(problem_all_s, spread.pad(jnp.asarray(u_full))[0], jnp.asarray(u_lot),
                           spread.chunk))
 
     u_full, final = at(u_free, u_lot)

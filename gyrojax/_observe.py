@@ -56,19 +56,54 @@ def _read_out(gyro: Gyroscope, settled: Settled, sweep: str, inputs, temperature
     return eqx.tree_at(lambda s: s.rate, settled, jax.vmap(one)(settled.rate, inputs, temps, times))
 
 
+STEADY_SWEEPS = ("rate_table", "vcf_static")
+"""The sweeps read from settled points of the steady tier (a rate table and a static virtual-Coriolis sweep)."""
+
+
+def steady_points(gyro: Gyroscope, requests, tier: AbstractTier = Steady(), carrier_v=VCF_CARRIER_V) -> tuple:
+    """Settled points of several steady sweeps of one device in one call of the tier (one compiled settle
+    for all of them: a static VCF point is the same equations as a rate point, at another input).
+
+    **Arguments:**
+
+    - `requests`: a sequence of `(sweep, inputs, temperatures, times)`: `sweep` one of `STEADY_SWEEPS`, the
+      inputs in its data unit (deg/s, or V of V_ac at the fixed carrier `carrier_v`), one die temperature
+      (deg C) and one time since power-on (s; None or NaN: not recorded) per point.
+
+    **Returns:** a `Settled` per request, in order, with the device's readout terms applied.
+    """
+    parts, sizes, views = [], [], []
+    for sweep, inputs, temperatures, times in requests:
+        x = jnp.atleast_1d(jnp.asarray(inputs, dtype=float))
+        temps = jnp.broadcast_to(jnp.asarray(temperatures, dtype=float), x.shape)
+        t = _times(times, x)
+        if sweep == "rate_table":
+            def one(value, temp, time):
+                return at_temperature(gyro, temp), Stimulus(rate=value * DEG, vcf_fc=0.0 * value, time=time)
+        elif sweep == "vcf_static":
+            def one(value, temp, time):
+                return at_temperature(gyro, temp), Stimulus(rate=0.0 * value, vcf_ac=value, vcf_fc=carrier_v,
+                                                            time=time)
+        else:
+            raise ValueError(f"steady_points: sweep must be one of {STEADY_SWEEPS}, got {sweep!r}.")
+        parts.append(jax.vmap(one)(x, temps, t))
+        sizes.append(x.shape[0])
+        views.append((sweep, x, temps, t))
+    gyros, stimuli = jax.tree.map(lambda *leaves: jnp.concatenate(leaves), *parts) if len(parts) > 1 else parts[0]
+    settled = tier.settle_points(gyros, stimuli)
+    out, start = [], 0
+    for size, (sweep, x, temps, t) in zip(sizes, views):
+        piece = jax.tree.map(lambda leaf, a=start, b=start + size: leaf[a:b], settled)
+        out.append(_read_out(gyro, piece, sweep, x, temps, t))
+        start += size
+    return tuple(out)
+
+
 def rate_table_points(gyro: Gyroscope, rates_dps: Float[ArrayLike, " point"], temperatures: Float[ArrayLike, " point"],
                       tier: AbstractTier = Steady(), *, times: Float[ArrayLike, "*#point"] | None = None) -> Settled:
     """Settled rate-table points: table rates in deg/s, one die temperature (deg C) and optionally one time
     since power-on (s) per point."""
-    rates = jnp.asarray(rates_dps, dtype=float)
-    temps = jnp.asarray(temperatures, dtype=float)
-    t = _times(times, rates)
-
-    def one(rate, temp, time):
-        return at_temperature(gyro, temp), Stimulus(rate=rate * DEG, time=time)
-
-    settled = tier.settle_points(*jax.vmap(one)(rates, temps, t))
-    return _read_out(gyro, settled, "rate_table", rates, temps, t)
+    return steady_points(gyro, [("rate_table", rates_dps, temperatures, times)], tier)[0]
 
 
 def vcf_static_points(gyro: Gyroscope, amplitudes_v: Float[ArrayLike, " point"],
@@ -76,15 +111,7 @@ def vcf_static_points(gyro: Gyroscope, amplitudes_v: Float[ArrayLike, " point"],
                       *, times: Float[ArrayLike, "*#point"] | None = None) -> Settled:
     """Settled static virtual-Coriolis points (seed 003 Eq. 7): the virtual-rate voltage V_ac (V, signed)
     times the fixed carrier V_fc, one die temperature and optionally one time since power-on per point."""
-    volts = jnp.asarray(amplitudes_v, dtype=float)
-    temps = jnp.asarray(temperatures, dtype=float)
-    t = _times(times, volts)
-
-    def one(v, temp, time):
-        return at_temperature(gyro, temp), Stimulus(vcf_ac=v, vcf_fc=carrier_v, time=time)
-
-    settled = tier.settle_points(*jax.vmap(one)(volts, temps, t))
-    return _read_out(gyro, settled, "vcf_static", volts, temps, t)
+    return steady_points(gyro, [("vcf_static", amplitudes_v, temperatures, times)], tier, carrier_v)[0]
 
 
 def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz: Float[ArrayLike, " point"],

@@ -15,24 +15,31 @@ import jax.numpy as jnp
 
 from ._fitdata import BIASED_SWEEPS, FitData, SweepBlock
 from ._gyroscope import Gyroscope
-from ._observe import dac_points, rate_table_points, vcf_dynamic_points, vcf_static_points
+from ._observe import STEADY_SWEEPS, dac_points, steady_points, vcf_dynamic_points
 from ._simulate.tiers import Steady
 from ._solution import RESULTS
+
+
+SF_STEP_DPS = 1.0
+"""deg/s: the scale factor at zero rate is the central difference of the rate output at +/- this rate (a secant
+over 2 deg/s differs from the tangent by the curvature over it: ~1e-14 relative on the presets with every
+effect at its typical size), settled in the same call as the data's steady points."""
+
+
+def _flag(settled, mask):
+    return (settled.result != RESULTS.successful) & jnp.ravel(mask)
 
 
 def predict_block(gyro: Gyroscope, sweep: str, block: SweepBlock, tier=Steady()):
     """Noise-free, bias-free predictions of one device's sweep block, shape (run, point), and a flag of
     points that did not settle."""
+    if sweep in STEADY_SWEEPS:
+        (settled,), _ = _steady(gyro, {sweep: block}, tier)
+        return (jnp.reshape(settled.rate, block.inputs.shape),
+                jnp.reshape(_flag(settled, block.mask), block.inputs.shape))
     shape = block.inputs.shape
     x, temps = jnp.ravel(block.inputs), jnp.ravel(block.temperatures)
-    times = None if block.times is None else jnp.ravel(block.times)
-    if sweep == "rate_table":
-        s = rate_table_points(gyro, x, temps, tier, times=times)
-        pred, bad = s.rate, s.result != RESULTS.successful
-    elif sweep == "vcf_static":
-        s = vcf_static_points(gyro, x, temps, tier, times=times)
-        pred, bad = s.rate, s.result != RESULTS.successful
-    elif sweep == "vcf_dynamic":
+    if sweep == "vcf_dynamic":
         # Each point at its own die temperature, as measured and simulated: one mean temperature per sweep
         # left ~1e-5 of amplitude, 10x the noise.
         pred, _ = vcf_dynamic_points(gyro, x, temps)
@@ -44,6 +51,21 @@ def predict_block(gyro: Gyroscope, sweep: str, block: SweepBlock, tier=Steady())
         raise ValueError(f"unknown sweep {sweep!r}.")
     bad = bad & jnp.ravel(block.mask)
     return jnp.reshape(pred, shape), jnp.reshape(bad, shape)
+
+
+def _steady(gyro, blocks, tier, sf_temperature=None):
+    """The steady sweeps' points (and the scale factor's two points at `sf_temperature`, if given) in one
+    call of the tier: the settled points per block, and the scale factor (LSB per deg/s) or None."""
+    requests = [(sweep, jnp.ravel(b.inputs), jnp.ravel(b.temperatures),
+                 None if b.times is None else jnp.ravel(b.times)) for sweep, b in blocks.items()]
+    if sf_temperature is not None:
+        requests.append(("rate_table", jnp.asarray([-SF_STEP_DPS, SF_STEP_DPS]),
+                         jnp.broadcast_to(jnp.asarray(sf_temperature, dtype=float), (2,)), None))
+    settled = steady_points(gyro, requests, tier)
+    if sf_temperature is None:
+        return settled, None
+    step = settled[-1].rate
+    return settled[:-1], (step[1] - step[0]) / (2.0 * SF_STEP_DPS)
 
 
 def run_biases(sweep: str, block: SweepBlock, pred):
@@ -62,17 +84,26 @@ def block_residuals(sweep: str, block: SweepBlock, pred):
     return jnp.where(block.mask, r, 0.0)
 
 
-def device_residuals(gyro: Gyroscope, data: FitData, tier=Steady()):
+def device_residuals(gyro: Gyroscope, data: FitData, tier=Steady(), sf_temperature=None):
     """All standardised residuals of one device (data without the device axis), flattened in the order of
-    `data.sweeps`, the number of points that did not settle, and the predictions per sweep (run, point)."""
+    `data.sweeps`, the number of points that did not settle, the predictions per sweep (run, point), and the
+    zero-rate scale factor (LSB per deg/s) at die temperature `sf_temperature` (None when not given). The
+    steady sweeps and the scale factor's points settle in one call (one compiled settle)."""
+    steady = {sweep: data.blocks[sweep] for sweep in data.sweeps if sweep in STEADY_SWEEPS}
+    settled, sf = _steady(gyro, steady, tier, sf_temperature) if steady or sf_temperature is not None else ((), None)
+    settled = dict(zip(steady, settled))
     parts, preds, failed = [], {}, jnp.zeros((), dtype=int)
     for sweep in data.sweeps:
         block = data.blocks[sweep]
-        pred, bad = predict_block(gyro, sweep, block, tier)
+        if sweep in settled:
+            pred = jnp.reshape(settled[sweep].rate, block.inputs.shape)
+            bad = _flag(settled[sweep], block.mask)
+        else:
+            pred, bad = predict_block(gyro, sweep, block, tier)
         parts.append(jnp.ravel(block_residuals(sweep, block, pred)))
         preds[sweep] = pred
         failed = failed + jnp.sum(bad)
-    return jnp.concatenate(parts), failed, preds
+    return jnp.concatenate(parts), failed, preds, sf
 
 
 def num_biases(data: FitData):
