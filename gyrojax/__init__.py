@@ -43,19 +43,18 @@ from ._compensate.polynomial import (  # noqa: E402
 from ._control.drive import DriveLoop as DriveLoop  # noqa: E402
 from ._control.openloop import OpenLoopReadout as OpenLoopReadout  # noqa: E402
 from ._control.rebalance import RebalanceLoop as RebalanceLoop  # noqa: E402
-from ._dataset import (  # noqa: E402
+from ._data.arrays import SweepArrays as SweepArrays  # noqa: E402
+from ._data.cells import (  # noqa: E402
     DAC_WORD_BITS as DAC_WORD_BITS,
     OPTIONAL_COLUMNS as OPTIONAL_COLUMNS,
     REQUIRED_COLUMNS as REQUIRED_COLUMNS,
     SWEEPS as SWEEPS,
     DataError as DataError,
-    SweepArrays as SweepArrays,
-    Table as Table,
-    aggregate_samples as aggregate_samples,
     decode_dac_word as decode_dac_word,
-    read_table as read_table,
-    write_table as write_table,
 )
+from ._data.files import read_table as read_table, write_table as write_table  # noqa: E402
+from ._data.samples import aggregate_samples as aggregate_samples  # noqa: E402
+from ._data.table import Table as Table  # noqa: E402
 from ._effects.agc_finite_gain import AgcFiniteGain as AgcFiniteGain  # noqa: E402
 from ._effects.base import AbstractEffect as AbstractEffect  # noqa: E402
 from ._effects.comb_gap import CombGap as CombGap  # noqa: E402

@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
-from ._dataset import Table
+from ._data.table import Table
 from ._gyroscope import Gyroscope
 from ._lot import ProcessSpread, as_arrays, make_lot
 from ._noise import DAC_VOLTMETER_SIGMA_V, RateNoise

@@ -5,7 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from ._dataset import SWEEPS, DataError, Table
+from ._data.cells import SWEEPS, DataError
+from ._data.table import Table
 
 
 BIASED_SWEEPS = ("rate_table", "vcf_static")

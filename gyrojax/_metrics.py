@@ -31,7 +31,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from ._dataset import SWEEPS, DataError, Table
+from ._data.arrays import padded_columns
+from ._data.cells import SWEEPS, DataError
+from ._data.table import Table
 
 
 FULL_SCALE_CONVENTIONS = ("half_range", "span", "output")
@@ -531,7 +533,7 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
     for sweep in SWEEPS:
         if not any(k[2] == sweep for k in groups):
             continue
-        arr = SimpleNamespace(**table._padded(sweep))  # NumPy: no compilation for a report
+        arr = SimpleNamespace(**padded_columns(table, sweep))  # NumPy: no compilation for a report
         index = {(dev, r): (d, k) for d, dev in enumerate(arr.devices) for k, r in enumerate(arr.runs[d])}
         sig = arr.sigmas if weighted else None
         if sweep == "vcf_dynamic":

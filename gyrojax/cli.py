@@ -116,7 +116,7 @@ def _sweep_list(text):
 
 
 def _cmd_simulate(args):
-    from ._dataset import table_format
+    from ._data.files import table_format
 
     table_format(args.out, "--out")
     _check_outputs(("--out", args.out, False))
@@ -125,7 +125,7 @@ def _cmd_simulate(args):
     import gyrojax as gj
 
     from ._campaign import simulate_table
-    from ._dataset import write_table
+    from ._data.files import write_table
 
     tiers = {"steady": gj.CAMPAIGN_TIER, "averaged": gj.Averaged(), "full": gj.FullWaveform()}
     gyro = gj.preset(args.preset)
@@ -145,7 +145,7 @@ _SF_UNIT = {"rate_table": "LSB/(deg/s)", "vcf_static": "LSB/V", "dac": "V/LSB"}
 
 
 def _cmd_metrics(args):
-    from ._dataset import read_table
+    from ._data.files import read_table
     from ._metrics import metrics_report
 
     _check_outputs(("--json", args.json, False))
@@ -225,7 +225,7 @@ def _compensation_na(run: dict, when: str) -> str:
 
 def _cmd_compensate(args):
     from ._compensate.compensate import compensate
-    from ._dataset import read_table
+    from ._data.files import read_table
 
     _check_outputs(("--json", args.json, False))
     _load_effects(args)
@@ -260,7 +260,7 @@ def _cmd_compensate(args):
 
 
 def _cmd_diagnose(args):
-    from ._dataset import read_table
+    from ._data.files import read_table
     from ._diagnose import diagnose, write_report
 
     _check_outputs(("--json", args.json, False), ("--report", args.report, True))
@@ -303,7 +303,7 @@ def _name_list(text):
 
 def _cmd_identify(args):
     from ._compare import compare
-    from ._dataset import read_table
+    from ._data.files import read_table
     from ._fitio import save_fit
     from ._fitreport import fit_report
     from ._identify import identify
@@ -473,7 +473,7 @@ def main(argv=None):
         args = parser.parse_args(argv)
     except SystemExit as e:  # argparse has printed the usage error (or the help)
         return e.code if isinstance(e.code, int) else EXIT_USAGE
-    from ._dataset import DataError
+    from ._data.cells import DataError
 
     name = f"gyrojax {args.command}"
     try:
