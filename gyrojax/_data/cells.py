@@ -18,9 +18,12 @@ from typing import Any
 
 import numpy as np
 
+from .._sweeps.registry import sweep_names
 
-SWEEPS = ("rate_table", "vcf_static", "vcf_dynamic", "dac")
-"""The sweep kinds of the data format (docs/data_format.md)."""
+
+SWEEPS = sweep_names()
+"""The built-in sweep kinds of the data format (docs/data_format.md); a table may also hold any sweep kind
+registered later (`gyrojax.register_sweep`, `gyrojax.sweep_names`)."""
 
 REQUIRED_COLUMNS = ("device", "run", "sweep", "input", "output")
 """Columns every table must have."""
@@ -160,10 +163,11 @@ def parse_str(cell: Any, where: Where, i: int, column: str) -> str:
 
 def parse_sweep(cell: Any, where: Where, i: int, column: str) -> str:
     text = parse_str(cell, where, i, column)
-    if text not in SWEEPS:
-        close = difflib.get_close_matches(text.lower(), SWEEPS, n=1)
+    names = sweep_names()
+    if text not in names:
+        close = difflib.get_close_matches(text.lower(), names, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise where.error(i, column, f"unknown sweep {text!r}{hint}; expected one of {', '.join(SWEEPS)}.")
+        raise where.error(i, column, f"unknown sweep {text!r}{hint}; expected one of {', '.join(names)}.")
     return text
 
 
@@ -238,5 +242,5 @@ def parse_dac_word(cell: Any, where: Where, i: int, column: str) -> tuple[int, s
 
 
 def check_sweep_name(sweep: str):
-    if sweep not in SWEEPS:
-        raise ValueError(f"sweep must be one of {', '.join(SWEEPS)}, got {sweep!r}.")
+    if sweep not in sweep_names():
+        raise ValueError(f"sweep must be one of {', '.join(sweep_names())}, got {sweep!r}.")

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from .._io import atomic_open, atomic_path
+from .._sweeps.registry import sweep_kind
 from .cells import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, DataError, show
 from .table import Table
 
@@ -179,8 +180,8 @@ def _csv_cells(name: str, arr: np.ndarray, table: Table) -> list[str]:
     if name == "run":
         return [str(int(v)) for v in arr.tolist()]
     if name == "input":
-        dac = table["sweep"] == "dac"
-        return [str(int(v)) if is_dac else repr(float(v)) for v, is_dac in zip(arr.tolist(), dac.tolist())]
+        words = [sweep_kind(s).word_input for s in table["sweep"].tolist()]
+        return [str(int(v)) if word else repr(float(v)) for v, word in zip(arr.tolist(), words)]
     if name == "n_samples":
         return ["" if math.isnan(v) else str(int(v)) for v in arr.tolist()]
     if name in REQUIRED_COLUMNS or name in OPTIONAL_COLUMNS:

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
+from .._sweeps.registry import sweep_kind
 from .cells import DataError, Where, parse_dac_word, parse_float, parse_int, parse_str, parse_sweep
 
 
@@ -50,8 +51,10 @@ def aggregate_samples(device: str, run: int, sweep: str, input: Any, samples: Fl
     device = parse_str(device, where, 0, "device")
     run = parse_int(run, where, 0, "run")
     sweep = parse_sweep(sweep, where, 0, "sweep")
-    value = parse_dac_word(input, where, 0, "input")[0] if sweep == "dac" else parse_float(input, where, 0,
-                                                                                               "input")
+    if sweep_kind(sweep).word_input:
+        value = parse_dac_word(input, where, 0, "input")[0]
+    else:
+        value = parse_float(input, where, 0, "input")
     if not (isinstance(sample_rate_hz, (int, float, np.number)) and sample_rate_hz > 0
             and math.isfinite(sample_rate_hz)):
         raise ValueError(f"{label}: sample_rate_hz must be a positive finite number, got {sample_rate_hz!r}.")

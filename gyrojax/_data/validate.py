@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from .._sweeps.registry import sweep_kind
 from .cells import (
     OPTIONAL_COLUMNS,
     REQUIRED_COLUMNS,
@@ -110,7 +111,7 @@ def validate_columns(raw: Mapping[str, Any], source: str, lines: Sequence[int] |
     word_kinds: dict[str, list[int]] = {}
     for i, x in enumerate(cells("input")):
         x = required_cell("input", i, x)
-        if sweep[i] == "dac":
+        if sweep_kind(sweep[i]).word_input:
             word, kind = parse_dac_word(x, where, i, "input")
             inputs[i] = word
             word_kinds.setdefault(kind, []).append(i)
@@ -177,9 +178,9 @@ def validate_columns(raw: Mapping[str, Any], source: str, lines: Sequence[int] |
 
     # Rate-table inputs that look like rad/s.
     for (dev, r, s), rows in group_rows(ordered).items():
-        if s == "rate_table" and looks_like_rad_s(inputs[rows]):
+        if sweep_kind(s).rate_input and looks_like_rad_s(inputs[rows]):
             raise DataError(
-                f"{source}: {rows_text(where, rows)}, column 'input': device {dev!r} run {r} rate_table inputs "
+                f"{source}: {rows_text(where, rows)}, column 'input': device {dev!r} run {r} {s} inputs "
                 f"look like rad/s, but rate-table inputs are deg/s (docs/data_format.md): max |input| = "
                 f"{np.abs(inputs[rows]).max():.6g} < 2 pi and every input x 180/pi is a round deg/s value "
                 f"(e.g. {inputs[rows][np.argmax(np.abs(inputs[rows]))]:.6g} -> "
