@@ -43,19 +43,18 @@ from ._compensate.polynomial import (  # noqa: E402
 from ._control.drive import DriveLoop as DriveLoop  # noqa: E402
 from ._control.openloop import OpenLoopReadout as OpenLoopReadout  # noqa: E402
 from ._control.rebalance import RebalanceLoop as RebalanceLoop  # noqa: E402
-from ._dataset import (  # noqa: E402
+from ._data.arrays import SweepArrays as SweepArrays  # noqa: E402
+from ._data.cells import (  # noqa: E402
     DAC_WORD_BITS as DAC_WORD_BITS,
     OPTIONAL_COLUMNS as OPTIONAL_COLUMNS,
     REQUIRED_COLUMNS as REQUIRED_COLUMNS,
     SWEEPS as SWEEPS,
     DataError as DataError,
-    SweepArrays as SweepArrays,
-    Table as Table,
-    aggregate_samples as aggregate_samples,
     decode_dac_word as decode_dac_word,
-    read_table as read_table,
-    write_table as write_table,
 )
+from ._data.files import read_table as read_table, write_table as write_table  # noqa: E402
+from ._data.samples import aggregate_samples as aggregate_samples  # noqa: E402
+from ._data.table import Table as Table  # noqa: E402
 from ._effects.agc_finite_gain import AgcFiniteGain as AgcFiniteGain  # noqa: E402
 from ._effects.base import AbstractEffect as AbstractEffect  # noqa: E402
 from ._effects.comb_gap import CombGap as CombGap  # noqa: E402
@@ -106,12 +105,6 @@ from ._metrics import (  # noqa: E402
     repeatability as repeatability,
 )
 from ._noise import RateNoise as RateNoise  # noqa: E402
-from ._observe import (  # noqa: E402
-    dac_points as dac_points,
-    rate_table_points as rate_table_points,
-    vcf_dynamic_points as vcf_dynamic_points,
-    vcf_static_points as vcf_static_points,
-)
 from ._process import WaferProcess as WaferProcess  # noqa: E402
 from ._parameters import PARAMETERS as PARAMETERS, Model as Model, Parameter as Parameter  # noqa: E402
 from ._physics.electrodes import (  # noqa: E402
@@ -160,17 +153,35 @@ from ._terms import (  # noqa: E402
     PointConditions as PointConditions,
     TemperatureCoefficient as TemperatureCoefficient,
 )
-from ._sweeps import (  # noqa: E402
+from ._sweeps.base import AbstractSweep as AbstractSweep  # noqa: E402
+from ._sweeps.dac import Dac as Dac, dac_points as dac_points, dac_sweep as dac_sweep  # noqa: E402
+from ._sweeps.lot import LotCampaign as LotCampaign  # noqa: E402
+from ._sweeps.protocol import Protocol as Protocol, RunWarmup as RunWarmup  # noqa: E402
+from ._sweeps.rate_table import (  # noqa: E402
     SEED000_RATES_DPS as SEED000_RATES_DPS,
-    VCF_CARRIER_V as VCF_CARRIER_V,
+    RateTable as RateTable,
+    rate_sweep as rate_sweep,
+    rate_table_points as rate_table_points,
+    seed000_rates as seed000_rates,
+)
+from ._sweeps.registry import (  # noqa: E402
+    SWEEP_KINDS as SWEEP_KINDS,
+    register_sweep as register_sweep,
+    sweep_kind as sweep_kind,
+    sweep_names as sweep_names,
+)
+from ._sweeps.steady import AbstractSteadySweep as AbstractSteadySweep  # noqa: E402
+from ._sweeps.vcf_dynamic import (  # noqa: E402
     VCF_DYNAMIC_AMPLITUDE_V as VCF_DYNAMIC_AMPLITUDE_V,
     VCF_DYNAMIC_FREQUENCIES_HZ as VCF_DYNAMIC_FREQUENCIES_HZ,
+    VcfDynamic as VcfDynamic,
+    vcf_dynamic_points as vcf_dynamic_points,
+)
+from ._sweeps.vcf_static import (  # noqa: E402
+    VCF_CARRIER_V as VCF_CARRIER_V,
     VCF_STATIC_RATES_DPS as VCF_STATIC_RATES_DPS,
-    Protocol as Protocol,
-    RunWarmup as RunWarmup,
-    dac_sweep as dac_sweep,
-    rate_sweep as rate_sweep,
-    seed000_rates as seed000_rates,
+    VcfStatic as VcfStatic,
+    vcf_static_points as vcf_static_points,
 )
 
 from ._version import __version__ as __version__  # noqa: E402

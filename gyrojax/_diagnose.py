@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._compare import chi2_sf, compare, nonlinearity_residual_ppm
-from ._dataset import Table
+from ._data.table import Table
 from ._effects.registry import EFFECTS
 from ._fitdata import FitData, fit_data
 from ._identify import Fit, identify

@@ -5,11 +5,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from ._dataset import SWEEPS, DataError, Table
+from ._data.cells import DataError
+from ._data.table import Table
+from ._sweeps.registry import SWEEP_KINDS, sweep_names
 
 
-BIASED_SWEEPS = ("rate_table", "vcf_static")
-"""Sweeps whose output carries the run's turn-on bias (a free bias per run, eliminated by projection)."""
+BIASED_SWEEPS = tuple(name for name, cls in SWEEP_KINDS.items() if cls.biased)
+"""The built-in sweeps whose output carries the run's turn-on bias (a free bias per run, eliminated by
+projection); `gyrojax.sweep_kind(name).biased` answers for any registered kind."""
 
 
 class SweepBlock(eqx.Module):
@@ -46,7 +49,7 @@ class FitData(eqx.Module):
 
     @property
     def sweeps(self) -> tuple[str, ...]:
-        return tuple(s for s in SWEEPS if s in self.blocks)
+        return tuple(s for s in sweep_names() if s in self.blocks)
 
     def run_ids(self, sweep: str) -> tuple[tuple[int, ...], ...]:
         return dict(self.runs)[sweep]
@@ -73,7 +76,7 @@ def _time_order(times, mask):
 
 def fit_data(table: Table, sweeps=None) -> FitData:
     """Convert a validated `Table` to `FitData` (only the sweeps named, default all present)."""
-    present = [s for s in SWEEPS if s in set(table["sweep"].tolist())]
+    present = [s for s in sweep_names() if s in set(table["sweep"].tolist())]
     if sweeps is None:
         sweeps = present
     missing = [s for s in sweeps if s not in present]

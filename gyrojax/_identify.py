@@ -36,7 +36,7 @@ import optimistix as optx
 from jax.scipy.special import betainc, gammaincc
 from jaxtyping import Array, Bool, Float, Int
 
-from ._dataset import Table
+from ._data.table import Table
 from ._fitdata import BIASED_SWEEPS, FitData, fit_data
 from ._linsolve import PivotedLU
 from ._lm import LevenbergMarquardt

@@ -31,7 +31,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from ._dataset import SWEEPS, DataError, Table
+from ._data.arrays import padded_columns
+from ._data.cells import DataError
+from ._data.table import Table
+from ._sweeps.registry import SWEEP_KINDS, sweep_kind, sweep_names
 
 
 FULL_SCALE_CONVENTIONS = ("half_range", "span", "output")
@@ -421,7 +424,18 @@ def rate_bandwidth(freqs_hz: Float[ArrayLike, "*batch point"], amplitudes: Float
 # Report.
 
 
-_SF_UNITS = {"rate_table": "LSB/(deg/s)", "vcf_static": "LSB/V", "dac": "V/word"}
+def scale_factor_units() -> dict[str, str]:
+    """The unit of `scale_factor` per sweep kind with a straight-line fit (output unit per input unit), and
+    `{name}_vs_rate` for the kinds also fitted against `rate_dps`."""
+    units = {}
+    for cls in SWEEP_KINDS.values():
+        kind = cls()
+        if kind.straight_line:
+            units[kind.name] = kind.scale_factor_unit
+    for cls in SWEEP_KINDS.values():
+        if cls.fit_against_rate:
+            units[f"{cls.name}_vs_rate"] = f"{cls.output_unit}/(deg/s)"
+    return units
 
 
 def _num(x) -> float | None:
@@ -439,9 +453,9 @@ def _why_not(rec: dict[str, Any], outputs: np.ndarray, inputs: np.ndarray) -> di
     for key, value in rec.items():
         if value is not None or key in ("device", "run", "sweep", "n_points"):
             continue
-        if rec["sweep"] == "vcf_dynamic":
+        if not sweep_kind(rec["sweep"]).straight_line:
             why = ("no phase_deg was given for every point of this sweep" if key == "phase_deg_at_bandwidth"
-                   else "a vcf_dynamic sweep gives a bandwidth, not a straight-line fit")
+                   else f"a {rec['sweep']} sweep gives a bandwidth, not a straight-line fit")
         elif flat and key.startswith("nonlinearity"):
             why = f"{_FLAT}: there is no full scale to divide the residuals by"
         elif flat and key == "asymmetry_ppm":
@@ -506,19 +520,20 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
     # Checks with names, before any arithmetic.
     for key, rows in groups.items():
         sweep = key[2]
-        need = MIN_POINTS_BANDWIDTH if sweep == "vcf_dynamic" else MIN_POINTS_LINEAR
-        what = "a rate bandwidth" if sweep == "vcf_dynamic" else "a scale factor with a nonlinearity"
+        line = sweep_kind(sweep).straight_line
+        need = MIN_POINTS_LINEAR if line else MIN_POINTS_BANDWIDTH
+        what = "a scale factor with a nonlinearity" if line else "a rate bandwidth"
         if len(rows) < need:
             raise DataError(f"{table.source}: {name(key, rows)} has {len(rows)} point{'s' * (len(rows) != 1)}; "
                             f"{what} needs at least {need}.", source=table.source, row=int(rows[0]) + 1)
-        if weighted and sweep != "vcf_dynamic":
+        if weighted and line:
             sig = table["output_sigma"] if "output_sigma" in table else None
             bad = rows if sig is None else rows[~(sig[rows] > 0)]
             if bad.size:
                 raise DataError(f"{table.locate(int(bad[0]), 'output_sigma')}: weighted=True needs a positive "
                                 f"output_sigma on every point; {name(key, rows)} lacks one.",
                                 source=table.source, row=int(bad[0]) + 1, column="output_sigma")
-        if sweep == "dac" and "rate_dps" in table:
+        if sweep_kind(sweep).fit_against_rate and "rate_dps" in table:
             given = ~np.isnan(table["rate_dps"][rows])
             if given.any() and not given.all():
                 r = int(rows[~given][0])
@@ -528,13 +543,13 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
 
     records: dict[tuple, dict[str, Any]] = {}
     device_records: list[dict[str, Any]] = []
-    for sweep in SWEEPS:
+    for sweep in sweep_names():
         if not any(k[2] == sweep for k in groups):
             continue
-        arr = SimpleNamespace(**table._padded(sweep))  # NumPy: no compilation for a report
+        arr = SimpleNamespace(**padded_columns(table, sweep))  # NumPy: no compilation for a report
         index = {(dev, r): (d, k) for d, dev in enumerate(arr.devices) for k, r in enumerate(arr.runs[d])}
         sig = arr.sigmas if weighted else None
-        if sweep == "vcf_dynamic":
+        if not sweep_kind(sweep).straight_line:
             phase = arr.aux.get("phase_deg")
             if phase is not None:
                 phase = np.where(np.isnan(phase), 0.0, phase)
@@ -559,7 +574,7 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
         fit = fit_scale_factor(arr.inputs, arr.outputs, mask=arr.mask, sigmas=sig, full_scale=full_scale)
         asym = asymmetry(arr.inputs, arr.outputs, mask=arr.mask, sigmas=sig, common_bias=common_bias)
         vs_rate = None
-        if sweep == "dac" and "rate_dps" in arr.aux:
+        if sweep_kind(sweep).fit_against_rate and "rate_dps" in arr.aux:
             rate = arr.aux["rate_dps"]
             has = arr.mask & ~np.isnan(rate)
             vs_rate = fit_scale_factor(np.where(has, rate, 0.0), arr.outputs, mask=has, sigmas=sig,
@@ -601,7 +616,7 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
             "full_scale": full_scale, "weighted": weighted,
             "asymmetry": "common_bias" if common_bias else "separate_fits", "repeatability_ddof": ddof,
             "nonlinearity_rms": "population RMS of residuals (divided by n)",
-            "scale_factor_units": dict(_SF_UNITS, dac_vs_rate="V/(deg/s)"),
+            "scale_factor_units": scale_factor_units(),
         },
     }
 

@@ -1,8 +1,8 @@
 """Standardised residuals of a model against `FitData`, for one device, with the run biases projected out.
 
-The turn-on bias of each run of a biased sweep (rate table, static VCF) is a free parameter that enters
-linearly, so it is eliminated exactly (variable projection): for any physical parameters the best bias is
-the weighted mean of the run's raw residuals, and the residual that remains is
+The turn-on bias of each run of a biased sweep (`AbstractSweep.biased`: rate table, static VCF) is a free
+parameter that enters linearly, so it is eliminated exactly (variable projection): for any physical parameters
+the best bias is the weighted mean of the run's raw residuals, and the residual that remains is
 
     r = (y - f - b_run) / sigma,   b_run = sum(w (y - f)) / sum(w),  w = 1 / sigma^2 on real points.
 
@@ -13,11 +13,13 @@ chi2, covariance and score tests are those of the full model with the biases fre
 import jax
 import jax.numpy as jnp
 
-from ._fitdata import BIASED_SWEEPS, FitData, SweepBlock
+from ._fitdata import FitData, SweepBlock
 from ._gyroscope import Gyroscope
-from ._observe import STEADY_SWEEPS, dac_points, steady_points, vcf_dynamic_points
 from ._simulate.tiers import Steady
 from ._solution import RESULTS
+from ._sweeps.rate_table import RateTable
+from ._sweeps.registry import sweep_kind
+from ._sweeps.steady import AbstractSteadySweep, steady_points
 
 
 SF_STEP_DPS = 1.0
@@ -32,34 +34,20 @@ def _flag(settled, mask):
 
 def predict_block(gyro: Gyroscope, sweep: str, block: SweepBlock, tier=Steady()):
     """Noise-free, bias-free predictions of one device's sweep block, shape (run, point), and a flag of
-    points that did not settle."""
-    if sweep in STEADY_SWEEPS:
-        (settled,), _ = _steady(gyro, {sweep: block}, tier)
-        return (jnp.reshape(settled.rate, block.inputs.shape),
-                jnp.reshape(_flag(settled, block.mask), block.inputs.shape))
+    points that could not be evaluated (not settled, not finite)."""
     shape = block.inputs.shape
-    x, temps = jnp.ravel(block.inputs), jnp.ravel(block.temperatures)
-    if sweep == "vcf_dynamic":
-        # Each point at its own die temperature, as measured and simulated: one mean temperature per sweep
-        # left ~1e-5 of amplitude, 10x the noise.
-        pred, _ = vcf_dynamic_points(gyro, x, temps)
-        bad = ~jnp.isfinite(pred)
-    elif sweep == "dac":
-        pred = dac_points(gyro, x)
-        bad = ~jnp.isfinite(pred)
-    else:
-        raise ValueError(f"unknown sweep {sweep!r}.")
-    bad = bad & jnp.ravel(block.mask)
-    return jnp.reshape(pred, shape), jnp.reshape(bad, shape)
+    pred, bad = sweep_kind(sweep).predict(gyro, jnp.ravel(block.inputs), jnp.ravel(block.temperatures),
+                                          None if block.times is None else jnp.ravel(block.times), tier)
+    return jnp.reshape(pred, shape), jnp.reshape(bad & jnp.ravel(block.mask), shape)
 
 
 def _steady(gyro, blocks, tier, sf_temperature=None):
     """The steady sweeps' points (and the scale factor's two points at `sf_temperature`, if given) in one
     call of the tier: the settled points per block, and the scale factor (LSB per deg/s) or None."""
-    requests = [(sweep, jnp.ravel(b.inputs), jnp.ravel(b.temperatures),
+    requests = [(sweep_kind(sweep), jnp.ravel(b.inputs), jnp.ravel(b.temperatures),
                  None if b.times is None else jnp.ravel(b.times)) for sweep, b in blocks.items()]
     if sf_temperature is not None:
-        requests.append(("rate_table", jnp.asarray([-SF_STEP_DPS, SF_STEP_DPS]),
+        requests.append((RateTable(), jnp.asarray([-SF_STEP_DPS, SF_STEP_DPS]),
                          jnp.broadcast_to(jnp.asarray(sf_temperature, dtype=float), (2,)), None))
     settled = steady_points(gyro, requests, tier)
     if sf_temperature is None:
@@ -70,7 +58,7 @@ def _steady(gyro, blocks, tier, sf_temperature=None):
 
 def run_biases(sweep: str, block: SweepBlock, pred):
     """Best bias per run (weighted mean of the raw residuals), shape (run,); zero for unbiased sweeps."""
-    if sweep not in BIASED_SWEEPS:
+    if not sweep_kind(sweep).biased:
         return jnp.zeros(block.inputs.shape[0])
     w = jnp.where(block.mask, 1.0 / block.sigmas**2, 0.0)
     raw = jnp.where(block.mask, block.outputs - pred, 0.0)
@@ -89,7 +77,8 @@ def device_residuals(gyro: Gyroscope, data: FitData, tier=Steady(), sf_temperatu
     `data.sweeps`, the number of points that did not settle, the predictions per sweep (run, point), and the
     zero-rate scale factor (LSB per deg/s) at die temperature `sf_temperature` (None when not given). The
     steady sweeps and the scale factor's points settle in one call (one compiled settle)."""
-    steady = {sweep: data.blocks[sweep] for sweep in data.sweeps if sweep in STEADY_SWEEPS}
+    steady = {sweep: data.blocks[sweep] for sweep in data.sweeps
+              if isinstance(sweep_kind(sweep), AbstractSteadySweep)}
     settled, sf = _steady(gyro, steady, tier, sf_temperature) if steady or sf_temperature is not None else ((), None)
     settled = dict(zip(steady, settled))
     parts, preds, failed = [], {}, jnp.zeros((), dtype=int)
@@ -110,7 +99,7 @@ def num_biases(data: FitData):
     """Run biases per device (real runs of biased sweeps), shape (device,)."""
     total = 0
     for sweep in data.sweeps:
-        if sweep in BIASED_SWEEPS:
+        if sweep_kind(sweep).biased:
             total = total + jnp.sum(jnp.any(data.blocks[sweep].mask, axis=-1), axis=-1)
     return jnp.asarray(total)
 

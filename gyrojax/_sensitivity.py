@@ -48,7 +48,7 @@ from ._lot import as_arrays
 from ._metrics import FULL_SCALE_CONVENTIONS, fit_scale_factor
 from ._parameters import PARAMETERS, Model, effect_leaves
 from ._simulate.tiers import Steady
-from ._sweeps import SEED000_RATES_DPS, rate_sweep
+from ._sweeps.rate_table import SEED000_RATES_DPS, rate_sweep
 from ._units import DEG
 
 

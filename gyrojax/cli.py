@@ -116,7 +116,7 @@ def _sweep_list(text):
 
 
 def _cmd_simulate(args):
-    from ._dataset import table_format
+    from ._data.files import table_format
 
     table_format(args.out, "--out")
     _check_outputs(("--out", args.out, False))
@@ -125,7 +125,7 @@ def _cmd_simulate(args):
     import gyrojax as gj
 
     from ._campaign import simulate_table
-    from ._dataset import write_table
+    from ._data.files import write_table
 
     tiers = {"steady": gj.CAMPAIGN_TIER, "averaged": gj.Averaged(), "full": gj.FullWaveform()}
     gyro = gj.preset(args.preset)
@@ -140,13 +140,10 @@ def _cmd_simulate(args):
     return EXIT_OK
 
 
-# The scale factor's unit per sweep kind: output unit per input unit (the data format's units).
-_SF_UNIT = {"rate_table": "LSB/(deg/s)", "vcf_static": "LSB/V", "dac": "V/LSB"}
-
-
 def _cmd_metrics(args):
-    from ._dataset import read_table
+    from ._data.files import read_table
     from ._metrics import metrics_report
+    from ._sweeps.registry import sweep_kind
 
     _check_outputs(("--json", args.json, False))
     report = metrics_report(read_table(args.data))
@@ -154,12 +151,13 @@ def _cmd_metrics(args):
     for p in report["points"]:
         why = p.get("not_applicable", {})
         head = f"{p['device']:>16} run {p['run']:<3} {p['sweep']:<11}"
-        if p["sweep"] == "vcf_dynamic":
+        kind = sweep_kind(p["sweep"])
+        if not kind.straight_line:
             print(f"{head} bandwidth {_na(p.get('bandwidth_hz'), '.4g', why.get('bandwidth_hz'), ' Hz')}")
             continue
         if p["scale_factor"] is None or p["nonlinearity_max_ppm"] is None:
             undetermined += 1
-        unit = _SF_UNIT.get(p["sweep"], "")
+        unit = kind.scale_factor_unit
         sf = _na(p["scale_factor"], ".6g", why.get("scale_factor"), f" {unit}" if unit else "")
         if p["nonlinearity_max_ppm"] is None:
             print(f"{head} SF {sf}  NL n/a ({why.get('nonlinearity_max_ppm', 'not determined')})")
@@ -225,7 +223,7 @@ def _compensation_na(run: dict, when: str) -> str:
 
 def _cmd_compensate(args):
     from ._compensate.compensate import compensate
-    from ._dataset import read_table
+    from ._data.files import read_table
 
     _check_outputs(("--json", args.json, False))
     _load_effects(args)
@@ -260,7 +258,7 @@ def _cmd_compensate(args):
 
 
 def _cmd_diagnose(args):
-    from ._dataset import read_table
+    from ._data.files import read_table
     from ._diagnose import diagnose, write_report
 
     _check_outputs(("--json", args.json, False), ("--report", args.report, True))
@@ -303,7 +301,7 @@ def _name_list(text):
 
 def _cmd_identify(args):
     from ._compare import compare
-    from ._dataset import read_table
+    from ._data.files import read_table
     from ._fitio import save_fit
     from ._fitreport import fit_report
     from ._identify import identify
@@ -349,6 +347,7 @@ def _effects_module_option(parser):
 
 def build_parser():
     from ._presets import PRESETS
+    from ._sweeps.registry import sweep_names
 
     parser = argparse.ArgumentParser(
         prog="gyrojax", epilog=_EXIT_CODES,
@@ -366,7 +365,7 @@ def build_parser():
                      help="lot size (default 1: the nominal device)")
     sim.add_argument("--runs", type=_positive_int("--runs"), default=1, help="repeated runs per device (default 1)")
     sim.add_argument("--sweeps", type=_sweep_list, default=("rate_table",),
-                     help="comma-separated, any of rate_table, vcf_static, vcf_dynamic, dac (default rate_table); "
+                     help=f"comma-separated, any of {', '.join(sweep_names())} (default rate_table); "
                           "the protocols are seed 000 §5's rate table and seed 003's virtual-Coriolis tests, see "
                           "gyrojax.Protocol")
     sim.add_argument("--tier", choices=("steady", "averaged", "full"), default="steady",
@@ -473,7 +472,7 @@ def main(argv=None):
         args = parser.parse_args(argv)
     except SystemExit as e:  # argparse has printed the usage error (or the help)
         return e.code if isinstance(e.code, int) else EXIT_USAGE
-    from ._dataset import DataError
+    from ._data.cells import DataError
 
     name = f"gyrojax {args.command}"
     try:

@@ -10,14 +10,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ._compare import nonlinearity_residual_ppm
+from ._sweeps.registry import sweep_kind
 
 
 PALETTE = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#F0E442", "#000000")
 """Okabe-Ito: distinguishable with every common colour-vision deficiency."""
 
-_XLABEL = {"rate_table": "table rate (deg/s)", "vcf_static": "virtual-rate voltage V_ac (V)",
-           "vcf_dynamic": "modulation frequency (Hz)", "dac": "DAC word (LSB)"}
-_UNIT = {"rate_table": "LSB", "vcf_static": "LSB", "vcf_dynamic": "LSB", "dac": "V"}
 _COORDINATE_LABEL = {"temperature_c": "die temperature (deg C)", "time_s": "time since power-on (s)",
                      "drive_freq_hz": "drive frequency (Hz)", "order": "point in its run (time order)",
                      "run": "run", "input": "input (the sweep's unit)"}
@@ -60,8 +58,9 @@ def residuals(fit, sweep: str = "rate_table", *, ax=None, device: int | None = N
                     zorder=0, label="+/- 1 sigma (noise)")
     ax.axhline(0.0, color="k", lw=0.6)
     _symlog_if_spread(ax, x[m])
-    ax.set_xlabel(_XLABEL.get(sweep, "input"))
-    ax.set_ylabel(f"measurement - model ({_UNIT.get(sweep, 'output unit')})")
+    kind = sweep_kind(sweep)
+    ax.set_xlabel(kind.input_label)
+    ax.set_ylabel(f"measurement - model ({kind.output_unit})")
     ax.set_title(f"{sweep}: residuals, chi2_red {fit.chi2_red_total:.3g}", fontsize=9)
     if x.shape[0] <= 8:
         ax.legend(fontsize=7)

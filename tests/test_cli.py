@@ -79,8 +79,9 @@ def no_work(monkeypatch):
     def reached(*args, **kwargs):
         raise AssertionError("work was started before the output paths were checked")
 
-    from gyrojax import _campaign, _dataset, _demo, _diagnose
-    monkeypatch.setattr(_dataset, "read_table", reached)
+    from gyrojax import _campaign, _demo, _diagnose
+    from gyrojax._data import files as data_files
+    monkeypatch.setattr(data_files, "read_table", reached)
     monkeypatch.setattr(_campaign, "simulate_table", reached)
     monkeypatch.setattr(_diagnose, "diagnose", reached)
     monkeypatch.setattr(_demo, "run_demo", reached)

@@ -13,13 +13,13 @@ from gyrojax import (
     DataError,
     SweepArrays,
     Table,
-    _dataset,
     _io,
     aggregate_samples,
     decode_dac_word,
     read_table,
     write_table,
 )
+from gyrojax._data import files as data_files, validate as data_validate
 
 
 HEADER = "device,run,sweep,input,output"
@@ -144,7 +144,7 @@ def test_rad_heuristic_cases(rates):
     x = np.asarray(rates, dtype=float)
     expected = len(np.unique(np.abs(x[x != 0]))) >= 2 and np.allclose(np.round(x * 1800 / math.pi),
                                                                        x * 1800 / math.pi, rtol=1e-12)
-    assert _dataset._looks_like_rad_s(x) == expected
+    assert data_validate.looks_like_rad_s(x) == expected
 
 
 @pytest.mark.parametrize("word, message", [
@@ -300,7 +300,7 @@ def test_write_is_atomic(tmp_path, monkeypatch):
         f.write("device,run,sweep,input,output\nhalf-written")
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(_dataset, "_write_csv", broken)
+    monkeypatch.setattr(data_files, "_write_csv", broken)
     with pytest.raises(RuntimeError, match="disk full"):
         write_table(full_table(), path)
     assert path.read_bytes() == before

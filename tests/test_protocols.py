@@ -16,7 +16,9 @@ import pytest
 from _experiments import load_experiment
 
 import gyrojax as gj
-from gyrojax import RateNoise, _campaign
+from gyrojax import RateNoise
+from gyrojax._sweeps import dac as sweeps_dac, vcf_dynamic as sweeps_vcf_dynamic
+from gyrojax._sweeps.steady import lot_steady
 from gyrojax.cli import main as cli
 
 
@@ -111,7 +113,7 @@ def test_noise_free_closed_loop_is_the_physics(qmg):
 @pytest.mark.parametrize("which", ["qmg", "vcf"])
 @pytest.mark.slow
 def test_noise_free_outputs_are_the_observe_predictions(which, qmg, vcf):
-    """Re-evaluate the measurement model (the vmapped `_observe` functions) on the table's own columns -
+    """Re-evaluate the measurement model (each sweep kind's vmapped model) on the table's own columns -
     device order, input, temperature_c - and get the table's outputs back bit for bit."""
     c = {"qmg": qmg, "vcf": vcf}[which]
     t, lot = c["clean"], c["lot"]
@@ -119,20 +121,20 @@ def test_noise_free_outputs_are_the_observe_predictions(which, qmg, vcf):
         arr = t.to_arrays(sweep)
         inputs = np.asarray(arr.inputs)
         assert np.all(inputs == inputs[:1, :1])  # one input list for the whole lot
-        fn = _campaign._lot_rate_table if sweep == "rate_table" else _campaign._lot_vcf_static
-        settled = fn(lot, jnp.asarray(inputs[0, 0]), arr.aux["temperature_c"], gj.CAMPAIGN_TIER)
+        request = (gj.sweep_kind(sweep), jnp.asarray(inputs[0, 0]), arr.aux["temperature_c"], jnp.nan)
+        settled = lot_steady(lot, (request,), gj.CAMPAIGN_TIER)[0]
         np.testing.assert_array_equal(np.asarray(settled.rate), np.asarray(arr.outputs))
     arr = t.to_arrays("vcf_dynamic")
-    amp, phase = _campaign._lot_vcf_dynamic(lot, arr.inputs[0, 0], arr.aux["temperature_c"], 0.02)
+    amp, phase = sweeps_vcf_dynamic._lot_vcf_dynamic(lot, arr.inputs[0, 0], arr.aux["temperature_c"], 0.02)
     np.testing.assert_array_equal(np.asarray(amp), np.asarray(arr.outputs))
     np.testing.assert_array_equal(np.asarray(phase), np.asarray(arr.aux["phase_deg"]))
     if which == "qmg":
         arr = t.to_arrays("dac")
-        volts = _campaign._lot_dac(lot, arr.inputs[:, 0])
+        volts = sweeps_dac._lot_dac(lot, arr.inputs[:, 0])
         np.testing.assert_array_equal(np.asarray(volts)[:, None, :] * np.ones((1, QMG_RUNS, 1)),
                                       np.asarray(arr.outputs))
         # seed 000 Table 2's convention: word = -SF x rate
-        sf = np.asarray(_campaign._lot_ideal_sf(lot))
+        sf = np.asarray(sweeps_dac._lot_ideal_sf(lot))
         np.testing.assert_array_equal(np.asarray(arr.inputs[:, 0]),
                                       np.round(-np.asarray(arr.aux["rate_dps"][:, 0]) * DEG * sf[:, None]))
 

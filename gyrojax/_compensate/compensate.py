@@ -7,7 +7,8 @@ from typing import Any
 import equinox as eqx
 import numpy as np
 
-from .._dataset import DataError, Table
+from .._data.cells import DataError
+from .._data.table import Table
 from .._metrics import (
     FULL_SCALE_CONVENTIONS,
     MIN_POINTS_LINEAR,

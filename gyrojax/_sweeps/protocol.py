@@ -2,68 +2,35 @@
 
 A `Protocol` holds the inputs of each sweep kind (table rates, virtual-Coriolis voltages and modulation
 frequencies), the timing of a run (warm-up, dwell per point, sampling rate) and the die's warm-up after
-power-on (`RunWarmup`). `gyrojax.simulate_table` runs it; the helpers `rate_sweep` and `dac_sweep` evaluate
-one device directly.
+power-on (`RunWarmup`); each sweep kind says which of them it reads (`AbstractSweep.inputs`, `dwell_s`,
+`sample_rate_hz`). `gyrojax.simulate_table` runs it.
 """
 
 import math
 
 import equinox as eqx
-import jax
-import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float, Real
 
-from ._checks import check_nonnegative, check_positive
-from ._gyroscope import Gyroscope
-from ._physics.thermal import AbstractTemperature, WarmupTemperature
-from ._simulate.tiers import AbstractTier, Settled, Steady
-from ._stimulus import Stimulus
-from ._units import DEG
+from .._checks import check_nonnegative, check_positive
+from .._gyroscope import Gyroscope
+from .._physics.thermal import AbstractTemperature, WarmupTemperature
+from .._units import DEG
+from .base import AbstractSweep
+from .rate_table import RATE_TABLE_DWELL_S, RATE_TABLE_SAMPLE_RATE_HZ, RATE_TABLE_WARMUP_S, SEED000_RATES_DPS
+from .registry import stream_index, sweep_kind
+from .vcf_dynamic import (
+    VCF_DYNAMIC_AMPLITUDE_V,
+    VCF_DYNAMIC_DWELL_S,
+    VCF_DYNAMIC_FREQUENCIES_HZ,
+    VCF_DYNAMIC_SAMPLE_RATE_HZ,
+)
+from .vcf_static import VCF_CARRIER_V, VCF_STATIC_RATES_DPS
 
-
-SEED000_RATES_DPS = (-200.0, -100.0, -50.0, -20.0, -10.0, -5.0, -2.0, -1.0, -0.5, -0.2, -0.1,
-                     0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0)
-"""Seed 000 §5: the 22 table rates, deg/s."""
-
-RATE_TABLE_WARMUP_S = 60.0
-"""s, seed 000 §5: "after powering the gyroscope and allowing a 1 min warm-up"."""
-
-RATE_TABLE_DWELL_S = 120.0
-"""s, seed 000 §5: "data were collected continuously for 2 min" per rate."""
-
-RATE_TABLE_SAMPLE_RATE_HZ = 100.0
-"""Hz, seed 000 §5: "at a sampling rate of 100 Hz"."""
-
-VCF_STATIC_RATES_DPS = SEED000_RATES_DPS
-"""deg/s, the static virtual-Coriolis sweep as a "virtual rate table" (seed 003 Fig. 4b): V_ac is set so that
-seed 003 Eq. (7), Om = K_svf V_fc V_ac / (2 m Ag a w_d), with the device's design values gives these rates
-(seed 000's 22). Seed 003 prints no static voltages. With Table 1's values (vcf-2018) 200 deg/s is
-V_ac = 6.546 mV at V_fc = 1 V; on paper-qmg's electrode (`gyrojax/_presets.py`) it is 2 V."""
-
-VCF_CARRIER_V = 1.0
-"""V, seed 003 §3: "Vfc = 1 V", the fixed carrier of the virtual-Coriolis multiplier."""
-
-VCF_DYNAMIC_AMPLITUDE_V = 0.02
-"""V, seed 003 §3: "Vac = 20 mV", the virtual-rate voltage of the dynamic (swept-frequency) test."""
-
-VCF_DYNAMIC_FREQUENCIES_HZ = tuple(10.0 * k for k in range(1, 51))
-"""Hz, seed 003 §3: "we measured the dynamic response from 10Hz to 500Hz"; the 10 Hz step is an ASSUMPTION
-(not printed), fine enough to place vcf-2018's 62 Hz peak and its -3 dB point by interpolation."""
-
-VCF_DYNAMIC_DWELL_S = 10.0
-"""s, ASSUMPTION: lock-in time per modulation frequency (not printed in seed 003); 100 whole cycles at the
-lowest frequency."""
-
-VCF_DYNAMIC_SAMPLE_RATE_HZ = 10_000.0
-"""Hz, ASSUMPTION: output sampling of the dynamic test, 20x the highest modulation frequency; seed 003 §3
-samples with an NI-DAQ 6366 (up to 2 MS/s), its rate is not printed."""
 
 ORDERS = ("listed", "reversed", "alternating", "shuffled")
 """The orders a sweep's points can be applied in (`Protocol.order`)."""
 
 ORDER_STREAM = 7919  # a random stream of its own for shuffled orders, apart from the noise streams
-_SWEEP_KINDS = ("rate_table", "vcf_static", "vcf_dynamic", "dac")
 
 WARMUP_RISE_K = 2.0
 """K, ASSUMPTION: die self-heating after power-on ("a couple of kelvin"; neither seed gives a figure)."""
@@ -223,56 +190,45 @@ class Protocol(eqx.Module):
         volts = np.asarray(self.vcf_rates_dps) * DEG * volts_per_rad_s
         return np.asarray([float(f"{v:.12g}") for v in volts])  # a generator's setting; clean numbers in files
 
-    def inputs(self, sweep: str, gyro: Gyroscope | None = None) -> np.ndarray:
-        """The `input` column of a sweep kind (for `dac`: the rates the words stand for, deg/s); `vcf_static`
-        needs the nominal device (see `vcf_static_amplitudes`)."""
-        if sweep in ("rate_table", "dac"):
-            return np.asarray(self.rates_dps)
-        if sweep == "vcf_static":
-            if self.vcf_amplitudes_v is not None:
-                return np.asarray(self.vcf_amplitudes_v)
-            if gyro is None:
-                raise ValueError("Protocol.inputs('vcf_static') needs the device to turn vcf_rates_dps into "
-                                 "volts; pass gyro=.")
-            return self.vcf_static_amplitudes(gyro)
-        if sweep == "vcf_dynamic":
-            return np.asarray(self.vcf_frequencies_hz)
-        raise ValueError(f"sweep must be rate_table, vcf_static, vcf_dynamic or dac, got {sweep!r}.")
+    def inputs(self, sweep: str | AbstractSweep, gyro: Gyroscope | None = None) -> np.ndarray:
+        """The `input` column of a sweep kind, listed (for `dac`: the rates the words stand for, deg/s);
+        `vcf_static` needs the nominal device (see `vcf_static_amplitudes`)."""
+        return sweep_kind(sweep).inputs(self, gyro)
 
-    def n_points(self, sweep: str) -> int:
+    def n_points(self, sweep: str | AbstractSweep) -> int:
         """Number of points of a sweep kind."""
-        if sweep == "vcf_static":
-            return len(self.vcf_amplitudes_v if self.vcf_amplitudes_v is not None else self.vcf_rates_dps)
-        return self.inputs(sweep).size
+        return sweep_kind(sweep).n_points(self)
 
-    def dwell(self, sweep: str) -> float:
+    def dwell(self, sweep: str | AbstractSweep) -> float:
         """Averaging time of one point of `sweep`, s."""
-        return self.dynamic_dwell_s if sweep == "vcf_dynamic" else self.dwell_s
+        return sweep_kind(sweep).dwell_s(self)
 
-    def n_samples(self, sweep: str) -> int:
+    def n_samples(self, sweep: str | AbstractSweep) -> int:
         """Samples averaged per point of `sweep`."""
-        rate = self.dynamic_sample_rate_hz if sweep == "vcf_dynamic" else self.sample_rate_hz
-        return int(round(self.dwell(sweep) * rate))
+        kind = sweep_kind(sweep)
+        return int(round(kind.dwell_s(self) * kind.sample_rate_hz(self)))
 
-    def point_order(self, sweep: str, runs: int, seed: int = 0) -> np.ndarray:
+    def point_order(self, sweep: str | AbstractSweep, runs: int, seed: int = 0) -> np.ndarray:
         """Indices into `inputs(sweep)` of the points in the order applied, shape (runs, points); `seed` draws
-        the `"shuffled"` orders (each run and sweep kind its own)."""
-        n = self.n_points(sweep)
+        the `"shuffled"` orders (each run and sweep kind its own). A sweep without a time axis (`timed`
+        false: the DAC sweep) is always applied as listed."""
+        kind = sweep_kind(sweep)
+        n = kind.n_points(self)
         listed = np.arange(n)
         rows = []
         for r in range(runs):
-            if self.order == "listed" or sweep == "dac":
+            if self.order == "listed" or not kind.timed:
                 rows.append(listed)
             elif self.order == "reversed" or (self.order == "alternating" and r % 2 == 1):
                 rows.append(listed[::-1])
             elif self.order == "alternating":
                 rows.append(listed)
             else:
-                rng = np.random.default_rng([int(seed) % 2**63, ORDER_STREAM, _SWEEP_KINDS.index(sweep), r])
+                rng = np.random.default_rng([int(seed) % 2**63, ORDER_STREAM, stream_index(kind), r])
                 rows.append(rng.permutation(n))
         return np.stack(rows)
 
-    def point_times(self, sweep: str) -> np.ndarray:
+    def point_times(self, sweep: str | AbstractSweep) -> np.ndarray:
         """Time since power-on of the middle of each point's dwell, s: warmup + (i + 1/2) dwell."""
         n = self.n_points(sweep)
         return self.warmup_s + (np.arange(n) + 0.5) * self.dwell(sweep)
@@ -281,61 +237,8 @@ class Protocol(eqx.Module):
         """The die-temperature history of run `run` (the device's own when `warmup` is None)."""
         return gyro.temperature if self.warmup is None else self.warmup.history(gyro, run)
 
-    def temperatures(self, gyro: Gyroscope, runs: int, sweep: str) -> np.ndarray:
+    def temperatures(self, gyro: Gyroscope, runs: int, sweep: str | AbstractSweep) -> np.ndarray:
         """Die temperature (deg C) at the middle of each point's dwell, shape (runs, points)."""
         t = self.point_times(sweep)
         return np.stack([np.broadcast_to(np.asarray(self.run_history(gyro, r)(t), dtype=float), t.shape)
                          for r in range(runs)])
-
-
-@eqx.filter_jit
-def _rate_sweep(gyro, rates, times, tier):
-    def one(rate, time):
-        return gyro, Stimulus(rate=rate, time=time)
-
-    return tier.settle_points(*jax.vmap(one)(rates, times))
-
-
-def rate_sweep(gyro: Gyroscope, rates: Float[ArrayLike, " point"], *, tier: AbstractTier = Steady(),
-               times: Float[ArrayLike, "*#point"] | None = None) -> Settled:
-    """Settle `gyro` at each table rate (rad/s), vmapped, with one compiled call per shape and tier.
-
-    **Arguments:**
-
-    - `gyro`: the device.
-    - `rates`: table rates, rad/s (1-d array).
-    - `tier`: `Steady()` (default), `Averaged()` or `FullWaveform()`.
-    - `times`: time since power-on of each point, s (sets the temperature); default all zero.
-
-    **Returns:** a `Settled` whose fields have a leading axis over the rates.
-    """
-    rates = jnp.asarray(rates, dtype=float)
-    if rates.ndim != 1 or rates.shape[0] < 1:
-        raise ValueError(f"rates must be a non-empty 1-d array of rad/s, got shape {rates.shape}.")
-    times = jnp.zeros_like(rates) if times is None else jnp.broadcast_to(jnp.asarray(times, dtype=float),
-                                                                          rates.shape)
-    return _rate_sweep(gyro, rates, times, tier)
-
-
-def seed000_rates() -> Float[Array, " 22"]:
-    """Seed 000's 22 table rates in rad/s."""
-    return jnp.asarray(SEED000_RATES_DPS) * DEG
-
-
-def _dac_fundamental(gyro, word):
-    """Signed carrier-fundamental amplitude (V) of the DAC output for a sine of amplitude `word` LSB."""
-    dac = gyro.excitation.dac
-    n = max(gyro.phase_points, 256)
-    theta = 2.0 * jnp.pi * jnp.arange(n, dtype=float) / n
-    hold_gain, _ = dac.hold(gyro.resonator.omega_x)
-    v = dac(word * jnp.sin(theta)) * hold_gain
-    return 2.0 * jnp.mean(v * jnp.sin(theta))
-
-
-def dac_sweep(gyro: Gyroscope, words: Real[ArrayLike, " word"]) -> Float[Array, " word"]:
-    """Seed 000 Table 2's experiment: the FTR DAC fed with carrier sines of the given word amplitudes
-    (LSB of the 24-bit word, signed), returning the measured AC amplitude (V) at the DAC output: the
-    signed fundamental, including the hold's gain. Closed-loop devices only."""
-    if not gyro.closed_loop:
-        raise ValueError(f"dac_sweep needs a closed-loop device with an FTR DAC; {gyro.name!r} is open loop.")
-    return jax.vmap(lambda w: _dac_fundamental(gyro, w))(jnp.asarray(words, dtype=float))

@@ -1,0 +1,228 @@
+"""The tidy table's file formats: CSV and Parquet, read with validation and written atomically."""
+
+from __future__ import annotations
+
+import codecs
+import csv
+import io
+import math
+import os
+from typing import Any
+
+import numpy as np
+
+from .._io import atomic_open, atomic_path
+from .._sweeps.registry import sweep_kind
+from .cells import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, DataError, show
+from .table import Table
+
+
+def table_format(path: str | os.PathLike, what: str) -> str:
+    """The table format of `path` from its suffix (".csv" or ".parquet"); `what` names the caller in the error."""
+    suffix = os.path.splitext(os.fspath(path))[1].lower()
+    if suffix not in (".csv", ".parquet"):
+        raise ValueError(f"{what}: cannot tell the format of {os.fspath(path)!r} from its suffix "
+                         f"{suffix or '(none)'!r}; use .csv or .parquet.")
+    return suffix
+
+
+def read_table(path: str | os.PathLike) -> Table:
+    """Read and validate a tidy table of settled points (docs/data_format.md) from CSV or Parquet.
+
+    **Arguments:**
+
+    - `path`: a `.csv` (UTF-8, comma-separated, one header line) or `.parquet` file.
+
+    **Returns:**
+
+    A validated [`gyrojax.Table`][].
+
+    Raises [`gyrojax.DataError`][] (a `ValueError`) naming the file, the data row (1-based, header not counted;
+    for CSV also the file line) and the column for: an empty file, a missing required column, an unknown sweep
+    name, an empty required cell, NaN or infinity, a non-numeric cell, a malformed DAC word, duplicate
+    (device, run, sweep, input) points, and rate-table inputs that look like rad/s. Raises `ValueError` for an
+    unknown suffix. Nothing is dropped silently (blank CSV lines hold nothing and are skipped).
+    """
+    suffix = table_format(path, "read_table")
+    source = os.fspath(path)
+    if os.path.isdir(source):
+        raise DataError(f"{source} is a directory; give a .csv or .parquet file.", source=source)
+    if suffix == ".csv":
+        columns, lines = _read_csv(source)
+        return Table._from_file(columns, source, lines)
+    columns = _read_parquet(source)
+    return Table._from_file(columns, source, None)
+
+
+def _read_csv(source: str) -> tuple[dict[str, list], list[int]]:
+    with open(source, "rb") as f:
+        data = f.read()
+    bom = data.startswith(codecs.BOM_UTF8)
+    try:
+        text = data[3 if bom else 0:].decode("utf-8")
+    except UnicodeDecodeError as e:
+        at = e.start + (3 if bom else 0)
+        line = data[:at].count(b"\n") + 1
+        raise DataError(f"{source}: line {line}: not UTF-8 text (byte {at}: {e.reason}); save the CSV as UTF-8.",
+                        source=source) from None
+    reader = csv.reader(io.StringIO(text, newline=""))
+    records: list[tuple[int, list[str]]] = []  # (first line, fields)
+    previous = 0
+    try:
+        for row in reader:
+            records.append((previous + 1, row))
+            previous = reader.line_num
+    except csv.Error as e:
+        raise DataError(f"{source}: line {reader.line_num}: not a readable CSV line: {e}.", source=source) from None
+
+    def blank(row):
+        return not any(cell.strip() for cell in row)
+
+    first = next((k for k, (_, row) in enumerate(records) if not blank(row)), None)
+    if first is None:
+        raise DataError(f"{source}: empty file: no header line (expected a header naming at least "
+                        f"{', '.join(REQUIRED_COLUMNS)}).", source=source)
+    if records[first][0] != 1:
+        raise DataError(f"{source}: the header must be line 1, found blank lines before it.", source=source)
+    header = records[first][1]
+    names = [h.strip() for h in header]
+    if len(names) == 1:
+        for sep, what in ((";", "semicolon"), ("\t", "tab"), ("|", "bar")):
+            if sep in names[0]:
+                raise DataError(f"{source}: the header (line 1) has one column {show(names[0])}: the file looks "
+                                f"{what}-separated; gyrojax reads comma-separated CSV (save it with ',' between "
+                                "fields and '.' as the decimal mark).", source=source)
+    for j, name in enumerate(names):
+        if not name:
+            raise DataError(f"{source}: header (line 1): column {j + 1} has no name.", source=source)
+        if name in names[:j]:
+            raise DataError(f"{source}: header (line 1): column {name!r} appears twice.", source=source,
+                            column=name)
+    data_records = [(line, row) for line, row in records[first + 1:] if not (blank(row) and len(row) <= 1)]
+    # A file cut short inside its last record would read as complete, with a wrong last number: refuse a last
+    # line that holds text but no newline (a blank last line holds no data).
+    tail = text[max(text.rfind("\n"), text.rfind("\r")) + 1:]
+    if tail.strip():
+        where = (f"data row {len(data_records)} (line {data_records[-1][0]})" if data_records
+                 else "the header (line 1)")
+        raise DataError(f"{source}: {where} does not end with a newline, so the file may have been cut short "
+                        "inside it (a partial copy or an interrupted write). If the file is complete, add a final "
+                        "newline.", source=source, row=len(data_records) or None)
+    columns: dict[str, list] = {name: [] for name in names}
+    lines: list[int] = []
+    for k, (start, row) in enumerate(data_records):
+        if len(row) != len(names):
+            raise DataError(f"{source}: data row {k + 1} (line {start}) has {len(row)} fields but the header has "
+                            f"{len(names)}.", source=source, row=k + 1)
+        for name, cell in zip(names, row):
+            columns[name].append(cell)
+        lines.append(start)
+    return columns, lines
+
+
+def _read_parquet(source: str) -> dict[str, Any]:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(source)
+    except (pa.ArrowInvalid, OSError) as e:
+        if os.path.exists(source) and os.path.getsize(source) == 0:
+            raise DataError(f"{source}: empty file.", source=source) from None
+        if isinstance(e, FileNotFoundError):
+            raise
+        raise DataError(f"{source}: not a readable Parquet file: {e}", source=source) from None
+    columns: dict[str, Any] = {}
+    for name in table.column_names:
+        col = table.column(name)
+        if name in REQUIRED_COLUMNS or name in OPTIONAL_COLUMNS:
+            columns[name] = col.to_pylist()  # None for nulls, so empty cells are told from NaN values
+        elif (pa.types.is_string(col.type) or pa.types.is_large_string(col.type)) and col.null_count == 0:
+            columns[name] = np.array(col.to_pylist(), dtype=str)  # as text read from a CSV
+        else:
+            columns[name] = col.to_numpy(zero_copy_only=False)
+    if not columns:
+        raise DataError(f"{source}: empty file: no columns.", source=source)
+    return columns
+
+
+def write_table(table: Table, path: str | os.PathLike) -> None:
+    """Write a table atomically as CSV or Parquet (chosen by the suffix of `path`).
+
+    The file is written to a temporary file in the same directory and moved into place with `os.replace`, so a
+    reader never sees a half-written file and a failed write leaves any old file untouched (a symbolic link is
+    written through, a new file gets `0o666 & ~umask`, a replaced one keeps its mode).
+
+    **Arguments:**
+
+    - `table`: a [`gyrojax.Table`][].
+    - `path`: ending in `.csv` or `.parquet`; anything else is a `ValueError`.
+
+    CSV floats are written with `repr` (the shortest text that reads back to the identical float64: exact
+    round trip); DAC words, runs and sample counts as integers; "not given" optional values as empty cells.
+    Every line, the last included, ends with a newline ([`gyrojax.read_table`][] refuses a file that does
+    not: it may have been cut short). Parquet keeps dtypes, with nulls for "not given".
+    """
+    if not isinstance(table, Table):
+        raise TypeError(f"write_table expects a gyrojax.Table, got {type(table).__name__}.")
+    suffix = table_format(path, "write_table")
+    if suffix == ".csv":
+        with atomic_open(path, "w", newline="", encoding="utf-8") as f:
+            _write_csv(table, f)
+    else:
+        with atomic_path(path) as tmp:
+            _write_parquet(table, tmp)
+
+
+def _csv_cells(name: str, arr: np.ndarray, table: Table) -> list[str]:
+    if name in ("device", "sweep"):
+        return arr.tolist()
+    if name == "run":
+        return [str(int(v)) for v in arr.tolist()]
+    if name == "input":
+        words = [sweep_kind(s).word_input for s in table["sweep"].tolist()]
+        return [str(int(v)) if word else repr(float(v)) for v, word in zip(arr.tolist(), words)]
+    if name == "n_samples":
+        return ["" if math.isnan(v) else str(int(v)) for v in arr.tolist()]
+    if name in REQUIRED_COLUMNS or name in OPTIONAL_COLUMNS:
+        return ["" if math.isnan(v) else repr(float(v)) for v in arr.tolist()]
+    # An extra column: text as is; numbers exactly; nulls empty.
+    out = []
+    for v in arr.tolist():
+        if v is None or (isinstance(v, float) and math.isnan(v)):
+            out.append("")
+        elif isinstance(v, float):
+            out.append(repr(v))
+        else:
+            out.append(str(v))
+    return out
+
+
+def _write_csv(table: Table, f) -> None:
+    writer = csv.writer(f, lineterminator="\n")
+    names = table.column_names
+    writer.writerow(names)
+    cols = [_csv_cells(c, table[c], table) for c in names]
+    writer.writerows(zip(*cols))
+
+
+def _write_parquet(table: Table, path: str) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    arrays, names = [], []
+    for c in table.column_names:
+        arr = table[c]
+        if c in ("device", "sweep"):
+            col = pa.array(arr.tolist(), type=pa.string())
+        elif c == "run":
+            col = pa.array(arr, type=pa.int64())
+        elif c in ("input", "output"):
+            col = pa.array(arr, type=pa.float64())
+        elif c in OPTIONAL_COLUMNS:
+            col = pa.array(arr, type=pa.float64(), mask=np.isnan(arr))
+        else:
+            col = pa.array(arr.tolist() if arr.dtype.kind in "OU" else arr)
+        arrays.append(col)
+        names.append(c)
+    pq.write_table(pa.Table.from_arrays(arrays, names=names), path)

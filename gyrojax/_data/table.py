@@ -1,0 +1,174 @@
+"""`Table`: the validated, immutable tidy table of settled points (docs/data_format.md).
+
+One row is one settled point of one sweep. Required columns are `device` (str), `run` (int), `sweep` (one of
+[`SWEEPS`][]), `input` and `output`; the optional columns are [`OPTIONAL_COLUMNS`][]; any other column is kept
+(and written back) but ignored.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, final
+
+import numpy as np
+
+from .cells import Where, check_sweep_name
+from .validate import group_rows, validate_columns
+
+
+if TYPE_CHECKING:
+    from .arrays import SweepArrays
+
+
+@final
+class Table:
+    """A validated tidy table of settled points (docs/data_format.md): plain NumPy columns, immutable.
+
+    Build one with [`gyrojax.read_table`][], `Table.from_columns` or `Table.from_records`; every constructor
+    validates (see [`gyrojax.DataError`][]). Columns are read-only NumPy arrays: `device` and `sweep` str,
+    `run` int64, `input` and `output` float64 (DAC words as integer-valued floats, exact below 2**53), the
+    optional columns float64 with NaN for "not given", and extra columns as read (text from CSV).
+    """
+
+    __slots__ = ("_columns", "_source", "_lines")
+
+    def __init__(self, columns: Mapping[str, Any], *, source: str = "<memory>"):
+        """**Arguments:**
+
+        - `columns`: column name -> 1-D sequence or array, all the same length. In memory, NaN in an optional
+          column means "not given"; `input` of `dac` rows may be integers or hex strings.
+        - `source`: a name for messages (a path, or "<memory>").
+        """
+        self._init(columns, source, None, nan_is_missing=True)
+
+    def _init(self, columns, source, lines, nan_is_missing):
+        self._columns = validate_columns(columns, str(source), lines, nan_is_missing)
+        self._source = str(source)
+        self._lines = None if lines is None else tuple(lines)
+
+    def __init_subclass__(cls, **kwargs):
+        raise TypeError("gyrojax.Table is final; compose it instead of subclassing.")
+
+    @classmethod
+    def from_columns(cls, columns: Mapping[str, Any], *, source: str = "<memory>") -> "Table":
+        """Build and validate a table from a dict of columns (same as `Table(columns, source=...)`)."""
+        return cls(columns, source=source)
+
+    @classmethod
+    def from_records(cls, records: Iterable[Mapping[str, Any]], *, source: str = "<memory>") -> "Table":
+        """Build and validate a table from row dicts (e.g. from [`gyrojax.aggregate_samples`][]).
+
+        A key missing from some records is "not given" (NaN) there; it is an error for required columns.
+        """
+        records = list(records)
+        names: list[str] = []
+        for rec in records:
+            names.extend(k for k in rec if k not in names)
+        return cls({k: [rec.get(k) for rec in records] for k in names}, source=source)
+
+    @classmethod
+    def _from_file(cls, columns, source, lines) -> "Table":
+        self = object.__new__(cls)
+        self._init(columns, source, lines, nan_is_missing=False)
+        return self
+
+    # -- access --------------------------------------------------------------------------------------------------
+
+    @property
+    def source(self) -> str:
+        """Where the table came from (a path, or "<memory>"), for messages."""
+        return self._source
+
+    @property
+    def columns(self) -> dict[str, np.ndarray]:
+        """A new dict of the (read-only) column arrays, in file order."""
+        return dict(self._columns)
+
+    @property
+    def column_names(self) -> tuple[str, ...]:
+        return tuple(self._columns)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self._columns[name]
+        except KeyError:
+            raise KeyError(f"{self._source}: no column {name!r}; columns are {', '.join(self._columns)}.") from None
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._columns
+
+    def __len__(self) -> int:
+        return len(self._columns["device"])
+
+    def __repr__(self) -> str:
+        return f"Table({len(self)} rows, columns={list(self._columns)}, source={self._source!r})"
+
+    def locate(self, row: int, column: str | None = None, *, with_source: bool = True) -> str:
+        """Describe 0-based row index `row` as a user sees it: "<source>: data row N (line L)[, column 'c']"."""
+        where = Where(self._source, self._lines)
+        text = where.row(row) + ("" if column is None else f", column {column!r}")
+        return f"{self._source}: {text}" if with_source else text
+
+    def equals(self, other: "Table") -> bool:
+        """Exact equality of column names, order, dtypes kinds and values (NaN equal to NaN)."""
+        if not isinstance(other, Table) or self.column_names != other.column_names:
+            return False
+        for c in self._columns:
+            a, b = self._columns[c], other._columns[c]
+            if a.shape != b.shape:
+                return False
+            if a.dtype.kind == "f" and b.dtype.kind == "f":
+                if not np.array_equal(a, b, equal_nan=True):
+                    return False
+            elif a.dtype.kind != b.dtype.kind or not np.array_equal(a, b):
+                return False
+        return True
+
+    def groups(self, sweep: str | None = None) -> dict[tuple[str, int, str], np.ndarray]:
+        """Row indices (0-based, file order) of each (device, run, sweep) group, in order of first appearance.
+
+        **Arguments:**
+
+        - `sweep`: keep only groups of this sweep kind.
+        """
+        groups = group_rows(self._columns)
+        if sweep is not None:
+            check_sweep_name(sweep)
+            groups = {k: v for k, v in groups.items() if k[2] == sweep}
+        return groups
+
+    def select(self, rows: Sequence[int] | np.ndarray) -> "Table":
+        """A new table of the given 0-based rows (in the given order), same columns, same source."""
+        rows = np.asarray(rows, dtype=np.int64)
+        new = object.__new__(Table)
+        new._columns = {}
+        for c, arr in self._columns.items():
+            sub = arr[rows]
+            sub.flags.writeable = False
+            new._columns[c] = sub
+        new._source = self._source
+        new._lines = None if self._lines is None else tuple(self._lines[r] for r in rows)
+        return new
+
+    # -- array form ----------------------------------------------------------------------------------------------
+
+    def to_arrays(self, sweep: str) -> "SweepArrays":
+        """The rows of one sweep kind as padded (device, run, point) arrays with a mask, for vmapping lots.
+
+        Devices and, within a device, runs are in order of first appearance; points keep file order (the order
+        a sweep was taken in matters for drift). Extra (unknown) columns are not carried.
+
+        **Arguments:**
+
+        - `sweep`: one of [`SWEEPS`][].
+
+        **Returns:**
+
+        A [`gyrojax.SweepArrays`][]. `SweepArrays.to_table()` gives back exactly these rows (same column
+        order, values and, for a table grouped by device and run, row order).
+        """
+        # The array form is built from the table; imported here, not at the top, because
+        # `SweepArrays.to_table()` builds a Table (the two are each other's inverse).
+        from .arrays import sweep_arrays
+
+        return sweep_arrays(self, sweep)

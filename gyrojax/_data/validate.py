@@ -1,0 +1,200 @@
+"""Table-level checks: raw columns -> the normalised, read-only columns of a `Table`, or a `DataError`.
+
+**Missing values.** In the required columns every cell must hold a value. In an optional column a cell may be
+empty (CSV) or null (Parquet): "not given". It is held as NaN in memory and written back as empty / null. A
+NaN or an infinity *written as a value* (`nan`, `inf` in a CSV cell, a NaN float in Parquet) is an error, so that
+a failed measurement is never mistaken for a point that was simply not recorded.
+"""
+
+import difflib
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from .._sweeps.registry import sweep_kind
+from .cells import (
+    OPTIONAL_COLUMNS,
+    REQUIRED_COLUMNS,
+    DataError,
+    Where,
+    is_missing,
+    parse_dac_word,
+    parse_float,
+    parse_int,
+    parse_str,
+    parse_sweep,
+    show,
+)
+
+
+# Rad/s heuristic (see `looks_like_rad_s`).
+_RAD_TOL = 1e-6
+_RAD_SIG_DIGITS = 3
+
+
+def looks_like_rad_s(inputs: np.ndarray) -> bool:
+    """Whether a rate-table run's inputs look like a round deg/s grid converted to rad/s.
+
+    The heuristic, made so that it essentially never fires on real deg/s data:
+
+    1. the run has at least two distinct non-zero |input| values;
+    2. max |input| < 2 pi (a rad/s file of any usual table range, up to 360 deg/s);
+    3. every non-zero |input| x 180/pi lies within 1e-6 (relative) of a number with at most three significant
+       digits (0.1, 0.2, 0.5, 1, 2, 5, 10, 15, 45, 100, 200, 360, ...).
+
+    A genuine deg/s grid fails 3 (1 deg/s x 180/pi = 57.2957..., 7e-5 away from 57.3). A random value passes 3
+    with probability at most ~2e-3 (the tolerance band over the spacing of 3-digit numbers), two independent
+    ones with at most ~4e-6. Conversions made with a truncated pi (3.1416) are not caught: this is a guard
+    against the usual mistake, not a proof.
+    """
+    mags = np.unique(np.abs(inputs[inputs != 0]))
+    if mags.size < 2 or mags.max() >= 2 * math.pi:
+        return False
+    deg = mags * (180.0 / math.pi)
+    step = 10.0 ** (np.floor(np.log10(deg)) - (_RAD_SIG_DIGITS - 1))
+    nearest = np.round(deg / step) * step
+    return bool(np.all(np.abs(deg - nearest) <= _RAD_TOL * deg))
+
+
+def rows_text(where: Where, rows: Sequence[int]) -> str:
+    rows = list(rows)
+    if len(rows) <= 4:
+        return ", ".join(where.row(r) for r in rows)
+    return f"{where.row(rows[0])} ... {where.row(rows[-1])} ({len(rows)} rows)"
+
+
+def validate_columns(raw: Mapping[str, Any], source: str, lines: Sequence[int] | None,
+              nan_is_missing: bool) -> dict[str, np.ndarray]:
+    """Parse and check raw columns; return the normalised columns (same order) or raise a DataError."""
+    where = Where(source, lines)
+    names = list(raw)
+    header = "header (line 1)" if lines is not None else "columns"
+    missing = [c for c in REQUIRED_COLUMNS if c not in raw]
+    if missing:
+        # Suggest a near spelling: 'Output', 'out put', 'sweep_kind' ...
+        hints = []
+        for c in missing:
+            close = difflib.get_close_matches(c, [n.lower() for n in names], n=1)
+            if close:
+                hints.append(f"{c!r} (found {names[[n.lower() for n in names].index(close[0])]!r})")
+            else:
+                hints.append(repr(c))
+        raise DataError(f"{source}: {header}: missing required column{'s' if len(missing) > 1 else ''} "
+                        f"{', '.join(hints)}; required are {', '.join(REQUIRED_COLUMNS)}; found "
+                        f"{', '.join(map(repr, names)) or 'no columns'}.", source=source,
+                        column=missing[0])
+    lengths = {c: len(v) for c, v in raw.items()}
+    n = lengths["device"]
+    for c, length in lengths.items():
+        if length != n:
+            raise DataError(f"{source}: column {c!r} has {length} values but column 'device' has {n}.",
+                            source=source, column=c)
+    if n == 0:
+        raise DataError(f"{source}: empty: the {header} is there but there are no data rows.", source=source)
+
+    def cells(c):
+        v = raw[c]
+        return v.tolist() if isinstance(v, np.ndarray) else list(v)
+
+    def required_cell(c, i, cell):
+        if is_missing(cell):
+            raise where.error(i, c, "is empty; every row needs a value in the required columns.")
+        return cell
+
+    out: dict[str, np.ndarray] = {}
+    device = [parse_str(required_cell("device", i, x), where, i, "device") for i, x in enumerate(cells("device"))]
+    run = [parse_int(required_cell("run", i, x), where, i, "run") for i, x in enumerate(cells("run"))]
+    sweep = [parse_sweep(required_cell("sweep", i, x), where, i, "sweep") for i, x in enumerate(cells("sweep"))]
+    inputs = np.empty(n)
+    word_kinds: dict[str, list[int]] = {}
+    for i, x in enumerate(cells("input")):
+        x = required_cell("input", i, x)
+        if sweep_kind(sweep[i]).word_input:
+            word, kind = parse_dac_word(x, where, i, "input")
+            inputs[i] = word
+            word_kinds.setdefault(kind, []).append(i)
+        else:
+            inputs[i] = parse_float(x, where, i, "input")
+    output = np.array([parse_float(required_cell("output", i, x), where, i, "output")
+                       for i, x in enumerate(cells("output"))], dtype=np.float64).reshape(n)
+
+    optional: dict[str, np.ndarray] = {}
+    for c in OPTIONAL_COLUMNS:
+        if c not in raw:
+            continue
+        col = np.full(n, np.nan)
+        for i, x in enumerate(cells(c)):
+            if is_missing(x) or (nan_is_missing and isinstance(x, float) and math.isnan(x)):
+                continue
+            col[i] = parse_float(x, where, i, c)
+            if c == "output_sigma" and col[i] < 0:
+                raise where.error(i, c, f"{show(x)} is negative; a standard uncertainty is >= 0.")
+            if c == "n_samples" and (col[i] < 1 or col[i] != math.floor(col[i])):
+                raise where.error(i, c, f"{show(x)} is not a positive whole number of samples.")
+            if c == "drive_freq_hz" and col[i] <= 0:
+                raise where.error(i, c, f"{show(x)} is not a positive frequency.")
+            if c == "time_s" and col[i] < 0:
+                raise where.error(i, c, f"{show(x)} is negative; time_s is seconds since the run's power-on.")
+        optional[c] = col
+
+    # Hex words without a prefix next to plain-digit words: '539' could be decimal 539 or hex 0x539 (seed 000
+    # Table 2 prints both 'A95' and '539'). Refuse rather than guess.
+    if "bare hex" in word_kinds and "digits" in word_kinds:
+        i_dec, i_hex = word_kinds["digits"][0], word_kinds["bare hex"][0]
+        raise where.error(i_dec, "input", f"DAC word {show(cells('input')[i_dec])} is ambiguous: it reads as a "
+                          f"decimal integer, but {where.row(i_hex)} has the bare hex word "
+                          f"{show(cells('input')[i_hex])}, so it may be hex too. Write hex words with a 0x "
+                          "prefix, or give every word as a signed decimal integer.")
+
+    for c in names:
+        if c in REQUIRED_COLUMNS:
+            continue
+        if c in optional:
+            out[c] = optional[c]
+        else:
+            v = raw[c]
+            arr = np.array(v) if not isinstance(v, np.ndarray) else v.copy()
+            if arr.ndim != 1:
+                raise DataError(f"{source}: extra column {c!r} must be one-dimensional, got shape {arr.shape}.",
+                                source=source, column=c)
+            out[c] = arr
+    required = {"device": np.array(device, dtype=str), "run": np.array(run, dtype=np.int64),
+                "sweep": np.array(sweep, dtype=str), "input": inputs, "output": output}
+    ordered = {c: (required[c] if c in required else out[c]) for c in names}
+
+    # Duplicate points.
+    seen: dict[tuple, int] = {}
+    for i in range(n):
+        key = (device[i], run[i], sweep[i], float(inputs[i]))
+        if key in seen:
+            j = seen[key]
+            raise DataError(f"{source}: {where.row(i)}, column 'input': duplicate point: {where.row(j)} has the "
+                            f"same (device, run, sweep, input) = ({device[i]!r}, {run[i]}, {sweep[i]!r}, "
+                            f"{inputs[i]:g}). Each settled point appears once; give repeats a different run.",
+                            source=source, row=i + 1, column="input")
+        seen[key] = i
+
+    # Rate-table inputs that look like rad/s.
+    for (dev, r, s), rows in group_rows(ordered).items():
+        if sweep_kind(s).rate_input and looks_like_rad_s(inputs[rows]):
+            raise DataError(
+                f"{source}: {rows_text(where, rows)}, column 'input': device {dev!r} run {r} {s} inputs "
+                f"look like rad/s, but rate-table inputs are deg/s (docs/data_format.md): max |input| = "
+                f"{np.abs(inputs[rows]).max():.6g} < 2 pi and every input x 180/pi is a round deg/s value "
+                f"(e.g. {inputs[rows][np.argmax(np.abs(inputs[rows]))]:.6g} -> "
+                f"{np.abs(inputs[rows]).max() * 180 / math.pi:.6g} deg/s) to 1e-6. Convert with "
+                "input_dps = input_rad_s * 180 / pi (gyrojax.units.rad_s_to_dps).",
+                source=source, row=int(rows[0]) + 1, column="input")
+    for arr in ordered.values():
+        arr.flags.writeable = False
+    return ordered
+
+
+def group_rows(columns: Mapping[str, np.ndarray]) -> dict[tuple[str, int, str], np.ndarray]:
+    """Row indices of each (device, run, sweep) group, groups and rows in order of first appearance."""
+    groups: dict[tuple[str, int, str], list[int]] = {}
+    for i, key in enumerate(zip(columns["device"].tolist(), columns["run"].tolist(), columns["sweep"].tolist())):
+        groups.setdefault(key, []).append(i)
+    return {k: np.asarray(v, dtype=np.int64) for k, v in groups.items()}

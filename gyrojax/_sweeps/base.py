@@ -1,0 +1,133 @@
+"""The sweep interface: one kind of experiment, from its protocol to its measurement model and its metrics."""
+
+import abc
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._gyroscope import Gyroscope
+from .._physics.thermal import ConstantTemperature
+
+
+if TYPE_CHECKING:
+    from .lot import LotCampaign
+    from .protocol import Protocol
+
+
+class AbstractSweep(eqx.Module):
+    """One kind of experiment: the `sweep` value of the tidy data format (docs/data_format.md).
+
+    A sweep kind owns what the data format, the simulator, identification, the metrics and the plots need to
+    know about it, so that a new experiment is one file (a final subclass) plus `gyrojax.register_sweep`. Its
+    fields, if any, are settings of the measurement model with the protocol's defaults (the carrier of a
+    virtual-Coriolis sweep); `gyrojax.sweep_kind(name)` gives the instance with the defaults.
+
+    **Class attributes:**
+
+    - `name`: the `sweep` value in files (the registry key).
+    - `title`: the kind in words, for messages ("rate-table").
+    - `input_quantity`, `input_unit`: what the `input` column holds, e.g. "table rate", "deg/s" (plot labels
+      and the scale factor's unit).
+    - `output_unit`: the unit of the `output` column.
+    - `input_meaning`, `output_meaning`: the data format's description of `input` and `output`.
+    - `biased`: the output carries the run's turn-on bias (a free bias per run in a fit, noise that is
+      constant over a run in the simulator).
+    - `straight_line`: the metrics of a straight-line fit apply (scale factor, bias, nonlinearity, asymmetry,
+      repeatability); otherwise the sweep gives a rate bandwidth.
+    - `word_input`: `input` is a DAC word (a signed integer, or hex; written back as an integer).
+    - `rate_input`: `input` is a rate in deg/s, so a run that looks converted to rad/s is refused.
+    - `timed`: points follow one another in a power-on run (a time axis, a point order, a die temperature
+      per point); False for a bench measurement.
+    - `rate_noise`: the simulator's noise is rate noise (deg/s) converted to LSB with each device's
+      rate-table scale factor.
+    - `fit_against_rate`: the metrics also fit `output` against the `rate_dps` column when it is given.
+    """
+
+    name: ClassVar[str]
+    title: ClassVar[str]
+    input_quantity: ClassVar[str]
+    input_unit: ClassVar[str]
+    output_unit: ClassVar[str]
+    input_meaning: ClassVar[str]
+    output_meaning: ClassVar[str]
+    biased: ClassVar[bool]
+    straight_line: ClassVar[bool]
+    word_input: ClassVar[bool] = False
+    rate_input: ClassVar[bool] = False
+    timed: ClassVar[bool] = True
+    rate_noise: ClassVar[bool] = False
+    fit_against_rate: ClassVar[bool] = False
+
+    @property
+    def input_label(self) -> str:
+        """Axis label of the input: quantity and unit."""
+        return f"{self.input_quantity} ({self.input_unit})"
+
+    @property
+    def scale_factor_unit(self) -> str | None:
+        """Output unit per input unit (None when the sweep has no straight-line fit)."""
+        if not self.straight_line:
+            return None
+        unit = f"({self.input_unit})" if "/" in self.input_unit else self.input_unit
+        return f"{self.output_unit}/{unit}"
+
+    # -- protocol ------------------------------------------------------------------------------------------------
+
+    @abc.abstractmethod
+    def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:
+        """The listed inputs of this sweep under `protocol`, in the data unit, in the order listed (the
+        nominal single device `gyro` where the inputs are set from its design values)."""
+
+    @abc.abstractmethod
+    def n_points(self, protocol: "Protocol") -> int:
+        """Number of points of this sweep under `protocol` (without a device)."""
+
+    @abc.abstractmethod
+    def dwell_s(self, protocol: "Protocol") -> float:
+        """Averaging time of one point, s."""
+
+    @abc.abstractmethod
+    def sample_rate_hz(self, protocol: "Protocol") -> float:
+        """Output sampling rate of one point, Hz."""
+
+    @abc.abstractmethod
+    def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
+        """Raise a `ValueError` naming the device when this sweep cannot be measured on `gyro` (a single
+        nominal device) under `protocol`, before anything is simulated."""
+
+    # -- measurement model ---------------------------------------------------------------------------------------
+
+    @abc.abstractmethod
+    def predict(self, gyro: Gyroscope, inputs, temperatures, times, tier) -> tuple[Any, Any]:
+        """The noise-free, bias-free outputs of one device at the points, and a flag of points the model could
+        not evaluate (not settled, not finite).
+
+        **Arguments:**
+
+        - `gyro`: one device.
+        - `inputs`, `temperatures`, `times`: 1-d arrays, one value per point: the `input` column, the die
+          temperature (deg C; NaN: the device's own at power-on) and the time since power-on (s; NaN: 0).
+        - `tier`: the simulation tier of settled points.
+
+        **Returns:** `(outputs, bad)`, 1-d arrays like `inputs`.
+        """
+
+    # -- simulation ----------------------------------------------------------------------------------------------
+
+    @abc.abstractmethod
+    def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
+        """This sweep of every device and run of `lot` (leaves with a leading device axis), with its noise.
+
+        **Returns:** columns of shape (device, run, point): `input`, `output`, `output_sigma`, `n_samples`,
+        `temperature_c` and `drive_freq_hz` (NaN where not given), and any other optional column the sweep
+        records (`time_s`, `phase_deg`, `rate_dps`).
+        """
+
+
+def at_temperature(gyro: Gyroscope, temperature) -> Gyroscope:
+    """`gyro` held at `temperature` (deg C); NaN keeps the device's own temperature at power-on."""
+    t = jnp.asarray(temperature, dtype=float)
+    t = jnp.where(jnp.isnan(t), gyro.temperature(0.0), t)
+    return eqx.tree_at(lambda g: g.temperature, gyro, ConstantTemperature(t))

@@ -1,0 +1,107 @@
+"""The rate table (seed 000 §5): the device on a turntable at a constant rate per point."""
+
+from typing import TYPE_CHECKING
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from .._gyroscope import Gyroscope
+from .._simulate.tiers import AbstractTier, Settled, Steady
+from .._stimulus import Stimulus
+from .._units import DEG
+from .steady import AbstractSteadySweep, steady_points
+
+
+if TYPE_CHECKING:
+    from .protocol import Protocol
+
+
+SEED000_RATES_DPS = (-200.0, -100.0, -50.0, -20.0, -10.0, -5.0, -2.0, -1.0, -0.5, -0.2, -0.1,
+                     0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0)
+"""Seed 000 §5: the 22 table rates, deg/s."""
+
+RATE_TABLE_WARMUP_S = 60.0
+"""s, seed 000 §5: "after powering the gyroscope and allowing a 1 min warm-up"."""
+
+RATE_TABLE_DWELL_S = 120.0
+"""s, seed 000 §5: "data were collected continuously for 2 min" per rate."""
+
+RATE_TABLE_SAMPLE_RATE_HZ = 100.0
+"""Hz, seed 000 §5: "at a sampling rate of 100 Hz"."""
+
+
+class RateTable(AbstractSteadySweep):
+    """A rate table: the device turned at a constant table rate per point, its settled rate output read
+    (seed 000 §5). Inputs `Protocol.rates_dps`; timing `Protocol.dwell_s` at `Protocol.sample_rate_hz`."""
+
+    name = "rate_table"
+    title = "rate-table"
+    input_quantity = "table rate"
+    input_unit = "deg/s"
+    output_unit = "LSB"
+    input_meaning = "the table rate, deg/s (a physical rate on a rate table, seed 000 §5)"
+    output_meaning = ("the gyro's rate output, LSB: the rebalance word in closed loop, the readout's ADC word in "
+                      "open loop")
+    rate_input = True
+
+    def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:
+        return np.asarray(protocol.rates_dps)
+
+    def n_points(self, protocol: "Protocol") -> int:
+        return len(protocol.rates_dps)
+
+    def dwell_s(self, protocol: "Protocol") -> float:
+        return protocol.dwell_s
+
+    def sample_rate_hz(self, protocol: "Protocol") -> float:
+        return protocol.sample_rate_hz
+
+    def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
+        pass
+
+    def stimulus(self, value, time) -> Stimulus:
+        return Stimulus(rate=value * DEG, vcf_fc=0.0 * value, time=time)
+
+
+def rate_table_points(gyro: Gyroscope, rates_dps: Float[ArrayLike, " point"], temperatures: Float[ArrayLike, " point"],
+                      tier: AbstractTier = Steady(), *, times: Float[ArrayLike, "*#point"] | None = None) -> Settled:
+    """Settled rate-table points: table rates in deg/s, one die temperature (deg C) and optionally one time
+    since power-on (s) per point."""
+    return steady_points(gyro, [(RateTable(), rates_dps, temperatures, times)], tier)[0]
+
+
+@eqx.filter_jit
+def _rate_sweep(gyro, rates, times, tier):
+    def one(rate, time):
+        return gyro, Stimulus(rate=rate, time=time)
+
+    return tier.settle_points(*jax.vmap(one)(rates, times))
+
+
+def rate_sweep(gyro: Gyroscope, rates: Float[ArrayLike, " point"], *, tier: AbstractTier = Steady(),
+               times: Float[ArrayLike, "*#point"] | None = None) -> Settled:
+    """Settle `gyro` at each table rate (rad/s), vmapped, with one compiled call per shape and tier.
+
+    **Arguments:**
+
+    - `gyro`: the device.
+    - `rates`: table rates, rad/s (1-d array).
+    - `tier`: `Steady()` (default), `Averaged()` or `FullWaveform()`.
+    - `times`: time since power-on of each point, s (sets the temperature); default all zero.
+
+    **Returns:** a `Settled` whose fields have a leading axis over the rates.
+    """
+    rates = jnp.asarray(rates, dtype=float)
+    if rates.ndim != 1 or rates.shape[0] < 1:
+        raise ValueError(f"rates must be a non-empty 1-d array of rad/s, got shape {rates.shape}.")
+    times = jnp.zeros_like(rates) if times is None else jnp.broadcast_to(jnp.asarray(times, dtype=float),
+                                                                          rates.shape)
+    return _rate_sweep(gyro, rates, times, tier)
+
+
+def seed000_rates() -> Float[Array, " 22"]:
+    """Seed 000's 22 table rates in rad/s."""
+    return jnp.asarray(SEED000_RATES_DPS) * DEG

@@ -1,0 +1,74 @@
+"""Sweep kinds by name, and registering a new one."""
+
+import difflib
+
+from .base import AbstractSweep
+from .dac import Dac
+from .rate_table import RateTable
+from .vcf_dynamic import VcfDynamic
+from .vcf_static import VcfStatic
+
+
+SWEEP_KINDS: dict[str, type[AbstractSweep]] = {cls.name: cls for cls in (RateTable, VcfStatic, VcfDynamic, Dac)}
+"""The sweep kinds by their `sweep` name, in the data format's order (a kind's position also numbers its
+random streams in `gyrojax.simulate_table`, so registering one leaves the others' draws unchanged)."""
+
+_CLASS_ATTRIBUTES = {"name": str, "title": str, "input_quantity": str, "input_unit": str, "output_unit": str,
+                     "input_meaning": str, "output_meaning": str, "biased": bool, "straight_line": bool,
+                     "word_input": bool, "rate_input": bool, "timed": bool, "rate_noise": bool,
+                     "fit_against_rate": bool}
+
+
+def register_sweep(cls: type[AbstractSweep]) -> type[AbstractSweep]:
+    """Add a sweep kind to `SWEEP_KINDS` under `cls.name` (also usable as a class decorator). From then on
+    tables may hold it, `simulate_table` simulates it and identification fits it.
+
+    Checks the interface: a concrete subclass of `gyrojax.AbstractSweep` with every class attribute set
+    (strings non-empty), and constructible without arguments. A name already taken by another class is
+    refused.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, AbstractSweep)):
+        raise ValueError(f"register_sweep expects a subclass of gyrojax.AbstractSweep, got {cls!r}.")
+    for attr, kind in _CLASS_ATTRIBUTES.items():
+        value = getattr(cls, attr, None)
+        if not isinstance(value, kind) or (kind is str and not value.strip()):
+            raise ValueError(f"sweep class {cls.__qualname__}: class attribute {attr!r} must be a "
+                             f"{'non-empty string' if kind is str else 'bool'}, got {value!r}.")
+    if cls.name != cls.name.strip() or "," in cls.name:
+        raise ValueError(f"sweep class {cls.__qualname__}: name {cls.name!r} must not contain commas or start "
+                         "or end with spaces (it is a cell of a CSV file and an item of --sweeps).")
+    taken = SWEEP_KINDS.get(cls.name)
+    if taken is not None and taken is not cls:
+        raise ValueError(f"sweep name {cls.name!r} is already registered by {taken.__qualname__}.")
+    try:
+        cls()
+    except TypeError as e:
+        raise ValueError(f"sweep class {cls.__qualname__} must be concrete and constructible without "
+                         f"arguments: {e}") from None
+    SWEEP_KINDS[cls.name] = cls
+    return cls
+
+
+def sweep_names() -> tuple[str, ...]:
+    """The names of the registered sweep kinds, in registry order."""
+    return tuple(SWEEP_KINDS)
+
+
+def sweep_kind(sweep: "str | AbstractSweep") -> AbstractSweep:
+    """The sweep kind named `sweep` with its default settings (an `AbstractSweep` is returned as it is).
+
+    Raises a `ValueError` for an unknown name, with the closest registered name if there is one.
+    """
+    if isinstance(sweep, AbstractSweep):
+        return sweep
+    try:
+        return SWEEP_KINDS[sweep]()
+    except (KeyError, TypeError):
+        close = difflib.get_close_matches(str(sweep).lower(), SWEEP_KINDS, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ValueError(f"unknown sweep {sweep!r}{hint}; expected one of {', '.join(SWEEP_KINDS)}.") from None
+
+
+def stream_index(sweep: "str | AbstractSweep") -> int:
+    """The position of a sweep kind in the registry: the number of its random streams."""
+    return list(SWEEP_KINDS).index(sweep_kind(sweep).name)

@@ -1,0 +1,167 @@
+"""Steady sweeps: points read from the settled rate output, all settled by one call of the tier.
+
+Each point is evaluated at its own die temperature (the `temperature_c` column): the device's temperature
+history is replaced by a constant at that temperature, since a settled point sees the temperature of its
+dwell. A NaN temperature means "not recorded" and falls back to the device's own history at power-on. The
+point's time since power-on (the `time_s` column; 0 when not recorded) reaches the device's terms that
+depend on it (`gyrojax.AbstractRateTerm`, `AbstractOutputTerm`); the device's readout terms
+(`AbstractOutputTerm`) act on the settled rate output.
+"""
+
+import abc
+from typing import TYPE_CHECKING
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._gyroscope import Gyroscope
+from .._simulate.tiers import AbstractTier, Settled, Steady
+from .._solution import RESULTS, result_code
+from .._stimulus import Stimulus
+from .._terms import AbstractOutputTerm, PointConditions
+from .base import AbstractSweep, at_temperature
+
+
+if TYPE_CHECKING:
+    from .lot import LotCampaign
+
+
+class AbstractSteadySweep(AbstractSweep):
+    """A sweep read from the settled rate output of the steady tier: a point is a `Stimulus` held until the
+    device settles. Every steady sweep of a device settles in one call of the tier (one compiled settle),
+    so a kind only says what it applies (`stimulus`). The output carries the run's turn-on bias; the noise
+    is rate noise averaged over the dwell."""
+
+    biased = True
+    straight_line = True
+    rate_noise = True
+
+    @abc.abstractmethod
+    def stimulus(self, value, time) -> Stimulus:
+        """What one point applies: `value` from the `input` column, `time` since power-on (s). Every field
+        of the returned `Stimulus` must be an array shaped like `value` (`0.0 * value` for zero), so that
+        the points of several steady sweeps stack into one settle."""
+
+    def predict(self, gyro, inputs, temperatures, times, tier=Steady()):
+        (settled,) = steady_points(gyro, [(self, inputs, temperatures, times)], tier)
+        return settled.rate, settled.result != RESULTS.successful
+
+    def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
+        inputs = campaign.applied(self, self.inputs(campaign.protocol, campaign.gyro))
+        temps, times, full = campaign.temperatures(self), campaign.times(self), campaign.shape(self)
+        settled = campaign.settled.get(self.name)
+        if settled is None:
+            settled = lot_steady(lot, ((self, jnp.asarray(inputs), jnp.asarray(temps), jnp.asarray(times)),),
+                                 campaign.tier)[0]
+            raise_unsettled(settled.result, self.title)
+        out = np.asarray(settled.rate, dtype=float)
+        dwell = self.dwell_s(campaign.protocol)
+        lsb_per_dps = campaign.lsb_per_dps
+        if campaign.noise_free:
+            sigma = np.zeros(full)
+        else:
+            bias, wobble = campaign.noise.sample_point_means(campaign.rng(self), full[:2], full[2], dwell)
+            out = out + (bias[..., None] + wobble) * lsb_per_dps[:, None, None]
+            sigma = np.broadcast_to((campaign.noise.point_sigma_dps(dwell) * lsb_per_dps)[:, None, None], full)
+        return {"input": np.broadcast_to(inputs, full), "output": out, "output_sigma": sigma,
+                "n_samples": np.full(full, float(campaign.protocol.n_samples(self))), "temperature_c": temps,
+                "drive_freq_hz": np.asarray(settled.frequency, dtype=float) / (2.0 * np.pi),
+                "time_s": np.broadcast_to(times, full)}
+
+
+def _times(times, like):
+    """Times since power-on (s) per point; not recorded (None or NaN) is 0."""
+    t = jnp.zeros_like(like) if times is None else jnp.broadcast_to(jnp.asarray(times, dtype=float), like.shape)
+    return jnp.where(jnp.isnan(t), 0.0, t)
+
+
+def _read_out(gyro: Gyroscope, settled: Settled, sweep: AbstractSweep, inputs, temperatures, times) -> Settled:
+    """The settled rate output through the device's readout terms (`AbstractOutputTerm`)."""
+    terms = gyro.terms_of(AbstractOutputTerm)
+    if not terms:
+        return settled
+    temps = jnp.where(jnp.isnan(temperatures), gyro.temperature(0.0), temperatures)
+
+    def one(output, x, temp, t):
+        cond = PointConditions(sweep.name, x, temp, t)
+        for term in terms:
+            output = term(gyro, output, cond)
+        return output
+
+    return eqx.tree_at(lambda s: s.rate, settled, jax.vmap(one)(settled.rate, inputs, temps, times))
+
+
+def steady_points(gyro: Gyroscope, requests, tier: AbstractTier = Steady()) -> tuple:
+    """Settled points of several steady sweeps of one device in one call of the tier (one compiled settle
+    for all of them: a static VCF point is the same equations as a rate point, at another input).
+
+    **Arguments:**
+
+    - `requests`: a sequence of `(sweep, inputs, temperatures, times)`: `sweep` an `AbstractSteadySweep`, the
+      inputs in its data unit, one die temperature (deg C) and one time since power-on (s; None or NaN: not
+      recorded) per point.
+
+    **Returns:** a `Settled` per request, in order, with the device's readout terms applied.
+    """
+    parts, sizes, views = [], [], []
+    for sweep, inputs, temperatures, times in requests:
+        if not isinstance(sweep, AbstractSteadySweep):
+            raise ValueError(f"steady_points: {sweep!r} is not a steady sweep (an AbstractSteadySweep).")
+        x = jnp.atleast_1d(jnp.asarray(inputs, dtype=float))
+        temps = jnp.broadcast_to(jnp.asarray(temperatures, dtype=float), x.shape)
+        t = _times(times, x)
+
+        def one(value, temp, time, sweep=sweep):
+            return at_temperature(gyro, temp), sweep.stimulus(value, time)
+
+        parts.append(jax.vmap(one)(x, temps, t))
+        sizes.append(x.shape[0])
+        views.append((sweep, x, temps, t))
+    gyros, stimuli = jax.tree.map(lambda *leaves: jnp.concatenate(leaves), *parts) if len(parts) > 1 else parts[0]
+    settled = tier.settle_points(gyros, stimuli)
+    out, start = [], 0
+    for size, (sweep, x, temps, t) in zip(sizes, views):
+        piece = jax.tree.map(lambda leaf, a=start, b=start + size: leaf[a:b], settled)
+        out.append(_read_out(gyro, piece, sweep, x, temps, t))
+        start += size
+    return tuple(out)
+
+
+def per_run(x, temperatures):
+    """Inputs or times, (point,) or (run, point), as (run, point) like the temperatures' last two axes."""
+    return jnp.broadcast_to(jnp.asarray(x, dtype=float), temperatures.shape[1:])
+
+
+@eqx.filter_jit
+def lot_steady(lot, requests, tier):
+    """`steady_points` for every device (axis 0) and run (axis 1), several steady sweeps in one call (one
+    compiled settle): `requests` is a tuple of `(sweep, inputs, temperatures, times)` with temperatures
+    (device, run, point) and inputs and times (point,) or (run, point) (times NaN: not recorded). Returns a
+    `Settled` per request, (device, run, point)."""
+    temps = tuple(r[2] for r in requests)
+    inputs = tuple(per_run(r[1], t) for r, t in zip(requests, temps))
+    times = tuple(per_run(r[3], t) for r, t in zip(requests, temps))
+    sweeps = tuple(r[0] for r in requests)
+
+    def device(g, dev_temps):
+        def run(xs, ts, tms):
+            return steady_points(g, tuple(zip(sweeps, xs, ts, tms)), tier)
+
+        return jax.vmap(run)(inputs, dev_temps, times)
+
+    return eqx.filter_vmap(device)(lot, temps)
+
+
+def raise_unsettled(result, what: str):
+    """Raise a RuntimeError naming how many `what` points did not settle, if any."""
+    codes = np.asarray(result_code(result))
+    bad = codes != result_code(RESULTS.successful)
+    if bad.any():
+        codes = codes[bad]
+        raise RuntimeError(
+            f"{int(bad.sum())} of {bad.size} {what} points did not settle (result code "
+            f"{sorted(set(codes.tolist()))}). Steady() at rtol = atol = 1e-11 can stall at round-off (use "
+            "gyrojax.CAMPAIGN_TIER, Steady at 1e-10); otherwise try the averaged tier to see the transient, "
+            "smaller inputs, or check the device's loop gains.")

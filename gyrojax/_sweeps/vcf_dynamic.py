@@ -1,0 +1,147 @@
+"""The dynamic virtual-Coriolis test (seed 003 Eq. 6): the rate output's response to a modulated virtual rate."""
+
+from typing import TYPE_CHECKING
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from .._gyroscope import Gyroscope
+from .._simulate.response import linearise
+from .._stimulus import Stimulus
+from .base import AbstractSweep, at_temperature
+from .steady import per_run
+from .vcf_static import VCF_CARRIER_V
+
+
+if TYPE_CHECKING:
+    from .lot import LotCampaign
+    from .protocol import Protocol
+
+
+VCF_DYNAMIC_AMPLITUDE_V = 0.02
+"""V, seed 003 §3: "Vac = 20 mV", the virtual-rate voltage of the dynamic (swept-frequency) test."""
+
+VCF_DYNAMIC_FREQUENCIES_HZ = tuple(10.0 * k for k in range(1, 51))
+"""Hz, seed 003 §3: "we measured the dynamic response from 10Hz to 500Hz"; the 10 Hz step is an ASSUMPTION
+(not printed), fine enough to place vcf-2018's 62 Hz peak and its -3 dB point by interpolation."""
+
+VCF_DYNAMIC_DWELL_S = 10.0
+"""s, ASSUMPTION: lock-in time per modulation frequency (not printed in seed 003); 100 whole cycles at the
+lowest frequency."""
+
+VCF_DYNAMIC_SAMPLE_RATE_HZ = 10_000.0
+"""Hz, ASSUMPTION: output sampling of the dynamic test, 20x the highest modulation frequency; seed 003 §3
+samples with an NI-DAQ 6366 (up to 2 MS/s), its rate is not printed."""
+
+
+class VcfDynamic(AbstractSweep):
+    """The dynamic virtual-Coriolis test: V_ac modulated at each frequency, the rate output's amplitude and
+    phase read by a lock-in (seed 003 Eq. 6). No turn-on bias reaches a lock-in reading; the noise is the
+    rate noise at the modulation frequency. Inputs `Protocol.vcf_frequencies_hz`, timing
+    `Protocol.dynamic_dwell_s` at `Protocol.dynamic_sample_rate_hz`; the simulator applies
+    `Protocol.vcf_dynamic_amplitude_v`.
+
+    **Arguments:**
+
+    - `amplitude_v`: V_ac of the fitted measurement model, V.
+    - `carrier_v`: the fixed carrier V_fc, V.
+    """
+
+    amplitude_v: float = VCF_DYNAMIC_AMPLITUDE_V
+    carrier_v: float = VCF_CARRIER_V
+
+    name = "vcf_dynamic"
+    title = "dynamic-VCF"
+    input_quantity = "modulation frequency"
+    input_unit = "Hz"
+    output_unit = "LSB"
+    input_meaning = "the modulation frequency of V_ac, Hz (V_ac = 20 mV; seed 003's dynamic test)"
+    output_meaning = ("the amplitude of the rate output at that frequency, LSB (a lock-in reading); its phase goes "
+                      "in `phase_deg`")
+    biased = False
+    straight_line = False
+    rate_noise = True
+
+    def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:
+        return np.asarray(protocol.vcf_frequencies_hz)
+
+    def n_points(self, protocol: "Protocol") -> int:
+        return len(protocol.vcf_frequencies_hz)
+
+    def dwell_s(self, protocol: "Protocol") -> float:
+        return protocol.dynamic_dwell_s
+
+    def sample_rate_hz(self, protocol: "Protocol") -> float:
+        return protocol.dynamic_sample_rate_hz
+
+    def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
+        if float(np.asarray(gyro.vcf_electrode.force_per_volt2)) == 0.0:
+            raise ValueError(f"a vcf_dynamic sweep needs a virtual-Coriolis electrode; {gyro.name!r} has "
+                             "vcf_electrode.force_per_volt2 = 0.")
+
+    def predict(self, gyro, inputs, temperatures, times, tier=None):
+        # Each point at its own die temperature, as measured and simulated: one mean temperature per sweep
+        # left ~1e-5 of amplitude, 10x the noise.
+        pred, _ = vcf_dynamic_points(gyro, inputs, temperatures, self.amplitude_v, self.carrier_v)
+        return pred, ~jnp.isfinite(pred)
+
+    def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
+        protocol = campaign.protocol
+        inputs = campaign.applied(self, self.inputs(protocol))
+        temps, full = campaign.temperatures(self), campaign.shape(self)
+        amp, phase = _lot_vcf_dynamic(lot, jnp.asarray(inputs), jnp.asarray(temps),
+                                      float(protocol.vcf_dynamic_amplitude_v))
+        amp, phase = np.asarray(amp, dtype=float), np.asarray(phase, dtype=float)
+        if not (np.all(np.isfinite(amp)) and np.all(np.isfinite(phase))):
+            raise RuntimeError("the vcf-dynamic response is not finite for some points; the device has no "
+                               "stable equilibrium at rest (check its loop gains).")
+        out = amp
+        if campaign.noise_free:
+            sigma = np.zeros(full)
+        else:
+            # Lock-in over whole cycles: each quadrature component carries sqrt(G(f) / T) (see RateNoise).
+            sigma = (campaign.noise.amplitude_sigma_dps(inputs, protocol.dynamic_dwell_s)[None, :, :]
+                     * campaign.lsb_per_dps[:, None, None]) * np.ones(full)
+            z = campaign.rng(self).standard_normal(full + (2,))
+            reading = 1.0 + sigma * (z[..., 0] + 1j * z[..., 1]) / amp
+            out = amp * np.abs(reading)
+            phase = phase + np.rad2deg(np.angle(reading))
+        return {"input": np.broadcast_to(inputs, full), "output": out, "output_sigma": sigma,
+                "n_samples": np.full(full, float(protocol.n_samples(self))), "temperature_c": temps,
+                "drive_freq_hz": np.full(full, np.nan), "phase_deg": phase,
+                "time_s": np.broadcast_to(campaign.times(self), full)}
+
+
+def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz: Float[ArrayLike, " point"],
+                       temperatures: Float[ArrayLike, "*#point"], amplitude_v=VCF_DYNAMIC_AMPLITUDE_V,
+                       carrier_v=VCF_CARRIER_V) -> tuple[Float[Array, " point"], Float[Array, " point"]]:
+    """Dynamic virtual-Coriolis test (seed 003 Eq. 6): the rate output's amplitude (LSB) and phase (deg)
+    for V_ac = `amplitude_v` modulated at each frequency (Hz), from the averaged model linearised at rest at
+    the die temperature of each point (deg C; one value for every point linearises once). A lock-in reads
+    the output at the modulation frequency: a zero-rate output and the readout terms do not reach it."""
+    def response(f, temperature):
+        ss = linearise(at_temperature(gyro, temperature), Stimulus(), input="vcf")
+        h = ss.response(2.0 * jnp.pi * f) * (amplitude_v * carrier_v)
+        return jnp.abs(h), jnp.rad2deg(jnp.angle(h))
+
+    f, t = jnp.asarray(frequencies_hz, dtype=float), jnp.asarray(temperatures, dtype=float)
+    if t.ndim == 0:
+        return response(f, t)
+    # Each point at its own temperature: the response follows the sense resonance's TCF.
+    amp, phase = jax.vmap(lambda fi, ti: response(fi[None], ti))(f, t)
+    return amp[:, 0], phase[:, 0]
+
+
+@eqx.filter_jit
+def _lot_vcf_dynamic(lot, frequencies_hz, temperatures, amplitude_v):
+    """`vcf_dynamic_points` for every device, run and point, each point at its own temperature; frequencies
+    (point,) or (run, point)."""
+    freqs = per_run(frequencies_hz, temperatures)
+
+    def device(g, temps):
+        return jax.vmap(lambda f, t_run: vcf_dynamic_points(g, f, t_run, amplitude_v))(freqs, temps)
+
+    return eqx.filter_vmap(device)(lot, temperatures)

@@ -1,0 +1,127 @@
+"""Sweep kinds as objects: the registry, what each kind declares, and a new experiment added in one file.
+
+The new experiment here is a rate table run with a constant virtual rate on the virtual-Coriolis electrode
+(V_ac fixed, the table rate swept): it checks that the Coriolis force of a real and of a virtual rate add. It
+lives in this file only, registers itself, and goes through the simulator, a CSV file and the data layer.
+"""
+
+import re
+
+import numpy as np
+import pytest
+
+import gyrojax as gj
+
+
+class RateTableWithVirtualRate(gj.AbstractSteadySweep):
+    """A rate table with a constant virtual rate: V_ac = `offset_v` at the fixed carrier on the
+    virtual-Coriolis electrode while the table turns at each rate."""
+
+    offset_v: float = 0.5
+
+    name = "rate_table_vcf_offset"
+    title = "rate-table with a virtual rate"
+    input_quantity = "table rate"
+    input_unit = "deg/s"
+    output_unit = "LSB"
+    input_meaning = "the table rate, deg/s, with V_ac = 0.5 V on the virtual-Coriolis electrode"
+    output_meaning = "the gyro's rate output, LSB"
+    rate_input = True
+
+    def inputs(self, protocol, gyro=None):
+        return np.asarray(protocol.rates_dps)
+
+    def n_points(self, protocol):
+        return len(protocol.rates_dps)
+
+    def dwell_s(self, protocol):
+        return protocol.dwell_s
+
+    def sample_rate_hz(self, protocol):
+        return protocol.sample_rate_hz
+
+    def check_device(self, gyro, protocol):
+        if float(np.asarray(gyro.vcf_electrode.force_per_volt2)) == 0.0:
+            raise ValueError(f"{self.name} needs a virtual-Coriolis electrode; {gyro.name!r} has none.")
+
+    def stimulus(self, value, time):
+        return gj.Stimulus(rate=value * gj.units.DEG, vcf_ac=0.0 * value + self.offset_v,
+                           vcf_fc=gj.VCF_CARRIER_V, time=time)
+
+
+@pytest.fixture
+def registered():
+    gj.register_sweep(RateTableWithVirtualRate)
+    yield RateTableWithVirtualRate
+    del gj.SWEEP_KINDS[RateTableWithVirtualRate.name]
+
+
+def test_registry_holds_the_data_formats_kinds_in_order():
+    assert gj.sweep_names() == gj.SWEEPS == gj.SIMULATED_SWEEPS == ("rate_table", "vcf_static", "vcf_dynamic",
+                                                                     "dac")
+    kinds = [gj.sweep_kind(name) for name in gj.SWEEPS]
+    assert [type(k) for k in kinds] == [gj.RateTable, gj.VcfStatic, gj.VcfDynamic, gj.Dac]
+    assert [k.biased for k in kinds] == [True, True, False, False]
+    assert [k.scale_factor_unit for k in kinds] == ["LSB/(deg/s)", "LSB/V", None, "V/LSB"]
+    assert gj.sweep_kind(kinds[1]) is kinds[1]
+    with pytest.raises(ValueError, match="unknown sweep 'rate-table' \\(did you mean 'rate_table'\\?\\)"):
+        gj.sweep_kind("rate-table")
+
+
+def test_register_sweep_refuses_a_bad_class():
+    with pytest.raises(ValueError, match="expects a subclass of gyrojax.AbstractSweep"):
+        gj.register_sweep(int)
+
+    class NoTitle(RateTableWithVirtualRate):
+        title = ""
+
+    with pytest.raises(ValueError, match="class attribute 'title' must be a non-empty string"):
+        gj.register_sweep(NoTitle)
+
+    class Taken(RateTableWithVirtualRate):
+        name = "dac"
+
+    with pytest.raises(ValueError, match="sweep name 'dac' is already registered by Dac"):
+        gj.register_sweep(Taken)
+    assert "rate_table_vcf_offset" not in gj.SWEEP_KINDS
+
+
+def test_the_data_format_page_is_the_sweep_classes():
+    """docs/data_format.md's table of what `input` and `output` mean is the classes' own text."""
+    import pathlib
+
+    page = (pathlib.Path(__file__).resolve().parents[1] / "docs" / "data_format.md").read_text(encoding="utf-8")
+    rows = dict(re.findall(r"^\| `(\w+)` \| (.+ \| .+) \|$", page, flags=re.M))
+    for name in gj.SWEEPS:
+        kind = gj.sweep_kind(name)
+        assert rows[name] == f"{kind.input_meaning} | {kind.output_meaning}", name
+
+
+def test_a_new_experiment_is_one_file(registered, tmp_path):
+    """Register the new kind, simulate it beside the rate table, write and read the CSV, and get it back
+    through the data layer: the virtual rate shows as an offset of the rate output by the rate it stands
+    for, the scale factor stays the rate table's."""
+    protocol = gj.Protocol(rates_dps=(-100.0, -10.0, 10.0, 100.0))
+    table = gj.simulate_table(gj.paper_qmg(), sweeps=("rate_table", registered.name), noise_free=True,
+                              protocol=protocol, progress=False)
+    path = tmp_path / "offset.csv"
+    gj.write_table(table, path)
+    back = gj.read_table(path)
+    assert back.equals(table)
+    assert sorted(set(back["sweep"].tolist())) == ["rate_table", "rate_table_vcf_offset"]
+    plain, offset = back.to_arrays("rate_table"), back.to_arrays(registered.name)
+    shift = np.asarray(offset.outputs - plain.outputs)[0, 0]
+    np.testing.assert_allclose(shift, shift[0], rtol=1e-4)  # the two Coriolis forces add
+    assert abs(shift[0]) > 1e3
+    report = gj.metrics_report(back)
+    sf = {p["sweep"]: p["scale_factor"] for p in report["points"]}
+    np.testing.assert_allclose(sf[registered.name], sf["rate_table"], rtol=1e-4)
+    assert report["conventions"]["scale_factor_units"][registered.name] == "LSB/(deg/s)"
+
+
+def test_an_unregistered_name_is_refused_by_the_data_layer(tmp_path):
+    path = tmp_path / "t.csv"
+    path.write_text("device,run,sweep,input,output\nA,0,rate_table_vcf_offset,1,2\n", encoding="utf-8")
+    with pytest.raises(gj.DataError, match="data row 1 \\(line 2\\), column 'sweep': unknown sweep "
+                                           "'rate_table_vcf_offset'"):
+        gj.read_table(path)
