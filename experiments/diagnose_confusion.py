@@ -37,7 +37,6 @@ import equinox as eqx
 import jax.numpy as jnp
 
 import gyrojax as gj
-from gyrojax._io import atomic_write_bytes, atomic_write_json
 
 
 SWEEPS = {
@@ -235,8 +234,8 @@ def main(argv=None):
                "unsupported": unsupported, "complete": len(rows) == len(todo),
                "versions": {"gyrojax": gj.__version__}}
         if args.out:
-            atomic_write_json(out, os.path.join(args.out, "diagnose_confusion.json"))
-            atomic_write_bytes(os.path.join(args.out, "diagnose_confusion.md"),
+            gj.atomic_write_json(out, os.path.join(args.out, "diagnose_confusion.json"))
+            gj.atomic_write_bytes(os.path.join(args.out, "diagnose_confusion.md"),
                                markdown(rows, unsupported, settings).encode())
     if unsupported:
         print(f"not simulated (no preset supports them): {', '.join(unsupported)}")

@@ -85,9 +85,9 @@ def main(argv=None):
         print(f"{name:>16} {p['scatter']:11.4g} {p['reported']:11.4g} {p['crb']:11.4g} "
               f"{p['reported_over_scatter']:9.3f} {p['scatter_over_crb']:9.3f}")
     if args.json:
-        from gyrojax._io import atomic_write_json
+        import gyrojax as gj
 
-        atomic_write_json(out, args.json)
+        gj.atomic_write_json(out, args.json)
     ok = all(abs(p["reported_over_scatter"] - 1) <= 0.2 and p["scatter_over_crb"] <= 1.2
              for p in out["parameters"].values())
     print("acceptance (reported within 20 % of scatter, scatter within 1.2x CRB):", "PASS" if ok else "FAIL")

@@ -63,8 +63,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import gyrojax as gj
-from gyrojax._fitdata import fit_data
-from gyrojax._io import atomic_write_bytes, atomic_write_json
 
 
 DEG = gj.units.DEG
@@ -189,7 +187,7 @@ def linear_start(start, table, options):
     # (2 w_d) >> g_y, the demodulated response to a virtual rate at w_z is ~ C d / (d^2 - w_z^2) below the
     # peak, so 1 / A = (d^2 - w_z^2) / (C d) is a line in w_z^2 whose intercept over slope is d^2.
     d = np.empty(start.resonator.omega_x.shape)
-    b = fit_data(table).blocks["vcf_dynamic"]
+    b = table.to_arrays("vcf_dynamic")
     for i in range(d.size):
         f, a = np.asarray(b.inputs[i, 0]), np.asarray(b.outputs[i, 0])
         below = np.asarray(b.mask[i, 0]) & (f < f[np.argmax(np.where(np.asarray(b.mask[i, 0]), a, 0))])
@@ -467,8 +465,8 @@ def main(argv=None):
     out = {"summary": summary, "devices": records, "versions": _versions(), "argv": list(argv or [])}
     if args.out:
         os.makedirs(args.out, exist_ok=True)
-        atomic_write_json(out, os.path.join(args.out, "lot_batch_calibration.json"))
-        atomic_write_bytes(os.path.join(args.out, "lot_batch_calibration.md"), text.encode())
+        gj.atomic_write_json(out, os.path.join(args.out, "lot_batch_calibration.json"))
+        gj.atomic_write_bytes(os.path.join(args.out, "lot_batch_calibration.md"), text.encode())
         print(f"wrote {args.out}/lot_batch_calibration.json and .md")
     return out
 

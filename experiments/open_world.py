@@ -30,7 +30,6 @@ import time
 import numpy as np
 
 import gyrojax as gj
-from gyrojax._io import atomic_write_bytes, atomic_write_json
 
 
 TRUTH = {"zro": 2e-3, "amp": 1e-4, "time": 0.05, "sign": 20e-6}
@@ -142,8 +141,8 @@ def main(argv=None):
               f"{r['baseline_chi2_red']:.3g} -> {r['final_chi2_red']:.3f}  ({r['seconds']:.0f} s)", flush=True)
         if args.out:
             out = {"settings": settings, "rows": rows, "versions": {"gyrojax": gj.__version__}}
-            atomic_write_json(out, os.path.join(args.out, "open_world.json"))
-            atomic_write_bytes(os.path.join(args.out, "open_world.md"), markdown(rows, settings).encode())
+            gj.atomic_write_json(out, os.path.join(args.out, "open_world.json"))
+            gj.atomic_write_bytes(os.path.join(args.out, "open_world.md"), markdown(rows, settings).encode())
 
     for case in cases:
         table = post_process(clean, case)

@@ -22,7 +22,6 @@ import sys
 import numpy as np
 
 import gyrojax as gj
-from gyrojax._io import atomic_write_bytes, atomic_write_json
 
 
 # Seed 000 Table 3 (worst nonlinearity per group, ppm; scale factor, LSB/(deg/s); repeatability, ppm).
@@ -132,7 +131,7 @@ def plot(results: dict, rates, path):
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue())
+    gj.atomic_write_bytes(path, buf.getvalue())
 
 
 def main(argv=None) -> dict:
@@ -205,8 +204,8 @@ def main(argv=None) -> dict:
                "model_over_composite_worst_nonlinearity": gain_nl,
                "model_over_composite_repeatability": gain_rep, "noise_floor_ppm_per_point": floor_ppm,
                "table_markdown": text}
-    atomic_write_json(summary, os.path.join(args.out, "table3.json"))
-    atomic_write_bytes(os.path.join(args.out, "table3.md"), (text + "\n").encode())
+    gj.atomic_write_json(summary, os.path.join(args.out, "table3.json"))
+    gj.atomic_write_bytes(os.path.join(args.out, "table3.md"), (text + "\n").encode())
     plot(results, np.asarray(rates), os.path.join(args.out, "fig10.png"))
     print(f"  wrote data.csv, table3.md, table3.json, fig10.png to {args.out}")
     return summary

@@ -46,7 +46,6 @@ import numpy as np
 
 import gyrojax as gj
 from gyrojax import _presets as P
-from gyrojax._io import atomic_write_bytes, atomic_write_json
 
 
 DEG = gj.units.DEG
@@ -217,8 +216,8 @@ def main(argv=None):
     out = {"devices": records, "summary": summary, "paper": PAPER, "versions": {"gyrojax": gj.__version__}}
     if args.out:
         os.makedirs(args.out, exist_ok=True)
-        atomic_write_json(out, os.path.join(args.out, "seed003_batch_calibration.json"))
-        atomic_write_bytes(os.path.join(args.out, "seed003_batch_calibration.png"), _plot(table, records, summary))
+        gj.atomic_write_json(out, os.path.join(args.out, "seed003_batch_calibration.json"))
+        gj.atomic_write_bytes(os.path.join(args.out, "seed003_batch_calibration.png"), _plot(table, records, summary))
         print(f"wrote {args.out}/seed003_batch_calibration.json and .png")
     return out
 

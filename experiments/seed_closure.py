@@ -20,7 +20,6 @@ import numpy as np
 
 import gyrojax as gj
 from gyrojax import _presets as P
-from gyrojax._io import atomic_write_json
 
 
 DEG, hz_to_rad_s = gj.units.DEG, gj.units.hz_to_rad_s
@@ -108,7 +107,7 @@ def main(argv=None):
     print(f"  Eq. (7) virtual rate at V_ac = 20 mV, V_fc = 1 V: {s3['vcf_equivalent_rate_dps_20mV_kg']:.0f} deg/s "
           f"with m_d in kg ({s3['vcf_equivalent_rate_dps_20mV_if_mass_in_grams']:.3g} deg/s if 'g' were meant)")
     if args.json:
-        atomic_write_json({"seed000": s0, "seed003": s3, "versions": {"gyrojax": gj.__version__}}, args.json)
+        gj.atomic_write_json({"seed000": s0, "seed003": s3, "versions": {"gyrojax": gj.__version__}}, args.json)
     return {"seed000": s0, "seed003": s3}
 
 

@@ -94,6 +94,11 @@ from ._fitio import load_fit as load_fit, save_fit as save_fit  # noqa: E402
 from ._fitreport import fit_report as fit_report  # noqa: E402
 from ._identify import Fit as Fit, Unidentifiable as Unidentifiable, identify as identify  # noqa: E402
 from ._lot import ProcessSpread as ProcessSpread, make_lot as make_lot  # noqa: E402
+from ._io import (  # noqa: E402
+    atomic_directory as atomic_directory,
+    atomic_write_bytes as atomic_write_bytes,
+    atomic_write_json as atomic_write_json,
+)
 from ._metrics import (  # noqa: E402
     FULL_SCALE_CONVENTIONS as FULL_SCALE_CONVENTIONS,
     RateBandwidth as RateBandwidth,

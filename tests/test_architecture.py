@@ -1,0 +1,151 @@
+"""The package's shape: no import cycles between its modules, no private names borrowed across modules, and
+the scripts a user reads (experiments, notebooks) on the public API only. Read from the source with `ast`,
+nothing is imported."""
+
+import ast
+import json
+import pathlib
+import re
+
+import pytest
+
+
+ROOT = pathlib.Path(__file__).parent.parent
+PACKAGE = ROOT / "gyrojax"
+
+
+def _module_name(path: pathlib.Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+MODULES = {_module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def _resolve(module: str, is_package: bool, node: ast.ImportFrom) -> str:
+    if node.level == 0:
+        return node.module or ""
+    base = module.split(".") if is_package else module.split(".")[:-1]
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def _top_level_imports(module: str, path: pathlib.Path):
+    """(target module, imported name or None, line) of the imports that run when `module` is imported: those at
+    the top level and in top-level if/try blocks, not those inside functions (lazy imports) nor under
+    `if TYPE_CHECKING:`."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    is_package = path.name == "__init__.py"
+
+    def walk(body):
+        for node in body:
+            if isinstance(node, ast.If):
+                test = ast.unparse(node.test)
+                if "TYPE_CHECKING" not in test:
+                    yield from walk(node.body)
+                yield from walk(node.orelse)
+            elif isinstance(node, ast.Try):
+                for block in (node.body, node.orelse, node.finalbody, *[h.body for h in node.handlers]):
+                    yield from walk(block)
+            elif isinstance(node, ast.ImportFrom):
+                target = _resolve(module, is_package, node)
+                for alias in node.names:
+                    sub = f"{target}.{alias.name}"
+                    if sub in MODULES:  # `from . import _x` imports a module, not a name
+                        yield sub, None, node.lineno
+                    else:
+                        yield target, alias.name, node.lineno
+            elif isinstance(node, ast.Import):
+                for alias in node.names:
+                    yield alias.name, None, node.lineno
+
+    yield from walk(tree.body)
+
+
+def _graph():
+    graph = {m: set() for m in MODULES}
+    for module, path in MODULES.items():
+        for target, _, _ in _top_level_imports(module, path):
+            if target in MODULES and target != module:
+                graph[module].add(target)
+    return graph
+
+
+def _cycles(graph):
+    """Strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_the_checker_sees_the_package():
+    assert "gyrojax" in MODULES and "gyrojax.cli" in MODULES and len(MODULES) > 40
+    # it resolves relative imports: cli imports the package's own modules
+    assert any(t.startswith("gyrojax.") for t in _graph()["gyrojax.cli"])
+
+
+def test_the_cycle_finder_finds_a_cycle():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_import_cycles():
+    cycles = _cycles(_graph())
+    assert not cycles, f"modules that import each other (directly or around a circle): {cycles}"
+
+
+def _is_private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def test_no_private_names_across_modules():
+    """A module uses another module's public names only; a helper that two modules share is not private."""
+    borrowed = []
+    for module, path in MODULES.items():
+        for target, name, line in _top_level_imports(module, path):
+            if name is not None and _is_private(name) and target.startswith("gyrojax"):
+                borrowed.append(f"{path.relative_to(ROOT)}:{line} imports {name} from {target}")
+    assert not borrowed, "\n".join(borrowed)
+
+
+PRIVATE_USE = re.compile(r"\b(?:gyrojax|gj)\._(?!_)")
+
+
+def _script_sources():
+    for path in sorted((ROOT / "experiments").glob("*.py")):
+        yield path, path.read_text()
+    for path in sorted((ROOT / "notebooks").glob("*.ipynb")):
+        cells = json.loads(path.read_text())["cells"]
+        yield path, "\n".join("".join(c["source"]) for c in cells if c["cell_type"] == "code")
+
+
+@pytest.mark.parametrize("path,source", list(_script_sources()), ids=lambda x: getattr(x, "name", ""))
+def test_experiments_and_notebooks_use_the_public_api(path, source):
+    private = [line.strip() for line in source.splitlines() if PRIVATE_USE.search(line)]
+    assert not private, f"{path.relative_to(ROOT)} reaches into private modules: {private}"
