@@ -50,7 +50,7 @@ def _problems(fit, preset):
     import jax.numpy as jnp
 
     from gyrojax import Steady
-    from gyrojax._identify import _Problem
+    from gyrojax._identify.identify import _Problem
     from gyrojax._parameters import as_model, batched, read_values
 
     n = len(fit.devices)

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from gyrojax._identify import _covariance
+from gyrojax._identify.identify import _covariance
 
 
 def _orthonormal(rows, cols, seed=0):
@@ -37,7 +37,7 @@ def test_gauss_newton_decrement_is_the_chi2_a_linear_fit_still_gains():
     """identify certifies a solve stopped at max_steps by the chi2 a full Gauss-Newton step would still gain:
     on a linear problem r(x) = y - J x that is chi2(x0) - min chi2, exactly, also with badly scaled columns;
     a joint fit's decrement is that of the lot's block Jacobian (per-device blocks plus shared columns)."""
-    from gyrojax._identify import _decrement, _joint_jacobian
+    from gyrojax._identify.identify import _decrement, _joint_jacobian
 
     rng = np.random.default_rng(2)
     jac = rng.normal(size=(3, 15, 4)) * np.array([1e6, 1.0, 1e-4, 0.0])  # a held (zero) column too

@@ -75,7 +75,7 @@ def test_fit_converges_with_chi2_near_one(fit):
 @pytest.mark.slow
 def test_scale_factor_recovered_within_three_sigma(fit, truth):
     """The fitted zero-rate SF against each true device's, both at the fit's reporting temperature."""
-    from gyrojax._identify import _sf_temperature
+    from gyrojax._identify.identify import _sf_temperature
 
     temps = _sf_temperature(fit.data)
     true_sfs = np.asarray(eqx.filter_jit(eqx.filter_vmap(lambda g, t: _slope(rate_table_points, g, t)))(truth, temps))
@@ -352,7 +352,7 @@ def test_chunks_map_like_vmap_with_padding_and_empty_leaves():
     """identify(lot_chunk=N)'s machinery: the lot padded to a multiple of N (copies of the last device, then
     dropped), jax.lax.map over vmapped chunks, equal to one vmap, with an empty (device, 0) leaf as the
     priors are. (Every identify of more than 16 devices runs chunked on a CPU: the Monte Carlo test's 100.)"""
-    from gyrojax._identify import _LotSpread, _map_devices
+    from gyrojax._identify.identify import _LotSpread, _map_devices
 
     n = 5
     tree = {"a": jnp.arange(n * 3.0).reshape(n, 3), "empty": jnp.zeros((n, 0)), "b": jnp.linspace(1.0, 2.0, n)}
@@ -384,7 +384,7 @@ def test_directions_the_data_no_longer_fix_at_the_solution_are_named():
     """A parameter that ran off to a flat region (its weighted-Jacobian column ~0 at the solution, as an open-loop
     Q_y did to 1e243 with the solver reporting success) is named in the device's message; a well-fixed device
     gets none."""
-    from gyrojax._identify import _weak_at_solution
+    from gyrojax._identify.identify import _weak_at_solution
 
     rng = np.random.default_rng(0)
     fixed = rng.normal(size=(40, 3)) * 10.0
@@ -401,7 +401,7 @@ def test_directions_the_data_no_longer_fix_at_the_solution_are_named():
 def test_a_nonfinite_model_inside_the_compiled_fit_is_explained():
     """An error raised inside the compiled model (as the implicit derivative's linear solve does on NaN) comes
     out of identify as a RuntimeError that says where and what to try, with the original as its cause."""
-    from gyrojax._identify import _nonfinite_explained
+    from gyrojax._identify.identify import _nonfinite_explained
 
     @eqx.filter_jit
     def broken(x):

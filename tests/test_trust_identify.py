@@ -22,14 +22,8 @@ import pytest
 import gyrojax as gj
 from gyrojax import _fitio
 from gyrojax._fitdata import fit_data
-from gyrojax._identify import (
-    EXIT_CODES,
-    HELD_LABEL,
-    _contrasts,
-    _noise_scales,
-    _sf_determinacy,
-    chi2_p_value,
-)
+from gyrojax._identify import EXIT_CODES, HELD_LABEL, chi2_p_value
+from gyrojax._identify.identify import _contrasts, _noise_scales, _sf_determinacy
 
 
 slow = pytest.mark.slow
@@ -235,7 +229,7 @@ def test_the_chi2_test_with_estimated_noise_holds_its_level(runs):
     """With the noise estimated from the same residuals, chi2 / dof is narrower than F (measured: 1 % of right
     models below p = 0.05 with the F test, on one run). Against its Monte Carlo null a right model is
     rejected at the level asked: 5 % of 1000 noise draws below p = 0.05, within 3 binomial errors."""
-    from gyrojax._identify import _mc_p_value
+    from gyrojax._identify.identify import _mc_p_value
 
     rng = np.random.default_rng(10 + runs)
     m, j = _linear_problem([RATES] * runs, 1.0)
