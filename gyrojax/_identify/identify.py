@@ -15,7 +15,7 @@ What the fit reports is checked before it is called a result (`Fit.status`, `Fit
 - **misfit**: the chi2 of each device is tested (`reject_alpha`); a rejected model keeps its fitted standard
   errors and gets them scaled by sqrt(chi2_red) too (`stderr_scaled`).
 - **noise**: data without `output_sigma` get their noise estimated per sweep from a first fit's residuals
-  (`_noise_scales`), then are re-weighted and fitted again, so that the chi2 tests the model (against its
+  (`noise_scales`), then are re-weighted and fitted again, so that the chi2 tests the model (against its
   Monte Carlo null distribution, since the estimate shares the residuals).
 - **plausibility**: fitted physical parameters far outside `Parameter.plausible` of their design values are
   flagged with a likely cause; outputs absurdly far from the rest of their run, and outputs whose slope has the
@@ -33,7 +33,6 @@ import jax.numpy as jnp
 import lineax as lx
 import numpy as np
 import optimistix as optx
-from jax.scipy.special import betainc, gammaincc
 
 from .._dataset import Table
 from .._fitdata import BIASED_SWEEPS, FitData, fit_data
@@ -59,7 +58,9 @@ from .._residuals import (
 )
 from .._simulate.tiers import Steady
 from .._solution import RESULTS, result_code, result_message
+from .covariance import chi2_p_value, covariance, gauss_newton_decrement, joint_jacobian
 from .fit import Fit, Unidentifiable, p_text
+from .noise import estimated_noise, reweighted
 
 
 SOLVERS = ("levenberg-marquardt", "gauss-newton", "bfgs")
@@ -79,278 +80,10 @@ def _solver(solver, rtol, atol):
     raise ValueError(f"solver must be one of {SOLVERS} or an optimistix solver, got {solver!r}.")
 
 
-def chi2_p_value(chi2, dof, noise_dof):
-    """p-value of a chi2 over `dof` degrees of freedom. With known sigmas (`noise_dof` inf) the chi2 test;
-    with the noise estimated from `noise_dof` effective degrees of freedom, the F test of chi2 / dof against
-    the estimate, which takes the two as independent. Where they share the residuals they correlate
-    positively and their ratio is narrower than F: the F p-value is then an upper bound (measured on a
-    22-point rate table: 0.03 % of right models below 1 %), used only beyond the reach of `_NULL_DRAWS`.
-    NaN where `dof` <= 0 (nothing to test)."""
-    chi2, dof, nu = np.broadcast_arrays(np.asarray(chi2, dtype=float), np.asarray(dof, dtype=float),
-                                        np.asarray(noise_dof, dtype=float))
-    out = np.full(chi2.shape, np.nan)
-    for i in np.ndindex(chi2.shape):
-        c, d, v = float(chi2[i]), float(dof[i]), float(nu[i])
-        if d <= 0 or math.isnan(c):
-            continue
-        if math.isinf(v):
-            out[i] = float(gammaincc(d / 2.0, max(c, 0.0) / 2.0))
-        elif v > 0:  # the F distribution's survival: I_{v / (v + d x)}(v / 2, d / 2), x = c / d
-            out[i] = float(betainc(v / 2.0, d / 2.0, v / (v + max(c, 0.0))))
-    return out
-
-
-def _pooled_dof(noise_dof, weight):
-    """Effective degrees of freedom of a sum of chi2 parts, each over its own noise estimate with `noise_dof`,
-    weighted by its share `weight` of the degrees of freedom (Satterthwaite: var(sum w_i s_i^2 / s^2) =
-    sum w_i^2 2 / nu_i); inf when every part had known sigmas."""
-    nu = np.asarray(noise_dof, dtype=float)
-    w = np.asarray(weight, dtype=float)
-    w = w / w.sum() if w.sum() > 0 else np.full(w.shape, 1.0 / max(w.size, 1))
-    inv = float(np.sum(np.where(np.isinf(nu), 0.0, w**2 / np.where(nu > 0, nu, np.nan))))
-    return np.inf if inv == 0.0 else (1.0 / inv if math.isfinite(inv) else 0.0)
-
-
 # --- the noise of data without output_sigma -------------------------------------------------------------
-
-# Inputs of two runs closer than this (relative to the sweep's largest |input|) are the same setting.
-_SAME_INPUT_RTOL = 1e-9
-
-
-# Within a run, each contrast spans this degree + 2 neighbouring inputs and cancels polynomials of this degree.
-# On seed 000's 22-point rate table (log-spaced, +/-0.1 to 200 deg/s) the estimate then takes up 1/299 of a
-# cubic misfit's share of the residual (1/1190 of a tanh, 1/76 of x^5), against 1/5 with degree 1 and 1/1.3
-# with plain neighbour differences; its effective degrees of freedom fall only from 10.7 (degree 1) to 8.8.
-_LOCAL_DEGREE = 2
-
-
-def _contrasts(x, mask):
-    """Contrasts of one device's sweep block (`x`, `mask` of shape (run, point)) whose mean square measures
-    the noise while a misfit of the model barely reaches it: rows over the block's flattened (run, point)
-    positions, and how they were made.
-
-    - Where two runs repeat an input, the difference of their residuals there: any misfit that repeats from
-      run to run (every error of the model that depends on the input) cancels exactly.
-    - Else, within each run in input order, the combination of every `_LOCAL_DEGREE` + 2 neighbouring
-      residuals that cancels a polynomial of degree `_LOCAL_DEGREE` through them: a misfit smooth over a few
-      neighbouring inputs barely enters, however widely they are spaced."""
-    n_run, n_pt = x.shape
-    runs = [k for k in range(n_run) if mask[k].any()]
-    tol = _SAME_INPUT_RTOL * max(float(np.max(np.abs(x[mask]))) if mask.any() else 0.0, np.finfo(float).tiny)
-    rows = []
-    for a, b in zip(runs, runs[1:]):
-        left = list(np.flatnonzero(mask[a]))
-        for j in np.flatnonzero(mask[b]):
-            same = [i for i in left if abs(x[a, i] - x[b, j]) <= tol]
-            if same:
-                left.remove(same[0])
-                row = np.zeros(n_run * n_pt)
-                row[b * n_pt + j], row[a * n_pt + same[0]] = 1.0, -1.0
-                rows.append(row)
-    if rows:
-        return np.asarray(rows), "differences between runs at equal inputs"
-    width = _LOCAL_DEGREE + 2
-    for k in runs:
-        idx = np.flatnonzero(mask[k])
-        idx = idx[np.argsort(x[k, idx], kind="stable")]
-        for i in range(idx.size - width + 1):
-            window = idx[i:i + width]
-            xs = x[k, window] - np.mean(x[k, window])
-            span = np.max(np.abs(xs))
-            # the null vector of the window's Vandermonde rows: sum_i c_i p(x_i) = 0 for every p of the degree
-            _, _, vt = np.linalg.svd(np.vander(xs / span if span > 0 else xs, _LOCAL_DEGREE + 1, increasing=True).T)
-            row = np.zeros(n_run * n_pt)
-            row[k * n_pt + window] = vt[-1]
-            rows.append(row)
-    return (np.asarray(rows).reshape(-1, n_run * n_pt),
-            f"combinations of {width} neighbouring inputs within each run that cancel a local polynomial of degree "
-            f"{_LOCAL_DEGREE}")
-
-
-def _solve_kappa(a, q, has):
-    """kappa from the moment equations a kappa = q over the sweeps `has` (q may carry draws on a second axis):
-    the joint solution, or where it is not positive, each sweep on its own (ignoring what leaks in from the
-    others' noise: an overestimate)."""
-    q = np.asarray(q, dtype=float)
-    kappa = np.full(q.shape, np.nan)
-    if not has.any():
-        return kappa
-    sub = np.ix_(has, has)
-    try:
-        kappa[has] = np.linalg.solve(a[sub], q[has])
-    except np.linalg.LinAlgError:
-        kappa[has] = np.nan
-    alone = q[has] / np.diag(a)[has].reshape((-1,) + (1,) * (q.ndim - 1))
-    bad = ~np.all(np.isfinite(kappa[has]) & (kappa[has] > 0), axis=0)
-    kappa[has] = np.where(bad, alone, kappa[has])
-    return kappa
-
-
-def _noise_scales(residual, jac, blocks, *, draws=0, rng=None):
-    """Per sweep of one device, the factor kappa by which the variance of its standardised residuals exceeds
-    1 (for unit weights: the noise variance in output units), unbiased for white noise.
-
-    `residual` (rows,) are the standardised residuals of a fit, `jac` (rows, free) their Jacobian (data rows
-    only, free parameters only), both over the concatenated blocks' flattened (run, point) positions; `blocks`
-    a list of `(x, mask, inv_sigma, biased)` per sweep, each (run, point). Near the solution r = M e, with e
-    the standardised noise and M = P_b - J J^+ the projector that removes the run biases (P_b) and what the
-    free parameters absorb. For contrasts C_s of sweep s (`_contrasts`), E |C_s r|^2 = sum_t kappa_t
-    tr(C_s M E_t M C_s^T), E_t selecting sweep t's rows: the method of moments solves these equations for
-    kappa, exactly unbiased for the linearised fit (prior rows are left out of M: a prior holds the fit back
-    a little, which can only raise the estimate).
-
-    With `draws` > 0, also the chi2 the data give in units of their estimated noise, sum_t |r_t|^2 / kappa_t,
-    and `draws` samples of it under white noise of the estimated kappa (the same estimator applied to M e for
-    Gaussian e, with `rng`): its null distribution. The chi2 and the noise estimate share the residuals, so
-    chi2 / dof is not F-distributed (on a 22-point rate table its 1 % point is 2.8, F's 4.9); the draws are.
-
-    **Returns:** `(kappa, nu, methods, null)`: kappa per sweep (NaN where a sweep has no contrast: too few
-    points), the effective degrees of freedom of each estimate (Satterthwaite: tr(S)^2 / tr(S^2) with S the
-    covariance of the contrasts), how each was made, and `(chi2, chi2 draws)` or None."""
-    sizes = [b[0].size for b in blocks]
-    offsets = np.concatenate([[0], np.cumsum(sizes)])
-    real = np.concatenate([np.ravel(b[1]) for b in blocks]).astype(bool)
-    idx = np.flatnonzero(real)
-    pos = np.full(real.size, -1)
-    pos[idx] = np.arange(idx.size)
-    n = idx.size
-    proj = np.eye(n)
-    for s, (x, mask, inv_sigma, biased) in enumerate(blocks):
-        if not biased:
-            continue
-        for k in range(x.shape[0]):
-            local = pos[offsets[s] + k * x.shape[1] + np.flatnonzero(mask[k])]
-            if local.size:
-                w = np.ravel(inv_sigma[k][mask[k]])
-                proj[np.ix_(local, local)] -= np.outer(w, w) / (w @ w)
-    j = np.asarray(jac, dtype=float)[idx]
-    if j.size and np.all(np.isfinite(j)):
-        u, sv, _ = np.linalg.svd(j, full_matrices=False)
-        u = u[:, sv > sv[:1] * max(j.shape) * np.finfo(float).eps] if sv.size else u[:, :0]
-        resid_maker = proj - u @ u.T
-    else:
-        resid_maker = proj
-    r = np.asarray(residual, dtype=float)[idx]
-    selects = [(pos[offsets[s]:offsets[s + 1]] >= 0) for s in range(len(blocks))]
-    cm, q, methods, size = [], [], [], []
-    for s, (x, mask, _, _) in enumerate(blocks):
-        rows, method = _contrasts(np.asarray(x, dtype=float), np.asarray(mask, dtype=bool))
-        c = np.zeros((rows.shape[0], n))
-        c[:, pos[offsets[s]:offsets[s + 1]][selects[s]]] = rows[:, selects[s]]
-        cm.append(c @ resid_maker)
-        q.append(float(np.sum((c @ r) ** 2)))
-        methods.append(method)
-        size.append(float(np.sum(c**2)))
-    sel = [pos[offsets[t]:offsets[t + 1]][selects[t]] for t in range(len(blocks))]
-    a = np.array([[float(np.sum(cm[s][:, sel[t]] ** 2)) for t in range(len(blocks))] for s in range(len(blocks))])
-    # A sweep whose contrasts the fit absorbs entirely (as many parameters as points) measures nothing; the
-    # cut is far above round-off of M (~1e-15) and far below any contrast that sees noise.
-    has = np.diag(a) > 1e-9 * np.asarray(size)
-    kappa = _solve_kappa(a, np.asarray(q), has)
-    nu = np.full(len(blocks), np.nan)
-    weights = np.zeros(n)
-    for t in range(len(blocks)):
-        weights[sel[t]] = kappa[t] if np.isfinite(kappa[t]) else 0.0
-    for s in range(len(blocks)):
-        if has[s]:
-            cov = (cm[s] * weights) @ cm[s].T
-            tr2 = float(np.sum(cov * cov))
-            nu[s] = float(np.trace(cov)) ** 2 / tr2 if tr2 > 0 else np.nan
-    null = None
-    if draws and np.all(np.isfinite(kappa[has])) and np.all(kappa[has] > 0) and has.any():
-        keep = np.concatenate([sel[t] for t in range(len(blocks)) if has[t]])
-        chi2 = sum(float(np.sum(r[sel[t]] ** 2)) / kappa[t] for t in range(len(blocks)) if has[t])
-        e = np.sqrt(weights)[:, None] * (rng or np.random.default_rng(0)).normal(size=(n, draws))
-        rr = resid_maker[keep] @ e
-        q_draws = np.stack([np.sum((cm[s] @ e) ** 2, axis=0) if has[s] else np.zeros(draws)
-                            for s in range(len(blocks))])
-        k_draws = _solve_kappa(a, q_draws, has)
-        offsets_keep = np.cumsum([0] + [sel[t].size for t in range(len(blocks)) if has[t]])
-        parts = [np.sum(rr[lo:hi] ** 2, axis=0) for lo, hi in zip(offsets_keep[:-1], offsets_keep[1:])]
-        chi2_draws = sum(part / k_draws[t] for part, t in zip(parts, np.flatnonzero(has)))
-        null = (chi2, chi2_draws)
-    return kappa, nu, methods, null
 
 
 _SWEEP_WORDS = {"rate_table": "rate-table", "vcf_static": "static-VCF", "vcf_dynamic": "dynamic-VCF", "dac": "DAC"}
-
-
-# Draws of the chi2's null distribution per device: the rejection at reject_alpha = 0.01 is then decided to
-# +/-0.0016 (the binomial error of a p-value near 0.01).
-_NULL_DRAWS = 4000
-
-
-def _mc_p_value(chi2, draws, dof, noise_dof):
-    """p-value of `chi2` against its Monte Carlo null `draws`: (k + 1) / (N + 1) with k draws at or above it,
-    or the F test's where that is smaller (it is conservative, so an upper bound: it resolves the tail beyond
-    the draws)."""
-    mc = (np.sum(draws >= chi2) + 1.0) / (draws.size + 1.0)
-    return float(min(mc, chi2_p_value(np.asarray(chi2), np.asarray(dof), np.asarray(noise_dof))[()]))
-
-
-def _estimated_noise(fit: "Fit", seed: int):
-    """Per device, the noise of each sweep estimated from `fit` (`_noise_scales`): `(kappa (device, sweep),
-    (noise_dof (device,), warnings per device, determined per device, p-values (device,), the lot's
-    p-value))`, the p-values of the chi2 in units of the estimated noise against its null distribution."""
-    data = fit.data
-    sweeps = data.sweeps
-    rows = sum(int(np.prod(data.blocks[s].inputs.shape[1:])) for s in sweeps)
-    free = np.asarray(fit.free)
-    dof = np.asarray(fit.dof)
-    n = len(data.devices)
-    kappa = np.ones((n, len(sweeps)))
-    noise_dof = np.full(n, np.inf)
-    p_value = np.full(n, np.nan)
-    notes, determined, nulls = [], [], []
-    for d in range(n):
-        blocks = [(np.asarray(data.blocks[s].inputs[d]), np.asarray(data.blocks[s].mask[d]),
-                   1.0 / np.asarray(data.blocks[s].sigmas[d]), s in BIASED_SWEEPS) for s in sweeps]
-        res = np.asarray(fit.residual_vector[d])[:rows]
-        jac = np.asarray(fit.jacobian[d])[:rows][:, free]
-        if not (np.all(np.isfinite(res)) and np.all(np.isfinite(jac))):
-            k, nu, methods, null = np.full(len(sweeps), np.nan), np.full(len(sweeps), np.nan), [""] * len(sweeps), None
-        else:
-            k, nu, methods, null = _noise_scales(res, jac, blocks, draws=_NULL_DRAWS,
-                                                 rng=np.random.default_rng([seed, d]))
-        points = np.array([int(np.sum(b[1])) for b in blocks], dtype=float)
-        present = points > 0
-        ok = present & np.isfinite(k) & (k > 0) & np.isfinite(nu)
-        kappa[d] = np.where(ok, k, 1.0)
-        noise_dof[d] = _pooled_dof(np.where(ok, nu, 0.0)[present], points[present])
-        if null is not None and ok[present].all() and dof[d] > 0:
-            p_value[d] = _mc_p_value(null[0], null[1], dof[d], noise_dof[d])
-            nulls.append(null)
-        unit = "x the given output_sigma" if data.weighted else "output units"
-        parts = [f"{s} {math.sqrt(k[i]):.3g} {unit} from {nu[i]:.3g} effective degrees of freedom ({methods[i]})"
-                 for i, s in enumerate(sweeps) if ok[i]]
-        bad = [s for i, s in enumerate(sweeps) if present[i] and not ok[i]]
-        text = []
-        if parts:
-            what = "no output_sigma" if not data.weighted else "estimate_noise=True"
-            text.append(f"{what}: the noise was estimated from the residuals of a first fit: " + "; ".join(parts)
-                        + "; the points were weighted by it and fitted again, and the chi2 is tested against its "
-                        "distribution under white noise of that size (Monte Carlo of the linearised fit)")
-        if bad:
-            text.append(f"no output_sigma, and the data leave nothing to estimate the noise of {', '.join(bad)} "
-                        "from (too few points, or a first fit that failed): the uncertainties are not determined")
-        notes.append(tuple(text))
-        determined.append(not bad)
-    # The lot: the devices' chi2 draws are independent, so their sums sample the lot's null distribution.
-    tested = np.isfinite(p_value)
-    p_lot = (_mc_p_value(sum(c for c, _ in nulls), sum(dr for _, dr in nulls), int(dof[tested].sum()),
-                         _pooled_dof(noise_dof[tested], dof[tested])) if nulls else float("nan"))
-    return kappa, (noise_dof, notes, determined, p_value, p_lot)
-
-
-def _reweighted(data: FitData, kappa) -> FitData:
-    """`data` with each device's sigmas of each sweep multiplied by sqrt(kappa) (device, sweep)."""
-    sweeps = data.sweeps
-    new = []
-    for i, s in enumerate(sweeps):
-        block = data.blocks[s]
-        scale = jnp.sqrt(jnp.asarray(kappa[:, i]))[:, None, None]
-        new.append(jnp.where(block.mask, block.sigmas * scale, block.sigmas))
-    return eqx.tree_at(lambda dd: [dd.blocks[s].sigmas for s in sweeps], data, new)
 
 
 # --- checks of the data before fitting ------------------------------------------------------------------
@@ -465,7 +198,7 @@ def _sf_determinacy(jac, jac_lot, grad, grad_lot, sf_stderr, threshold):
     weak_part = np.zeros((n, nc + n_lot))
     weak_s = []
     if n_lot:
-        full = _joint_jacobian(jac, np.asarray(jac_lot, dtype=float))
+        full = joint_jacobian(jac, np.asarray(jac_lot, dtype=float))
         ok = np.all(np.isfinite(full))
         s, vt = _singular(np.where(np.isfinite(full), full, 0.0))
         v = vt[s < threshold]
@@ -938,7 +671,7 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
       device is tested at this level, so a lot of N devices with a right model has about N x reject_alpha
       rejected by chance.
     - `estimate_noise`: estimate each sweep's noise per device from the residuals of a first fit, re-weight
-      and fit again (`_noise_scales`: differences between runs at repeated inputs, else of neighbouring inputs
+      and fit again (`noise_scales`: differences between runs at repeated inputs, else of neighbouring inputs
       within a run; unbiased for white noise). `None` (default): when the data have no `output_sigma`.
       `False` takes the data's sigmas as the noise (unit weights for a table without `output_sigma`, so the
       chi2 then tests nothing; e.g. for `fit.data` of an earlier fit, whose sigmas were estimated already).
@@ -990,8 +723,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         first = _identify(model, data, noise=None, **options)
         say("estimating the noise from the first fit's residuals (the data give no output_sigma); fitting again "
             "with those weights")
-        kappa, noise = _estimated_noise(first, seed)
-        fit = _identify(model, _reweighted(data, kappa), noise=noise, **options)
+        kappa, noise = estimated_noise(first, seed)
+        fit = _identify(model, reweighted(data, kappa), noise=noise, **options)
     counts = {st: fit.status.count(st) for st in dict.fromkeys(fit.status)}
     say("done: " + ", ".join(f"{k} device(s) {st}" for st, k in counts.items()))
     return fit
@@ -1002,7 +735,7 @@ def _identify(model, data, *, free, shared, priors, solver, starts, start_spread
               retry_solver, decrement_tol, reject_alpha, noise) -> Fit:
     """One fit of `identify` (arguments checked there) with the data's sigmas as they are; `noise`: the
     estimated noise's `(degrees of freedom, warnings, determined, p-values)` per device and the lot's p-value
-    (`_estimated_noise`), or None for given sigmas."""
+    (`estimated_noise`), or None for given sigmas."""
     n = len(data.devices)
     model = batched(model, n)
     one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, model)
@@ -1133,7 +866,7 @@ def _identify(model, data, *, free, shared, priors, solver, starts, start_spread
     ok = result_code(RESULTS.successful)
     stopped = (code == result_code(RESULTS.nonlinear_max_steps_reached)) & (np.asarray(final.failed) == 0)
     if stopped.any():
-        decrement = _decrement(np.asarray(final.jac)[:, :, free_index], np.asarray(final.jac_lot),
+        decrement = gauss_newton_decrement(np.asarray(final.jac)[:, :, free_index], np.asarray(final.jac_lot),
                                np.asarray(final.residuals), joint=bool(n_lot))
         certified = stopped & (decrement < decrement_tol)
         code = np.where(certified, ok, code)
@@ -1219,12 +952,12 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
     # are shared (then the whole lot's normal matrix is inverted). Data without output_sigma were weighted by
     # their estimated noise before this (`identify`), so the covariance is that of the weights in both cases.
     if n_lot:
-        cov_all = _covariance(_joint_jacobian(jac, jac_lot))
+        cov_all = covariance(joint_jacobian(jac, jac_lot))
         cov_dev = np.stack([cov_all[d * f.size:(d + 1) * f.size, d * f.size:(d + 1) * f.size] for d in range(n)])
         cov_lot = cov_all[n * f.size:, n * f.size:]
         cross = np.stack([cov_all[d * f.size:(d + 1) * f.size, n * f.size:] for d in range(n)])
     else:
-        cov_dev = _covariance(jac)
+        cov_dev = covariance(jac)
         cov_lot = np.zeros((0, 0))
         cross = np.zeros((n, f.size, 0))
     cov_full = np.zeros((n, n_dev, n_dev))
@@ -1314,55 +1047,6 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
                scale_factor_stderr_scaled=jnp.asarray(sf_stderr * scale),
                noise_dof=jnp.asarray(np.asarray(noise_dof, dtype=float)),
                p_value=jnp.asarray(np.asarray(p_value, dtype=float)), p_value_total=jnp.asarray(float(p_lot)))
-
-
-def _decrement(jac, jac_lot, residuals, *, joint):
-    """The Gauss-Newton decrement per device, r^T J (J^T J)^+ J^T r = |P r|^2 with P the projector onto the
-    columns of the weighted Jacobian (from its SVD, columns scaled to unit norm): the chi2 fall a full
-    Gauss-Newton step would still give. A joint fit's (one number for the lot) is repeated per device."""
-    if joint:
-        full = _joint_jacobian(jac, jac_lot)
-        return np.full(jac.shape[0], _decrement(full[None], None, np.reshape(residuals, (1, -1)), joint=False)[0])
-    finite = np.all(np.isfinite(jac), axis=(-2, -1)) & np.all(np.isfinite(residuals), axis=-1)
-    jac, residuals = np.where(finite[:, None, None], jac, 0.0), np.where(finite[:, None], residuals, 0.0)
-    u, _, _, _, keep = _scaled_svd(jac)
-    dec = np.sum(np.where(keep, np.einsum("...rk,...r->...k", u, residuals), 0.0) ** 2, axis=-1)
-    return np.where(finite, dec, np.inf)
-
-
-def _joint_jacobian(jac, jac_lot):
-    """The lot's Jacobian of a joint fit: per-device blocks (device, residual, free) on the diagonal, the
-    shared columns (device, residual, n_lot) beside them."""
-    n, rows, p = jac.shape
-    full = np.zeros((n * rows, n * p + jac_lot.shape[-1]))
-    for d in range(n):
-        full[d * rows:(d + 1) * rows, d * p:(d + 1) * p] = jac[d]
-        full[d * rows:(d + 1) * rows, n * p:] = jac_lot[d]
-    return full
-
-
-def _covariance(jac):
-    """(J^T J)^+ of weighted Jacobians (..., residual, parameter), from the SVD of J with unit-norm columns.
-
-    Forming J^T J squares J's condition number: a dynamic VCF sweep pins the sense resonance ~1e5 times
-    better than a prior fixes the angular gain, J^T J's condition passed 1e15 and its pseudo-inverse dropped
-    the weak directions (a 6-device lot: shared-gain stderr off by 3681 sigma). Zero columns (held
-    parameters) get zero rows and columns, as a pseudo-inverse gives them; directions with a singular value
-    below round-off of the largest are dropped likewise."""
-    _, sv, vt, d, keep = _scaled_svd(jac)
-    inv2 = np.where(keep, 1.0 / np.where(sv > 0, sv, 1.0) ** 2, 0.0)
-    cov = np.einsum("...ki,...k,...kj->...ij", vt, inv2, vt)
-    return cov * d[..., :, None] * d[..., None, :]
-
-
-def _scaled_svd(jac):
-    """SVD of the Jacobian (..., residual, parameter) with its columns scaled to unit norm (zero columns stay
-    zero): (u, s, vt, column scales d, s above round-off of the largest)."""
-    jac = np.asarray(jac, dtype=float)
-    norm = np.sqrt(np.sum(jac**2, axis=-2))
-    d = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 0.0)
-    u, sv, vt = np.linalg.svd(jac * d[..., None, :], full_matrices=False)
-    return u, sv, vt, d, sv > sv[..., :1] * max(jac.shape[-2:]) * np.finfo(float).eps
 
 
 def _physical(start, entries, u, cov, free_index, *, shared):
