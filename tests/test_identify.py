@@ -384,7 +384,7 @@ def test_directions_the_data_no_longer_fix_at_the_solution_are_named():
     """A parameter that ran off to a flat region (its weighted-Jacobian column ~0 at the solution, as an open-loop
     Q_y did to 1e243 with the solver reporting success) is named in the device's message; a well-fixed device
     gets none."""
-    from gyrojax._identify.identify import _weak_at_solution
+    from gyrojax._identify.identifiability import weak_at_solution
 
     rng = np.random.default_rng(0)
     fixed = rng.normal(size=(40, 3)) * 10.0
@@ -392,7 +392,7 @@ def test_directions_the_data_no_longer_fix_at_the_solution_are_named():
     wandered[:, 2] = 1e-6  # Q_y's column once Q_y is huge: the data no longer move with it
     combo = fixed.copy()
     combo[:, 1] = combo[:, 0] + 1e-3 * rng.normal(size=40)  # two columns the data see only as a sum
-    notes = _weak_at_solution(np.stack([fixed, wandered, combo]), ["k_vf", "omega_y", "q_y"], 1.0)
+    notes = weak_at_solution(np.stack([fixed, wandered, combo]), ["k_vf", "omega_y", "q_y"], 1.0)
     assert notes[0] == ""
     assert "no longer fix q_y (s = " in notes[1] and "k_vf" not in notes[1] and "prior" in notes[1]
     assert "k_vf x omega_y" in notes[2] and "q_y" not in notes[2]

@@ -23,7 +23,7 @@ import gyrojax as gj
 from gyrojax import _fitio
 from gyrojax._fitdata import fit_data
 from gyrojax._identify import EXIT_CODES, HELD_LABEL, chi2_p_value
-from gyrojax._identify.identify import _sf_determinacy
+from gyrojax._identify.identifiability import sf_determinacy
 from gyrojax._identify.noise import contrasts, noise_scales
 
 
@@ -101,27 +101,27 @@ def test_scale_factor_determinacy_is_the_row_space_test():
     sf = 1.37e4
     grad = np.array([[-sf, sf]])
     se = np.array([0.01])
-    det, part, s = _sf_determinacy(jac, None, grad, None, se, 1.0)
+    det, part, s = sf_determinacy(jac, None, grad, None, se, 1.0)
     assert det[0] and np.linalg.norm(part[0]) < 1e-9 * sf and s[0].size == 1
-    det, part, _ = _sf_determinacy(jac, None, np.array([[-sf, 0.0]]), None, se, 1.0)  # K_vf alone
+    det, part, _ = sf_determinacy(jac, None, np.array([[-sf, 0.0]]), None, se, 1.0)  # K_vf alone
     assert not det[0]
     np.testing.assert_allclose(part[0], [-sf / 2, -sf / 2], rtol=1e-9)
-    det, _, _ = _sf_determinacy(np.zeros((1, 1, 2)), None, grad, None, np.array([0.0]), 1.0)
+    det, _, _ = sf_determinacy(np.zeros((1, 1, 2)), None, grad, None, np.array([0.0]), 1.0)
     assert not det[0]
     # A dependence on the weak direction (1, 1) / sqrt(2) below a tenth of the SF's standard error is
     # immaterial; above it, it is not.
     weak = np.array([[1.0, 1.0]]) / np.sqrt(2.0)
-    assert _sf_determinacy(jac, None, grad + 0.05 * se[0] * weak, None, se, 1.0)[0][0]
-    assert not _sf_determinacy(jac, None, grad + 0.2 * se[0] * weak, None, se, 1.0)[0][0]
+    assert sf_determinacy(jac, None, grad + 0.05 * se[0] * weak, None, se, 1.0)[0][0]
+    assert not sf_determinacy(jac, None, grad + 0.2 * se[0] * weak, None, se, 1.0)[0][0]
     # Joint: each device's data see (own gain + shared gain), its SF its own gain alone: not determined. Rows of
     # device 0 that see the shared gain apart (a rate table) fix the shared gain, hence both own gains.
     b = rng.normal(size=(2, 30, 1)) * 100
     g, g_lot = np.full((2, 1), sf), np.zeros((2, 1))
     two = np.array([0.01, 0.01])
-    assert not _sf_determinacy(b, b, g, g_lot, two, 1.0)[0].any()
+    assert not sf_determinacy(b, b, g, g_lot, two, 1.0)[0].any()
     seen = b.copy()
     seen[0, :10, 0] += 50.0 * rng.normal(size=10)
-    assert _sf_determinacy(b, seen, g, g_lot, two, 1.0)[0].all()
+    assert sf_determinacy(b, seen, g, g_lot, two, 1.0)[0].all()
 
 
 # --- 2. a misfit reaches the uncertainty -----------------------------------------------------------------

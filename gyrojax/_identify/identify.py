@@ -35,7 +35,7 @@ import numpy as np
 import optimistix as optx
 
 from .._dataset import Table
-from .._fitdata import BIASED_SWEEPS, FitData, fit_data
+from .._fitdata import FitData, fit_data
 from .._linsolve import PivotedLU
 from .._lm import LevenbergMarquardt
 from .._parameters import (
@@ -59,8 +59,10 @@ from .._residuals import (
 from .._simulate.tiers import Steady
 from .._solution import RESULTS, result_code, result_message
 from .covariance import chi2_p_value, covariance, gauss_newton_decrement, joint_jacobian
-from .fit import Fit, Unidentifiable, p_text
+from .fit import Fit, p_text
+from .identifiability import hold_unidentifiable, sf_determinacy, undetermined_reason, weak_at_solution, weak_directions
 from .noise import estimated_noise, reweighted
+from .plausibility import check_absurd_outputs, check_signs, implausible_values
 
 
 SOLVERS = ("levenberg-marquardt", "gauss-newton", "bfgs")
@@ -83,236 +85,10 @@ def _solver(solver, rtol, atol):
 # --- the noise of data without output_sigma -------------------------------------------------------------
 
 
-_SWEEP_WORDS = {"rate_table": "rate-table", "vcf_static": "static-VCF", "vcf_dynamic": "dynamic-VCF", "dac": "DAC"}
-
-
 # --- checks of the data before fitting ------------------------------------------------------------------
-
-# A reading this many times the largest other reading of its run is refused: a 24-bit readout spans 1.7e7
-# levels, so no genuine reading exceeds another of the same run by 1e8.
-_ABSURD_RATIO = 1e8
-
-
-def _check_absurd_outputs(data: FitData):
-    """Raise a ValueError naming each device, run and input whose output is absurdly far from the rest of its
-    run (`_ABSURD_RATIO`): one such point decides every fit it enters (its chi2 alone can overflow), so no fit
-    is attempted."""
-    bad = []
-    for s in data.sweeps:
-        block = data.blocks[s]
-        y, x, m = (np.asarray(a) for a in (block.outputs, block.inputs, block.mask))
-        runs = data.run_ids(s)
-        for d, k in np.ndindex(m.shape[:2]):
-            idx = np.flatnonzero(m[d, k])
-            if idx.size < 2:
-                continue
-            mag = np.abs(y[d, k, idx])
-            top = np.argsort(mag)[-2:]  # the largest other than the largest is the second largest
-            for j, i in enumerate(idx):
-                others = mag[top[0]] if j == top[1] else mag[top[1]]
-                if others > 0 and mag[j] > _ABSURD_RATIO * others:
-                    bad.append(f"sweep {s!r}, device {data.devices[d]!r}, run {runs[d][k]}, input {x[d, k, i]:.6g}: "
-                               f"output {y[d, k, i]:.6g} is {mag[j] / others:.2g} times the largest other output "
-                               f"of its run ({others:.6g})")
-    if bad:
-        raise ValueError(f"identify: {data.source}: {len(bad)} output(s) are no reading on the scale of the rest "
-                         f"of their run (more than {_ABSURD_RATIO:.0e} times the largest other): " + "; ".join(bad[:5])
-                         + ("; ..." if len(bad) > 5 else "") + ". A typo or a failed acquisition? Fix or remove "
-                         "these rows; no fit is made with them.")
-
-
-# The data's slope must have the model's sign at 5 standard errors before it counts as flipped: a right table
-# reads the wrong sign that clearly once in ~3.5 million runs.
-_FLIP_SIGMAS = 5.0
-_SIGNED_SWEEPS = ("rate_table", "vcf_static", "dac")
-
-
-def _slope(x, y, w):
-    """Weighted least-squares slope of y on (1, x), its standard error from the given weights (`known`) and
-    from the scatter about the line (NaN with fewer than 3 points)."""
-    sw = np.sum(w)
-    xm = np.sum(w * x) / sw
-    sxx = np.sum(w * (x - xm) ** 2)
-    if sxx <= 0:
-        return np.nan, np.nan, np.nan
-    b = np.sum(w * (x - xm) * y) / sxx
-    resid = y - np.sum(w * y) / sw - b * (x - xm)
-    scatter = np.sqrt(np.sum(w * resid**2) / (x.size - 2) / sxx) if x.size > 2 else np.nan
-    return b, np.sqrt(1.0 / sxx), scatter
-
-
-def _check_signs(data: FitData, predictions, model_name: str):
-    """Raise a ValueError naming each device and run whose outputs run against the input with the opposite
-    sign of the start model's predictions (`_FLIP_SIGMAS`): a sign convention of the data (output, or
-    input) flipped against the model's, which no positive gain or factor of the model can fit."""
-    bad = []
-    for s in data.sweeps:
-        if s not in _SIGNED_SWEEPS or s not in predictions:
-            continue
-        block = data.blocks[s]
-        x, y, m, sig = (np.asarray(a) for a in (block.inputs, block.outputs, block.mask, block.sigmas))
-        pred = np.asarray(predictions[s])
-        runs = data.run_ids(s)
-        for d, k in np.ndindex(m.shape[:2]):
-            sel = m[d, k] & np.isfinite(pred[d, k])
-            if sel.sum() < 2:
-                continue
-            w = 1.0 / sig[d, k][sel] ** 2
-            b, known, scatter = _slope(x[d, k][sel], y[d, k][sel], w)
-            b_model, _, _ = _slope(x[d, k][sel], pred[d, k][sel], w)
-            se = known if data.weighted else scatter
-            if (np.isfinite(b) and np.isfinite(b_model) and np.isfinite(se) and se > 0 and b * b_model < 0
-                    and abs(b) > _FLIP_SIGMAS * se):
-                bad.append(f"sweep {s!r}, device {data.devices[d]!r}, run {runs[d][k]}: slope {b:.6g} +/- {se:.2g} "
-                           f"per input unit, the model's {b_model:.6g}")
-    if bad:
-        raise ValueError(f"identify: {data.source}: the outputs change with the input with the opposite sign of "
-                         f"the model {model_name!r} (by more than {_FLIP_SIGMAS:g} standard errors) in {len(bad)} "
-                         "run(s): " + "; ".join(bad[:5]) + ("; ..." if len(bad) > 5 else "") + ". The data's sign "
-                         "convention is flipped against the model's (the output's, or the input's: a rate table "
-                         "turning the other way): negate the output (or input) column of these runs, or use a model "
-                         "of this device's polarity. No fit is made: no positive gain of the model can fit them.")
 
 
 # --- checks of the result -------------------------------------------------------------------------------
-
-# A held direction moves the scale factor by g.v per natural unit of the parameters (one internal unit: an
-# e-fold of a positive parameter, `scale` of a signed one). Below a tenth of the SF's standard error, a design
-# value off by that much would add under 1 % to the SF's variance: immaterial. Above it the SF rests on the
-# design value.
-_SF_HELD_TOL = 0.1
-
-
-def _sf_determinacy(jac, jac_lot, grad, grad_lot, sf_stderr, threshold):
-    """Per device, whether the scale factor is estimable: its gradient `grad` (device, candidate) over the
-    candidate parameters (free, or held as unidentifiable) must lie in the row space of the weighted Jacobian
-    `jac` (device, residual, candidate), up to the directions the data fix (singular value >= `threshold`).
-    A joint fit's lot-shared columns (`jac_lot`, `grad_lot`) make one Jacobian of the whole lot.
-
-    **Returns:** `(determined (device,), weak part of the gradient (device, candidate + lot), weak singular
-    values per device)`. Determined: some free parameter the data fix moves the SF (`sf_stderr` > 0) and the
-    weak part is below `_SF_HELD_TOL` standard errors per natural unit."""
-    jac, grad = np.asarray(jac, dtype=float), np.asarray(grad, dtype=float)
-    n, _, nc = jac.shape
-    n_lot = np.shape(jac_lot)[-1] if jac_lot is not None else 0
-    weak_part = np.zeros((n, nc + n_lot))
-    weak_s = []
-    if n_lot:
-        full = joint_jacobian(jac, np.asarray(jac_lot, dtype=float))
-        ok = np.all(np.isfinite(full))
-        s, vt = _singular(np.where(np.isfinite(full), full, 0.0))
-        v = vt[s < threshold]
-        for d in range(n):
-            g = np.zeros(full.shape[1])
-            g[d * nc:(d + 1) * nc], g[n * nc:] = grad[d], np.asarray(grad_lot, dtype=float)[d]
-            part = v.T @ (v @ g) if ok else g
-            weak_part[d] = np.concatenate([part[d * nc:(d + 1) * nc], part[n * nc:]])
-            weak_s.append(s[s < threshold])
-    else:
-        for d in range(n):
-            j = jac[d]
-            if not np.all(np.isfinite(j)) or not np.all(np.isfinite(grad[d])):
-                weak_part[d] = np.where(np.isfinite(grad[d]), grad[d], np.inf)
-                weak_s.append(np.zeros(0))
-                continue
-            s, vt = _singular(j) if nc else (np.zeros(0), np.zeros((0, 0)))
-            v = vt[s < threshold]
-            weak_part[d] = v.T @ (v @ grad[d])
-            weak_s.append(s[s < threshold])
-    se = np.asarray(sf_stderr, dtype=float)
-    size = np.linalg.norm(weak_part, axis=1)
-    determined = np.isfinite(se) & (se > 0) & (size <= _SF_HELD_TOL * se)
-    return determined, weak_part, weak_s
-
-
-def _count_text(data: FitData, d: int) -> tuple[str, int, int]:
-    """('22 rate-table points and 4 DAC points', points, run biases) of device `d`."""
-    parts, points, biases = [], 0, 0
-    for s in data.sweeps:
-        m = np.asarray(data.blocks[s].mask[d])
-        k = int(m.sum())
-        if k:
-            parts.append(f"{k} {_SWEEP_WORDS.get(s, s)} point{'s' if k != 1 else ''}")
-            points += k
-            if s in BIASED_SWEEPS:
-                biases += int(np.sum(np.any(m, axis=-1)))
-    text = " and ".join([", ".join(parts[:-1]), parts[-1]] if len(parts) > 1 else parts) or "no points"
-    return text, points, biases
-
-
-def _undetermined_reason(data, d, names, weak_part, n_free, threshold) -> str:
-    """Why device `d`'s scale factor is not determined, naming the parameters it rests on (those of the
-    gradient's part along the directions the data do not fix, `weak_part`)."""
-    size = np.abs(weak_part)
-    involved = [names[k] for k in np.flatnonzero(size > 0.3 * size.max())] if size.max() > 0 else []
-    counts, points, biases = _count_text(data, d)
-    if not involved:
-        return (f"the scale factor moves with no parameter the data fix ({counts}): it is the design value, not a "
-                "measurement")
-    what = " x ".join(involved)
-    left = points - biases - n_free
-    if points - biases <= 0:
-        why = (f"{counts} and {biases} free run bias{'es' if biases != 1 else ''} leave no degree of freedom")
-    elif left < 0:
-        why = f"{counts} leave {points - biases} independent residual(s) after the run biases, too few"
-    else:
-        why = (f"the data do not change along {'this combination' if len(involved) > 1 else 'it'} (singular value "
-               f"below identifiability_threshold = {threshold:g}); a prior (priors=...) or a sweep that sees it "
-               "would fix it")
-    return f"the data cannot fix {what}: {why}; the printed design value would not be a measurement"
-
-
-def _power_hint(ratio: float) -> str:
-    """What a ratio of a fitted value to its design value near a power of 10 or of 2 suggests."""
-    # Within 5 %: a unit or word-width error is exact up to the device's own deviation from design, a few
-    # percent at most (the lot spread of a scale factor is about 1 %).
-    hints = []
-    k10 = round(math.log10(ratio))
-    if k10 != 0 and abs(math.log(ratio / 10.0**k10)) < math.log(1.05):
-        hints.append(f"10^{k10}")
-    k2 = round(math.log2(ratio))
-    if abs(k2) >= 1 and abs(math.log(ratio / 2.0**k2)) < math.log(1.05):
-        hints.append(f"2^{k2}")
-    if not hints:
-        return "the preset may not describe this device (or the data's units differ from the preset's)"
-    return (f"the ratio is within 5 % of {' = '.join(hints)}: a unit or scaling error in the data is likely "
-            "(outputs or inputs in other units, or another word width, than the preset's); else the preset does "
-            "not describe this device")
-
-
-def _implausible(entries, start, values, lot_values, free, n):
-    """Per device, sentences for each fitted physical parameter outside `Parameter.plausible` of its start
-    (design) value."""
-    from .._parameters import PARAMETERS
-
-    out = [[] for _ in range(n)]
-    k_dev = k_lot = 0
-    for e, p0 in zip(entries, start):
-        k = k_lot if e.shared else k_dev
-        if e.shared:
-            k_lot += e.size
-        else:
-            k_dev += e.size
-        par = PARAMETERS.get(e.label) if e.effect_index is None else None
-        if par is None or par.plausible is None or (not e.shared and not free[k]):
-            continue
-        p0 = np.reshape(np.asarray(p0), (-1,))
-        for d in range(n):
-            v = float(lot_values[k]) if e.shared else float(values[d, k])
-            ref = float(p0[d] if p0.size == n else p0[0])
-            unit = f" {par.unit}" if par.unit else ""
-            if e.transform == "log":
-                ratio = v / ref if ref != 0 else np.inf
-                if ratio > 0 and 1.0 / par.plausible <= ratio <= par.plausible:
-                    continue
-                hint = _power_hint(ratio) if ratio > 0 and math.isfinite(ratio) else "the fit ran off"
-                out[d].append(f"{e.label} = {v:.4g}{unit} is {ratio:.3g} x its design value {ref:.4g}{unit}, "
-                              f"outside the plausible factor of {par.plausible:g} ({par.plausible_why}): {hint}")
-            elif abs(v - ref) > par.plausible:
-                out[d].append(f"{e.label} = {v:.4g}{unit} is {v - ref:+.3g}{unit} from its design value "
-                              f"{ref:.4g}{unit}, beyond the plausible {par.plausible:g}{unit} ({par.plausible_why}): "
-                              "the preset may not describe this device, or the data's units differ from its")
-    return out
 
 
 def _message(converged, result_text, unsettled):
@@ -346,36 +122,6 @@ def _nonfinite_explained(stage: str):
             "state there, or one whose derivative is singular. Try: starting closer to the data (a Model with "
             "data-based values), holding parameters (hold=...) or priors on the design values, or fitting the "
             "sweeps one at a time (fit_data(table, sweeps=...)) to find the one that fails.") from e
-
-
-def _weak_directions(jac, threshold):
-    """Per device, the free directions the data no longer fix at the solution: (member indices into the free
-    list, singular value) for each singular value of the weighted Jacobian (data and prior rows) below
-    `threshold`, in internal units. `jac` is (device, residual, free)."""
-    out = []
-    for j in np.asarray(jac, dtype=float):
-        if j.shape[1] == 0 or not np.all(np.isfinite(j)):
-            out.append([])
-            continue
-        # the SVD, as in `_hold_unidentifiable` (eigh of J^T J cannot resolve s below ~sqrt(eps) s_max)
-        s, vt = _singular(j)
-        out.append([(tuple(int(k) for k in _members(vt[i])), float(s[i])) for i in np.nonzero(s < threshold)[0]])
-    return out
-
-
-def _weak_at_solution(jac, names_free, threshold):
-    """Per device, text naming the free directions the data no longer fix at the solution (`_weak_directions`).
-    They were fixed at the start (or identify would have held them), so the fit moved somewhere flat: a
-    log-parameter run off towards 0 or infinity (an open-loop Q_y of 1e243, measured, with the solver reporting
-    success) is the typical case."""
-    out = []
-    for weak in _weak_directions(jac, threshold):
-        notes = [f"{' x '.join(names_free[k] for k in members)} (s = {s:.2g})" for members, s in weak]
-        out.append("" if not notes else
-                   "the data no longer fix " + "; ".join(notes) + f" at the solution (singular value < "
-                   f"{threshold:g}): the fit may have wandered along a flat direction. Give it a prior "
-                   "(priors=...), hold it (hold=...), or start from the data")
-    return out
 
 
 class _Problem(eqx.Module):
@@ -562,53 +308,6 @@ class _LotSpread:
         return jax.tree.map(lambda x: x[: self.n] if eqx.is_array(x) else x, tree)
 
 
-def _singular(j):
-    """Singular values and right singular vectors (rows of `vt`) of `j`, one per column: fewer rows than
-    columns are padded with zero rows, so that the null directions come out with s = 0."""
-    if j.shape[0] < j.shape[1]:
-        j = np.concatenate([j, np.zeros((j.shape[1] - j.shape[0], j.shape[1]))])
-    _, s, vt = np.linalg.svd(j, full_matrices=False)
-    return s, vt
-
-
-def _members(direction):
-    """Indices of the parameters taking part in a weak direction: components over 0.3 of its largest."""
-    v = np.abs(direction)
-    return np.nonzero(v > 0.3 * v.max())[0]
-
-
-def _hold_unidentifiable(jac, names_free, threshold):
-    """Indices (into the free list) to hold, and the reports. `jac` is (device, residual, free)."""
-    # The lot's Jacobians stacked (its Gram matrix is the lot's mean normal matrix). Combinations come from its
-    # SVD, not eigh of J^T J, whose absolute error eps * s_max^2 left nothing below ~400 resolvable beside a
-    # dynamic VCF sweep (s_max ~ 3e10), which the former 1e-7 * s_max guard then had to hold.
-    stacked = np.asarray(jac, dtype=float).reshape(-1, jac.shape[-1]) / np.sqrt(max(jac.shape[0], 1))
-    keep = list(range(len(names_free)))
-    reports = []
-    # Parameters the data do not see at all, one by one; then combinations.
-    columns = np.linalg.norm(stacked, axis=0)
-    scale = float(np.max(columns)) if keep else 0.0
-    # A single column's norm is a sum of squares (no cancellation): only a column at the round-off of the
-    # largest is numerically zero. (1e-7 here held a sense Duffing coefficient with a column norm of 1.1e3
-    # beside a dynamic VCF sweep's 2.7e10 for omega_y: the diagnosis then could not add it.)
-    for j in list(keep):
-        s_j = float(columns[j])
-        if s_j < threshold or s_j < 1e-12 * scale:
-            reports.append(Unidentifiable((names_free[j],), names_free[j], s_j))
-            keep.remove(j)
-    while keep:
-        s, vt = _singular(stacked[:, keep])
-        evecs = vt.T
-        i = int(np.argmin(s))
-        if s[i] >= threshold and s[i] >= 1e-12 * s.max():
-            break
-        involved = [keep[j] for j in _members(evecs[:, i])]
-        held = max(involved)  # the last in order of preference
-        reports.append(Unidentifiable(tuple(names_free[j] for j in involved), names_free[held], float(s[i])))
-        keep.remove(held)
-    return keep, tuple(reports)
-
-
 def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="levenberg-marquardt",
              starts: int = 1, start_spread: float = 0.05, seed: int = 0, rtol: float = 1e-8, atol: float = 1e-8,
              max_steps: int = 200, identifiability_threshold: float = 1.0, hold=(), tier=Steady(),
@@ -683,7 +382,7 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     `fit.check()`). A scale factor the data do not determine is NaN, with the reason in `fit.warnings`.
 
     **Raises:** `ValueError` before fitting for data no fit could mean anything with: an output more than
-    `_ABSURD_RATIO` times the largest other output of its run, or outputs whose slope has the opposite sign of
+    `ABSURD_RATIO` times the largest other output of its run, or outputs whose slope has the opposite sign of
     the model's (both named by device, run and input).
     """
     model = as_model(model)
@@ -703,7 +402,7 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         raise ValueError(f"lot_chunk must be 'auto', None or an integer >= 1, got {lot_chunk!r}.")
     if not isinstance(starts, int) or starts < 1:
         raise ValueError(f"starts must be an integer >= 1, got {starts!r}.")
-    _check_absurd_outputs(data)
+    check_absurd_outputs(data)
     options = dict(free=free, shared=shared, priors=priors, solver=solver, starts=starts, start_spread=start_spread,
                    seed=seed, rtol=rtol, atol=atol, max_steps=max_steps,
                    identifiability_threshold=identifiability_threshold, hold=hold, tier=tier,
@@ -797,12 +496,12 @@ def _identify(model, data, *, free, shared, priors, solver, starts, start_spread
     problem_all_s, zeros_s = spread.pad(problem_all, jnp.zeros((n, n_dev)))
     with _nonfinite_explained("at the start"):
         at_start = spread.unpad(_evaluate(problem_all_s, zeros_s, jnp.zeros(n_lot), spread.chunk))
-    _check_signs(data, {s: np.asarray(v) for s, v in at_start.predictions.items()},
+    check_signs(data, {s: np.asarray(v) for s, v in at_start.predictions.items()},
                  model.device.name)
     # Identifiability at the start: hold what the data cannot see.
     candidates = [i for i, nm in enumerate(names_dev)
                   if not any(nm == h or nm.startswith(h + "[") or nm.startswith(h + ".") for h in hold)]
-    keep, held_reports = _hold_unidentifiable(np.asarray(at_start.jac)[:, :, candidates],
+    keep, held_reports = hold_unidentifiable(np.asarray(at_start.jac)[:, :, candidates],
                                               [names_dev[i] for i in candidates], identifiability_threshold)
     free_index = [candidates[k] for k in keep]
     problem = problem_for(free_index)
@@ -901,7 +600,7 @@ def _identify(model, data, *, free, shared, priors, solver, starts, start_spread
             if better.any():
                 u_full, final = at(u_free, u_lot)
     if restart_runoffs and not evaluate_only and not n_lot:
-        weak = _weak_directions(np.asarray(final.jac)[:, :, free_index], identifiability_threshold)
+        weak = weak_directions(np.asarray(final.jac)[:, :, free_index], identifiability_threshold)
         runoff = [sorted({free_index[k] for members, _ in w for k in members}) for w in weak]
         if any(runoff):
             stage = "during the restart of a run-off fit"
@@ -981,7 +680,7 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
     ok = np.asarray(code) == result_code(RESULTS.successful)
     messages = [_message(bool(o), "" if o else result_message(c).split(".")[0], int(fl))
                 for o, c, fl in zip(ok, np.asarray(code), failed)]
-    weak = _weak_at_solution(jac, [names_dev[i] for i in f], threshold)
+    weak = weak_at_solution(jac, [names_dev[i] for i in f], threshold)
     messages = tuple(m if not w else f"{m}; but {w}" for m, w in zip(messages, weak))
     messages = tuple(m if not note else f"{m} ({note})" for m, note in zip(messages, notes))
     free_mask = tuple(bool(i in set(f.tolist())) for i in range(n_dev))
@@ -989,7 +688,7 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
     # What the data determine: the scale factor's gradient over every candidate parameter (free, or held as
     # unidentifiable) against the weighted Jacobian's row space.
     cand = np.asarray(candidates, dtype=int)
-    determined, weak_part, _ = _sf_determinacy(
+    determined, weak_part, _ = sf_determinacy(
         np.asarray(final.jac)[:, :, cand], jac_lot if n_lot else None, np.asarray(final.sf_grad)[:, cand],
         g_lot if n_lot else None, sf_stderr, threshold)
     if noise is None:
@@ -1000,7 +699,7 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
         noise_dof, noise_notes, noise_ok, p_value, p_lot = noise
     chi2_red = chi2 / np.maximum(dof, 1)
     rejected = np.nan_to_num(p_value, nan=1.0) < reject_alpha
-    implausible = _implausible(entries, problem_all.start, values, lot_values[0], free_mask, n)
+    implausible = implausible_values(entries, problem_all.start, values, lot_values[0], free_mask, n)
     status, warnings = [], []
     for d in range(n):
         notes_d = []
@@ -1009,7 +708,7 @@ def _finish(problem_all, data, entries, names_dev, names_lot, free_index, u_full
         elif not determined[d] or not noise_ok[d]:
             status.append("not determined")
             if not determined[d]:
-                notes_d.append(_undetermined_reason(data, d, [names_dev[i] for i in cand] + list(names_lot),
+                notes_d.append(undetermined_reason(data, d, [names_dev[i] for i in cand] + list(names_lot),
                                                     weak_part[d], f.size, threshold))
             else:  # the reason first: the noise (hence every uncertainty) is what the data leave open
                 notes_d.append(noise_notes[d][-1])
