@@ -75,9 +75,9 @@ def test_fit_converges_with_chi2_near_one(fit):
 @pytest.mark.slow
 def test_scale_factor_recovered_within_three_sigma(fit, truth):
     """The fitted zero-rate SF against each true device's, both at the fit's reporting temperature."""
-    from gyrojax._identify.identify import _sf_temperature
+    from gyrojax._identify.problem import sf_temperature
 
-    temps = _sf_temperature(fit.data)
+    temps = sf_temperature(fit.data)
     true_sfs = np.asarray(eqx.filter_jit(eqx.filter_vmap(lambda g, t: _slope(rate_table_points, g, t)))(truth, temps))
     for i in range(3):
         true_sf = float(true_sfs[i])
@@ -352,7 +352,7 @@ def test_chunks_map_like_vmap_with_padding_and_empty_leaves():
     """identify(lot_chunk=N)'s machinery: the lot padded to a multiple of N (copies of the last device, then
     dropped), jax.lax.map over vmapped chunks, equal to one vmap, with an empty (device, 0) leaf as the
     priors are. (Every identify of more than 16 devices runs chunked on a CPU: the Monte Carlo test's 100.)"""
-    from gyrojax._identify.identify import _LotSpread, _map_devices
+    from gyrojax._identify.lot import LotSpread, map_devices
 
     n = 5
     tree = {"a": jnp.arange(n * 3.0).reshape(n, 3), "empty": jnp.zeros((n, 0)), "b": jnp.linspace(1.0, 2.0, n)}
@@ -362,14 +362,14 @@ def test_chunks_map_like_vmap_with_padding_and_empty_leaves():
 
     y = jnp.linspace(-1.0, 1.0, n)
     want = jax.vmap(f)(tree, y)
-    spread = _LotSpread(n, 1, 2)
+    spread = LotSpread(n, 1, 2)
     assert spread.chunk == 2 and spread.multiple == 2
     padded_tree, padded_y = spread.pad(tree, y)
     assert padded_y.shape == (6,)
-    got = spread.unpad(_map_devices(f, spread.chunk, padded_tree, padded_y))
+    got = spread.unpad(map_devices(f, spread.chunk, padded_tree, padded_y))
     np.testing.assert_array_equal(np.asarray(got["s"]), np.asarray(want["s"]))
     assert got["e"].shape == (n, 0)
-    assert _LotSpread(n, 1, 16).chunk is None  # a chunk as large as the lot: one vmap
+    assert LotSpread(n, 1, 16).chunk is None  # a chunk as large as the lot: one vmap
 
 
 @pytest.mark.slow
@@ -401,7 +401,7 @@ def test_directions_the_data_no_longer_fix_at_the_solution_are_named():
 def test_a_nonfinite_model_inside_the_compiled_fit_is_explained():
     """An error raised inside the compiled model (as the implicit derivative's linear solve does on NaN) comes
     out of identify as a RuntimeError that says where and what to try, with the original as its cause."""
-    from gyrojax._identify.identify import _nonfinite_explained
+    from gyrojax._identify.problem import nonfinite_explained
 
     @eqx.filter_jit
     def broken(x):
@@ -409,7 +409,7 @@ def test_a_nonfinite_model_inside_the_compiled_fit_is_explained():
 
     with pytest.raises(RuntimeError, match=r"not finite at the start \(the error inside the compiled model: 'A linear "
                        r"solver received non-finite \(NaN or inf\) input'\).*Try: starting closer") as info:
-        with _nonfinite_explained("at the start"):
+        with nonfinite_explained("at the start"):
             broken(jnp.asarray(jnp.nan))
     assert isinstance(info.value.__cause__, eqx.EquinoxRuntimeError)
 

@@ -16,6 +16,7 @@ returns a `Fit`. One concept per file:
 - `shortcuts.py`: the strings accepted for strategy objects (`solver="levenberg-marquardt"`), in one place.
 """
 
+from .covariance import chi2_p_value as chi2_p_value
 from .fit import (
     EXIT_CODES as EXIT_CODES,
     EXIT_PRECEDENCE as EXIT_PRECEDENCE,
@@ -24,4 +25,4 @@ from .fit import (
     Fit as Fit,
     Unidentifiable as Unidentifiable,
 )
-from .identify import chi2_p_value as chi2_p_value, identify as identify
+from .identify import identify as identify

@@ -82,8 +82,8 @@ class Fit(eqx.Module):
       fitted ones elsewhere.
     - `noise_dof`: (device,) effective degrees of freedom of the estimated noise (inf where the data gave
       `output_sigma`); `p_value` (device,), `p_value_total`: of the chi2 per device and for the lot (the chi2
-      test; where the noise was estimated, against the chi2's null distribution with that estimate,
-      `noise_scales`); NaN without degrees of freedom.
+      test; where the noise was estimated, against the chi2's null distribution with that estimate);
+      NaN without degrees of freedom.
     """
 
     model: Model
