@@ -380,6 +380,30 @@ def test_lot_chunk_is_checked(table):
         gj.identify("paper-qmg", table, lot_chunk=2, shared=("dac_gain_error",))
 
 
+@pytest.mark.slow
+def test_lot_strategies_are_checked_and_the_shortcuts_name_them(table):
+    """A lot strategy object takes shard and chunk itself, and must match the fit (joint where parameters are
+    shared); the strings are shortcuts for the same objects."""
+    with pytest.raises(ValueError, match="shard and lot_chunk go into the lot strategy"):
+        gj.identify("paper-qmg", table, lot_solve=gj.VmapSolve(), lot_chunk=2)
+    with pytest.raises(ValueError, match="shared parameters need JointSolve"):
+        gj.identify("paper-qmg", table, lot_solve=gj.VmapSolve(chunk=2), shared=("dac_gain_error",))
+    with pytest.raises(ValueError, match="a joint solve, which needs shared parameters"):
+        gj.identify("paper-qmg", table, lot_solve=gj.JointSolve())
+    with pytest.raises(ValueError, match="lot_solve must be a lot strategy"):
+        gj.identify("paper-qmg", table, lot_solve="sharded")
+    from gyrojax._identify.shortcuts import lot_solve_from
+
+    assert lot_solve_from("vmap", None, "auto", joint=False) == gj.VmapSolve()
+    assert lot_solve_from("vmap", True, 4, joint=False) == gj.VmapSolve(chunk=4, shard=True)
+    assert lot_solve_from("loop", None, "auto", joint=False) == gj.LoopSolve()
+    assert lot_solve_from("vmap", None, "auto", joint=True) == gj.JointSolve()
+    assert lot_solve_from("loop", None, "auto", joint=True) == gj.JointSolve(shard=False)
+    at_start = gj.identify("paper-qmg", table, evaluate_only=True, lot_solve="loop", progress=False)
+    same = gj.identify("paper-qmg", table, evaluate_only=True, lot_solve=gj.LoopSolve(), progress=False)
+    np.testing.assert_array_equal(np.asarray(same.residual_vector), np.asarray(at_start.residual_vector))
+
+
 def test_directions_the_data_no_longer_fix_at_the_solution_are_named():
     """A parameter that ran off to a flat region (its weighted-Jacobian column ~0 at the solution, as an open-loop
     Q_y did to 1e243 with the solver reporting success) is named in the device's message; a well-fixed device

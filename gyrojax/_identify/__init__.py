@@ -26,3 +26,9 @@ from .fit import (
     Unidentifiable as Unidentifiable,
 )
 from .identify import identify as identify
+from .lot import (
+    AbstractLotSolve as AbstractLotSolve,
+    JointSolve as JointSolve,
+    LoopSolve as LoopSolve,
+    VmapSolve as VmapSolve,
+)

@@ -35,7 +35,7 @@ from .._solution import RESULTS, result_code
 from .assemble import assemble_fit
 from .fit import Fit
 from .identifiability import hold_unidentifiable
-from .lot import Lot
+from .lot import AbstractLotSolve, Lot
 from .noise import estimated_noise, reweighted
 from .plausibility import check_absurd_outputs, check_signs
 from .problem import make_problem, with_free
@@ -46,7 +46,7 @@ from .shortcuts import check_lot_options, lot_solve_from, solver_from
 def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="levenberg-marquardt",
              starts: int = 1, start_spread: float = 0.05, seed: int = 0, rtol: float = 1e-8, atol: float = 1e-8,
              max_steps: int = 200, identifiability_threshold: float = 1.0, hold=(), tier=Steady(),
-             evaluate_only: bool = False, lot_solve: str = "vmap", shard: bool | None = None,
+             evaluate_only: bool = False, lot_solve: str | AbstractLotSolve = "vmap", shard: bool | None = None,
              lot_chunk: int | None | str = "auto", restart_runoffs: bool = True,
              retry_solver: str | None = "gauss-newton", decrement_tol: float = 1e-6, reject_alpha: float = 0.01,
              estimate_noise: bool | None = None, progress=True) -> Fit:
@@ -70,8 +70,11 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
       internal units: relative change for positive parameters, typical size for effects) are held.
     - `hold`: names held at their start values regardless.
     - `tier`: the settling tier for rate-table and static-VCF points (`Steady()`).
-    - `lot_solve`: `"vmap"` (default): all devices' independent fits in one vmapped, compiled solve;
-      `"loop"`: one device after another through one compiled single-device solve (less memory).
+    - `lot_solve`: how the lot's devices are solved: a strategy, `gyrojax.VmapSolve(chunk=..., shard=...)`
+      (all devices' independent fits in one vmapped, compiled solve), `gyrojax.LoopSolve()` (one device
+      after another through one compiled single-device solve: less memory) or `gyrojax.JointSolve(shard=...)`
+      (one fit of the whole lot; the only one for `shared` parameters); or a shortcut with `shard` and
+      `lot_chunk` below: `"vmap"` (default; `JointSolve` where parameters are shared), `"loop"`.
     - `shard`: spread the device axis over every JAX device (`jax.sharding`, a 1-D mesh named `"lot"`; the
       lot is padded to a multiple of the device count). `None` (default): when more than one JAX device
       exists. Applies to the vmapped solve and the Jacobian passes; a joint (shared-parameter) fit is
