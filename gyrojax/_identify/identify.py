@@ -136,12 +136,17 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     if not isinstance(starts, int) or starts < 1:
         raise ValueError(f"starts must be an integer >= 1, got {starts!r}.")
     check_absurd_outputs(data)
-    options = dict(free=free, shared=shared, priors=priors, solver=solver, starts=starts, start_spread=start_spread,
-                   seed=seed, rtol=rtol, atol=atol, max_steps=max_steps,
-                   identifiability_threshold=identifiability_threshold, hold=hold, tier=tier,
-                   evaluate_only=evaluate_only, lot_solve=lot_solve, shard=shard, lot_chunk=lot_chunk,
-                   restart_runoffs=restart_runoffs, retry_solver=retry_solver, decrement_tol=decrement_tol,
-                   reject_alpha=reject_alpha)
+    # The strategies, composed once for every fit below: the solver, the first solve, the recovery policies.
+    recoveries = (DecrementCertificate(decrement_tol),)
+    if not evaluate_only and retry_solver is not None and isinstance(solver, str) and solver != retry_solver:
+        recoveries += (RetryWithSolver(retry_solver, rtol, atol),)
+    if not evaluate_only and restart_runoffs:
+        recoveries += (RestartRunoffs(),)
+    options = dict(free=free, shared=shared, priors=priors, hold=hold, tier=tier,
+                   solver=solver_from(solver, rtol, atol), solver_name=solver,
+                   lot_options=(lot_solve, shard, lot_chunk),
+                   first=None if evaluate_only else MultiStart(starts, start_spread, seed), recoveries=recoveries,
+                   max_steps=max_steps, threshold=identifiability_threshold, reject_alpha=reject_alpha)
     say = as_progress(progress, "gyrojax.identify")
     say(f"{'evaluating' if evaluate_only else 'fitting'} {len(data.devices)} device(s), {data.num_points()} points "
         f"({', '.join(data.sweeps)})")
@@ -162,39 +167,34 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     return fit
 
 
-def _fit_once(model, data, *, free, shared, priors, solver, starts, start_spread, seed, rtol, atol, max_steps,
-              identifiability_threshold, hold, tier, evaluate_only, lot_solve, shard, lot_chunk, restart_runoffs,
-              retry_solver, decrement_tol, reject_alpha, noise) -> Fit:
-    """One fit of `identify` (arguments checked there) with the data's sigmas as they are; `noise`: the
-    estimated noise's `(degrees of freedom, warnings, determined, p-values)` per device and the lot's p-value
-    (`estimated_noise`), or None for given sigmas."""
+def _fit_once(model, data, *, free, shared, priors, hold, tier, solver, solver_name, lot_options, first, recoveries,
+              max_steps, threshold, reject_alpha, noise) -> Fit:
+    """One fit of `identify` (arguments checked there) with the data's sigmas as they are: the problem, the lot
+    strategy, what to hold, the first solve (`first`; None: evaluate at the start) and the `recoveries` in
+    turn. `noise`: the estimated noise's `(degrees of freedom, warnings, determined, p-values)` per device and
+    the lot's p-value (`estimated_noise`), or None for given sigmas."""
     n = len(data.devices)
     problem_all, layout = make_problem(model, data, free=free, shared=shared, hold=hold, priors=priors, tier=tier)
     n_dev, n_lot = len(layout.names_dev), len(layout.names_lot)
-    lot = Lot(lot_solve_from(lot_solve, shard, lot_chunk, joint=bool(n_lot)), n)
+    lot = Lot(lot_solve_from(*lot_options, joint=bool(n_lot)), n)
     # One compiled evaluation, at the start and at the solution: the Jacobian over every per-device entry.
     at_start = lot.evaluate(problem_all, np.zeros((n, n_dev)), np.zeros(n_lot), "at the start")
     check_signs(data, {s: np.asarray(v) for s, v in at_start.predictions.items()}, problem_all.model.device.name)
     # Identifiability at the start: hold what the data cannot see.
     candidates = list(layout.candidates)
     keep, held_reports = hold_unidentifiable(np.asarray(at_start.jac)[:, :, candidates],
-                                             [layout.names_dev[i] for i in candidates], identifiability_threshold)
+                                             [layout.names_dev[i] for i in candidates], threshold)
     free_index = tuple(candidates[k] for k in keep)
-    solving = Solving(with_free(problem_all, free_index), problem_all, lot, solver_from(solver, rtol, atol), solver,
-                      max_steps, n_lot, free_index, layout.names_dev, identifiability_threshold)
-    if evaluate_only:
+    solving = Solving(with_free(problem_all, free_index), problem_all, lot, solver, solver_name, max_steps, n_lot,
+                      free_index, layout.names_dev, threshold)
+    if first is None:
         ok = np.full(n, result_code(RESULTS.successful))
         solution = Solution(np.zeros((n, n_dev)), np.zeros(n_lot), ok, np.zeros(n, dtype=int), None,
                             np.zeros((n, n_dev)), at_start, ("",) * n)
     else:
-        solution = MultiStart(starts, start_spread, seed)(solving)
-    recoveries = [DecrementCertificate(decrement_tol)]
-    if retry_solver is not None and not evaluate_only and isinstance(solver, str) and solver != retry_solver:
-        recoveries.append(RetryWithSolver(retry_solver, rtol, atol))
-    if restart_runoffs and not evaluate_only and not n_lot:
-        recoveries.append(RestartRunoffs())
+        solution = first(solving)
     for recover in recoveries:
         solution = recover(solving, solution)
     return assemble_fit(problem_all, data, layout.entries, layout.names_dev, layout.names_lot, free_index,
                         solution.u_full, np.asarray(solution.u_lot), solution.code, solution.steps, solution.final,
-                        held_reports, identifiability_threshold, solution.notes, candidates, reject_alpha, noise)
+                        held_reports, threshold, solution.notes, candidates, reject_alpha, noise)

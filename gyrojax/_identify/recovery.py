@@ -183,6 +183,8 @@ class RestartRunoffs(AbstractRecovery):
     only."""
 
     def __call__(self, solving, solution):
+        if solving.lot.joint:
+            return solution
         free_index = list(solving.free_index)
         weak = weak_directions(np.asarray(solution.final.jac)[:, :, free_index], solving.threshold)
         runoff = [sorted({free_index[k] for members, _ in w for k in members}) for w in weak]
