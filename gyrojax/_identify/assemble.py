@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._fitdata import FitData
 from .._parameters import apply_u
 from .._residuals import block_residuals, num_biases, num_points
 from .._solution import RESULTS, result_code, result_message
@@ -16,6 +17,8 @@ from .covariance import chi2_p_value, covariance, joint_jacobian
 from .fit import Fit, p_text
 from .identifiability import sf_determinacy, undetermined_reason, weak_at_solution
 from .plausibility import implausible_values
+from .problem import Layout, Problem
+from .recovery import Solution
 
 
 def _message(converged, result_text, unsettled):
@@ -28,8 +31,15 @@ def _message(converged, result_text, unsettled):
             "(solver='gauss-newton' or 'bfgs'), holding a parameter (free=...), or priors on the design values")
 
 
-def assemble_fit(problem_all, data, entries, names_dev, names_lot, free_index, u_full, u_lot, code, steps, final,
-            held_reports, threshold, notes, candidates, reject_alpha, noise):
+def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index, solution: Solution, held_reports,
+                 threshold: float, reject_alpha: float, noise) -> Fit:
+    """The `Fit` of `solution`: covariance and physical values with standard errors (free parameters
+    `free_index`, the others held: `held_reports` for those the data could not fix at `threshold`), each
+    device's status and warnings (the chi2 test at `reject_alpha`; `noise` as for `identify`'s second fit of
+    data without `output_sigma`, else None)."""
+    entries, names_dev, names_lot = layout.entries, layout.names_dev, layout.names_lot
+    u_full, u_lot, code, steps = solution.u_full, np.asarray(solution.u_lot), solution.code, solution.steps
+    final, notes, candidates = solution.final, solution.notes, list(layout.candidates)
     n, n_dev, n_lot = len(data.devices), len(names_dev), len(names_lot)
     f = np.asarray(free_index, dtype=int)
     jac = np.asarray(final.jac)[:, :, f]  # (device, residual, free)

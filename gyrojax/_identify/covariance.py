@@ -29,7 +29,6 @@ def chi2_p_value(chi2, dof, noise_dof):
     return out
 
 
-
 def pooled_dof(noise_dof, weight):
     """Effective degrees of freedom of a sum of chi2 parts, each over its own noise estimate with `noise_dof`,
     weighted by its share `weight` of the degrees of freedom (Satterthwaite: var(sum w_i s_i^2 / s^2) =
@@ -41,17 +40,12 @@ def pooled_dof(noise_dof, weight):
     return np.inf if inv == 0.0 else (1.0 / inv if math.isfinite(inv) else 0.0)
 
 
-
-
-
-
 def mc_p_value(chi2, draws, dof, noise_dof):
     """p-value of `chi2` against its Monte Carlo null `draws`: (k + 1) / (N + 1) with k draws at or above it,
     or the F test's where that is smaller (it is conservative, so an upper bound: it resolves the tail beyond
     the draws)."""
     mc = (np.sum(draws >= chi2) + 1.0) / (draws.size + 1.0)
     return float(min(mc, chi2_p_value(np.asarray(chi2), np.asarray(dof), np.asarray(noise_dof))[()]))
-
 
 
 def gauss_newton_decrement(jac, jac_lot, residuals, *, joint):
@@ -69,7 +63,6 @@ def gauss_newton_decrement(jac, jac_lot, residuals, *, joint):
     return np.where(finite, dec, np.inf)
 
 
-
 def joint_jacobian(jac, jac_lot):
     """The lot's Jacobian of a joint fit: per-device blocks (device, residual, free) on the diagonal, the
     shared columns (device, residual, n_lot) beside them."""
@@ -79,7 +72,6 @@ def joint_jacobian(jac, jac_lot):
         full[d * rows:(d + 1) * rows, d * p:(d + 1) * p] = jac[d]
         full[d * rows:(d + 1) * rows, n * p:] = jac_lot[d]
     return full
-
 
 
 def covariance(jac):
@@ -94,7 +86,6 @@ def covariance(jac):
     inv2 = np.where(keep, 1.0 / np.where(sv > 0, sv, 1.0) ** 2, 0.0)
     cov = np.einsum("...ki,...k,...kj->...ij", vt, inv2, vt)
     return cov * d[..., :, None] * d[..., None, :]
-
 
 
 def scaled_svd(jac):

@@ -19,7 +19,6 @@ or its uncertainty: it is NaN); `"not converged"` (the solve failed). A fit read
 these checks has `"unknown"`."""
 
 
-
 EXIT_CODES = {"ok": 0, "not converged": 1, "model rejected": 3, "not determined": 4, "unknown": 5}
 """Exit code of a command for a fit whose devices all have this status (see `Fit.exit_status`): 0 every device
 `"ok"`; 1 a computation failed (the solve did not converge, as for any failed computation); 3 fitted, but the
@@ -27,16 +26,13 @@ model does not describe the data; 4 the data do not determine the scale factor; 
 checks. (2 stays a usage or data error.)"""
 
 
-
 EXIT_PRECEDENCE = ("not converged", "not determined", "unknown", "model rejected", "ok")
 """When devices differ, the first of these statuses present gives the exit code: a failed solve over a number
 that is missing, over one that is unchecked, over one that is there but with a model the data reject."""
 
 
-
 HELD_LABEL = "held at the design value, not determined by the data"
 """How summaries and reports label a parameter the fit did not move (held as unidentifiable, or by `hold`)."""
-
 
 
 class Unidentifiable(eqx.Module):
@@ -46,7 +42,6 @@ class Unidentifiable(eqx.Module):
     parameters: tuple[str, ...]
     held: str
     singular_value: float
-
 
 
 class Fit(eqx.Module):
@@ -221,7 +216,6 @@ class Fit(eqx.Module):
         for u in self.unidentifiable:
             lines.append(f"  unidentifiable: {' x '.join(u.parameters)} (held {u.held}, s = {u.singular_value:.2g})")
         return "\n".join(lines)
-
 
 
 def p_text(p) -> str:

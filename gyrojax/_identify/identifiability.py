@@ -13,13 +13,11 @@ from .fit import Unidentifiable
 _SWEEP_WORDS = {"rate_table": "rate-table", "vcf_static": "static-VCF", "vcf_dynamic": "dynamic-VCF", "dac": "DAC"}
 
 
-
 # A held direction moves the scale factor by g.v per natural unit of the parameters (one internal unit: an
 # e-fold of a positive parameter, `scale` of a signed one). Below a tenth of the SF's standard error, a design
 # value off by that much would add under 1 % to the SF's variance: immaterial. Above it the SF rests on the
 # design value.
 _SF_HELD_TOL = 0.1
-
 
 
 def sf_determinacy(jac, jac_lot, grad, grad_lot, sf_stderr, threshold):
@@ -64,7 +62,6 @@ def sf_determinacy(jac, jac_lot, grad, grad_lot, sf_stderr, threshold):
     return determined, weak_part, weak_s
 
 
-
 def _count_text(data: FitData, d: int) -> tuple[str, int, int]:
     """('22 rate-table points and 4 DAC points', points, run biases) of device `d`."""
     parts, points, biases = [], 0, 0
@@ -78,7 +75,6 @@ def _count_text(data: FitData, d: int) -> tuple[str, int, int]:
                 biases += int(np.sum(np.any(m, axis=-1)))
     text = " and ".join([", ".join(parts[:-1]), parts[-1]] if len(parts) > 1 else parts) or "no points"
     return text, points, biases
-
 
 
 def undetermined_reason(data, d, names, weak_part, n_free, threshold) -> str:
@@ -103,7 +99,6 @@ def undetermined_reason(data, d, names, weak_part, n_free, threshold) -> str:
     return f"the data cannot fix {what}: {why}; the printed design value would not be a measurement"
 
 
-
 def weak_directions(jac, threshold):
     """Per device, the free directions the data no longer fix at the solution: (member indices into the free
     list, singular value) for each singular value of the weighted Jacobian (data and prior rows) below
@@ -117,7 +112,6 @@ def weak_directions(jac, threshold):
         s, vt = _singular(j)
         out.append([(tuple(int(k) for k in _members(vt[i])), float(s[i])) for i in np.nonzero(s < threshold)[0]])
     return out
-
 
 
 def weak_at_solution(jac, names_free, threshold):
@@ -135,7 +129,6 @@ def weak_at_solution(jac, names_free, threshold):
     return out
 
 
-
 def _singular(j):
     """Singular values and right singular vectors (rows of `vt`) of `j`, one per column: fewer rows than
     columns are padded with zero rows, so that the null directions come out with s = 0."""
@@ -145,12 +138,10 @@ def _singular(j):
     return s, vt
 
 
-
 def _members(direction):
     """Indices of the parameters taking part in a weak direction: components over 0.3 of its largest."""
     v = np.abs(direction)
     return np.nonzero(v > 0.3 * v.max())[0]
-
 
 
 def hold_unidentifiable(jac, names_free, threshold):

@@ -195,6 +195,4 @@ def _fit_once(model, data, *, free, shared, priors, hold, tier, solver, solver_n
         solution = first(solving)
     for recover in recoveries:
         solution = recover(solving, solution)
-    return assemble_fit(problem_all, data, layout.entries, layout.names_dev, layout.names_lot, free_index,
-                        solution.u_full, np.asarray(solution.u_lot), solution.code, solution.steps, solution.final,
-                        held_reports, threshold, solution.notes, candidates, reject_alpha, noise)
+    return assemble_fit(problem_all, data, layout, free_index, solution, held_reports, threshold, reject_alpha, noise)

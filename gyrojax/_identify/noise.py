@@ -17,13 +17,11 @@ from .fit import Fit
 _SAME_INPUT_RTOL = 1e-9
 
 
-
 # Within a run, each contrast spans this degree + 2 neighbouring inputs and cancels polynomials of this degree.
 # On seed 000's 22-point rate table (log-spaced, +/-0.1 to 200 deg/s) the estimate then takes up 1/299 of a
 # cubic misfit's share of the residual (1/1190 of a tanh, 1/76 of x^5), against 1/5 with degree 1 and 1/1.3
 # with plain neighbour differences; its effective degrees of freedom fall only from 10.7 (degree 1) to 8.8.
 _LOCAL_DEGREE = 2
-
 
 
 def contrasts(x, mask):
@@ -69,7 +67,6 @@ def contrasts(x, mask):
             f"{_LOCAL_DEGREE}")
 
 
-
 def _solve_kappa(a, q, has):
     """kappa from the moment equations a kappa = q over the sweeps `has` (q may carry draws on a second axis):
     the joint solution, or where it is not positive, each sweep on its own (ignoring what leaks in from the
@@ -87,7 +84,6 @@ def _solve_kappa(a, q, has):
     bad = ~np.all(np.isfinite(kappa[has]) & (kappa[has] > 0), axis=0)
     kappa[has] = np.where(bad, alone, kappa[has])
     return kappa
-
 
 
 def noise_scales(residual, jac, blocks, *, draws=0, rng=None):
@@ -176,7 +172,6 @@ def noise_scales(residual, jac, blocks, *, draws=0, rng=None):
     return kappa, nu, methods, null
 
 
-
 # Draws of the chi2's null distribution per device: the rejection at reject_alpha = 0.01 is then decided to
 # +/-0.0016 (the binomial error of a p-value near 0.01).
 _NULL_DRAWS = 4000
@@ -234,7 +229,6 @@ def estimated_noise(fit: Fit, seed: int):
     p_lot = (mc_p_value(sum(c for c, _ in nulls), sum(dr for _, dr in nulls), int(dof[tested].sum()),
                          pooled_dof(noise_dof[tested], dof[tested])) if nulls else float("nan"))
     return kappa, (noise_dof, notes, determined, p_value, p_lot)
-
 
 
 def reweighted(data: FitData, kappa) -> FitData:

@@ -15,7 +15,6 @@ from .._parameters import PARAMETERS
 ABSURD_RATIO = 1e8
 
 
-
 def check_absurd_outputs(data: FitData):
     """Raise a ValueError naming each device, run and input whose output is absurdly far from the rest of its
     run (`ABSURD_RATIO`): one such point decides every fit it enters (its chi2 alone can overflow), so no fit
@@ -44,15 +43,12 @@ def check_absurd_outputs(data: FitData):
                          "these rows; no fit is made with them.")
 
 
-
 # The data's slope must have the model's sign at 5 standard errors before it counts as flipped: a right table
 # reads the wrong sign that clearly once in ~3.5 million runs.
 _FLIP_SIGMAS = 5.0
 
 
-
 _SIGNED_SWEEPS = ("rate_table", "vcf_static", "dac")
-
 
 
 def _slope(x, y, w):
@@ -67,7 +63,6 @@ def _slope(x, y, w):
     resid = y - np.sum(w * y) / sw - b * (x - xm)
     scatter = np.sqrt(np.sum(w * resid**2) / (x.size - 2) / sxx) if x.size > 2 else np.nan
     return b, np.sqrt(1.0 / sxx), scatter
-
 
 
 def check_signs(data: FitData, predictions, model_name: str):
@@ -103,7 +98,6 @@ def check_signs(data: FitData, predictions, model_name: str):
                          "of this device's polarity. No fit is made: no positive gain of the model can fit them.")
 
 
-
 def _power_hint(ratio: float) -> str:
     """What a ratio of a fitted value to its design value near a power of 10 or of 2 suggests."""
     # Within 5 %: a unit or word-width error is exact up to the device's own deviation from design, a few
@@ -120,7 +114,6 @@ def _power_hint(ratio: float) -> str:
     return (f"the ratio is within 5 % of {' = '.join(hints)}: a unit or scaling error in the data is likely "
             "(outputs or inputs in other units, or another word width, than the preset's); else the preset does "
             "not describe this device")
-
 
 
 def implausible_values(entries, start, values, lot_values, free, n):
