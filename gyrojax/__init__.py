@@ -93,8 +93,15 @@ from ._diagnose import (  # noqa: E402
 )
 from ._fitio import load_fit as load_fit, save_fit as save_fit  # noqa: E402
 from ._fitreport import fit_report as fit_report  # noqa: E402
-from ._identify import Fit as Fit, Unidentifiable as Unidentifiable, identify as identify  # noqa: E402
-from ._identify import AbstractLotSolve as AbstractLotSolve, JointSolve as JointSolve, LoopSolve as LoopSolve, VmapSolve as VmapSolve  # noqa: E402,E501
+from ._identify import (  # noqa: E402
+    AbstractLotSolve as AbstractLotSolve,
+    Fit as Fit,
+    JointSolve as JointSolve,
+    LoopSolve as LoopSolve,
+    Unidentifiable as Unidentifiable,
+    VmapSolve as VmapSolve,
+    identify as identify,
+)
 from ._lot import ProcessSpread as ProcessSpread, make_lot as make_lot  # noqa: E402
 from ._metrics import (  # noqa: E402
     FULL_SCALE_CONVENTIONS as FULL_SCALE_CONVENTIONS,
