@@ -28,12 +28,12 @@ class Solving(eqx.Module):
     problem_all: Problem
     lot: Lot
     solver: eqx.Module  # an optimistix least-squares solver
-    solver_name: object = eqx.field(static=True)  # as given to identify: a name of SOLVERS, or the solver
+    solver_name: object  # as given to identify: a name of SOLVERS, or the solver
     max_steps: int = eqx.field(static=True)
     n_lot: int = eqx.field(static=True)  # shared entries (a joint fit)
     free_index: tuple[int, ...] = eqx.field(static=True)
     names_dev: tuple[str, ...] = eqx.field(static=True)
-    threshold: float = eqx.field(static=True)
+    threshold: float
 
     def at(self, u_free, u_lot) -> tuple[np.ndarray, Evaluation]:
         """The full internal vector (held entries at 0) of `u_free` and the evaluation there."""
@@ -72,7 +72,7 @@ class MultiStart(eqx.Module):
     units (drawn with `seed`); the lowest chi2 wins, per device (for a joint fit: the lot's sum)."""
 
     starts: int = eqx.field(static=True)
-    spread: float = eqx.field(static=True)
+    spread: float
     seed: int = eqx.field(static=True)
 
     def __call__(self, solving: Solving) -> Solution:
@@ -120,7 +120,7 @@ class DecrementCertificate(AbstractRecovery):
     stopped would lower chi2 by less than `tol` (the point is then within sqrt(tol) standard errors of the
     minimum); the solver's own test can keep failing on the round-off of the steady-state solves."""
 
-    tol: float = eqx.field(static=True)
+    tol: float
 
     def __call__(self, solving, solution):
         final, code = solution.final, solution.code
@@ -144,8 +144,8 @@ class RetryWithSolver(AbstractRecovery):
     joint fit is retried as a whole: all devices or none)."""
 
     solver: str = eqx.field(static=True)
-    rtol: float = eqx.field(static=True)
-    atol: float = eqx.field(static=True)
+    rtol: float
+    atol: float
 
     def __call__(self, solving, solution):
         # Levenberg-Marquardt can crawl where a full Gauss-Newton step would not (measured: a leaky-rebalance
