@@ -470,3 +470,28 @@ def test_open_loop_dynamic_sweep_fits_where_the_first_solve_runs_off():
     split, t_split = (wy**2 - wx**2) / (2 * wx), (t_wy**2 - t_wx**2) / (2 * t_wx)
     assert np.max(np.abs(split / t_split - 1)) < 1e-6, (split, t_split)
     assert np.max(np.abs((wy / qy) / (t_wy / t_qy) - 1)) < 2e-3, (wy / qy, t_wy / t_qy)
+
+
+def test_a_recovery_policy_is_a_small_object_on_the_solution_so_far():
+    """DecrementCertificate on a hand-made solution (no compile): the device stopped at max_steps whose
+    residuals a Gauss-Newton step cannot lower is certified, with the reason in its note; the one a step still
+    improves stays stopped."""
+    from gyrojax._identify.lot import Evaluation, Lot
+    from gyrojax._identify.recovery import DecrementCertificate, Solution, Solving
+    from gyrojax._solution import RESULTS, result_code
+
+    rng = np.random.default_rng(1)
+    jac, r = rng.normal(size=(2, 10, 3)), rng.normal(size=(2, 10))
+    r[0] -= jac[0] @ np.linalg.lstsq(jac[0], r[0], rcond=None)[0]  # at the minimum: r orthogonal to J
+    final = Evaluation(r, jac, np.zeros((2, 10, 0)), np.zeros(2), np.zeros((2, 3)), np.zeros((2, 0)), {}, {},
+                       np.zeros(2, dtype=int))
+    stopped = result_code(RESULTS.nonlinear_max_steps_reached)
+    solution = Solution(np.zeros((2, 3)), np.zeros(0), np.full(2, stopped), np.full(2, 200), np.sum(r**2, axis=-1),
+                        np.zeros((2, 3)), final, ("", ""))
+    solving = Solving(None, None, Lot(gj.VmapSolve(chunk=None, shard=False), 2), None, "levenberg-marquardt", 200,
+                      0, (0, 1, 2), ("k_vf", "angular_gain", "vcf_gain"), 1.0)
+    out = DecrementCertificate(1e-6)(solving, solution)
+    assert out.code[0] == result_code(RESULTS.successful) and out.code[1] == stopped
+    assert out.notes[0].startswith("stopped at max_steps=200, where a full Gauss-Newton step would lower chi2 by")
+    assert out.notes[1] == ""
+    assert DecrementCertificate(0.0)(solving, solution).code.tolist() == [stopped, stopped]

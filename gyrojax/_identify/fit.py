@@ -81,6 +81,8 @@ class Fit(eqx.Module):
       NaN without degrees of freedom.
     """
 
+    # Flat, not grouped into sub-objects: a fit file (`save_fit`) stores the leaves in this order, and users
+    # read the fields by these names.
     model: Model
     names: tuple[str, ...] = eqx.field(static=True)
     lot_names: tuple[str, ...] = eqx.field(static=True)
