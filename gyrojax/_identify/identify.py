@@ -157,10 +157,10 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
     else:
         # The noise from a first fit's residuals; then the points weighted by it and fitted again. The second
         # fit has the first's shapes: it reuses every compiled function.
-        first = _fit_once(model, data, noise=None, **options)
+        first_fit = _fit_once(model, data, noise=None, **options)
         say("estimating the noise from the first fit's residuals (the data give no output_sigma); fitting again "
             "with those weights")
-        kappa, noise = estimated_noise(first, seed)
+        kappa, noise = estimated_noise(first_fit, seed)
         fit = _fit_once(model, reweighted(data, kappa), noise=noise, **options)
     counts = {st: fit.status.count(st) for st in dict.fromkeys(fit.status)}
     say("done: " + ", ".join(f"{k} device(s) {st}" for st, k in counts.items()))
