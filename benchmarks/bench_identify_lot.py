@@ -50,7 +50,7 @@ def _problems(fit, preset):
     import jax.numpy as jnp
 
     from gyrojax import Steady
-    from gyrojax._identify import _Problem
+    from gyrojax._identify.problem import Problem
     from gyrojax._parameters import as_model, batched, read_values
 
     n = len(fit.devices)
@@ -60,7 +60,7 @@ def _problems(fit, preset):
     n_dev = len(fit.names)
     mask = jnp.broadcast_to(jnp.asarray(np.asarray(fit.free, dtype=float)), (n, n_dev))
     empty = jnp.zeros((n, 0))
-    return _Problem(model, start, data, mask, n_dev, fit.entries, Steady(), jnp.zeros((n, 0), dtype=int), empty,
+    return Problem(model, start, data, mask, n_dev, fit.entries, Steady(), jnp.zeros((n, 0), dtype=int), empty,
                     jnp.ones((n, 0)), sf_temperature=jnp.full((n,), 25.0))
 
 

@@ -92,7 +92,15 @@ from ._diagnose import (  # noqa: E402
 )
 from ._fitio import load_fit as load_fit, save_fit as save_fit  # noqa: E402
 from ._fitreport import fit_report as fit_report  # noqa: E402
-from ._identify import Fit as Fit, Unidentifiable as Unidentifiable, identify as identify  # noqa: E402
+from ._identify import (  # noqa: E402
+    AbstractLotSolve as AbstractLotSolve,
+    Fit as Fit,
+    JointSolve as JointSolve,
+    LoopSolve as LoopSolve,
+    Unidentifiable as Unidentifiable,
+    VmapSolve as VmapSolve,
+    identify as identify,
+)
 from ._lot import ProcessSpread as ProcessSpread, make_lot as make_lot  # noqa: E402
 from ._io import (  # noqa: E402
     atomic_directory as atomic_directory,

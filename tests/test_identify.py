@@ -75,9 +75,9 @@ def test_fit_converges_with_chi2_near_one(fit):
 @pytest.mark.slow
 def test_scale_factor_recovered_within_three_sigma(fit, truth):
     """The fitted zero-rate SF against each true device's, both at the fit's reporting temperature."""
-    from gyrojax._identify import _sf_temperature
+    from gyrojax._identify.problem import sf_temperature
 
-    temps = _sf_temperature(fit.data)
+    temps = sf_temperature(fit.data)
     true_sfs = np.asarray(eqx.filter_jit(eqx.filter_vmap(lambda g, t: _slope(rate_table_points, g, t)))(truth, temps))
     for i in range(3):
         true_sf = float(true_sfs[i])
@@ -352,7 +352,7 @@ def test_chunks_map_like_vmap_with_padding_and_empty_leaves():
     """identify(lot_chunk=N)'s machinery: the lot padded to a multiple of N (copies of the last device, then
     dropped), jax.lax.map over vmapped chunks, equal to one vmap, with an empty (device, 0) leaf as the
     priors are. (Every identify of more than 16 devices runs chunked on a CPU: the Monte Carlo test's 100.)"""
-    from gyrojax._identify import _LotSpread, _map_devices
+    from gyrojax._identify.lot import LotSpread, map_devices
 
     n = 5
     tree = {"a": jnp.arange(n * 3.0).reshape(n, 3), "empty": jnp.zeros((n, 0)), "b": jnp.linspace(1.0, 2.0, n)}
@@ -362,14 +362,14 @@ def test_chunks_map_like_vmap_with_padding_and_empty_leaves():
 
     y = jnp.linspace(-1.0, 1.0, n)
     want = jax.vmap(f)(tree, y)
-    spread = _LotSpread(n, 1, 2)
+    spread = LotSpread(n, 1, 2)
     assert spread.chunk == 2 and spread.multiple == 2
     padded_tree, padded_y = spread.pad(tree, y)
     assert padded_y.shape == (6,)
-    got = spread.unpad(_map_devices(f, spread.chunk, padded_tree, padded_y))
+    got = spread.unpad(map_devices(f, spread.chunk, padded_tree, padded_y))
     np.testing.assert_array_equal(np.asarray(got["s"]), np.asarray(want["s"]))
     assert got["e"].shape == (n, 0)
-    assert _LotSpread(n, 1, 16).chunk is None  # a chunk as large as the lot: one vmap
+    assert LotSpread(n, 1, 16).chunk is None  # a chunk as large as the lot: one vmap
 
 
 @pytest.mark.slow
@@ -380,11 +380,35 @@ def test_lot_chunk_is_checked(table):
         gj.identify("paper-qmg", table, lot_chunk=2, shared=("dac_gain_error",))
 
 
+@pytest.mark.slow
+def test_lot_strategies_are_checked_and_the_shortcuts_name_them(table):
+    """A lot strategy object takes shard and chunk itself, and must match the fit (joint where parameters are
+    shared); the strings are shortcuts for the same objects."""
+    with pytest.raises(ValueError, match="shard and lot_chunk go into the lot strategy"):
+        gj.identify("paper-qmg", table, lot_solve=gj.VmapSolve(), lot_chunk=2)
+    with pytest.raises(ValueError, match="shared parameters need JointSolve"):
+        gj.identify("paper-qmg", table, lot_solve=gj.VmapSolve(chunk=2), shared=("dac_gain_error",))
+    with pytest.raises(ValueError, match="a joint solve, which needs shared parameters"):
+        gj.identify("paper-qmg", table, lot_solve=gj.JointSolve())
+    with pytest.raises(ValueError, match="lot_solve must be a lot strategy"):
+        gj.identify("paper-qmg", table, lot_solve="sharded")
+    from gyrojax._identify.shortcuts import lot_solve_from
+
+    assert lot_solve_from("vmap", None, "auto", joint=False) == gj.VmapSolve()
+    assert lot_solve_from("vmap", True, 4, joint=False) == gj.VmapSolve(chunk=4, shard=True)
+    assert lot_solve_from("loop", None, "auto", joint=False) == gj.LoopSolve()
+    assert lot_solve_from("vmap", None, "auto", joint=True) == gj.JointSolve()
+    assert lot_solve_from("loop", None, "auto", joint=True) == gj.JointSolve(shard=False)
+    at_start = gj.identify("paper-qmg", table, evaluate_only=True, lot_solve="loop", progress=False)
+    same = gj.identify("paper-qmg", table, evaluate_only=True, lot_solve=gj.LoopSolve(), progress=False)
+    np.testing.assert_array_equal(np.asarray(same.residual_vector), np.asarray(at_start.residual_vector))
+
+
 def test_directions_the_data_no_longer_fix_at_the_solution_are_named():
     """A parameter that ran off to a flat region (its weighted-Jacobian column ~0 at the solution, as an open-loop
     Q_y did to 1e243 with the solver reporting success) is named in the device's message; a well-fixed device
     gets none."""
-    from gyrojax._identify import _weak_at_solution
+    from gyrojax._identify.identifiability import weak_at_solution
 
     rng = np.random.default_rng(0)
     fixed = rng.normal(size=(40, 3)) * 10.0
@@ -392,7 +416,7 @@ def test_directions_the_data_no_longer_fix_at_the_solution_are_named():
     wandered[:, 2] = 1e-6  # Q_y's column once Q_y is huge: the data no longer move with it
     combo = fixed.copy()
     combo[:, 1] = combo[:, 0] + 1e-3 * rng.normal(size=40)  # two columns the data see only as a sum
-    notes = _weak_at_solution(np.stack([fixed, wandered, combo]), ["k_vf", "omega_y", "q_y"], 1.0)
+    notes = weak_at_solution(np.stack([fixed, wandered, combo]), ["k_vf", "omega_y", "q_y"], 1.0)
     assert notes[0] == ""
     assert "no longer fix q_y (s = " in notes[1] and "k_vf" not in notes[1] and "prior" in notes[1]
     assert "k_vf x omega_y" in notes[2] and "q_y" not in notes[2]
@@ -401,7 +425,7 @@ def test_directions_the_data_no_longer_fix_at_the_solution_are_named():
 def test_a_nonfinite_model_inside_the_compiled_fit_is_explained():
     """An error raised inside the compiled model (as the implicit derivative's linear solve does on NaN) comes
     out of identify as a RuntimeError that says where and what to try, with the original as its cause."""
-    from gyrojax._identify import _nonfinite_explained
+    from gyrojax._identify.problem import nonfinite_explained
 
     @eqx.filter_jit
     def broken(x):
@@ -409,7 +433,7 @@ def test_a_nonfinite_model_inside_the_compiled_fit_is_explained():
 
     with pytest.raises(RuntimeError, match=r"not finite at the start \(the error inside the compiled model: 'A linear "
                        r"solver received non-finite \(NaN or inf\) input'\).*Try: starting closer") as info:
-        with _nonfinite_explained("at the start"):
+        with nonfinite_explained("at the start"):
             broken(jnp.asarray(jnp.nan))
     assert isinstance(info.value.__cause__, eqx.EquinoxRuntimeError)
 
@@ -446,3 +470,28 @@ def test_open_loop_dynamic_sweep_fits_where_the_first_solve_runs_off():
     split, t_split = (wy**2 - wx**2) / (2 * wx), (t_wy**2 - t_wx**2) / (2 * t_wx)
     assert np.max(np.abs(split / t_split - 1)) < 1e-6, (split, t_split)
     assert np.max(np.abs((wy / qy) / (t_wy / t_qy) - 1)) < 2e-3, (wy / qy, t_wy / t_qy)
+
+
+def test_a_recovery_policy_is_a_small_object_on_the_solution_so_far():
+    """DecrementCertificate on a hand-made solution (no compile): the device stopped at max_steps whose
+    residuals a Gauss-Newton step cannot lower is certified, with the reason in its note; the one a step still
+    improves stays stopped."""
+    from gyrojax._identify.lot import Evaluation, Lot
+    from gyrojax._identify.recovery import DecrementCertificate, Solution, Solving
+    from gyrojax._solution import RESULTS, result_code
+
+    rng = np.random.default_rng(1)
+    jac, r = rng.normal(size=(2, 10, 3)), rng.normal(size=(2, 10))
+    r[0] -= jac[0] @ np.linalg.lstsq(jac[0], r[0], rcond=None)[0]  # at the minimum: r orthogonal to J
+    final = Evaluation(r, jac, np.zeros((2, 10, 0)), np.zeros(2), np.zeros((2, 3)), np.zeros((2, 0)), {}, {},
+                       np.zeros(2, dtype=int))
+    stopped = result_code(RESULTS.nonlinear_max_steps_reached)
+    solution = Solution(np.zeros((2, 3)), np.zeros(0), np.full(2, stopped), np.full(2, 200), np.sum(r**2, axis=-1),
+                        np.zeros((2, 3)), final, ("", ""))
+    solving = Solving(None, None, Lot(gj.VmapSolve(chunk=None, shard=False), 2), None, "levenberg-marquardt", 200,
+                      0, (0, 1, 2), ("k_vf", "angular_gain", "vcf_gain"), 1.0)
+    out = DecrementCertificate(1e-6)(solving, solution)
+    assert out.code[0] == result_code(RESULTS.successful) and out.code[1] == stopped
+    assert out.notes[0].startswith("stopped at max_steps=200, where a full Gauss-Newton step would lower chi2 by")
+    assert out.notes[1] == ""
+    assert DecrementCertificate(0.0)(solving, solution).code.tolist() == [stopped, stopped]

@@ -22,14 +22,9 @@ import pytest
 import gyrojax as gj
 from gyrojax import _fitio
 from gyrojax._fitdata import fit_data
-from gyrojax._identify import (
-    EXIT_CODES,
-    HELD_LABEL,
-    _contrasts,
-    _noise_scales,
-    _sf_determinacy,
-    chi2_p_value,
-)
+from gyrojax._identify import EXIT_CODES, HELD_LABEL, chi2_p_value
+from gyrojax._identify.identifiability import sf_determinacy
+from gyrojax._identify.noise import contrasts, noise_scales
 
 
 slow = pytest.mark.slow
@@ -106,27 +101,27 @@ def test_scale_factor_determinacy_is_the_row_space_test():
     sf = 1.37e4
     grad = np.array([[-sf, sf]])
     se = np.array([0.01])
-    det, part, s = _sf_determinacy(jac, None, grad, None, se, 1.0)
+    det, part, s = sf_determinacy(jac, None, grad, None, se, 1.0)
     assert det[0] and np.linalg.norm(part[0]) < 1e-9 * sf and s[0].size == 1
-    det, part, _ = _sf_determinacy(jac, None, np.array([[-sf, 0.0]]), None, se, 1.0)  # K_vf alone
+    det, part, _ = sf_determinacy(jac, None, np.array([[-sf, 0.0]]), None, se, 1.0)  # K_vf alone
     assert not det[0]
     np.testing.assert_allclose(part[0], [-sf / 2, -sf / 2], rtol=1e-9)
-    det, _, _ = _sf_determinacy(np.zeros((1, 1, 2)), None, grad, None, np.array([0.0]), 1.0)
+    det, _, _ = sf_determinacy(np.zeros((1, 1, 2)), None, grad, None, np.array([0.0]), 1.0)
     assert not det[0]
     # A dependence on the weak direction (1, 1) / sqrt(2) below a tenth of the SF's standard error is
     # immaterial; above it, it is not.
     weak = np.array([[1.0, 1.0]]) / np.sqrt(2.0)
-    assert _sf_determinacy(jac, None, grad + 0.05 * se[0] * weak, None, se, 1.0)[0][0]
-    assert not _sf_determinacy(jac, None, grad + 0.2 * se[0] * weak, None, se, 1.0)[0][0]
+    assert sf_determinacy(jac, None, grad + 0.05 * se[0] * weak, None, se, 1.0)[0][0]
+    assert not sf_determinacy(jac, None, grad + 0.2 * se[0] * weak, None, se, 1.0)[0][0]
     # Joint: each device's data see (own gain + shared gain), its SF its own gain alone: not determined. Rows of
     # device 0 that see the shared gain apart (a rate table) fix the shared gain, hence both own gains.
     b = rng.normal(size=(2, 30, 1)) * 100
     g, g_lot = np.full((2, 1), sf), np.zeros((2, 1))
     two = np.array([0.01, 0.01])
-    assert not _sf_determinacy(b, b, g, g_lot, two, 1.0)[0].any()
+    assert not sf_determinacy(b, b, g, g_lot, two, 1.0)[0].any()
     seen = b.copy()
     seen[0, :10, 0] += 50.0 * rng.normal(size=10)
-    assert _sf_determinacy(b, seen, g, g_lot, two, 1.0)[0].all()
+    assert sf_determinacy(b, seen, g, g_lot, two, 1.0)[0].all()
 
 
 # --- 2. a misfit reaches the uncertainty -----------------------------------------------------------------
@@ -221,7 +216,7 @@ def test_the_noise_estimate_is_unbiased_for_white_noise(runs):
     k = np.zeros((draws, 2))
     for i in range(draws):
         e = np.concatenate([sig_rate * rng.normal(size=n_rate), sig_dac * rng.normal(size=words.size)])
-        k[i], nu, methods, _ = _noise_scales(resid_maker @ e, j, blocks)
+        k[i], nu, methods, _ = noise_scales(resid_maker @ e, j, blocks)
     mean, err = k.mean(0), k.std(0) / np.sqrt(draws)
     assert abs(mean[0] - sig_rate**2) < 4 * err[0], (mean, err)
     assert abs(mean[1] - sig_dac**2) < 4 * err[1], (mean, err)
@@ -235,7 +230,7 @@ def test_the_chi2_test_with_estimated_noise_holds_its_level(runs):
     """With the noise estimated from the same residuals, chi2 / dof is narrower than F (measured: 1 % of right
     models below p = 0.05 with the F test, on one run). Against its Monte Carlo null a right model is
     rejected at the level asked: 5 % of 1000 noise draws below p = 0.05, within 3 binomial errors."""
-    from gyrojax._identify import _mc_p_value
+    from gyrojax._identify.covariance import mc_p_value
 
     rng = np.random.default_rng(10 + runs)
     m, j = _linear_problem([RATES] * runs, 1.0)
@@ -245,8 +240,8 @@ def test_the_chi2_test_with_estimated_noise_holds_its_level(runs):
     p_mc, p_f = [], []
     for _ in range(1000):
         r = m @ (2.2 * rng.normal(size=runs * RATES.size))
-        _, nu, _, (chi2, draws) = _noise_scales(r, j, blocks, draws=1000, rng=rng)
-        p_mc.append(_mc_p_value(chi2, draws, dof, nu[0]))
+        _, nu, _, (chi2, draws) = noise_scales(r, j, blocks, draws=1000, rng=rng)
+        p_mc.append(mc_p_value(chi2, draws, dof, nu[0]))
         p_f.append(chi2_p_value(np.array(chi2), np.array(dof), np.array(nu[0]))[()])
     rate = np.mean(np.array(p_mc) < 0.05)
     assert abs(rate - 0.05) < 3 * np.sqrt(0.05 * 0.95 / 1000), rate
@@ -257,14 +252,14 @@ def test_local_contrasts_cancel_a_smooth_misfit():
     """Within a run, the contrasts cancel any quadratic through four neighbouring inputs, so a cubic over the
     rate table enters the estimate ~300x less than it enters the residuals; between runs any repeated misfit
     cancels."""
-    rows, _ = _contrasts(RATES[None], np.ones((1, RATES.size), bool))
+    rows, _ = contrasts(RATES[None], np.ones((1, RATES.size), bool))
     assert rows.shape == (RATES.size - 3, RATES.size)
     np.testing.assert_allclose(rows @ np.stack([np.ones(22), RATES, RATES**2], -1), 0.0, atol=1e-9)
     m, _ = _linear_problem([RATES], 1.0)
     r = m @ RATES**3
     inflation = (r @ r / 20) / (np.sum((rows @ r) ** 2) / np.trace(rows @ m @ rows.T))
     assert inflation > 100
-    rows2, method = _contrasts(np.tile(RATES, (2, 1)), np.ones((2, 22), bool))
+    rows2, method = contrasts(np.tile(RATES, (2, 1)), np.ones((2, 22), bool))
     assert method.startswith("differences between runs") and rows2.shape == (22, 44)
     np.testing.assert_allclose(rows2 @ np.tile(RATES**3, 2), 0.0, atol=0.0)
 

@@ -1,0 +1,34 @@
+"""Identification: `identify` fits a model's parameters to every sweep of a lot, with uncertainties, and
+returns a `Fit`. One concept per file:
+
+- `identify.py`: the entry point, which composes the pieces below.
+- `problem.py`: the problem of one device (parameters, masks, priors, residuals with their custom JVP) and the
+  compiled evaluation of residuals, Jacobians and the scale factor.
+- `lot.py`: how a lot's devices are solved (vmapped in chunks, sharded, one after another, or jointly).
+- `recovery.py`: what is tried when a solve ends badly (multi-start, a retry with another solver, the restart of
+  a run-off fit, the decrement certificate).
+- `identifiability.py`: what the data cannot fix (hold rules, weak directions, the scale factor's determinacy).
+- `covariance.py`: covariance, the Gauss-Newton decrement, the chi2 test's p-values.
+- `noise.py`: the noise of data without `output_sigma`, estimated from a first fit's residuals.
+- `plausibility.py`: data no fit can mean anything with (refused), and implausible fitted values (flagged).
+- `assemble.py`: from a solution to a `Fit` (statuses and warnings).
+- `fit.py`: `Fit`, `Unidentifiable`, statuses and exit codes.
+- `shortcuts.py`: the strings accepted for strategy objects (`solver="levenberg-marquardt"`), in one place.
+"""
+
+from .covariance import chi2_p_value as chi2_p_value
+from .fit import (
+    EXIT_CODES as EXIT_CODES,
+    EXIT_PRECEDENCE as EXIT_PRECEDENCE,
+    HELD_LABEL as HELD_LABEL,
+    STATUSES as STATUSES,
+    Fit as Fit,
+    Unidentifiable as Unidentifiable,
+)
+from .identify import identify as identify
+from .lot import (
+    AbstractLotSolve as AbstractLotSolve,
+    JointSolve as JointSolve,
+    LoopSolve as LoopSolve,
+    VmapSolve as VmapSolve,
+)

@@ -1,0 +1,173 @@
+"""From a solution to a `Fit`: the covariance and physical values with their standard errors, each device's
+status (did the solve converge, do the data determine the scale factor and its noise, does the chi2 test
+reject the model, are the fitted values plausible) and the warnings that say why."""
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._fitdata import FitData
+from .._parameters import apply_u
+from .._residuals import block_residuals, num_biases, num_points
+from .._solution import RESULTS, result_code, result_message
+from .covariance import chi2_p_value, covariance, joint_jacobian
+from .fit import Fit, p_text
+from .identifiability import sf_determinacy, undetermined_reason, weak_at_solution
+from .plausibility import implausible_values
+from .problem import Layout, Problem
+from .recovery import Solution
+
+
+def _message(converged, result_text, unsettled):
+    if unsettled > 0:
+        return (f"{unsettled} point(s) had no steady state at the solution; check the loop design, or fit "
+                "fewer parameters")
+    if converged:
+        return "converged"
+    return (f"{result_text}. Try: more starts (starts=8), a larger max_steps, another solver "
+            "(solver='gauss-newton' or 'bfgs'), holding a parameter (free=...), or priors on the design values")
+
+
+def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index, solution: Solution, held_reports,
+                 threshold: float, reject_alpha: float, noise) -> Fit:
+    """The `Fit` of `solution`: covariance and physical values with standard errors (free parameters
+    `free_index`, the others held: `held_reports` for those the data could not fix at `threshold`), each
+    device's status and warnings (the chi2 test at `reject_alpha`; `noise` as for `identify`'s second fit of
+    data without `output_sigma`, else None)."""
+    entries, names_dev, names_lot = layout.entries, layout.names_dev, layout.names_lot
+    u_full, u_lot, code, steps = solution.u_full, np.asarray(solution.u_lot), solution.code, solution.steps
+    final, notes, candidates = solution.final, solution.notes, list(layout.candidates)
+    n, n_dev, n_lot = len(data.devices), len(names_dev), len(names_lot)
+    f = np.asarray(free_index, dtype=int)
+    jac = np.asarray(final.jac)[:, :, f]  # (device, residual, free)
+    jac_lot = np.asarray(final.jac_lot)
+    chi2 = np.sum(np.asarray(final.residuals) ** 2, axis=-1)
+    dof = np.asarray(num_points(data) - num_biases(data)) - f.size
+    # Covariance of the internal coordinates: (J^T J)^+, block-diagonal over devices unless some entries
+    # are shared (then the whole lot's normal matrix is inverted). Data without output_sigma were weighted by
+    # their estimated noise before this (`identify`), so the covariance is that of the weights in both cases.
+    if n_lot:
+        cov_all = covariance(joint_jacobian(jac, jac_lot))
+        cov_dev = np.stack([cov_all[d * f.size:(d + 1) * f.size, d * f.size:(d + 1) * f.size] for d in range(n)])
+        cov_lot = cov_all[n * f.size:, n * f.size:]
+        cross = np.stack([cov_all[d * f.size:(d + 1) * f.size, n * f.size:] for d in range(n)])
+    else:
+        cov_dev = covariance(jac)
+        cov_lot = np.zeros((0, 0))
+        cross = np.zeros((n, f.size, 0))
+    cov_full = np.zeros((n, n_dev, n_dev))
+    cov_full[:, f[:, None], f[None, :]] = cov_dev
+    values, stderr = _physical(problem_all.start, entries, u_full, cov_full, f, shared=False)
+    lot_values, lot_stderr = _physical(problem_all.start, entries, u_lot[None], cov_lot[None],
+                                       np.arange(n_lot), shared=True)
+    fitted = eqx.filter_vmap(lambda p, u: apply_u(p.model, p.entries, p.start, u, jnp.asarray(u_lot)))(
+        problem_all, jnp.asarray(u_full))
+    residuals = {}
+    for sweep in data.sweeps:
+        block = data.blocks[sweep]
+        residuals[sweep] = jax.vmap(lambda bl, p, s=sweep: block_residuals(s, bl, p))(block, final.predictions[sweep])
+    g = np.asarray(final.sf_grad)[:, f]
+    g_lot = np.asarray(final.sf_grad_lot)
+    var = np.einsum("di,dij,dj->d", g, cov_dev, g)
+    if n_lot:
+        var = var + np.einsum("di,ij,dj->d", g_lot, cov_lot, g_lot) + 2 * np.einsum("di,dij,dj->d", g, cross, g_lot)
+    sf_stderr = np.sqrt(np.maximum(var, 0.0))
+    failed = np.asarray(final.failed)
+    ok = np.asarray(code) == result_code(RESULTS.successful)
+    messages = [_message(bool(o), "" if o else result_message(c).split(".")[0], int(fl))
+                for o, c, fl in zip(ok, np.asarray(code), failed)]
+    weak = weak_at_solution(jac, [names_dev[i] for i in f], threshold)
+    messages = tuple(m if not w else f"{m}; but {w}" for m, w in zip(messages, weak))
+    messages = tuple(m if not note else f"{m} ({note})" for m, note in zip(messages, notes))
+    free_mask = tuple(bool(i in set(f.tolist())) for i in range(n_dev))
+
+    # What the data determine: the scale factor's gradient over every candidate parameter (free, or held as
+    # unidentifiable) against the weighted Jacobian's row space.
+    cand = np.asarray(candidates, dtype=int)
+    determined, weak_part, _ = sf_determinacy(
+        np.asarray(final.jac)[:, :, cand], jac_lot if n_lot else None, np.asarray(final.sf_grad)[:, cand],
+        g_lot if n_lot else None, sf_stderr, threshold)
+    if noise is None:
+        noise_dof, noise_notes, noise_ok = np.full(n, np.inf), [()] * n, [True] * n
+        p_value = chi2_p_value(chi2, dof, noise_dof)
+        p_lot = float(chi2_p_value(np.asarray(chi2.sum()), np.asarray(int(dof.sum()) - n_lot), np.asarray(np.inf)))
+    else:
+        noise_dof, noise_notes, noise_ok, p_value, p_lot = noise
+    chi2_red = chi2 / np.maximum(dof, 1)
+    rejected = np.nan_to_num(p_value, nan=1.0) < reject_alpha
+    implausible = implausible_values(entries, problem_all.start, values, lot_values[0], free_mask, n)
+    status, warnings = [], []
+    for d in range(n):
+        notes_d = []
+        if not ok[d] or failed[d]:
+            status.append("not converged")
+        elif not determined[d] or not noise_ok[d]:
+            status.append("not determined")
+            if not determined[d]:
+                notes_d.append(undetermined_reason(data, d, [names_dev[i] for i in cand] + list(names_lot),
+                                                    weak_part[d], f.size, threshold))
+            else:  # the reason first: the noise (hence every uncertainty) is what the data leave open
+                notes_d.append(noise_notes[d][-1])
+        elif rejected[d] or implausible[d]:
+            status.append("model rejected")
+        else:
+            status.append("ok")
+        if rejected[d] and status[d] != "not converged":
+            notes_d.append(f"the model does not describe the data: chi2 {chi2[d]:.4g} over {int(dof[d])} degrees of "
+                           f"freedom has {p_text(p_value[d])} < reject_alpha = {reject_alpha:g}; the standard errors "
+                           f"are also given scaled by sqrt(chi2_red) = {math.sqrt(chi2_red[d]):.3g} (stderr_scaled). "
+                           "gyrojax.compare shows where the misfit sits")
+        if dof[d] <= 0 and status[d] != "not converged":
+            notes_d.append(f"no degrees of freedom are left ({int(dof[d])}): nothing tests the model")
+        notes_d += implausible[d] + [w for w in noise_notes[d] if w not in notes_d]
+        warnings.append(tuple(notes_d))
+    undetermined = np.array([s == "not determined" for s in status])
+    scale = np.where(rejected, np.sqrt(np.maximum(chi2_red, 1.0)), 1.0)
+    sf = np.where(undetermined, np.nan, np.asarray(final.scale_factor))
+    sf_stderr = np.where(undetermined, np.nan, sf_stderr)
+    lot_rejected = bool(n_lot) and np.nan_to_num(p_lot, nan=1.0) < reject_alpha
+    lot_scale = math.sqrt(max(float(chi2.sum()) / max(int(dof.sum()) - n_lot, 1), 1.0)) if lot_rejected else 1.0
+    return Fit(model=fitted, names=names_dev, lot_names=names_lot, values=values[:, :n_dev],
+               stderr=stderr[:, :n_dev], lot_values=lot_values[0], lot_stderr=lot_stderr[0], free=free_mask,
+               covariance=jnp.asarray(cov_full), u=jnp.asarray(u_full), u_lot=jnp.asarray(u_lot),
+               residuals=residuals, predictions=dict(final.predictions), biases=dict(final.biases),
+               chi2=jnp.asarray(chi2), dof=jnp.asarray(dof),
+               converged=jnp.asarray(ok & (failed == 0) & ~undetermined),
+               result_message=messages, num_steps=jnp.asarray(steps), unsettled=jnp.asarray(failed),
+               unidentifiable=held_reports, scale_factor=jnp.asarray(sf), scale_factor_stderr=jnp.asarray(sf_stderr),
+               devices=data.devices, data=data, entries=entries, weighted=data.weighted, jacobian=final.jac,
+               residual_vector=final.residuals, status=tuple(status), warnings=tuple(warnings),
+               reject_alpha=float(reject_alpha), stderr_scaled=jnp.asarray(stderr[:, :n_dev] * scale[:, None]),
+               lot_stderr_scaled=jnp.asarray(lot_stderr[0] * lot_scale),
+               scale_factor_stderr_scaled=jnp.asarray(sf_stderr * scale),
+               noise_dof=jnp.asarray(np.asarray(noise_dof, dtype=float)),
+               p_value=jnp.asarray(np.asarray(p_value, dtype=float)), p_value_total=jnp.asarray(float(p_lot)))
+
+
+def _physical(start, entries, u, cov, free_index, *, shared):
+    """Physical values and standard errors (delta method) of the per-device (or shared) entries."""
+    values, ses = [], []
+    var_all = np.diagonal(cov, axis1=1, axis2=2)
+    k = 0
+    for e, p0 in zip(entries, start):
+        if e.shared != shared:
+            continue
+        uu = u[:, k:k + e.size]
+        var = var_all[:, k:k + e.size]
+        p0 = np.reshape(np.asarray(p0), (np.shape(p0)[0], -1))[: uu.shape[0]]
+        if e.transform == "log":
+            v = p0 * np.exp(uu)
+            sd = v * np.sqrt(var)
+        else:
+            sc = np.asarray(e.scale)
+            v, sd = p0 + sc * uu, sc * np.sqrt(var)
+        held = ~np.isin(np.arange(k, k + e.size), free_index)
+        values.append(v)
+        ses.append(np.where(held[None, :], np.nan, sd))
+        k += e.size
+    if not values:
+        return np.zeros((u.shape[0], 0)), np.zeros((u.shape[0], 0))
+    return np.concatenate(values, axis=1), np.concatenate(ses, axis=1)
