@@ -158,12 +158,13 @@ class Plan(eqx.Module):
         raise ValueError(f"no candidate {name!r} in this plan; it has {', '.join(c.effect for c in self.candidates)}.")
 
     def to_json(self) -> dict:
-        return {"candidates": {c.effect: c.to_json() for c in self.candidates},
+        """The plan as JSON (numbers that are not finite, e.g. an undetermined stderr, are null)."""
+        return _finite({"candidates": {c.effect: c.to_json() for c in self.candidates},
                 "scale_factor": self.scale_factor.to_json(),
                 "experiments": {e.name: e.to_json() for e in self.experiments},
                 "alpha": self.alpha, "target_power": self.target_power, "max_repeats": self.max_repeats,
                 "search": f"exact: every combination of 0..{self.max_repeats} runs of each experiment, cheapest first",
-                "devices": list(self.devices)}
+                "devices": list(self.devices)})
 
     def summary(self) -> str:
         lines = [f"candidate effects (expected chi2 of a typical-size effect; power at alpha = {self.alpha:g}, "
@@ -193,6 +194,16 @@ class Plan(eqx.Module):
                   + (f" + VCF at {list(s.vcf_rates_dps)} deg/s x {s.vcf_runs} run(s)" if s.vcf_runs else "")
                   + f" ({s.minutes:.0f} min): stderr {mean:.4g}, {s.ratio:.3g} x seed 000's"]
         return "\n".join(lines)
+
+
+def _finite(obj):
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    return obj
 
 
 def _reduce(rows: np.ndarray) -> np.ndarray:
