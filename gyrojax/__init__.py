@@ -155,6 +155,14 @@ from ._plugins import (  # noqa: E402
     load_effect_entry_points as load_effect_entry_points,
     load_effects_module as load_effects_module,
 )
+from ._plan import (  # noqa: E402
+    CandidateExperiment as CandidateExperiment,
+    CandidatePlan as CandidatePlan,
+    Plan as Plan,
+    ScaleFactorDesign as ScaleFactorDesign,
+    default_experiments as default_experiments,
+    plan as plan,
+)
 from ._probes import PROBES as PROBES, AbstractProbe as AbstractProbe  # noqa: E402
 from ._solution import RESULTS as RESULTS  # noqa: E402
 from ._stimulus import Stimulus as Stimulus  # noqa: E402

@@ -292,6 +292,40 @@ def _cmd_diagnose(args):
     return EXIT_OK
 
 
+def _cmd_plan(args):
+    from ._dataset import read_table
+    from ._plan import plan
+
+    _check_outputs(("--json", args.json, False))
+    _load_effects(args)
+    table = read_table(args.data)
+    fit = None
+    if args.fit:
+        from ._fitio import load_fit
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            fit = load_fit(args.fit)
+        for w in caught:
+            print(f"gyrojax plan: warning: {w.message}", file=sys.stderr)
+    result = plan(table, args.model, fit=fit, budget_min=args.budget_min, progress=not args.quiet)
+    print(result.summary())
+    if args.json:
+        _write_json(result.to_json(), args.json)
+        print(f"wrote {args.json}")
+    return EXIT_OK
+
+
+def _positive_minutes(text):
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"--budget-min expects minutes > 0, got {text!r}")
+    return value
+
+
 def _name_list(text):
     names = tuple(s.strip() for s in text.split(",") if s.strip())
     if not names:
@@ -423,6 +457,27 @@ def build_parser():
     diag.add_argument("--quiet", action="store_true", help="no progress messages (on standard error)")
     _effects_module_option(diag)
     diag.set_defaults(func=_cmd_diagnose)
+
+    pln = sub.add_parser("plan", help="which measurements would make each hidden effect testable; the scale "
+                                      "factor's best calibration within a time budget",
+                         description="From the baseline fit of DATA (fitted here as diagnose does, or --fit), the "
+                                     "expected chi2 and power that each candidate effect at its typical size "
+                                     "would give with each available experiment added, the cheapest set of runs "
+                                     "that makes it testable (power 0.9 at alpha 0.01), and the rates, runs and "
+                                     "VCF points that minimise the scale factor's standard error within "
+                                     "--budget-min, against seed 000's 22-rate protocol at equal time. No refits.")
+    pln.add_argument("data", help="a tidy data file (.csv or .parquet): the measurements made so far")
+    pln.add_argument("--model", choices=sorted(PRESETS), default="paper-qmg",
+                     help="baseline device preset (default paper-qmg)")
+    pln.add_argument("--fit", metavar="FIT", help="a fit of this data saved by `gyrojax identify --save`: the "
+                                                 "baseline, instead of fitting it here (its preset replaces --model)")
+    pln.add_argument("--budget-min", type=_positive_minutes, default=None, metavar="M",
+                     help="test time for the scale factor's design, minutes (default 135: three runs of seed "
+                          "000's protocol; at least one run, 45 min)")
+    pln.add_argument("--json", help="write the plan as JSON here (keys in docs/planning.md)")
+    pln.add_argument("--quiet", action="store_true", help="no progress messages (on standard error)")
+    _effects_module_option(pln)
+    pln.set_defaults(func=_cmd_plan)
 
     idf = sub.add_parser("identify", help="fit the model's physical parameters to every sweep of a data file",
                          description="Fit the free parameters of a preset (plus any effects) to all sweeps of "

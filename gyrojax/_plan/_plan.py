@@ -1,0 +1,629 @@
+r"""`plan`: which measurements to add so that each candidate effect becomes testable, and how to spend a time
+budget on the scale factor. From the baseline fit's Jacobians and one Jacobian of each candidate experiment's
+points; no refit.
+
+**Effects.** Identification's residuals are standardised and linear in the parameters near the fit, so a
+candidate effect at its typical size theta (internal units: 1 = typical, `gyrojax/_parameters.py`) leaves an
+expected chi2 (the noncentrality of its test) of
+
+    lambda = theta^T (I_ee - I_eb I_bb^+ I_be) theta,    I = J_0^T J_0 + sum_k n_k J_k^T (1 - P_k) J_k
+
+per device, with J_0 the standardised Jacobian of the data given, J_k that of one run of experiment k (its
+points over their sigma), P_k the projector onto the run's turn-on bias (a nuisance of each new run), n_k
+the runs of it, b the nuisance parameters (what the joint fit would free: the baseline's free parameters and
+whatever else the joint data determine, by identification's own rule) and e the effect's. lambda is the
+Schur complement of the joint Fisher information, computed from stacked triangular factors so that the
+condition number is not squared. Summed over the lot's devices, it is the noncentrality of a chi2 test with
+df = parameters x devices; the power at level alpha is P(chi2(df, lambda) > chi2_{1-alpha}(df)).
+
+**Scale factor.** Its variance is g^T I_bb^+ g with g its gradient; the design chooses the rates and
+static-VCF points of a fresh campaign (runs, points per run, each run with its own bias) within a time
+budget greedily (largest variance reduction per minute), for a number of rate-table and VCF runs each, and
+keeps the best; seed 000's 22-rate protocol at equal time is the reference.
+"""
+
+import itertools
+import math
+
+import equinox as eqx
+import jax
+import numpy as np
+
+from .._dataset import Table
+from .._diagnose import _from_fit, _is_lot, full_key
+from .._effects.registry import EFFECTS
+from .._fitdata import FitData, fit_data
+from .._identify import Fit, identify
+from .._parameters import DEFAULT_FREE, Model, as_model, zero_effect
+from .._progress import as_progress
+from .._sweeps import Protocol
+from ._experiment import CandidateExperiment, default_experiments, jacobians, noise_levels, weighted_rows
+from ._power import power, required_noncentrality
+
+
+SF_HELD_TOL = 0.1
+"""A design determines the scale factor when the part of its gradient along directions the design cannot fix
+is below this many standard errors (identification's own test)."""
+
+SAME_SHAPE = 0.95
+"""|cos| between two candidates' fingerprints on the data given above which they are ambiguous (the
+diagnosis's default `ambiguity`)."""
+
+
+class Recommendation(eqx.Module):
+    """Runs of one experiment in a recommended set: how many, their minutes, and the expected chi2 and power
+    of the effect's test with only these runs added to the data given."""
+
+    experiment: CandidateExperiment
+    runs: int = eqx.field(static=True)
+    expected_chi2: float = eqx.field(static=True)
+    power: float = eqx.field(static=True)
+
+    @property
+    def minutes(self) -> float:
+        return self.runs * self.experiment.minutes
+
+    def to_json(self) -> dict:
+        return {"sweep": self.experiment.name, "kind": self.experiment.sweep,
+                "settings": dict(self.experiment.settings), "runs": self.runs, "minutes": self.minutes,
+                "expected_chi2": self.expected_chi2, "power": self.power}
+
+
+class CandidatePlan(eqx.Module):
+    """What one candidate effect needs: its test on the data given, what one run of each experiment adds,
+    and the cheapest set of runs that makes it testable."""
+
+    effect: str = eqx.field(static=True)
+    df: int = eqx.field(static=True)
+    expected_chi2: float = eqx.field(static=True)  # on the data given
+    power: float = eqx.field(static=True)
+    testable: bool = eqx.field(static=True)
+    ambiguous_with: tuple = eqx.field(static=True)
+    per_experiment: tuple = eqx.field(static=True)  # (name, minutes, expected chi2 with one run, power)
+    recommended: tuple = eqx.field(static=True)  # Recommendation per experiment of the cheapest set
+    recommended_chi2: float = eqx.field(static=True)
+    recommended_power: float = eqx.field(static=True)
+    reason: str = eqx.field(static=True)
+
+    @property
+    def minutes(self) -> float:
+        return float(sum(r.minutes for r in self.recommended))
+
+    def to_json(self) -> dict:
+        return {"testable": self.testable, "df": self.df, "expected_chi2": self.expected_chi2, "power": self.power,
+                "ambiguous_with": list(self.ambiguous_with),
+                "experiments": {name: {"minutes": m, "expected_chi2": lam, "power": p,
+                                       "chi2_per_minute": (lam - self.expected_chi2) / m}
+                                for name, m, lam, p in self.per_experiment},
+                "recommended": [r.to_json() for r in self.recommended],
+                "recommended_minutes": self.minutes, "recommended_expected_chi2": self.recommended_chi2,
+                "recommended_power": self.recommended_power, "reason": self.reason}
+
+
+class ScaleFactorDesign(eqx.Module):
+    """The campaign within `budget_min` that minimises the scale factor's standard error, and seed 000's
+    protocol at equal time (both predicted for the baseline model, per device; mean over the lot in
+    `summary`)."""
+
+    budget_min: float = eqx.field(static=True)
+    rates_dps: tuple = eqx.field(static=True)
+    rate_runs: int = eqx.field(static=True)
+    vcf_rates_dps: tuple = eqx.field(static=True)
+    vcf_runs: int = eqx.field(static=True)
+    minutes: float = eqx.field(static=True)
+    stderr: tuple = eqx.field(static=True)  # per device, LSB per deg/s
+    seed000_runs: int = eqx.field(static=True)
+    seed000_minutes: float = eqx.field(static=True)
+    seed000_stderr: tuple = eqx.field(static=True)
+    data_stderr: tuple = eqx.field(static=True)  # on the data given
+    scale_factor: tuple = eqx.field(static=True)
+
+    @property
+    def ratio(self) -> float:
+        """The design's stderr over seed 000's, mean over devices (below 1: the design is better)."""
+        return float(np.mean(np.asarray(self.stderr) / np.asarray(self.seed000_stderr)))
+
+    def protocol(self) -> Protocol:
+        """The design as a `gyrojax.Protocol` (simulate it with `runs=rate_runs`)."""
+        kw = {"rates_dps": self.rates_dps}
+        return Protocol(**kw)
+
+    def to_json(self) -> dict:
+        return {"budget_min": self.budget_min, "rates_dps": list(self.rates_dps), "rate_runs": self.rate_runs,
+                "vcf_rates_dps": list(self.vcf_rates_dps), "vcf_runs": self.vcf_runs, "minutes": self.minutes,
+                "stderr": list(self.stderr), "seed000": {"rates_dps": "seed 000's 22", "runs": self.seed000_runs,
+                                                         "minutes": self.seed000_minutes,
+                                                         "stderr": list(self.seed000_stderr)},
+                "ratio": self.ratio, "data_stderr": list(self.data_stderr),
+                "scale_factor": list(self.scale_factor), "unit": "LSB/(deg/s)"}
+
+
+class Plan(eqx.Module):
+    """The solution of `plan`: per candidate effect a `CandidatePlan`, the scale-factor design, the
+    experiments considered, the baseline fit, and how the search was made."""
+
+    candidates: tuple  # CandidatePlan
+    scale_factor: ScaleFactorDesign
+    experiments: tuple  # CandidateExperiment
+    baseline: Fit  # the fit whose Jacobians the plan used (with every candidate at zero)
+    alpha: float = eqx.field(static=True)
+    target_power: float = eqx.field(static=True)
+    max_repeats: int = eqx.field(static=True)
+    devices: tuple = eqx.field(static=True)
+
+    def candidate(self, name: str) -> CandidatePlan:
+        for c in self.candidates:
+            if c.effect == name:
+                return c
+        raise ValueError(f"no candidate {name!r} in this plan; it has {', '.join(c.effect for c in self.candidates)}.")
+
+    def to_json(self) -> dict:
+        """The plan as JSON (numbers that are not finite, e.g. an undetermined stderr, are null)."""
+        return _finite({"candidates": {c.effect: c.to_json() for c in self.candidates},
+                "scale_factor": self.scale_factor.to_json(),
+                "experiments": {e.name: e.to_json() for e in self.experiments},
+                "alpha": self.alpha, "target_power": self.target_power, "max_repeats": self.max_repeats,
+                "search": f"exact: every combination of 0..{self.max_repeats} runs of each experiment, cheapest first",
+                "devices": list(self.devices)})
+
+    def summary(self) -> str:
+        lines = [f"candidate effects (expected chi2 of a typical-size effect; power at alpha = {self.alpha:g}, "
+                 f"target {self.target_power:g}; {len(self.devices)} device(s)):"]
+        for c in self.candidates:
+            amb = f", ambiguous with {', '.join(c.ambiguous_with)}" if c.ambiguous_with else ""
+            lines.append(f"  {c.effect:<20} now: chi2 {c.expected_chi2:10.3g}, power {c.power:.2f}{amb}"
+                         + (" -> testable" if c.testable else ""))
+            if c.testable:
+                continue
+            best = max(c.per_experiment, key=lambda x: (x[2] - c.expected_chi2) / x[1])
+            lines.append(f"  {'':<20} best per minute: {best[0]} (+{(best[2] - c.expected_chi2) / best[1]:.3g} "
+                         "chi2/min)")
+            if c.recommended:
+                what = " + ".join(f"{r.runs} x {r.experiment.name}" for r in c.recommended)
+                lines.append(f"  {'':<20} add {what} ({c.minutes:.0f} min): chi2 {c.recommended_chi2:.3g}, power "
+                             f"{c.recommended_power:.2f}")
+            else:
+                lines.append(f"  {'':<20} {c.reason}")
+        s = self.scale_factor
+        mean = float(np.mean(s.stderr))
+        ref = float(np.mean(s.seed000_stderr))
+        lines += [f"scale factor in {s.budget_min:g} min (per device, LSB per deg/s, mean over the lot):",
+                  f"  on the data given: stderr {np.mean(s.data_stderr):.4g} (SF {np.mean(s.scale_factor):.6g})",
+                  f"  seed 000's 22 rates x {s.seed000_runs} run(s) ({s.seed000_minutes:.0f} min): stderr {ref:.4g}",
+                  f"  design: rates {list(s.rates_dps)} x {s.rate_runs} run(s)"
+                  + (f" + VCF at {list(s.vcf_rates_dps)} deg/s x {s.vcf_runs} run(s)" if s.vcf_runs else "")
+                  + f" ({s.minutes:.0f} min): stderr {mean:.4g}, {s.ratio:.3g} x seed 000's"]
+        return "\n".join(lines)
+
+
+def _finite(obj):
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    return obj
+
+
+def _reduce(rows: np.ndarray) -> np.ndarray:
+    """A triangular factor R with R^T R = rows^T rows (fewer rows, the same Fisher information, without
+    squaring the condition)."""
+    rows = np.asarray(rows, dtype=float)
+    if rows.shape[0] == 0:
+        return np.zeros((0, rows.shape[1]))
+    return np.linalg.qr(rows, mode="r")
+
+
+def _kept(blocks, cols, threshold):
+    """Which of `cols` a joint fit would free: identification's rule on the lot's stacked Jacobian (a column
+    below `threshold` is held; then, while a combination is, its last member in order of preference).
+    `blocks`: per device, a matrix whose Gram matrix is the information."""
+    stacked = np.concatenate([b[:, cols] for b in blocks]) / math.sqrt(len(blocks))
+    keep = list(range(len(cols)))
+    norms = np.linalg.norm(stacked, axis=0)
+    top = float(np.max(norms)) if norms.size else 0.0
+    keep = [j for j in keep if norms[j] >= threshold and norms[j] >= 1e-12 * top]
+    while keep:
+        a = stacked[:, keep]
+        if a.shape[0] < a.shape[1]:
+            a = np.concatenate([a, np.zeros((a.shape[1] - a.shape[0], a.shape[1]))])
+        _, s, vt = np.linalg.svd(a, full_matrices=False)
+        i = int(np.argmin(s))
+        if s[i] >= threshold and s[i] >= 1e-12 * s.max():
+            break
+        v = np.abs(vt[i])
+        keep.remove(keep[int(np.max(np.nonzero(v > 0.3 * v.max())[0]))])
+    return [cols[j] for j in keep]
+
+
+def _residual_chi2(a, nuisance, effect, theta):
+    """|(1 - P_b) A_e theta|^2 for one device's factor `a`: what the effect leaves after the nuisance
+    columns (scaled to unit norm for the least squares) took their share."""
+    f = a[:, effect] @ theta
+    if not nuisance:
+        return float(f @ f)
+    b = a[:, nuisance]
+    norm = np.linalg.norm(b, axis=0)
+    b = b / np.where(norm > 0, norm, 1.0)
+    c = np.linalg.lstsq(b, f, rcond=None)[0]
+    r = f - b @ c
+    return float(r @ r)
+
+
+def _typical(fit: Fit, name: str, cols) -> np.ndarray:
+    """The effect at its typical size in internal units: typical(1.0) over each element's scale."""
+    entries = [e for e in fit.entries if e.effect_index is not None and e.label.split(".")[0] == name]
+    typ = EFFECTS[name].typical(1.0)
+    out = [np.ravel(np.asarray(getattr(typ, e.field), dtype=float)) / np.asarray(e.scale) for e in entries]
+    theta = np.concatenate(out) if out else np.zeros(0)
+    if theta.size != len(cols):
+        raise ValueError(f"effect {name!r}: {len(cols)} columns in the fit, {theta.size} typical values.")
+    return theta
+
+
+def _baseline(data, model, fit, candidates, free, say):
+    """The baseline fit with every candidate effect in the model at zero and held (as the diagnosis fits it),
+    reusing a given fit's Jacobian when it has the candidates' columns. Returns (fit, candidates)."""
+    from .._effects.registry import supported_effects
+
+    if fit is not None:
+        if data is not None:
+            data = data if isinstance(data, FitData) else fit_data(data)
+            base = _from_fit(fit, data)
+        else:
+            if not isinstance(fit, Fit):
+                raise TypeError(f"fit must be a gyrojax.Fit (from identify or load_fit), got {type(fit).__name__}.")
+            data = fit.data
+            base = Model(fit.model.device, tuple(e for e in fit.model.effects
+                                                 if any(np.any(np.asarray(x) != 0) for x in jax.tree.leaves(e))))
+    else:
+        if data is None:
+            raise ValueError("plan needs data (a gyrojax.Table or FitData) or a fit of it; got neither.")
+        data = data if isinstance(data, FitData) else fit_data(data)
+        base = as_model(model)
+    one = base.device if not _is_lot(base.device) else jax.tree.map(
+        lambda x: x[0] if eqx.is_array(x) else x, base.device)
+    available = supported_effects(one)
+    present = set(base.effect_names)
+    if candidates is None:
+        candidates = tuple(c for c in available if c not in present)
+    for c in candidates:
+        if c not in EFFECTS:
+            raise ValueError(f"unknown candidate effect {c!r}; expected names of gyrojax.EFFECTS: "
+                             f"{', '.join(EFFECTS)}.")
+        if c not in available:
+            raise ValueError(f"candidate effect {c!r} cannot act on device {one.name!r} "
+                             f"(supported: {', '.join(available)}).")
+        if c in present:
+            raise ValueError(f"candidate effect {c!r} is already fitted in the baseline; plan for the others.")
+    if not candidates:
+        raise ValueError("plan needs at least one candidate effect not already in the model.")
+    candidates = tuple(candidates)
+    if fit is not None:
+        have = set(fit.names)
+        missing = [c for c in candidates if not any(n.startswith(c + ".") for n in have)]
+        if not missing:
+            return fit, candidates
+        free = tuple(e.label for e in fit.entries if e.effect_index is None)
+        say("evaluating the given fit with every candidate effect at zero (its Jacobian lacks "
+            f"{', '.join(missing)})")
+    full = Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates))
+    if fit is None:
+        say(f"fitting the baseline: {len(data.devices)} device(s), {data.num_points()} points, every one of "
+            f"{len(candidates)} candidate effects held at zero")
+        say.compiling(("identify", full_key(full, data)), "the lot's fit with every candidate")
+    fit = identify(full, data if fit is None else fit.data, free=free, hold=candidates,
+                   evaluate_only=fit is not None, estimate_noise=None if fit is None else False, progress=False)
+    return fit, candidates
+
+
+def _sf_temperature(data: FitData) -> np.ndarray:
+    """Where identification reports the scale factor: the mean die temperature of the rate-table points (else
+    of every recorded point, else 25 deg C), per device."""
+    blocks = [data.blocks["rate_table"]] if "rate_table" in data.blocks else list(data.blocks.values())
+    total = sum(np.sum(np.where(np.asarray(b.mask) & np.isfinite(np.asarray(b.temperatures)),
+                                np.asarray(b.temperatures), 0.0), axis=(1, 2)) for b in blocks)
+    count = sum(np.sum(np.asarray(b.mask) & np.isfinite(np.asarray(b.temperatures)), axis=(1, 2)) for b in blocks)
+    return np.where(count > 0, total / np.maximum(count, 1), 25.0)
+
+
+def _data_rows(fit: Fit) -> int:
+    return int(sum(int(np.prod(fit.data.blocks[s].inputs.shape[1:])) for s in fit.data.sweeps))
+
+
+def _sf_variance(info, g, cols, threshold):
+    """Variance of the scale factor g^T I^+ g over the columns `cols` a fit of this information would free,
+    and whether those determine it (its gradient's part along what the design cannot fix is below
+    `SF_HELD_TOL` standard errors). `info` is (param, param)."""
+    sub = info[np.ix_(cols, cols)]
+    d = np.sqrt(np.maximum(np.diag(sub), 0.0))
+    if not cols or np.any(d <= 0):
+        return math.inf
+    evals, evecs = np.linalg.eigh(sub / np.outer(d, d))
+    keep = evals > evals.max() * 1e-12
+    gs = g[cols] / d
+    proj = evecs[:, keep].T @ gs
+    var = float(np.sum(proj**2 / evals[keep]))
+    # determined: the gradient lies in the span of what the data fix (singular values >= threshold)
+    ev_all, vec_all = np.linalg.eigh(sub)
+    weak = vec_all[:, np.sqrt(np.maximum(ev_all, 0.0)) < threshold]
+    part = float(np.linalg.norm(weak.T @ g[cols])) if weak.size else 0.0
+    return var if part <= SF_HELD_TOL * math.sqrt(max(var, 0.0)) else math.inf
+
+
+def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=None, experiments=None,
+         budget_min: float | None = None, alpha: float = 0.01, target_power: float = 0.9, max_repeats: int = 3,
+         protocol: Protocol = Protocol(), free=DEFAULT_FREE, identifiability_threshold: float = 1.0,
+         progress=True) -> Plan:
+    r"""Plan the measurements that make each candidate effect testable, and the scale factor's calibration.
+
+    **Arguments:**
+
+    - `data`: a `gyrojax.Table` (or `FitData`): the measurements made so far. May be None when `fit` is given
+      (its data are used).
+    - `model`: the baseline (a preset name, `Gyroscope` or `gyrojax.Model`) fitted to `data` when no `fit`
+      is given, with every candidate effect held at zero (as `gyrojax.diagnose` fits it).
+    - `fit`: a `gyrojax.Fit` of `data` (from `identify`, `diagnose(...).baseline` or `load_fit`): the
+      baseline; its Jacobian is reused (evaluated once more if it lacks the candidates' columns).
+    - `candidates`: effect names to plan for (default every registered effect the device supports and the
+      baseline lacks).
+    - `experiments`: `CandidateExperiment`s that may be added (default `default_experiments` of the baseline's
+      device with `protocol`).
+    - `budget_min`: test time of the scale factor's design, minutes (default three runs of seed 000's
+      protocol, as seed 000 measured: 135 min with the default protocol).
+    - `alpha`, `target_power`: an effect is testable when its test at level `alpha` (df = its parameters x
+      devices) rejects with probability `target_power` at its typical size.
+    - `max_repeats`: the search tries 0 to `max_repeats` runs of each experiment.
+    - `protocol`: timing and inputs of the default experiments and of seed 000's reference.
+    - `free`: the baseline's free parameters when it is fitted here.
+    - `identifiability_threshold`: identification's threshold (what a joint fit would hold).
+    - `progress`: as for `gyrojax.diagnose`.
+
+    **Returns:** a `Plan`.
+    """
+    if not (isinstance(alpha, (int, float)) and 0.0 < alpha <= 0.5):
+        raise ValueError(f"alpha must be a significance level in (0, 0.5], got {alpha!r}.")
+    if not (isinstance(target_power, (int, float)) and 0.0 < target_power < 1.0):
+        raise ValueError(f"target_power must be in (0, 1), got {target_power!r}.")
+    if not isinstance(max_repeats, int) or isinstance(max_repeats, bool) or not 1 <= max_repeats <= 8:
+        raise ValueError(f"max_repeats must be an integer in 1..8, got {max_repeats!r}.")
+    if not isinstance(protocol, Protocol):
+        raise ValueError(f"protocol must be a gyrojax.Protocol, got {protocol!r}.")
+    seed_run_min = (protocol.warmup_s + len(protocol.rates_dps) * protocol.dwell_s) / 60.0
+    if budget_min is None:
+        budget_min = 3 * seed_run_min
+    if not (isinstance(budget_min, (int, float)) and math.isfinite(budget_min) and budget_min >= seed_run_min):
+        raise ValueError(f"budget_min must be at least one run of seed 000's protocol ({seed_run_min:g} min), got "
+                         f"{budget_min!r}.")
+    if data is not None and not isinstance(data, (Table, FitData)):
+        raise TypeError(f"data must be a gyrojax.Table or FitData, got {type(data).__name__}.")
+    say = as_progress(progress, "gyrojax.plan")
+    fit, candidates = _baseline(data, model, fit, candidates, free, say)
+    one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, fit.model.device)
+    if experiments is None:
+        experiments = default_experiments(one, protocol)
+    experiments = tuple(experiments)
+    for e in experiments:
+        if not isinstance(e, CandidateExperiment):
+            raise ValueError(f"experiments must be gyrojax.CandidateExperiment, got {type(e).__name__}.")
+    names = [e.name for e in experiments]
+    if len(set(names)) != len(names) or not names:
+        raise ValueError(f"experiments need distinct names, at least one; got {names}.")
+    # The scale-factor design picks its points among the rate table's (and static VCF's) of the default kinds.
+    design_exps = tuple(e for e in default_experiments(one, protocol) if e.name in ("rate_table", "vcf_static"))
+    all_exps = experiments + tuple(e for e in design_exps if e.name not in names)
+    say(f"Jacobians of {len(all_exps)} experiments' points ({sum(e.points for e in all_exps)} points per device) "
+        f"at the baseline, {len(fit.devices)} device(s)")
+    t_sf = _sf_temperature(fit.data)
+    (jac_e, g), (_, sf) = jacobians(fit.model, fit.entries, all_exps, t_sf)
+    noise = noise_levels(fit.data, sf, protocol)
+    n_dev = len(fit.devices)
+    jac0 = np.asarray(fit.jacobian, dtype=float)
+    free_mask = np.asarray(fit.free)
+    phys = [i for i, e in enumerate(_columns(fit)) if e is None]
+    cand_cols = {c: [i for i, nm in enumerate(fit.names) if nm.startswith(c + ".")] for c in candidates}
+    held_cands = {i for cols in cand_cols.values() for i in cols}
+    pool = sorted(set(phys) | {i for i in np.nonzero(free_mask)[0] if i not in held_cands})
+    base_free = [int(i) for i in np.nonzero(free_mask)[0]]
+    r0 = [_reduce(jac0[d]) for d in range(n_dev)]
+    rk = [[_reduce(weighted_rows(e, jac_e[k][d], e.sigmas(noise[d]))) for d in range(n_dev)]
+          for k, e in enumerate(experiments)]
+    say(f"expected chi2 of {len(candidates)} candidate effects on the data given and with every combination of "
+        f"0..{max_repeats} runs of {len(experiments)} experiments")
+    thetas = {c: _typical(fit, c, cand_cols[c]) for c in candidates}
+    # Fingerprints on the data given (after the baseline's free parameters), for ambiguity.
+    prints = {}
+    for c in candidates:
+        fp = []
+        for d in range(n_dev):
+            a = r0[d]
+            f = a[:, cand_cols[c]] @ thetas[c]
+            b = a[:, base_free]
+            if base_free:
+                f = f - b @ np.linalg.lstsq(b, f, rcond=None)[0]
+            fp.append(f)
+        prints[c] = np.concatenate(fp)
+    plans = []
+    combos = sorted(itertools.product(range(max_repeats + 1), repeat=len(experiments)),
+                    key=lambda n: (sum(k * e.minutes for k, e in zip(n, experiments)), sum(n)))
+    for c in candidates:
+        cols = cand_cols[c]
+        df = len(cols) * n_dev
+        need = required_noncentrality(df, target_power, alpha)
+        # Ambiguous: both fingerprints visible on the data given (a typical size changes the chi2 by more
+        # than 1, the diagnosis's `min_typical_chi2`) and nearly collinear.
+        pn = np.linalg.norm(prints[c])
+        amb = tuple(o for o in candidates if o != c and pn > 1.0 and np.linalg.norm(prints[o]) > 1.0
+                    and abs(prints[c] @ prints[o]) / (pn * np.linalg.norm(prints[o])) > SAME_SHAPE)
+        amb_cols = [i for o in amb for i in cand_cols[o]]
+
+        def lam(counts, c=c, cols=cols, amb_cols=amb_cols):
+            blocks = [np.concatenate([r0[d]] + [math.sqrt(k) * rk[j][d] for j, k in enumerate(counts) if k])
+                      for d in range(n_dev)]
+            nuis = base_free if not any(counts) else _kept(blocks, pool, identifiability_threshold)
+            nuis = [i for i in nuis if i not in cols] + amb_cols
+            return sum(_residual_chi2(blocks[d], nuis, cols, thetas[c]) for d in range(n_dev))
+
+        now = lam((0,) * len(experiments))
+        p_now = power(now, df, alpha)
+        per = []
+        for j, e in enumerate(experiments):
+            counts = tuple(1 if i == j else 0 for i in range(len(experiments)))
+            lj = lam(counts)
+            per.append((e.name, e.minutes, lj, power(lj, df, alpha)))
+        testable = p_now >= target_power
+        recommended, rec_chi2, rec_power, reason = (), now, p_now, ""
+        if testable:
+            reason = "testable on the data given"
+        else:
+            found = None
+            for counts in combos[1:]:
+                lc = lam(counts)
+                if lc >= need:
+                    found = (counts, lc)
+                    break
+            if found is None:
+                top = lam((max_repeats,) * len(experiments))
+                reason = (f"no combination of up to {max_repeats} runs of {', '.join(names)} makes it testable: a "
+                          f"typical size leaves chi2 {top:.3g} with all of them, {need:.3g} is needed for power "
+                          f"{target_power:g}; {EFFECTS[c].revealed_by or 'no measurement named'}")
+            else:
+                counts, rec_chi2 = found
+                rec_power = power(rec_chi2, df, alpha)
+                recs = []
+                for j, k in enumerate(counts):
+                    if k:
+                        only = tuple(k if i == j else 0 for i in range(len(experiments)))
+                        lk = lam(only)
+                        recs.append(Recommendation(experiments[j], k, lk, power(lk, df, alpha)))
+                recommended = tuple(recs)
+                reason = "cheapest combination (exact search)"
+        plans.append(CandidatePlan(c, df, now, p_now, testable, amb, tuple(per), recommended, rec_chi2, rec_power,
+                                   reason))
+        say(f"{c}: now chi2 {now:.3g} (power {p_now:.2f})" + ("" if testable else (
+            f"; add {' + '.join(f'{r.runs} x {r.experiment.name}' for r in recommended)}" if recommended
+            else "; not reachable with these experiments")))
+    design = _sf_design(fit, jac0, g, sf, all_exps, jac_e, noise, pool, budget_min, protocol,
+                        identifiability_threshold, say)
+    return Plan(tuple(plans), design, experiments, fit, float(alpha), float(target_power), max_repeats, fit.devices)
+
+
+def _columns(fit: Fit):
+    """Per column of the fit: None for a physical parameter, else the effect's name."""
+    out = []
+    for e in fit.entries:
+        out += [None if e.effect_index is None else e.label.split(".")[0]] * e.size
+    return out
+
+
+def _run_info(rows_j, sig, subset):
+    """Fisher information of one run at the points `subset` (their Jacobian rows and sigmas), its bias
+    projected out."""
+    w = 1.0 / sig[subset] ** 2
+    mean = (w @ rows_j[subset]) / np.sum(w)
+    jp = (rows_j[subset] - mean) / sig[subset, None]
+    return jp.T @ jp
+
+
+def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, threshold, say):
+    """The greedy c-optimal design of the scale factor within `budget` minutes (see the module notes)."""
+    n_dev = len(fit.devices)
+    n_rows = _data_rows(fit)
+    prior = [jac0[d, n_rows:].T @ jac0[d, n_rows:] for d in range(n_dev)]
+    by_name = {e.name: k for k, e in enumerate(exps)}
+    warm, dwell = protocol.warmup_s / 60.0, protocol.dwell_s / 60.0
+    rate = exps[by_name["rate_table"]]
+    levels = {"rate_table": np.asarray(protocol.rates_dps)}
+    rows = {"rate_table": [jac_e[by_name["rate_table"]][d] for d in range(n_dev)]}
+    sigs = {"rate_table": [rate.sigmas(noise[d]) for d in range(n_dev)]}
+    if "vcf_static" in by_name:
+        v = exps[by_name["vcf_static"]]
+        levels["vcf_static"] = np.asarray(protocol.vcf_rates_dps)
+        rows["vcf_static"] = [jac_e[by_name["vcf_static"]][d] for d in range(n_dev)]
+        sigs["vcf_static"] = [v.sigmas(noise[d]) for d in range(n_dev)]
+    cols = list(pool)
+
+    def variance(sets, runs):
+        return float(np.mean([_per_device(prior, rows, sigs, sets, runs, g, cols, threshold, d)
+                              for d in range(n_dev)]))
+
+    seed_runs = int(budget // ((protocol.warmup_s + len(protocol.rates_dps) * protocol.dwell_s) / 60.0))
+    seed_sets = {"rate_table": tuple(range(len(levels["rate_table"])))}
+    seed_var = [_per_device(prior, rows, sigs, seed_sets, {"rate_table": seed_runs}, g, cols, threshold, d)
+                for d in range(n_dev)]
+    best = None
+    max_rate_runs = int(budget // (warm + 2 * dwell))
+    kinds = list(levels)
+    say(f"scale-factor design within {budget:g} min: up to {max_rate_runs} rate-table runs")
+    # Run counts on a roughly geometric grid (every count up to 4, then steps of ~25 %): the variance changes
+    # smoothly with the count, and each count costs a greedy search.
+    grid = sorted({r for r in range(1, max_rate_runs + 1) if r <= 4 or r == max_rate_runs
+                   or int(round(1.25 ** round(math.log(r, 1.25)))) == r})
+    for r_runs in grid:
+        for q_runs in range(0, 2 if "vcf_static" in levels else 1):
+            runs = {"rate_table": r_runs, "vcf_static": q_runs}
+            used = (r_runs + q_runs) * warm
+            if used + 2 * dwell * (r_runs + q_runs) > budget:
+                continue
+            sets = {k: () for k in kinds}
+            # start each run kind with its best pair, then add single points by variance drop per minute
+            for kind in kinds:
+                if not runs.get(kind):
+                    continue
+                lv = list(levels[kind])
+                pairs = [(i, lv.index(-x)) for i, x in enumerate(lv) if x < 0 and -x in lv]
+                pair = min(pairs, key=lambda p, kind=kind: variance({**sets, kind: tuple(sorted(p))}, runs))
+                pair = tuple(sorted(pair))
+                sets[kind] = pair
+                used += 2 * dwell * runs[kind]
+            current = variance(sets, runs)
+            while True:
+                options = []
+                for kind in kinds:
+                    cost = dwell * runs.get(kind, 0)
+                    if not runs.get(kind) or used + cost > budget + 1e-9:
+                        continue
+                    for i in range(len(levels[kind])):
+                        if i in sets[kind]:
+                            continue
+                        trial = {**sets, kind: tuple(sorted(sets[kind] + (i,)))}
+                        options.append(((current - variance(trial, runs)) / cost, kind, trial, cost))
+                if not options:
+                    break
+                gain, kind, trial, cost = max(options, key=lambda o: o[0])
+                if not gain > 0:
+                    break
+                sets, used = trial, used + cost
+                current = variance(sets, runs)
+            if best is None or current < best[0]:
+                best = (current, dict(sets), dict(runs), used)
+    _, sets, runs, used = best
+    stderr = [math.sqrt(_per_device(prior, rows, sigs, sets, runs, g, cols, threshold, d)) for d in range(n_dev)]
+    data_free = [int(i) for i in np.nonzero(np.asarray(fit.free))[0]]
+    data_se = []
+    for d in range(n_dev):
+        info = jac0[d].T @ jac0[d]
+        data_se.append(math.sqrt(_sf_variance(info, g[d], data_free, 0.0)) if data_free else math.inf)
+    rates = tuple(float(levels["rate_table"][i]) for i in sets["rate_table"])
+    vcf = tuple(float(levels["vcf_static"][i]) for i in sets.get("vcf_static", ())) if runs.get("vcf_static") else ()
+    return ScaleFactorDesign(float(budget), rates, runs["rate_table"], vcf, runs.get("vcf_static", 0), float(used),
+                             tuple(stderr), seed_runs,
+                             seed_runs * (protocol.warmup_s + len(protocol.rates_dps) * protocol.dwell_s) / 60.0,
+                             tuple(math.sqrt(v) for v in seed_var), tuple(data_se),
+                             tuple(float(x) for x in np.asarray(sf)))
+
+
+def _sqrt_info(info):
+    """A matrix whose Gram matrix is `info` (for the hold rule)."""
+    evals, evecs = np.linalg.eigh(info)
+    return (evecs * np.sqrt(np.maximum(evals, 0.0))).T
+
+
+def _per_device(prior, rows, sigs, sets, runs, g, cols, threshold, d):
+    info = prior[d].copy()
+    for kind, idx in sets.items():
+        if runs.get(kind) and len(idx) >= 2:
+            info = info + runs[kind] * _run_info(rows[kind][d], sigs[kind][d], list(idx))
+    kept = _kept([_sqrt_info(info)], cols, threshold)
+    return _sf_variance(info, g[d], kept, threshold)

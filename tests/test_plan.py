@@ -1,0 +1,143 @@
+"""The measurement planner: its statistics against brute force and scipy, its arguments, and (slow) its
+scale-factor standard error against the fit's own covariance and the command's JSON."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy.stats import chi2 as scipy_chi2, ncx2
+
+import gyrojax as gj
+from gyrojax._plan._experiment import weighted_rows
+from gyrojax._plan._plan import _kept, _reduce, _residual_chi2
+from gyrojax._plan._power import chi2_isf, ncx2_sf, power, required_noncentrality
+from gyrojax.cli import main
+
+
+@pytest.mark.parametrize("df", [1, 2, 3, 4, 7, 12])
+@pytest.mark.parametrize("nc", [0.0, 0.3, 5.0, 14.9, 60.0, 400.0])
+def test_power_matches_scipy_ncx2(df, nc):
+    c = scipy_chi2.isf(0.01, df)
+    assert chi2_isf(0.01, df) == pytest.approx(c, rel=1e-10)
+    assert power(nc, df, 0.01) == pytest.approx(ncx2.sf(c, df, nc) if nc > 0 else 0.01, rel=1e-9, abs=1e-13)
+    assert ncx2_sf(0.7 * c, df, nc) == pytest.approx(ncx2.sf(0.7 * c, df, nc) if nc > 0 else
+                                                      scipy_chi2.sf(0.7 * c, df), rel=1e-9, abs=1e-13)
+
+
+@pytest.mark.parametrize("df", [1, 4, 12])
+def test_required_noncentrality_gives_the_target_power(df):
+    lam = required_noncentrality(df, 0.9, 0.01)
+    assert ncx2.sf(scipy_chi2.isf(0.01, df), df, lam) == pytest.approx(0.9, abs=1e-7)
+
+
+def test_power_rejects_bad_df():
+    with pytest.raises(ValueError, match="df must be an integer >= 1"):
+        power(3.0, 0)
+    with pytest.raises(ValueError, match="target power must be in"):
+        required_noncentrality(2, 1.5)
+
+
+def _experiment(n):
+    return gj.CandidateExperiment("extra", "rate_table", np.linspace(-1.0, 1.0, n), np.full(n, 25.0), np.zeros(n),
+                                  10.0, 120.0)
+
+
+def test_expected_chi2_equals_a_refit_on_a_noise_free_linear_case():
+    # Existing data (rows x params) and one new biased run: the effect (2 columns) at theta leaves, after a
+    # least-squares refit of the nuisances and the new run's bias, exactly the planner's lambda.
+    rng = np.random.default_rng(3)
+    j0 = rng.normal(size=(30, 6))
+    j0[:, 3] = j0[:, 2]  # a column the existing data cannot tell from another
+    jn = rng.normal(size=(9, 6)) + 0.4
+    sig = rng.uniform(0.5, 2.0, 9)
+    theta = np.array([0.7, -1.3])
+    nuis, eff = [0, 1, 2, 3], [4, 5]
+    exp = _experiment(9)
+    blocks = [np.concatenate([_reduce(j0), _reduce(weighted_rows(exp, jn, sig))])]
+    lam = _residual_chi2(blocks[0], nuis, eff, theta)
+    # brute force: the whole design with an explicit bias column for the new run, refitted without the effect
+    y = np.concatenate([j0[:, eff] @ theta, (jn[:, eff] @ theta) / sig])
+    x = np.zeros((39, 5))
+    x[:30, :4] = j0[:, nuis]
+    x[30:, :4] = jn[:, nuis] / sig[:, None]
+    x[30:, 4] = 1.0 / sig
+    resid = y - x @ np.linalg.lstsq(x, y, rcond=None)[0]
+    assert lam == pytest.approx(float(resid @ resid), rel=1e-9)
+    assert lam > 0.1
+    # the existing data alone: the duplicated column is held by identification's rule, and changes nothing
+    assert _kept([_reduce(j0)], nuis, 1.0) == [0, 1, 2]
+    alone = _residual_chi2(_reduce(j0), [0, 1, 2], eff, theta)
+    y0 = j0[:, eff] @ theta
+    r0 = y0 - j0[:, :3] @ np.linalg.lstsq(j0[:, :3], y0, rcond=None)[0]
+    assert alone == pytest.approx(float(r0 @ r0), rel=1e-9)
+
+
+def test_candidate_experiment_checks_its_settings():
+    with pytest.raises(ValueError, match="sweep must be one of"):
+        gj.CandidateExperiment("x", "mode_reversal", (1.0, 2.0), (25.0, 25.0), (0.0, 0.0), 1.0, 1.0)
+    with pytest.raises(ValueError, match="one value per point"):
+        gj.CandidateExperiment("x", "rate_table", (1.0, 2.0), (25.0,), (0.0, 0.0), 1.0, 1.0)
+    with pytest.raises(ValueError, match="minutes must be > 0"):
+        gj.CandidateExperiment("x", "rate_table", (1.0, 2.0), (25.0, 25.0), (0.0, 0.0), 0.0, 1.0)
+
+
+def test_default_experiments_minutes_follow_the_protocol():
+    exps = {e.name: e for e in gj.default_experiments(gj.preset("paper-qmg"))}
+    assert list(exps) == ["rate_table", "rate_table_hot", "vcf_static", "vcf_dynamic", "dac"]
+    assert exps["rate_table"].minutes == pytest.approx(1 + 22 * 2)  # seed 000: 1 min warm-up, 2 min per rate
+    assert exps["rate_table_hot"].minutes == pytest.approx(45 + 30)
+    assert exps["vcf_dynamic"].minutes == pytest.approx((60 + 50 * 10) / 60)
+    assert exps["dac"].minutes == pytest.approx(22 * 10 / 60)
+    hot = np.asarray(exps["rate_table_hot"].temperatures_c) - np.asarray(exps["rate_table"].temperatures_c)
+    assert np.allclose(hot, 20.0)
+    assert exps["rate_table"].biased and not exps["vcf_dynamic"].biased
+
+
+def test_plan_rejects_bad_arguments():
+    with pytest.raises(ValueError, match="budget_min must be at least one run of seed 000's protocol"):
+        gj.plan(None, budget_min=30.0)
+    with pytest.raises(ValueError, match="alpha must be a significance level"):
+        gj.plan(None, alpha=0.7)
+    with pytest.raises(ValueError, match="max_repeats must be an integer in 1..8"):
+        gj.plan(None, max_repeats=0)
+    with pytest.raises(ValueError, match="plan needs data"):
+        gj.plan(None)
+
+
+def test_cli_plan_rejects_a_bad_budget(tmp_path, capsys):
+    assert main(["plan", str(tmp_path / "x.csv"), "--budget-min", "-5"]) == 2
+    assert "--budget-min expects minutes > 0" in capsys.readouterr().err
+    assert main(["plan", str(tmp_path / "missing.csv")]) == 2
+
+
+@pytest.mark.slow
+def test_plan_on_a_rate_table(tmp_path):
+    table = gj.simulate_table(gj.preset("paper-qmg"), runs=2, seed=1, progress=False)
+    plan = gj.plan(table, "paper-qmg", max_repeats=2, progress=False)
+    fit = plan.baseline
+    sfd = plan.scale_factor
+    # the scale factor's stderr on the data given is the fit's own (its covariance and gradient)
+    assert sfd.data_stderr[0] == pytest.approx(float(fit.scale_factor_stderr[0]), rel=1e-6)
+    # three runs of the seed-000 protocol against the two given: sqrt(2/3) of the stderr
+    assert sfd.seed000_runs == 3
+    assert sfd.seed000_stderr[0] == pytest.approx(sfd.data_stderr[0] * np.sqrt(2 / 3), rel=0.02)
+    assert sfd.minutes <= sfd.budget_min + 1e-9 and sfd.ratio < 1.0
+    dac = plan.candidate("dac_inl")
+    assert dac.testable and dac.power > 0.99 and not dac.recommended
+    # a run-bias-absorbed effect stays untestable on more rate tables (its fingerprint is a constant)
+    assert not plan.candidate("damping_coupling").testable
+    report = plan.to_json()
+    assert set(report) >= {"candidates", "scale_factor"}
+    for c in report["candidates"].values():
+        assert set(c) >= {"testable", "recommended"}
+        for r in c["recommended"]:
+            assert set(r) >= {"sweep", "settings", "minutes", "expected_chi2", "power"}
+    assert set(report["scale_factor"]) >= {"stderr", "seed000", "ratio", "rates_dps", "rate_runs"}
+    # the command, from the saved fit
+    data, saved, out = tmp_path / "t.csv", tmp_path / "base.fit", tmp_path / "plan.json"
+    gj.write_table(table, data)
+    gj.save_fit(fit, saved)
+    assert main(["plan", str(data), "--fit", str(saved), "--json", str(out), "--quiet"]) == 0
+    cli = json.loads(out.read_text())
+    assert cli["scale_factor"]["seed000"]["stderr"][0] == pytest.approx(sfd.seed000_stderr[0], rel=1e-9)
+    assert cli["candidates"]["dac_inl"]["testable"] is True
