@@ -587,11 +587,11 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     if isinstance(data, Table):
         data = fit_data(data)
     if fit is not None:
-        base = _from_fit(fit, data)
+        base = baseline_model(fit, data)
     else:
         base = as_model(model)
     device = base.device
-    one = device if not _is_lot(device) else _first(device)
+    one = device if not is_lot(device) else first_device(device)
     available = supported_effects(one)
     present = set(base.effect_names)
     if candidates is None:
@@ -731,7 +731,7 @@ def full_key(model: Model, data: FitData):
     return jax.tree.structure(eqx.filter(model, eqx.is_array)), shapes
 
 
-def _from_fit(fit: Fit, data: FitData) -> Model:
+def baseline_model(fit: Fit, data: FitData) -> Model:
     """The fitted model of `fit` as the diagnosis's baseline, after checking that it was fitted to `data`."""
     if not isinstance(fit, Fit):
         raise TypeError(f"fit must be a gyrojax.Fit (from identify or load_fit), got {type(fit).__name__}.")
@@ -749,12 +749,14 @@ def _from_fit(fit: Fit, data: FitData) -> Model:
     return Model(fit.model.device, kept)
 
 
-def _is_lot(device):
+def is_lot(device) -> bool:
+    """Whether `device` is a lot: every array leaf has a leading device axis."""
     leaves = [x for x in jax.tree.leaves(device) if eqx.is_array(x)]
     return bool(leaves) and all(jnp.ndim(x) >= 1 for x in leaves)
 
 
-def _first(device):
+def first_device(device):
+    """The first device of a lot (leaves indexed at 0 on their device axis)."""
     return jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, device)
 
 

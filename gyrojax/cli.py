@@ -293,7 +293,7 @@ def _cmd_diagnose(args):
 
 
 def _cmd_plan(args):
-    from ._dataset import read_table
+    from ._data.files import read_table
     from ._plan import plan
 
     _check_outputs(("--json", args.json, False))

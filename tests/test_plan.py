@@ -8,9 +8,9 @@ import pytest
 from scipy.stats import chi2 as scipy_chi2, ncx2
 
 import gyrojax as gj
-from gyrojax._plan._experiment import weighted_rows
-from gyrojax._plan._plan import _kept, _reduce, _residual_chi2
-from gyrojax._plan._power import chi2_isf, ncx2_sf, power, required_noncentrality
+from gyrojax._plan.experiment import NoiseLevel, weighted_rows
+from gyrojax._plan.plan import _kept, _reduce, _residual_chi2
+from gyrojax._plan.power import chi2_isf, ncx2_sf, power, required_noncentrality
 from gyrojax.cli import main
 
 
@@ -39,7 +39,7 @@ def test_power_rejects_bad_df():
 
 def _experiment(n):
     return gj.CandidateExperiment("extra", "rate_table", np.linspace(-1.0, 1.0, n), np.full(n, 25.0), np.zeros(n),
-                                  10.0, 120.0)
+                                  10.0)
 
 
 def test_expected_chi2_equals_a_refit_on_a_noise_free_linear_case():
@@ -73,12 +73,16 @@ def test_expected_chi2_equals_a_refit_on_a_noise_free_linear_case():
 
 
 def test_candidate_experiment_checks_its_settings():
-    with pytest.raises(ValueError, match="sweep must be one of"):
-        gj.CandidateExperiment("x", "mode_reversal", (1.0, 2.0), (25.0, 25.0), (0.0, 0.0), 1.0, 1.0)
+    with pytest.raises(ValueError, match="sweep must be a registered sweep kind"):
+        gj.CandidateExperiment("x", "mode_reversal", (1.0, 2.0), (25.0, 25.0), (0.0, 0.0), 1.0)
     with pytest.raises(ValueError, match="one value per point"):
-        gj.CandidateExperiment("x", "rate_table", (1.0, 2.0), (25.0,), (0.0, 0.0), 1.0, 1.0)
+        gj.CandidateExperiment("x", "rate_table", (1.0, 2.0), (25.0,), (0.0, 0.0), 1.0)
     with pytest.raises(ValueError, match="minutes must be > 0"):
-        gj.CandidateExperiment("x", "rate_table", (1.0, 2.0), (25.0, 25.0), (0.0, 0.0), 0.0, 1.0)
+        gj.CandidateExperiment("x", "rate_table", (1.0, 2.0), (25.0, 25.0), (0.0, 0.0), 0.0)
+    with pytest.raises(ValueError, match="protocol must be a gyrojax.Protocol"):
+        gj.CandidateExperiment("x", "rate_table", (1.0, 2.0), (25.0, 25.0), (0.0, 0.0), 1.0, 120.0)
+    exp = gj.CandidateExperiment("x", gj.VcfDynamic(), (10.0, 20.0), (25.0, 25.0), (0.0, 0.0), 1.0)
+    assert exp.kind == "vcf_dynamic" and not exp.biased
 
 
 def test_default_experiments_minutes_follow_the_protocol():
@@ -91,6 +95,62 @@ def test_default_experiments_minutes_follow_the_protocol():
     hot = np.asarray(exps["rate_table_hot"].temperatures_c) - np.asarray(exps["rate_table"].temperatures_c)
     assert np.allclose(hot, 20.0)
     assert exps["rate_table"].biased and not exps["vcf_dynamic"].biased
+    assert exps["dac"].inputs[0] == pytest.approx(-exps["dac"].inputs[-1])  # words for -200 and +200 deg/s
+    assert np.all(np.isnan(exps["dac"].temperatures_c))  # a bench measurement of the DAC alone
+
+
+class _OffsetRateTable(gj.AbstractSteadySweep):
+    """A sweep kind the planner has never heard of: a rate table with a constant virtual rate on the
+    virtual-Coriolis electrode, at 3 rates."""
+
+    offset_v: float = 0.5
+
+    name = "plan_test_offset_rate_table"
+    title = "rate-table with a virtual rate"
+    input_quantity = "table rate"
+    input_unit = "deg/s"
+    output_unit = "LSB"
+    input_meaning = "the table rate, deg/s, with V_ac = 0.5 V"
+    output_meaning = "the gyro's rate output, LSB"
+    rate_input = True
+
+    def inputs(self, protocol, gyro=None):
+        return np.asarray((-100.0, 0.0, 100.0))
+
+    def n_points(self, protocol):
+        return 3
+
+    def dwell_s(self, protocol):
+        return 60.0
+
+    def sample_rate_hz(self, protocol):
+        return protocol.sample_rate_hz
+
+    def check_device(self, gyro, protocol):
+        pass
+
+    def stimulus(self, value, time):
+        return gj.Stimulus(rate=value * gj.units.DEG, vcf_ac=0.0 * value + self.offset_v,
+                           vcf_fc=gj.VCF_CARRIER_V, time=time)
+
+
+def test_a_registered_sweep_kind_is_a_candidate_with_its_own_minutes_and_noise():
+    gj.register_sweep(_OffsetRateTable)
+    try:
+        exps = {e.name: e for e in gj.default_experiments(gj.preset("paper-qmg"))}
+    finally:
+        del gj.SWEEP_KINDS[_OffsetRateTable.name]
+    new = exps[_OffsetRateTable.name]
+    assert new.minutes == pytest.approx((60 + 3 * 60) / 60)  # warm-up + 3 dwells of 60 s
+    assert dict(new.settings)["offset_v"] == 0.5 and new.biased and new.inputs == (-100.0, 0.0, 100.0)
+    level = NoiseLevel(lsb_per_dps=1000.0, scale=2.0, voltmeter_sigma_v=1e-5)
+    rate = exps["rate_table"].sigmas(level)
+    # rate noise averaged over the kind's own dwell (60 s against the rate table's 120 s)
+    ratio = gj.RateNoise().point_sigma_dps(60.0) / gj.RateNoise().point_sigma_dps(120.0)
+    assert ratio > 1.2
+    assert rate[0] == pytest.approx(2.0 * 1000.0 * gj.RateNoise().point_sigma_dps(120.0), rel=1e-12)
+    assert new.sigmas(level) == pytest.approx(np.full(3, rate[0] * ratio), rel=1e-12)
+    assert exps["dac"].sigmas(level) == pytest.approx(np.full(22, 1e-5))
 
 
 def test_plan_rejects_bad_arguments():

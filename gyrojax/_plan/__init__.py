@@ -1,16 +1,16 @@
 """The measurement planner: which experiments make each candidate effect testable, and the scale factor's
 design within a time budget."""
 
-from ._experiment import (
+from .experiment import (
     CandidateExperiment as CandidateExperiment,
     NoiseLevel as NoiseLevel,
     default_experiments as default_experiments,
 )
-from ._plan import (
+from .plan import (
     CandidatePlan as CandidatePlan,
     Plan as Plan,
     Recommendation as Recommendation,
     ScaleFactorDesign as ScaleFactorDesign,
     plan as plan,
 )
-from ._power import ncx2_sf as ncx2_sf, power as power, required_noncentrality as required_noncentrality
+from .power import ncx2_sf as ncx2_sf, power as power, required_noncentrality as required_noncentrality

@@ -1,6 +1,7 @@
 """The sweep interface: one kind of experiment, from its protocol to its measurement model and its metrics."""
 
 import abc
+import dataclasses
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import equinox as eqx
@@ -12,6 +13,7 @@ from .._physics.thermal import ConstantTemperature
 
 
 if TYPE_CHECKING:
+    from .._noise import RateNoise
     from .lot import LotCampaign
     from .protocol import Protocol
 
@@ -124,6 +126,51 @@ class AbstractSweep(eqx.Module):
         `temperature_c` and `drive_freq_hz` (NaN where not given), and any other optional column the sweep
         records (`time_s`, `phase_deg`, `rate_dps`).
         """
+
+    # -- planning ------------------------------------------------------------------------------------------------
+    # What a measurement planner needs to propose one run of this kind; the defaults fit a timed sweep of rate
+    # noise, and a kind overrides what differs.
+
+    def run_inputs(self, protocol: "Protocol", gyro: Gyroscope) -> np.ndarray:
+        """The `input` column of one run on the nominal single device `gyro`, as listed (what `predict`
+        takes). Default: `inputs`."""
+        return np.asarray(self.inputs(protocol, gyro), dtype=float)
+
+    def run_minutes(self, protocol: "Protocol") -> float:
+        """Test time of one run under `protocol`, minutes. Default: the warm-up of a timed sweep plus one
+        dwell per point."""
+        warmup = protocol.warmup_s if self.timed else 0.0
+        return (warmup + self.n_points(protocol) * self.dwell_s(protocol)) / 60.0
+
+    def run_settings(self, protocol: "Protocol") -> dict:
+        """What one run applies besides its inputs, for people and JSON: the kind's own settings (its fields)
+        and its timing. Default: every field, the dwell and, for a timed sweep, the warm-up."""
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        out["dwell_s"] = float(self.dwell_s(protocol))
+        if self.timed:
+            out["warmup_s"] = float(protocol.warmup_s)
+        return out
+
+    def point_sigmas(self, inputs, protocol: "Protocol", noise: "RateNoise", lsb_per_dps: float,
+                     voltmeter_sigma_v: float) -> np.ndarray | None:
+        """Standard uncertainty of each point of one run, in the output unit, as the simulator draws it.
+
+        **Arguments:**
+
+        - `inputs`: the run's `input` column (`run_inputs`).
+        - `protocol`: timing.
+        - `noise`: the rate output's noise model.
+        - `lsb_per_dps`: the device's rate-table scale factor, LSB per deg/s.
+        - `voltmeter_sigma_v`: the bench voltmeter's noise, V.
+
+        **Returns:** a 1-d array like `inputs`, or None when this kind's noise is not rate noise and the kind
+        does not say (a planner then takes the sigmas of this kind in the data, if any). Default: rate noise
+        averaged over the dwell, for a kind with `rate_noise`.
+        """
+        if not self.rate_noise:
+            return None
+        sigma = noise.point_sigma_dps(self.dwell_s(protocol)) * abs(float(lsb_per_dps))
+        return np.full(np.shape(inputs), sigma)
 
 
 def at_temperature(gyro: Gyroscope, temperature) -> Gyroscope:

@@ -18,6 +18,11 @@ if TYPE_CHECKING:
     from .protocol import Protocol
 
 
+DAC_READING_S = 10.0
+"""s, ASSUMPTION: one AC-voltmeter reading of a DAC word (settling and a 1 s integration, several times over;
+seed 000 Table 2 prints the readings, not the time they took): the test time of a DAC point."""
+
+
 class Dac(AbstractSweep):
     """The DAC sweep: the FTR DAC fed with carrier sines of given word amplitudes, the signed carrier
     fundamental read at its output by an AC voltmeter (seed 000 Table 2). A bench measurement of the DAC
@@ -53,6 +58,20 @@ class Dac(AbstractSweep):
     def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
         if not gyro.closed_loop:
             raise ValueError(f"a dac sweep needs a closed-loop device; {gyro.name!r} is open loop.")
+
+    def run_inputs(self, protocol: "Protocol", gyro: Gyroscope) -> np.ndarray:
+        # The words for the listed rates with the device's ideal scale factor (seed 000 Table 2).
+        sf_ideal = float(np.asarray(gyro.ideal_scale_factor()))
+        return np.round(-np.asarray(protocol.rates_dps, dtype=float) * DEG * sf_ideal)
+
+    def run_minutes(self, protocol: "Protocol") -> float:
+        return self.n_points(protocol) * DAC_READING_S / 60.0
+
+    def run_settings(self, protocol: "Protocol") -> dict:
+        return {"reading_s": DAC_READING_S}
+
+    def point_sigmas(self, inputs, protocol, noise, lsb_per_dps, voltmeter_sigma_v):
+        return np.full(np.shape(inputs), float(voltmeter_sigma_v))
 
     def predict(self, gyro, inputs, temperatures, times, tier=None):
         pred = dac_points(gyro, inputs)

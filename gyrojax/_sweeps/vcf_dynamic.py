@@ -88,6 +88,11 @@ class VcfDynamic(AbstractSweep):
         pred, _ = vcf_dynamic_points(gyro, inputs, temperatures, self.amplitude_v, self.carrier_v)
         return pred, ~jnp.isfinite(pred)
 
+    def point_sigmas(self, inputs, protocol, noise, lsb_per_dps, voltmeter_sigma_v):
+        # Lock-in over whole cycles: the rate noise at each modulation frequency (see RateNoise).
+        return np.asarray(noise.amplitude_sigma_dps(np.asarray(inputs, dtype=float), self.dwell_s(protocol)),
+                          dtype=float) * abs(float(lsb_per_dps))
+
     def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
         protocol = campaign.protocol
         inputs = campaign.applied(self, self.inputs(protocol))

@@ -29,16 +29,16 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from .._dataset import Table
-from .._diagnose import _from_fit, _is_lot, full_key
+from .._data.table import Table
+from .._diagnose import baseline_model, first_device, full_key, is_lot
 from .._effects.registry import EFFECTS
 from .._fitdata import FitData, fit_data
 from .._identify import Fit, identify
 from .._parameters import DEFAULT_FREE, Model, as_model, zero_effect
 from .._progress import as_progress
-from .._sweeps import Protocol
-from ._experiment import CandidateExperiment, default_experiments, jacobians, noise_levels, weighted_rows
-from ._power import power, required_noncentrality
+from .._sweeps.protocol import Protocol
+from .experiment import CandidateExperiment, default_experiments, jacobians, noise_levels, weighted_rows
+from .power import power, required_noncentrality
 
 
 SF_HELD_TOL = 0.1
@@ -64,7 +64,7 @@ class Recommendation(eqx.Module):
         return self.runs * self.experiment.minutes
 
     def to_json(self) -> dict:
-        return {"sweep": self.experiment.name, "kind": self.experiment.sweep,
+        return {"sweep": self.experiment.name, "kind": self.experiment.kind,
                 "settings": dict(self.experiment.settings), "runs": self.runs, "minutes": self.minutes,
                 "expected_chi2": self.expected_chi2, "power": self.power}
 
@@ -270,7 +270,7 @@ def _baseline(data, model, fit, candidates, free, say):
     if fit is not None:
         if data is not None:
             data = data if isinstance(data, FitData) else fit_data(data)
-            base = _from_fit(fit, data)
+            base = baseline_model(fit, data)
         else:
             if not isinstance(fit, Fit):
                 raise TypeError(f"fit must be a gyrojax.Fit (from identify or load_fit), got {type(fit).__name__}.")
@@ -282,8 +282,7 @@ def _baseline(data, model, fit, candidates, free, say):
             raise ValueError("plan needs data (a gyrojax.Table or FitData) or a fit of it; got neither.")
         data = data if isinstance(data, FitData) else fit_data(data)
         base = as_model(model)
-    one = base.device if not _is_lot(base.device) else jax.tree.map(
-        lambda x: x[0] if eqx.is_array(x) else x, base.device)
+    one = first_device(base.device) if is_lot(base.device) else base.device
     available = supported_effects(one)
     present = set(base.effect_names)
     if candidates is None:
