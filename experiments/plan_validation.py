@@ -1,4 +1,5 @@
-"""The planner's scale-factor design against a Monte Carlo of actual fits.
+"""The planner's promises against simulation: its scale-factor design against a Monte Carlo of actual fits
+(`sf`), and its effect plan against simulated detections (`detection`).
 
 `gyrojax.plan` predicts, from the Fisher information of a baseline fit, the scale factor's standard error of
 seed 000's 22-rate protocol and of its own design at equal test time. Here both protocols are simulated on
@@ -6,13 +7,24 @@ seed 000's 22-rate protocol and of its own design at equal test time. Here both 
 same truth), each device is fitted with `gyrojax.identify`, and the spread of the fitted scale factors over
 the devices is compared with the prediction (its Monte Carlo uncertainty: std / sqrt(2 (N - 1))).
 
-Run: `python experiments/plan_validation.py` (about 15 minutes on a 2-core CPU, most of it compiling).
+**Detections.** For an (effect, experiment) pair, `gyrojax.plan` predicts on the data given (one rate-table
+run of one paper-qmg device) the expected chi2 `lambda` that a typical-size effect leaves for the score test
+after one run of the experiment is added, and so the test's power at alpha = 0.01. The effect is set to the size
+at which the predicted power is `TARGET_POWER` (lambda scales with the size squared), the data given plus one
+run of the experiment are simulated for `SEEDS` noise seeds, and the diagnosis's own score test at the
+baseline (`gyrojax.diagnose(..., max_effects=0)`: its ranking, no refit) is counted: the detection fraction
+against the predicted power, the mean statistic against df + lambda.
+
+Run: `python experiments/plan_validation.py sf` (about 15 minutes on a 2-core CPU, most of it compiling) or
+`python experiments/plan_validation.py detection [OUT.json]` (about 5 minutes once compiled).
 """
 
 import math
+import sys
 import time
 
 import numpy as np
+from scipy.stats import chi2, ncx2
 
 import gyrojax as gj
 
@@ -29,7 +41,7 @@ def spread(protocol, runs, seed):
     return float(np.std(sf, ddof=1)), float(np.mean(np.asarray(fit.scale_factor_stderr))), fit.status
 
 
-def main():
+def scale_factor():
     t0 = time.time()
     given = gj.simulate_table(gj.preset("paper-qmg"), runs=2, seed=1, progress=False)
     plan = gj.plan(given, "paper-qmg", max_repeats=2, progress=False)
@@ -53,5 +65,79 @@ def main():
           f"{ratio_unc:.2f}")
 
 
+SEEDS = 16
+ALPHA = 0.01
+TARGET_POWER = 0.6
+PAIRS = (("quadrature_phase", "vcf_dynamic"),)
+
+
+def size_for_power(lam_typical, df, target):
+    """The multiple of the typical size whose expected chi2 gives `target` power."""
+    crit = chi2.isf(ALPHA, df)
+    lo, hi = 0.0, 1e6
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if ncx2.sf(crit, df, mid) < target:
+            lo = mid
+        else:
+            hi = mid
+    return math.sqrt(hi / lam_typical), hi
+
+
+def detection(effect, experiment, t0):
+    gyro = gj.preset("paper-qmg")
+    given = gj.simulate_table(gyro, runs=1, seed=1, progress=False)
+    exps = tuple(e for e in gj.default_experiments(gyro) if e.name == experiment)
+    plan = gj.plan(given, "paper-qmg", candidates=(effect,), experiments=exps, max_repeats=1, progress=False)
+    cand = plan.candidate(effect)
+    lam_typical = dict((name, lam) for name, _, lam, _ in cand.per_experiment)[experiment]
+    multiple, lam = size_for_power(lam_typical, cand.df, TARGET_POWER)
+    print(f"[{time.time() - t0:.0f} s] {effect} with 1 x {experiment}: planner chi2 at typical size "
+          f"{lam_typical:.4g} (df {cand.df}; {cand.expected_chi2:.3g} on the data given); size {multiple:.4g} x "
+          f"typical gives lambda {lam:.3g}, power {TARGET_POWER}")
+    model = gj.Model(gyro, (gj.EFFECTS[effect].typical(multiple),))
+    truth = model.gyroscope()
+    stats, pvals, seen = [], [], []
+    for seed in range(SEEDS):
+        table = gj.simulate_table(truth, runs=1, sweeps=("rate_table", experiment), seed=100 + seed, progress=False)
+        diag = gj.diagnose(table, "paper-qmg", candidates=(effect,), max_effects=0, progress=False)
+        score = next(s for s in diag.ranking if s.effect == effect)
+        stats.append(float(score.statistic))
+        pvals.append(float(score.p_value))
+        seen.append(float(score.typical_chi2))
+        print(f"[{time.time() - t0:.0f} s]   seed {seed}: statistic {score.statistic:.3g} (df {score.df}), "
+              f"p {score.p_value:.3g}; typical-size chi2 at this baseline {score.typical_chi2:.3g}")
+    stats, pvals = np.asarray(stats), np.asarray(pvals)
+    detected = float(np.mean(pvals < ALPHA))
+    row = {"effect": effect, "experiment": experiment, "runs_added": 1, "seeds": SEEDS, "alpha": ALPHA,
+           "size_multiple_of_typical": multiple, "df": cand.df,
+           "planned_chi2_typical": lam_typical, "planned_chi2": lam, "planned_power": TARGET_POWER,
+           "planned_mean_statistic": cand.df + lam,
+           "mean_statistic": float(np.mean(stats)),
+           "mean_statistic_stderr": float(np.std(stats, ddof=1) / math.sqrt(SEEDS)),
+           "detected_fraction": detected,
+           "detected_fraction_stderr": math.sqrt(TARGET_POWER * (1 - TARGET_POWER) / SEEDS),
+           "statistics": stats.tolist(), "typical_chi2_at_each_baseline": seen}
+    print(f"[{time.time() - t0:.0f} s] {effect}: detected {detected:.2f} (planned {TARGET_POWER} +/- "
+          f"{row['detected_fraction_stderr']:.2f}); mean statistic {row['mean_statistic']:.3g} +/- "
+          f"{row['mean_statistic_stderr']:.2g} (planned df + lambda = {cand.df + lam:.3g})")
+    return row
+
+
+def detections(out=None):
+    t0 = time.time()
+    rows = [detection(effect, experiment, t0) for effect, experiment in PAIRS]
+    if out:
+        gj.atomic_write_json({"pairs": rows, "seed_of_the_data_given": 1,
+                              "seeds": list(range(100, 100 + SEEDS))}, out)
+        print(f"wrote {out}")
+
+
 if __name__ == "__main__":
-    main()
+    what = sys.argv[1] if len(sys.argv) > 1 else ""
+    if what == "sf":
+        scale_factor()
+    elif what == "detection":
+        detections(sys.argv[2] if len(sys.argv) > 2 else None)
+    else:
+        sys.exit("usage: python experiments/plan_validation.py sf | detection [OUT.json]")

@@ -559,7 +559,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     - `free`: baseline physical parameters free per device (see `gyrojax.identify`).
     - `alpha`: family-wise significance per step, in (0, 0.5]; a candidate must reach p < alpha /
       n_candidates in the score test and p < alpha in the likelihood-ratio test after its refit.
-    - `max_effects`: stop after this many.
+    - `max_effects`: stop after this many (0: only rank the candidates at the baseline, no refit).
     - `ambiguity`: |cos| between fingerprints above which two candidates are reported as ambiguous.
     - `min_typical_chi2`: a candidate whose typical-size fingerprint, after the baseline took up what it
       could, changes the lot's chi2 by less than this (and whose score is not significant) is reported as
@@ -582,6 +582,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
 
     if not (isinstance(alpha, (int, float)) and 0.0 < alpha <= 0.5):
         raise ValueError(f"alpha must be a significance level in (0, 0.5], got {alpha!r}.")
+    if not isinstance(max_effects, int) or isinstance(max_effects, bool) or max_effects < 0:
+        raise ValueError(f"max_effects must be an integer >= 0, got {max_effects!r}.")
     if not (isinstance(max_typical_multiple, (int, float)) and max_typical_multiple > 1.0):
         raise ValueError(f"max_typical_multiple must be a number > 1, got {max_typical_multiple!r}.")
     if isinstance(data, Table):
@@ -637,13 +639,17 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     remaining = list(candidates)
     discrepancy, designs = score_probes(fit, probes, alpha=alpha)
     baseline_discrepancy, baseline_designs = discrepancy, designs
+    def first_ranking(scores, threshold):
+        return scores, tuple(c.effect for c in scores if not c.testable or (
+            c.typical_chi2 < min_typical_chi2 and c.p_value >= threshold))
+
+    if remaining and max_effects == 0:  # rank at the baseline only
+        ranking0, untestable = first_ranking(score_candidates(fit, remaining), alpha / len(remaining))
     while remaining and len(selected) < max_effects:
         scores = score_candidates(fit, remaining)
         threshold = alpha / len(remaining)
         if ranking0 is None:
-            ranking0 = scores
-            untestable = tuple(c.effect for c in scores if not c.testable or (
-                c.typical_chi2 < min_typical_chi2 and c.p_value >= threshold))
+            ranking0, untestable = first_ranking(scores, threshold)
         significant = [c for c in scores if c.testable and c.p_value < threshold]
         if not significant:
             break

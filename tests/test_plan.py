@@ -201,3 +201,11 @@ def test_plan_on_a_rate_table(tmp_path):
     cli = json.loads(out.read_text())
     assert cli["scale_factor"]["seed000"]["stderr"][0] == pytest.approx(sfd.seed000_stderr[0], rel=1e-9)
     assert cli["candidates"]["dac_inl"]["testable"] is True
+
+
+def test_diagnose_max_effects_is_a_count():
+    # max_effects=0 ranks at the baseline only (the planner's validation scores that way); a bad count is refused
+    # before any data are read
+    for bad in (-1, 1.5, True):
+        with pytest.raises(ValueError, match="max_effects must be an integer >= 0"):
+            gj.diagnose(None, "paper-qmg", max_effects=bad)
