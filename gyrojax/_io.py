@@ -203,8 +203,8 @@ def atomic_directory(path: str | os.PathLike) -> Iterator[str]:
     **Arguments:**
 
     - `path`: the folder to write. It may not exist yet (its parent must), may be an empty folder, or a folder
-      gyrojax wrote before (it holds the marker file `.gyrojax-output`): that one is replaced as a whole, with everything
-      in it. A symbolic link is followed, and kept.
+      gyrojax wrote before (it holds the marker file `.gyrojax-output`): that one is replaced as a whole, with
+      everything in it. A symbolic link is followed, and kept.
 
     **Returns:**
 
