@@ -201,7 +201,9 @@ def averaged_field(t, state: SlowState, gyro: Gyroscope, stim: Stimulus):
     f_x = (_cj(0.0, gyro.drive_electrode.force(ctl.drive_voltage))
            - _cx(0.75 * m * r.duffing_x * jnp.abs(X) ** 2) * X)
     f_y, _ = sense_force_fundamental(gyro, Y, ctl.word, w, wy, temp)
-    f_y = f_y - _cj(0.0, gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t))
+    # The virtual force's phasor -j K V_ac V_fc e^{j vcf_phase}: -j (in phase with velocity) at phase 0.
+    vcf = gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t)
+    f_y = f_y - _cj(-vcf * jnp.sin(stim.vcf_phase), vcf * jnp.cos(stim.vcf_phase))
 
     force_gain = _cj(0.0, 2 * w * m)
     dX = -_cj(gx, -dx) * X + _cj(ag * om - c / 2, kap / (2 * w)) * Y + f_x / force_gain
@@ -230,7 +232,7 @@ def full_field(t, state: WaveState, gyro: Gyroscope, stim: Stimulus):
 
     f_x = gyro.drive_electrode.force(ctl.drive_voltage) * (-jnp.sin(theta)) - m * r.duffing_x * x**3
     f_y = (_sense_force(gyro, y, ctl.word, theta, ctl.omega, temp)
-           + gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t) * jnp.sin(theta))
+           + gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t) * jnp.sin(theta + stim.vcf_phase))
     ax = f_x / m - (wx / qx) * vx - wx**2 * x - c * vy - kap * y + 2 * ag * om * vy
     ay = f_y / m - (wy / qy) * vy - wy**2 * y - c * vx - kap * x - 2 * ag * om_sense * vx
 
@@ -282,7 +284,7 @@ def operating_point(gyro: Gyroscope, stim: Stimulus):
         _, hold_delay = gyro.excitation.dac.hold(w)
         fb = gyro.feedback_electrode
         bias_ratio = fb.bias(temp - r.t_ref) / fb.v_dc
-        needed = coupling + _cx(vcf / (2 * w * m))
+        needed = coupling + _cx(vcf / (2 * w * m)) * _expj(stim.vcf_phase)
         word = (needed * _cx(2 * w * m / gyro.rebalance_gain(w)) / _cx(bias_ratio)
                 * _expj(-(gyro.rebalance_loop.carrier_phase - hold_delay)))
         rebalance = _r(-word)
@@ -294,7 +296,7 @@ def operating_point(gyro: Gyroscope, stim: Stimulus):
         dy = (wy**2 - w**2) / (2 * w)
         coupling = _cj((r.angular_gain * om_sense + r.damping_coupling / 2) * a,
                        -r.stiffness_coupling * a / (2 * w))
-        force = -coupling - _cx(vcf / (2 * w * m))
+        force = -coupling - _cx(vcf / (2 * w * m)) * _expj(stim.vcf_phase)
         Y = force / _cj(gy, -dy)
         for _ in range(3):  # the sense's cubic stiffness: d_y + 3/8 duffing_y |Y|^2 / w, by fixed point
             Y = force / _cj(gy, -(dy + 0.375 * r.duffing_y * jnp.abs(Y) ** 2 / w))
