@@ -38,9 +38,9 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._gyroscope import Gyroscope
-from .._observe import at_temperature
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._stimulus import Stimulus
+from .._sweeps.base import at_temperature
 from .._units import DEG
 from .drive_amplitude import with_setpoint
 

@@ -35,10 +35,10 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._gyroscope import Gyroscope
-from .._observe import at_temperature
-from .._simulate._model import SlowState, _controls, _dac_voltage, _expj, _phase_grid
+from .._simulate._model import SlowState, controls, dac_voltage, expj, phase_grid
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._stimulus import Stimulus
+from .._sweeps.base import at_temperature
 from .._units import DEG
 
 
@@ -74,12 +74,12 @@ class BranchVoltageReading(eqx.Module):
 
 def _branch_amplitudes(gyro: Gyroscope, loops, temperature):
     gyro = gyro.at_die_temperature(temperature)
-    ctl = _controls(gyro, loops)
-    theta = _phase_grid(max(gyro.phase_points, 64))
-    v_plus, v_minus = gyro.feedback_voltages(_dac_voltage(gyro, ctl.word, theta, ctl.omega))
+    ctl = controls(gyro, loops)
+    theta = phase_grid(max(gyro.phase_points, 64))
+    v_plus, v_minus = gyro.feedback_voltages(dac_voltage(gyro, ctl.word, theta, ctl.omega))
 
     def fundamental(v):
-        return jnp.abs(2.0 * jnp.mean(v.astype(complex) * _expj(-theta)))
+        return jnp.abs(2.0 * jnp.mean(v.astype(complex) * expj(-theta)))
 
     return fundamental(v_plus), fundamental(v_minus)
 

@@ -39,10 +39,10 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._gyroscope import Gyroscope
-from .._observe import at_temperature
 from .._simulate._model import SlowState, WaveState
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._stimulus import Stimulus
+from .._sweeps.base import at_temperature
 
 
 SETPOINT_RATIOS = (0.5, 0.625, 0.75, 0.875, 1.0, 1.125, 1.25)

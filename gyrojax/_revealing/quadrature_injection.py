@@ -43,10 +43,10 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._gyroscope import Gyroscope
-from .._observe import at_temperature
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._stimulus import Stimulus
-from .._sweeps import VCF_CARRIER_V
+from .._sweeps.base import at_temperature
+from .._sweeps.vcf_static import VCF_CARRIER_V
 from .._units import DEG
 
 

@@ -39,10 +39,12 @@ from jaxtyping import Array, Float
 
 from .._checks import check_finite, check_positive
 from .._gyroscope import Gyroscope
-from .._observe import steady_points
 from .._physics.thermal import AbstractTemperature
 from .._simulate.tiers import AbstractTier, Steady
-from .._sweeps import WARMUP_RISE_K, WARMUP_TIME_CONSTANT_S, Protocol
+from .._sweeps.protocol import WARMUP_RISE_K, WARMUP_TIME_CONSTANT_S, Protocol
+from .._sweeps.rate_table import RateTable
+from .._sweeps.steady import steady_points
+from .._sweeps.vcf_static import VcfStatic
 
 
 PLATEAUS_C = (10.0, 25.0, 40.0)
@@ -191,7 +193,7 @@ def predict(gyro: Gyroscope, settings: PlateauSettings, *, tier: AbstractTier = 
     temp_rate, temp_vcf = history(t_rate), history(t_vcf)
     shape = t_rate.shape
     rate, vcf = steady_points(gyro, [
-        ("rate_table", np.tile(settings.rates_dps, shape[0]), jnp.ravel(temp_rate), t_rate.ravel()),
-        ("vcf_static", np.tile(volts, shape[0]), jnp.ravel(temp_vcf), t_vcf.ravel()),
+        (RateTable(), np.tile(settings.rates_dps, shape[0]), jnp.ravel(temp_rate), t_rate.ravel()),
+        (VcfStatic(), np.tile(volts, shape[0]), jnp.ravel(temp_vcf), t_vcf.ravel()),
     ], tier)
     return PlateauReading(rate.rate.reshape(shape), vcf.rate.reshape(shape), temp_rate, temp_vcf)
