@@ -16,8 +16,11 @@ from .._gyroscope import Gyroscope
 from .._physics.thermal import AbstractTemperature, WarmupTemperature
 from .._units import DEG
 from .base import AbstractSweep
+from .branch_voltages import BRANCH_RATES_DPS
+from .quadrature_injection import INJECTED_QUADRATURE_DPS
 from .rate_table import RATE_TABLE_DWELL_S, RATE_TABLE_SAMPLE_RATE_HZ, RATE_TABLE_WARMUP_S, SEED000_RATES_DPS
 from .registry import stream_index, sweep_kind
+from .setpoint import DRIVE_REGISTER_DWELL_S, SETPOINT_RATIOS
 from .vcf_dynamic import (
     VCF_DYNAMIC_AMPLITUDE_V,
     VCF_DYNAMIC_DWELL_S,
@@ -108,6 +111,15 @@ class Protocol(eqx.Module):
       `vcf_rates_dps`.
     - `vcf_frequencies_hz`: modulation frequencies of the dynamic test, Hz, in order.
     - `vcf_dynamic_amplitude_v`: V_ac of the dynamic test, V (seed 003: 20 mV).
+    - `quadrature_rates_dps`: the quadrature injection's virtual quadrature, deg/s of equivalent rate, in
+      order: V_ac is set from them as for `vcf_rates_dps` (`virtual_rate_volts`).
+    - `quadrature_amplitudes_v`: explicit injection voltages V_ac, V, in order; when given they replace
+      `quadrature_rates_dps`.
+    - `setpoint_ratios`: the AGC set-points of the set-point sweeps (`drive_amplitude`, `drive_frequency`,
+      `setpoint_zero_rate`) relative to the nominal device's, in order.
+    - `drive_dwell_s`: averaging time of a drive-loop register reading (`drive_amplitude`,
+      `drive_frequency`), s.
+    - `branch_rates_dps`: table rates of the branch-voltage ratio (`branch_ratio`), deg/s, in order.
     - `warmup_s`: time from power-on to the first point, s.
     - `dwell_s`, `sample_rate_hz`: averaging time and sampling rate of a settled point (rate_table,
       vcf_static).
@@ -131,6 +143,11 @@ class Protocol(eqx.Module):
     vcf_amplitudes_v: tuple | None = eqx.field(converter=_optional_float_tuple, default=None)
     vcf_frequencies_hz: tuple = eqx.field(converter=_float_tuple, default=VCF_DYNAMIC_FREQUENCIES_HZ)
     vcf_dynamic_amplitude_v: float = VCF_DYNAMIC_AMPLITUDE_V
+    quadrature_rates_dps: tuple = eqx.field(converter=_float_tuple, default=INJECTED_QUADRATURE_DPS)
+    quadrature_amplitudes_v: tuple | None = eqx.field(converter=_optional_float_tuple, default=None)
+    setpoint_ratios: tuple = eqx.field(converter=_float_tuple, default=SETPOINT_RATIOS)
+    drive_dwell_s: float = DRIVE_REGISTER_DWELL_S
+    branch_rates_dps: tuple = eqx.field(converter=_float_tuple, default=BRANCH_RATES_DPS)
     warmup_s: float = RATE_TABLE_WARMUP_S
     dwell_s: float = RATE_TABLE_DWELL_S
     sample_rate_hz: float = RATE_TABLE_SAMPLE_RATE_HZ
@@ -141,7 +158,10 @@ class Protocol(eqx.Module):
 
     def __check_init__(self):
         for name, what in (("rates_dps", "table rates (deg/s)"), ("vcf_rates_dps", "virtual rates (deg/s)"),
-                           ("vcf_amplitudes_v", "voltages (V)"), ("vcf_frequencies_hz", "frequencies (Hz)")):
+                           ("vcf_amplitudes_v", "voltages (V)"), ("vcf_frequencies_hz", "frequencies (Hz)"),
+                           ("quadrature_rates_dps", "virtual quadratures (deg/s)"),
+                           ("quadrature_amplitudes_v", "voltages (V)"), ("setpoint_ratios", "set-point ratios"),
+                           ("branch_rates_dps", "table rates (deg/s)")):
             if getattr(self, name) is None:
                 continue
             values = np.asarray(getattr(self, name))
@@ -157,8 +177,10 @@ class Protocol(eqx.Module):
         if self.vcf_dynamic_amplitude_v == 0 or not math.isfinite(self.vcf_dynamic_amplitude_v):
             raise ValueError("Protocol.vcf_dynamic_amplitude_v must be finite and non-zero, got "
                              f"{self.vcf_dynamic_amplitude_v!r}.")
+        if not all(r > 0 for r in self.setpoint_ratios):
+            raise ValueError(f"Protocol.setpoint_ratios must be > 0, got {list(self.setpoint_ratios)}.")
         check_nonnegative("Protocol", "warmup_s", self.warmup_s)
-        for name in ("dwell_s", "sample_rate_hz", "dynamic_dwell_s", "dynamic_sample_rate_hz"):
+        for name in ("dwell_s", "sample_rate_hz", "dynamic_dwell_s", "dynamic_sample_rate_hz", "drive_dwell_s"):
             check_positive("Protocol", name, getattr(self, name))
         if f.max() >= self.dynamic_sample_rate_hz / 2:
             raise ValueError(f"Protocol.dynamic_sample_rate_hz = {self.dynamic_sample_rate_hz} Hz does not sample "
@@ -175,19 +197,25 @@ class Protocol(eqx.Module):
 
     def vcf_static_amplitudes(self, gyro: Gyroscope) -> np.ndarray:
         """V_ac of each static virtual-Coriolis point, V: `vcf_amplitudes_v` if given, else `vcf_rates_dps`
-        through seed 003 Eq. (7) inverted with `gyro`'s nominal values (a single device):
-        V_ac = Om 2 m Ag a w_d / (K_svf V_fc), a the AGC's amplitude and w_d the drive resonance at t_ref,
-        rounded to 12 significant digits."""
+        through `virtual_rate_volts`."""
         if self.vcf_amplitudes_v is not None:
             return np.asarray(self.vcf_amplitudes_v)
+        return self.virtual_rate_volts(gyro, self.vcf_rates_dps)
+
+    @staticmethod
+    def virtual_rate_volts(gyro: Gyroscope, rates_dps, carrier_v: float = VCF_CARRIER_V) -> np.ndarray:
+        """The V_ac whose virtual-Coriolis force equals the Coriolis force of `rates_dps` (deg/s) on `gyro`'s
+        nominal values (a single device), by seed 003 Eq. (7) inverted: V_ac = Om 2 m Ag a w_d / (K_svf V_fc),
+        a the AGC's amplitude and w_d the drive resonance at t_ref, rounded to 12 significant digits. Raises a
+        `ValueError` for a device without a virtual-Coriolis electrode."""
         r = gyro.resonator
         k_svf = float(np.asarray(gyro.vcf_electrode.force_per_volt2))
         if k_svf == 0.0:
             raise ValueError(f"a vcf sweep needs a virtual-Coriolis electrode; {gyro.name!r} has "
                              "vcf_electrode.force_per_volt2 = 0.")
         coriolis = 2.0 * r.mass * r.angular_gain * gyro.drive_amplitude(r.omega_x) * r.omega_x
-        volts_per_rad_s = float(np.asarray(coriolis)) / (k_svf * VCF_CARRIER_V)
-        volts = np.asarray(self.vcf_rates_dps) * DEG * volts_per_rad_s
+        volts_per_rad_s = float(np.asarray(coriolis)) / (k_svf * float(carrier_v))
+        volts = np.asarray(rates_dps, dtype=float) * DEG * volts_per_rad_s
         return np.asarray([float(f"{v:.12g}") for v in volts])  # a generator's setting; clean numbers in files
 
     def inputs(self, sweep: str | AbstractSweep, gyro: Gyroscope | None = None) -> np.ndarray:
