@@ -140,7 +140,7 @@ class BranchRatio(AbstractSweep):
         return ratio, (settled.result != RESULTS.successful) | ~jnp.isfinite(ratio)
 
     def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
-        inputs = campaign.applied(self, self.inputs(campaign.protocol))
+        inputs = campaign.applied(self, campaign.protocol.inputs(self))
         temps, times, full = campaign.temperatures(self), campaign.times(self), campaign.shape(self)
         ratio, settled = _lot_branch_ratio(lot, jnp.asarray(inputs), jnp.asarray(temps), jnp.asarray(times),
                                            campaign.tier)

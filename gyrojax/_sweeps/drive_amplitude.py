@@ -36,8 +36,8 @@ class DriveAmplitude(AbstractSetpointSweep):
     output_unit = "LSB"
     input_meaning = ("the AGC set-point, drive ADC LSB (the amplitude the AGC regulates the demodulated drive "
                      "pick-off to), at zero table rate")
-    output_meaning = ("the AGC's demodulated drive pick-off amplitude |e_d|, drive ADC LSB (a register of the drive "
-                      "loop; equal to the set-point for an ideal AGC)")
+    output_meaning = ("the amplitude of the AGC's demodulated drive pick-off e_d, drive ADC LSB (a register of "
+                      "the drive loop; equal to the set-point for an ideal AGC)")
     biased = False
 
     def dwell_s(self, protocol: "Protocol") -> float:

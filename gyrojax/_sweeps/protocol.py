@@ -13,7 +13,7 @@ import numpy as np
 
 from .._checks import check_nonnegative, check_positive
 from .._gyroscope import Gyroscope
-from .._physics.thermal import AbstractTemperature, WarmupTemperature
+from .._physics.thermal import AbstractTemperature, PlateauTemperature, WarmupTemperature
 from .._units import DEG
 from .base import AbstractSweep
 from .branch_voltages import BRANCH_RATES_DPS
@@ -47,6 +47,22 @@ FIRST_RUN_TIME_CONSTANT_S = 600.0
 seed 000 §5, "due to the longer time required for temperature stabilization during the first set of
 repeated experiments ... discrepancies were observed between the first set and the subsequent second and
 third sets"."""
+
+
+CHAMBER_PLATEAUS_C = (10.0, 25.0, 40.0)
+"""deg C, ASSUMPTION: a plateau run's chamber temperatures (`Protocol.chamber_plateaus_c`), three plateaus 15 K
+apart around room temperature. Three (not two) so that a linear temperature coefficient is checked on a third
+point; a +/-15 K span keeps inside the range where the library's linear coefficients hold (silicon's TCF is
+linear to a few percent over +/-15 K) and gives the effects' typical sizes 300 ppm (`vref_drift`), 45 ppm
+(`thermal_drift`) and 0.015 deg/s (`zro_tempco`) of swing."""
+
+PACKAGE_TIME_CONSTANT_S = 300.0
+"""s, ASSUMPTION: die-to-chamber thermal time constant of a ceramic LCC-packaged MEMS gyroscope on a fixture
+(minutes: the fixture's and package's heat capacity through convection in the chamber)."""
+
+PLATEAU_SOAK_S = 1800.0
+"""s, ASSUMPTION: soak per chamber plateau, six package time constants: the die within 0.25 % of the step
+(0.04 K of 15 K) before the plateau's first point."""
 
 
 def _float_tuple(values):
@@ -126,6 +142,13 @@ class Protocol(eqx.Module):
     - `dynamic_dwell_s`, `dynamic_sample_rate_hz`: the same for a dynamic (lock-in) point.
     - `warmup`: the die's warm-up per run (`RunWarmup`), or None to use the device's own `temperature`
       history for every run.
+    - `chamber_plateaus_c`: a plateau run, or None (default). Given (deg C, e.g. `CHAMBER_PLATEAUS_C`), each
+      run of a timed sweep kind takes its listed points once per chamber plateau within the one power-on
+      (one turn-on bias): the chamber steps to plateau k, the die soaks for `plateau_soak_s`, then the
+      points follow back to back. The die temperature is `PlateauTemperature`: the chamber through a
+      first-order lag of `package_time_constant_s`, starting soaked at the first plateau, plus the run's
+      self-heating (`warmup`; none when it is None). The DAC sweep (a bench measurement) is unaffected.
+    - `plateau_soak_s`, `package_time_constant_s`: see `PLATEAU_SOAK_S`, `PACKAGE_TIME_CONSTANT_S`.
     - `order`: the order the points of a settled or dynamic sweep are applied in, per run (`ORDERS`):
       `"listed"` (default: as listed above, ascending for the default lists), `"reversed"`, `"alternating"`
       (listed in even runs, reversed in odd ones: up-down) or `"shuffled"` (a random order per run, drawn
@@ -154,6 +177,9 @@ class Protocol(eqx.Module):
     dynamic_dwell_s: float = VCF_DYNAMIC_DWELL_S
     dynamic_sample_rate_hz: float = VCF_DYNAMIC_SAMPLE_RATE_HZ
     warmup: RunWarmup | None = RunWarmup()
+    chamber_plateaus_c: tuple | None = eqx.field(converter=_optional_float_tuple, default=None)
+    plateau_soak_s: float = PLATEAU_SOAK_S
+    package_time_constant_s: float = PACKAGE_TIME_CONSTANT_S
     order: str = eqx.field(static=True, default="listed")
 
     def __check_init__(self):
@@ -190,6 +216,13 @@ class Protocol(eqx.Module):
                                    "dynamic_dwell_s x dynamic_sample_rate_hz")):
             if round(dwell * rate) < 1:
                 raise ValueError(f"Protocol: {name} = {dwell * rate:g} gives no sample per point.")
+        if self.chamber_plateaus_c is not None:
+            plateaus = np.asarray(self.chamber_plateaus_c)
+            if plateaus.size < 2 or not np.all(np.isfinite(plateaus)):
+                raise ValueError("Protocol.chamber_plateaus_c must hold at least 2 finite chamber temperatures "
+                                 f"(deg C), got {plateaus.tolist()}.")
+        check_positive("Protocol", "plateau_soak_s", self.plateau_soak_s)
+        check_positive("Protocol", "package_time_constant_s", self.package_time_constant_s)
         if self.order not in ORDERS:
             raise ValueError(f"Protocol.order must be one of {', '.join(ORDERS)}, got {self.order!r}.")
         if self.warmup is not None and not isinstance(self.warmup, RunWarmup):
@@ -218,14 +251,20 @@ class Protocol(eqx.Module):
         volts = np.asarray(rates_dps, dtype=float) * DEG * volts_per_rad_s
         return np.asarray([float(f"{v:.12g}") for v in volts])  # a generator's setting; clean numbers in files
 
+    def plateaus(self, sweep: str | AbstractSweep) -> int:
+        """How many times `sweep`'s listed points are applied per run: the number of chamber plateaus for a
+        timed kind in a plateau run, else 1."""
+        return len(self.chamber_plateaus_c) if self.chamber_plateaus_c and sweep_kind(sweep).timed else 1
+
     def inputs(self, sweep: str | AbstractSweep, gyro: Gyroscope | None = None) -> np.ndarray:
-        """The `input` column of a sweep kind, listed (for `dac`: the rates the words stand for, deg/s);
-        `vcf_static` needs the nominal device (see `vcf_static_amplitudes`)."""
-        return sweep_kind(sweep).inputs(self, gyro)
+        """The `input` column of a sweep kind, listed (for `dac`: the rates the words stand for, deg/s; in a
+        plateau run, the listed points once per plateau); `vcf_static`, `quadrature_injection` and the
+        set-point sweeps need the nominal device (see `virtual_rate_volts`)."""
+        return np.tile(sweep_kind(sweep).inputs(self, gyro), self.plateaus(sweep))
 
     def n_points(self, sweep: str | AbstractSweep) -> int:
-        """Number of points of a sweep kind."""
-        return sweep_kind(sweep).n_points(self)
+        """Number of points of a sweep kind per run (all plateaus of a plateau run)."""
+        return sweep_kind(sweep).n_points(self) * self.plateaus(sweep)
 
     def dwell(self, sweep: str | AbstractSweep) -> float:
         """Averaging time of one point of `sweep`, s."""
@@ -239,34 +278,55 @@ class Protocol(eqx.Module):
     def point_order(self, sweep: str | AbstractSweep, runs: int, seed: int = 0) -> np.ndarray:
         """Indices into `inputs(sweep)` of the points in the order applied, shape (runs, points); `seed` draws
         the `"shuffled"` orders (each run and sweep kind its own). A sweep without a time axis (`timed`
-        false: the DAC sweep) is always applied as listed."""
+        false: the DAC sweep) is always applied as listed; in a plateau run the order applies within each
+        plateau."""
         kind = sweep_kind(sweep)
         n = kind.n_points(self)
         listed = np.arange(n)
         rows = []
         for r in range(runs):
             if self.order == "listed" or not kind.timed:
-                rows.append(listed)
+                row = [listed] * self.plateaus(kind)
             elif self.order == "reversed" or (self.order == "alternating" and r % 2 == 1):
-                rows.append(listed[::-1])
+                row = [listed[::-1]] * self.plateaus(kind)
             elif self.order == "alternating":
-                rows.append(listed)
+                row = [listed] * self.plateaus(kind)
             else:
                 rng = np.random.default_rng([int(seed) % 2**63, ORDER_STREAM, stream_index(kind), r])
-                rows.append(rng.permutation(n))
+                row = [rng.permutation(n) for _ in range(self.plateaus(kind))]
+            rows.append(np.concatenate([k * n + block for k, block in enumerate(row)]))
         return np.stack(rows)
 
-    def point_times(self, sweep: str | AbstractSweep) -> np.ndarray:
-        """Time since power-on of the middle of each point's dwell, s: warmup + (i + 1/2) dwell."""
-        n = self.n_points(sweep)
-        return self.warmup_s + (np.arange(n) + 0.5) * self.dwell(sweep)
+    def plateau_starts(self, sweep: str | AbstractSweep) -> np.ndarray:
+        """Time since power-on at which the chamber steps to each plateau, s (a plateau run): plateau k
+        starts at warmup + k (soak + points x dwell), its soak first."""
+        block = self.plateau_soak_s + sweep_kind(sweep).n_points(self) * self.dwell(sweep)
+        return self.warmup_s + np.arange(self.plateaus(sweep)) * block
 
-    def run_history(self, gyro: Gyroscope, run: int) -> AbstractTemperature:
-        """The die-temperature history of run `run` (the device's own when `warmup` is None)."""
+    def point_times(self, sweep: str | AbstractSweep) -> np.ndarray:
+        """Time since power-on of the middle of each point's dwell, s: warmup + (i + 1/2) dwell, or in a
+        plateau run the plateau's start + soak + (i + 1/2) dwell."""
+        if self.plateaus(sweep) == 1:
+            n = self.n_points(sweep)
+            return self.warmup_s + (np.arange(n) + 0.5) * self.dwell(sweep)
+        n = sweep_kind(sweep).n_points(self)
+        within = self.plateau_soak_s + (np.arange(n) + 0.5) * self.dwell(sweep)
+        return np.ravel(self.plateau_starts(sweep)[:, None] + within[None, :])
+
+    def run_history(self, gyro: Gyroscope, run: int, sweep: str | AbstractSweep | None = None) -> AbstractTemperature:
+        """The die-temperature history of run `run` (the device's own when `warmup` is None; in a plateau run,
+        the chamber's `PlateauTemperature` for `sweep`'s schedule)."""
+        if sweep is not None and self.plateaus(sweep) > 1:
+            heating = (WarmupTemperature(rise=0.0) if self.warmup is None
+                       else self.warmup.history(gyro, run))
+            return PlateauTemperature(
+                plateaus_c=self.chamber_plateaus_c, starts_s=self.plateau_starts(sweep),
+                initial_c=self.chamber_plateaus_c[0], package_time_constant_s=self.package_time_constant_s,
+                rise_k=heating.rise, heating_time_constant_s=heating.time_constant)
         return gyro.temperature if self.warmup is None else self.warmup.history(gyro, run)
 
     def temperatures(self, gyro: Gyroscope, runs: int, sweep: str | AbstractSweep) -> np.ndarray:
         """Die temperature (deg C) at the middle of each point's dwell, shape (runs, points)."""
         t = self.point_times(sweep)
-        return np.stack([np.broadcast_to(np.asarray(self.run_history(gyro, r)(t), dtype=float), t.shape)
+        return np.stack([np.broadcast_to(np.asarray(self.run_history(gyro, r, sweep)(t), dtype=float), t.shape)
                          for r in range(runs)])

@@ -169,7 +169,7 @@ class AbstractSetpointSweep(AbstractSweep):
         return out, (points.settled.result != RESULTS.successful) | ~jnp.isfinite(out)
 
     def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
-        inputs = campaign.applied(self, self.inputs(campaign.protocol, campaign.gyro))
+        inputs = campaign.applied(self, campaign.protocol.inputs(self, campaign.gyro))
         temps, times, full = campaign.temperatures(self), campaign.times(self), campaign.shape(self)
         points = lot_setpoint_points(lot, jnp.asarray(inputs), jnp.asarray(temps), jnp.asarray(times),
                                      campaign.tier, self)

@@ -49,7 +49,7 @@ class AbstractSteadySweep(AbstractSweep):
         return settled.rate, settled.result != RESULTS.successful
 
     def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
-        inputs = campaign.applied(self, self.inputs(campaign.protocol, campaign.gyro))
+        inputs = campaign.applied(self, campaign.protocol.inputs(self, campaign.gyro))
         temps, times, full = campaign.temperatures(self), campaign.times(self), campaign.shape(self)
         settled = campaign.settled.get(self.name)
         if settled is None:

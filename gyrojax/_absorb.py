@@ -16,8 +16,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._gyroscope import Gyroscope
-from .._parameters import PARAMETERS
+from ._gyroscope import Gyroscope
+from ._parameters import PARAMETERS
 
 
 NEGLIGIBLE = 1e-6
