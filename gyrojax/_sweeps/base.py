@@ -74,7 +74,8 @@ class AbstractSweep(eqx.Module):
         if not self.straight_line:
             return None
         unit = f"({self.input_unit})" if "/" in self.input_unit else self.input_unit
-        return f"{self.output_unit}/{unit}"
+        out = f"({self.output_unit})" if "/" in self.output_unit else self.output_unit
+        return f"{out}/{unit}"
 
     # -- protocol ------------------------------------------------------------------------------------------------
 

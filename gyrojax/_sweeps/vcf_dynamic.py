@@ -91,7 +91,7 @@ class VcfDynamic(AbstractSweep):
 
     def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
         protocol = campaign.protocol
-        inputs = campaign.applied(self, self.inputs(protocol))
+        inputs = campaign.applied(self, protocol.inputs(self))
         temps, full = campaign.temperatures(self), campaign.shape(self)
         amp, phase = _lot_vcf_dynamic(lot, jnp.asarray(inputs), jnp.asarray(temps),
                                       float(protocol.vcf_dynamic_amplitude_v))
