@@ -129,6 +129,7 @@ from ._physics.resonator import Resonator as Resonator  # noqa: E402
 from ._physics.thermal import (  # noqa: E402
     AbstractTemperature as AbstractTemperature,
     ConstantTemperature as ConstantTemperature,
+    PlateauTemperature as PlateauTemperature,
     WarmupTemperature as WarmupTemperature,
 )
 from ._presets import PRESETS as PRESETS, paper_qmg as paper_qmg, preset as preset, vcf_2018 as vcf_2018  # noqa: E402
@@ -175,9 +176,24 @@ from ._terms import (  # noqa: E402
     TemperatureCoefficient as TemperatureCoefficient,
 )
 from ._sweeps.base import AbstractSweep as AbstractSweep  # noqa: E402
+from ._sweeps.branch_voltages import (  # noqa: E402
+    BRANCH_RATES_DPS as BRANCH_RATES_DPS,
+    BranchRatio as BranchRatio,
+    branch_ratio_points as branch_ratio_points,
+)
 from ._sweeps.dac import Dac as Dac, dac_points as dac_points, dac_sweep as dac_sweep  # noqa: E402
+from ._sweeps.drive_amplitude import DriveAmplitude as DriveAmplitude  # noqa: E402
+from ._sweeps.drive_frequency import DriveFrequency as DriveFrequency  # noqa: E402
 from ._sweeps.lot import LotCampaign as LotCampaign  # noqa: E402
-from ._sweeps.protocol import Protocol as Protocol, RunWarmup as RunWarmup  # noqa: E402
+from ._sweeps.protocol import (  # noqa: E402
+    CHAMBER_PLATEAUS_C as CHAMBER_PLATEAUS_C,
+    Protocol as Protocol,
+    RunWarmup as RunWarmup,
+)
+from ._sweeps.quadrature_injection import (  # noqa: E402
+    INJECTED_QUADRATURE_DPS as INJECTED_QUADRATURE_DPS,
+    QuadratureInjection as QuadratureInjection,
+)
 from ._sweeps.rate_table import (  # noqa: E402
     SEED000_RATES_DPS as SEED000_RATES_DPS,
     RateTable as RateTable,
@@ -191,6 +207,13 @@ from ._sweeps.registry import (  # noqa: E402
     sweep_kind as sweep_kind,
     sweep_names as sweep_names,
 )
+from ._sweeps.setpoint import (  # noqa: E402
+    SETPOINT_RATIOS as SETPOINT_RATIOS,
+    AbstractSetpointSweep as AbstractSetpointSweep,
+    SetpointReading as SetpointReading,
+    setpoint_points as setpoint_points,
+)
+from ._sweeps.setpoint_zero_rate import SetpointZeroRate as SetpointZeroRate  # noqa: E402
 from ._sweeps.steady import AbstractSteadySweep as AbstractSteadySweep  # noqa: E402
 from ._sweeps.vcf_dynamic import (  # noqa: E402
     VCF_DYNAMIC_AMPLITUDE_V as VCF_DYNAMIC_AMPLITUDE_V,

@@ -158,7 +158,7 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
         announce(rate, kinds.index(rate) + 1 if rate in kinds else 0)
         shared = [rate] + [k for k in kinds if isinstance(k, AbstractSteadySweep) and k != rate
                            and rate_tier is tier]
-        requests = tuple((k, jnp.asarray(campaign.applied(k, k.inputs(protocol, gyro))),
+        requests = tuple((k, jnp.asarray(campaign.applied(k, protocol.inputs(k, gyro))),
                           jnp.asarray(campaign.temperatures(k)), jnp.asarray(campaign.times(k))) for k in shared)
         steady = lot_steady(lot, requests, rate_tier)
         raise_unsettled(steady[0].result, rate.title if rate in kinds

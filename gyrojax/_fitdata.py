@@ -7,10 +7,9 @@ from jaxtyping import Array, Bool, Float
 
 from ._data.cells import DataError
 from ._data.table import Table
-from ._sweeps.registry import SWEEP_KINDS, sweep_names
+from ._sweeps.registry import sweep_names
 
 
-BIASED_SWEEPS = tuple(name for name, cls in SWEEP_KINDS.items() if cls.biased)
 """The built-in sweeps whose output carries the run's turn-on bias (a free bias per run, eliminated by
 projection); `gyrojax.sweep_kind(name).biased` answers for any registered kind."""
 

@@ -140,7 +140,8 @@ def atomic_open(path: str | os.PathLike, mode: str = "wb", **open_kwargs):
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write `data` to `path` atomically (see [`atomic_path`][])."""
+    """Write `data` to `path` atomically: into a temporary file beside it, then moved into place, so that a
+    reader sees the old file or the new one, never a half-written one; a symbolic link is written through."""
     with atomic_open(path, "wb") as f:
         f.write(data)
 
@@ -163,7 +164,7 @@ def _first_non_finite(obj, where: str = "") -> str | None:
 
 
 def atomic_write_json(obj, path: str | os.PathLike) -> None:
-    """Write `obj` as indented JSON atomically (see [`atomic_path`][]).
+    """Write `obj` as indented JSON atomically (as [`gyrojax.atomic_write_bytes`][]).
 
     Raises `ValueError` naming the file and the key of the first NaN or infinity: JSON has no such numbers,
     and a not-applicable value belongs in the object as None.
@@ -202,8 +203,8 @@ def atomic_directory(path: str | os.PathLike) -> Iterator[str]:
     **Arguments:**
 
     - `path`: the folder to write. It may not exist yet (its parent must), may be an empty folder, or a folder
-      gyrojax wrote before (it holds [`FOLDER_MARKER`][]): that one is replaced as a whole, with everything
-      in it. A symbolic link is followed, and kept.
+      gyrojax wrote before (it holds the marker file `.gyrojax-output`): that one is replaced as a whole, with
+      everything in it. A symbolic link is followed, and kept.
 
     **Returns:**
 

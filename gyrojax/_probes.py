@@ -25,28 +25,51 @@ import equinox as eqx
 import numpy as np
 
 from ._compare import chi2_sf
-from ._fitdata import BIASED_SWEEPS
+from ._sweeps.registry import sweep_kind
 
 
-RATE_SWEEPS = ("rate_table", "vcf_static")
-"""Sweeps read from the rate output, with a turn-on bias per run."""
+# Which sweep kinds a probe acts on, from what the kind reads (`AbstractSweep`'s class attributes), so that a
+# new kind is probed by what it is, not by its name.
+def rate_sweeps(kind) -> bool:
+    """Read from the rate output, with a turn-on bias per run (rate table, static VCF)."""
+    return kind.rate_output and kind.biased
 
-GAIN_SWEEPS = ("rate_table", "vcf_static", "vcf_dynamic")
-"""Sweeps whose output scales with the gain of the rate path."""
+
+def gain_sweeps(kind) -> bool:
+    """The output scales with the gain of the rate path (rate table, static and dynamic VCF)."""
+    return kind.rate_output
+
+
+def gain_and_dac_sweeps(kind) -> bool:
+    return kind.rate_output or kind.word_input
+
+
+def rate_and_dac_sweeps(kind) -> bool:
+    return rate_sweeps(kind) or kind.word_input
+
+
+def unbiased_sweeps(kind) -> bool:
+    """Read without a turn-on bias (dynamic VCF as a lock-in amplitude, the DAC sweep, bench readings)."""
+    return not kind.biased
 
 
 class AbstractProbe(eqx.Module):
     """A generic shape a missing term could add to the predictions.
 
     **Class attributes:** `name`, `coordinate` (the data column it runs along, or `"order"`, `"run"`),
-    `shape` (in words), `unit` (of its coefficient), `sweeps` (those it acts on).
+    `shape` (in words), `unit` (of its coefficient), `sweeps` (a predicate on a sweep kind, an
+    `AbstractSweep`: whether the probe acts on it).
     """
 
     name: ClassVar[str]
     coordinate: ClassVar[str]
     shape: ClassVar[str]
     unit: ClassVar[str]
-    sweeps: ClassVar[tuple[str, ...]]
+    sweeps: ClassVar  # (AbstractSweep) -> bool
+
+    def acts_on(self, fit, sweep: str) -> bool:
+        """Whether the probe acts on the data's sweep `sweep`."""
+        return sweep in fit.data.blocks and type(self).sweeps(sweep_kind(sweep))
 
     @abc.abstractmethod
     def changes(self, fit, sweep: str) -> np.ndarray | None:
@@ -89,7 +112,7 @@ class _AbstractLinear(AbstractProbe):
     origin: ClassVar[float | None]  # where the term is zero; None: the device's mean
 
     def changes(self, fit, sweep):
-        if sweep not in self.sweeps or sweep not in fit.data.blocks:
+        if not self.acts_on(fit, sweep):
             return None
         c = _coordinate(fit.data.blocks[sweep], self.field)
         if c is None:
@@ -108,7 +131,7 @@ class BiasVsTemperature(_AbstractLinear):
     coordinate = "temperature_c"
     shape = "a bias linear in die temperature"
     unit = "(deg/s)/K"
-    sweeps = RATE_SWEEPS
+    sweeps = rate_sweeps
     gain, field, per, origin = False, "temperatures", 1.0, 25.0
 
 
@@ -117,7 +140,7 @@ class GainVsTemperature(_AbstractLinear):
     coordinate = "temperature_c"
     shape = "a gain linear in die temperature"
     unit = "ppm/K"
-    sweeps = GAIN_SWEEPS
+    sweeps = gain_sweeps
     gain, field, per, origin = True, "temperatures", 1.0, 25.0
 
 
@@ -126,7 +149,7 @@ class BiasVsTime(_AbstractLinear):
     coordinate = "time_s"
     shape = "a bias linear in time since power-on"
     unit = "(deg/s)/h"
-    sweeps = RATE_SWEEPS
+    sweeps = rate_sweeps
     gain, field, per, origin = False, "times", 3600.0, 0.0
 
 
@@ -135,7 +158,7 @@ class GainVsTime(_AbstractLinear):
     coordinate = "time_s"
     shape = "a gain linear in time since power-on"
     unit = "ppm/h"
-    sweeps = GAIN_SWEEPS
+    sweeps = gain_sweeps
     gain, field, per, origin = True, "times", 3600.0, 0.0
 
 
@@ -144,7 +167,7 @@ class GainVsDriveFrequency(_AbstractLinear):
     coordinate = "drive_freq_hz"
     shape = "a gain linear in the drive frequency (beyond the model's own)"
     unit = "ppm/Hz"
-    sweeps = RATE_SWEEPS
+    sweeps = rate_sweeps
     gain, field, per, origin = True, "drive_freqs", 1.0, None
 
 
@@ -153,10 +176,10 @@ class GainPerRun(AbstractProbe):
     coordinate = "run"
     shape = "a gain that changes from run to run"
     unit = "ppm"
-    sweeps = GAIN_SWEEPS + ("dac",)
+    sweeps = gain_and_dac_sweeps
 
     def changes(self, fit, sweep):
-        if sweep not in self.sweeps or sweep not in fit.data.blocks:
+        if not self.acts_on(fit, sweep):
             return None
         f = np.asarray(fit.predictions[sweep]) * 1e-6
         runs = f.shape[1]
@@ -170,10 +193,10 @@ class BiasPerRun(AbstractProbe):
     coordinate = "run"
     shape = "an offset that changes from run to run (sweeps read without a turn-on bias)"
     unit = "output unit"
-    sweeps = ("vcf_dynamic", "dac")
+    sweeps = unbiased_sweeps
 
     def changes(self, fit, sweep):
-        if sweep not in self.sweeps or sweep not in fit.data.blocks:
+        if not self.acts_on(fit, sweep):
             return None
         mask = np.asarray(fit.data.blocks[sweep].mask)
         runs = mask.shape[1]
@@ -191,16 +214,16 @@ class CubicAfterDac(AbstractProbe):
     coordinate = "input"
     shape = "an odd cubic of the force path after the DAC (or of an open-loop readout), not seen by the DAC sweep"
     unit = "ppm of full scale"
-    sweeps = RATE_SWEEPS
+    sweeps = rate_sweeps
 
     def changes(self, fit, sweep):
-        if sweep not in self.sweeps or sweep not in fit.data.blocks:
+        if not self.acts_on(fit, sweep):
             return None
         f = np.asarray(fit.predictions[sweep])
         w = _full_scale_word(fit)
         if w is None:  # open loop: relative to the largest rate-table output of the device
-            ref = fit.predictions.get("rate_table", f)
-            mask = fit.data.blocks["rate_table" if "rate_table" in fit.predictions else sweep].mask
+            table = next((s for s in fit.predictions if sweep_kind(s).rate_input), sweep)
+            ref, mask = fit.predictions[table], fit.data.blocks[table].mask
             w = np.max(np.where(np.asarray(mask), np.abs(np.asarray(ref)), 0.0), axis=(1, 2), keepdims=True)
             w = np.where(w > 0, w, 1.0)
         return (f * (f / w) ** 2 * 1e-6)[..., None]
@@ -214,14 +237,14 @@ class CubicOfDac(AbstractProbe):
     coordinate = "input"
     shape = "an odd cubic of the DAC itself (rate output and DAC sweep, with opposite signs)"
     unit = "ppm of full scale"
-    sweeps = RATE_SWEEPS + ("dac",)
+    sweeps = rate_and_dac_sweeps
 
     def changes(self, fit, sweep):
         w = _full_scale_word(fit)
-        if w is None or sweep not in self.sweeps or sweep not in fit.data.blocks:
+        if w is None or not self.acts_on(fit, sweep):
             return None
         f = np.asarray(fit.predictions[sweep])
-        if sweep == "dac":
+        if sweep_kind(sweep).word_input:
             words = np.asarray(fit.data.blocks[sweep].inputs)
             return (f * (words / w) ** 2 * 1e-6)[..., None]
         return (-f * (f / w) ** 2 * 1e-6)[..., None]
@@ -232,10 +255,10 @@ class EvenBow(AbstractProbe):
     coordinate = "input"
     shape = "an even bow in the input"
     unit = "ppm of full scale"
-    sweeps = RATE_SWEEPS
+    sweeps = rate_sweeps
 
     def changes(self, fit, sweep):
-        if sweep not in self.sweeps or sweep not in fit.data.blocks:
+        if not self.acts_on(fit, sweep):
             return None
         block = fit.data.blocks[sweep]
         mask = np.asarray(block.mask)
@@ -251,10 +274,10 @@ class SignGain(AbstractProbe):
     coordinate = "input"
     shape = "a gain that differs for positive and negative inputs (K+ vs K-)"
     unit = "ppm"
-    sweeps = RATE_SWEEPS
+    sweeps = rate_sweeps
 
     def changes(self, fit, sweep):
-        if sweep not in self.sweeps or sweep not in fit.data.blocks:
+        if not self.acts_on(fit, sweep):
             return None
         x = np.asarray(fit.data.blocks[sweep].inputs)
         return (np.asarray(fit.predictions[sweep]) * (x > 0) * 1e-6)[..., None]
@@ -275,7 +298,7 @@ def _standardised(fit, sweep, g):
     mask = np.asarray(block.mask)[..., None]
     sig = np.asarray(block.sigmas)[..., None]
     g = np.where(mask, np.nan_to_num(np.asarray(g, float)), 0.0)
-    if sweep in BIASED_SWEEPS:
+    if sweep_kind(sweep).biased:
         w = np.where(mask, 1.0 / sig**2, 0.0)
         g = g - np.sum(w * g, axis=2, keepdims=True) / np.maximum(np.sum(w, axis=2, keepdims=True), 1e-300)
     return np.where(mask, g / sig, 0.0)

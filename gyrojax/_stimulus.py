@@ -15,6 +15,9 @@ class Stimulus(eqx.Module):
     - `rate_frequency`: angular frequency of a sinusoidal rate, rad/s; 0 for a constant rate.
     - `vcf_ac`, `vcf_fc`: virtual-Coriolis voltages (seed 003): the carrier amplitude V_ac and V_fc, V.
     - `vcf_frequency`: angular frequency of V_fc, rad/s; 0 for a static (DC) virtual rate.
+    - `vcf_phase`: phase of the virtual-Coriolis force's carrier, rad: 0 puts the force in phase with the
+      drive velocity (a virtual rate, seed 003), pi/2 in phase with the drive displacement (a virtual
+      quadrature: the quadrature injection).
     - `time`: time since power-on at the start of the point, s (sets the temperature).
     """
 
@@ -23,10 +26,11 @@ class Stimulus(eqx.Module):
     vcf_ac: float = 0.0
     vcf_fc: float = 0.0
     vcf_frequency: float = 0.0
+    vcf_phase: float = 0.0
     time: float = 0.0
 
     def __check_init__(self):
-        for name in ("rate", "vcf_ac", "vcf_fc"):
+        for name in ("rate", "vcf_ac", "vcf_fc", "vcf_phase"):
             check_finite("Stimulus", name, getattr(self, name))
         for name in ("rate_frequency", "vcf_frequency", "time"):
             check_nonnegative("Stimulus", name, getattr(self, name))

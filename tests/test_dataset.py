@@ -93,8 +93,14 @@ def test_duplicate_points(tmp_path):
     path = write_csv(tmp_path, [HEADER, *GOOD_ROWS, "B,0,rate_table,10,1.0", "A,0,rate_table,10.0,137021.0"])
     with pytest.raises(DataError, match=cell(5, 6, "input") + re.escape(
             ": duplicate point: data row 3 (line 4) has the same (device, run, sweep, input) = "
-            "('A', 0, 'rate_table', 10)")):
+            "('A', 0, 'rate_table', 10) and time_s")):
         read_table(path)
+    # The same input again within a run at another time (a plateau run) is another point; at the same time not.
+    header = HEADER + ",time_s"
+    rows = ["A,0,rate_table,10,137020.0,60", "A,0,rate_table,-10,-137020.0,180", "A,0,rate_table,10,137021.0,300"]
+    assert len(read_table(write_csv(tmp_path, [header, *rows]))) == 3
+    with pytest.raises(DataError, match="duplicate point: data row 1 .*and time_s"):
+        read_table(write_csv(tmp_path, [header, *rows, "A,0,rate_table,10,137022.0,60"]))
 
 
 def test_empty_file(tmp_path):

@@ -57,12 +57,15 @@ def registered():
 
 
 def test_registry_holds_the_data_formats_kinds_in_order():
-    assert gj.sweep_names() == gj.SWEEPS == gj.SIMULATED_SWEEPS == ("rate_table", "vcf_static", "vcf_dynamic",
-                                                                     "dac")
+    assert gj.sweep_names() == gj.SWEEPS == gj.SIMULATED_SWEEPS == (
+        "rate_table", "vcf_static", "vcf_dynamic", "dac", "quadrature_injection", "drive_amplitude",
+        "drive_frequency", "setpoint_zero_rate", "branch_ratio")
     kinds = [gj.sweep_kind(name) for name in gj.SWEEPS]
-    assert [type(k) for k in kinds] == [gj.RateTable, gj.VcfStatic, gj.VcfDynamic, gj.Dac]
-    assert [k.biased for k in kinds] == [True, True, False, False]
-    assert [k.scale_factor_unit for k in kinds] == ["LSB/(deg/s)", "LSB/V", None, "V/LSB"]
+    assert [type(k) for k in kinds] == [gj.RateTable, gj.VcfStatic, gj.VcfDynamic, gj.Dac, gj.QuadratureInjection,
+                                        gj.DriveAmplitude, gj.DriveFrequency, gj.SetpointZeroRate, gj.BranchRatio]
+    assert [k.biased for k in kinds] == [True, True, False, False, True, False, False, True, False]
+    assert [k.scale_factor_unit for k in kinds] == ["LSB/(deg/s)", "LSB/V", None, "V/LSB", "LSB/V", "LSB/LSB",
+                                                    "Hz/LSB", "LSB/LSB", "(V/V)/(deg/s)"]
     assert gj.sweep_kind(kinds[1]) is kinds[1]
     with pytest.raises(ValueError, match="unknown sweep 'rate-table' \\(did you mean 'rate_table'\\?\\)"):
         gj.sweep_kind("rate-table")

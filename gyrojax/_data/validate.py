@@ -165,14 +165,17 @@ def validate_columns(raw: Mapping[str, Any], source: str, lines: Sequence[int] |
     ordered = {c: (required[c] if c in required else out[c]) for c in names}
 
     # Duplicate points.
+    # A point applied again within a run (at each plateau of a plateau run) is told apart by its time_s.
     seen: dict[tuple, int] = {}
+    times = np.asarray(ordered["time_s"], dtype=float) if "time_s" in ordered else np.full(n, np.nan)
     for i in range(n):
-        key = (device[i], run[i], sweep[i], float(inputs[i]))
+        key = (device[i], run[i], sweep[i], float(inputs[i]), None if np.isnan(times[i]) else float(times[i]))
         if key in seen:
             j = seen[key]
             raise DataError(f"{source}: {where.row(i)}, column 'input': duplicate point: {where.row(j)} has the "
                             f"same (device, run, sweep, input) = ({device[i]!r}, {run[i]}, {sweep[i]!r}, "
-                            f"{inputs[i]:g}). Each settled point appears once; give repeats a different run.",
+                            f"{inputs[i]:g}) and time_s. Each settled point appears once; give repeats a different "
+                            "run, or a point applied again within a run (a plateau run) its own time_s.",
                             source=source, row=i + 1, column="input")
         seen[key] = i
 

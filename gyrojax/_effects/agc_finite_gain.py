@@ -42,9 +42,10 @@ class AgcFiniteGain(AbstractEffect):
     name = "agc_finite_gain"
     description = "leaky (finite DC gain) AGC integrator: the drive amplitude sags with the drive load"
     plugs_into = "drive_loop.agc_leak"
-    revealed_by = ("the drive pick-off's amplitude read against the AGC set-point (the sag is the AGC's standing"
-                   " error), or rate tables at two die temperatures: the sag follows the drive Q, where a "
-                   "resonator TCF follows the drive frequency")
+    revealed_by = ("a drive_amplitude sweep: the drive pick-off's amplitude read against the AGC set-point (the "
+                   "sag is the AGC's standing error; the baseline reads the set-point exactly), or rate tables at "
+                   "two die temperatures: the sag follows the drive Q, where a resonator TCF follows the drive "
+                   "frequency")
 
     def __check_init__(self):
         check_nonnegative("AgcFiniteGain", "leak", self.leak)

@@ -29,8 +29,10 @@ class DampingCoupling(AbstractEffect):
     name = "damping_coupling"
     description = "damping coupling c_xy between drive and sense: a zero-rate output in phase with rate"
     plugs_into = "resonator.damping_coupling"
-    revealed_by = ("a mode-reversal test (swapping the drive and sense roles flips the Coriolis term's sign, not"
-                   " c's): at one configuration it is a constant c / (2 Ag) that a turn-on bias takes up")
+    revealed_by = ("a setpoint_zero_rate sweep (the zero-rate output at several AGC set-points in one run: c's "
+                   "output scales with the drive amplitude, the turn-on bias does not; a quadrature_phase scales "
+                   "alike) or a mode-reversal test (swapping the drive and sense roles flips the Coriolis term's "
+                   "sign, not c's): at one configuration it is a constant c / (2 Ag) that a turn-on bias takes up")
 
     def __check_init__(self):
         check_finite("DampingCoupling", "c", self.c)

@@ -31,7 +31,7 @@ class DuffingDrive(AbstractEffect):
     name = "duffing_drive"
     description = "cubic (Duffing) stiffness of the drive mode: amplitude-dependent drive frequency"
     plugs_into = "resonator.duffing_x"
-    revealed_by = ("a drive-amplitude (AGC set-point) sweep with the drive frequency read: w = w_x (1 + 3/8 "
+    revealed_by = ("a drive_frequency sweep (the PLL frequency read against the AGC set-point): w = w_x (1 + 3/8 "
                    "kappa a^2); at one amplitude it is an omega_x shift")
 
     def __check_init__(self):

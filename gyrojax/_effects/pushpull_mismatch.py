@@ -40,8 +40,9 @@ class PushPullMismatch(AbstractEffect):
     name = "pushpull_mismatch"
     description = "gain mismatch of the V_f+ / V_f- feedback branches (amplifier and comb), relative"
     plugs_into = "excitation.branch_gain_error_plus, excitation.branch_gain_error_minus"
-    revealed_by = ("the two feedback branches' AC voltages measured separately: on rate-table, VCF and DAC "
-                   "sweeps the common part is a K_vf change and the DAC sweep reads the word before the branches")
+    revealed_by = ("a branch_ratio sweep (the two feedback branches' AC voltages compared, V_f+ / V_f-, at "
+                   "rate-table points): on rate-table, VCF and DAC sweeps the common part is a K_vf change and the "
+                   "DAC sweep reads the word before the branches")
 
     def __check_init__(self):
         check_finite("PushPullMismatch", "plus", self.plus)

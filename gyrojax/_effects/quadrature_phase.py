@@ -30,8 +30,8 @@ class QuadraturePhase(AbstractEffect):
     name = "quadrature_phase"
     description = "phase error of the rate channel: quadrature leaks into the rate output as a bias"
     plugs_into = "rebalance_loop.carrier_phase (closed loop), readout.phase_error (open loop)"
-    revealed_by = ("a quadrature injection (a virtual-Coriolis drive in phase with the displacement): the rate "
-                   "channel reads sin(phi) of it; otherwise it is a bias and a second-order gain loss")
+    revealed_by = ("a quadrature_injection sweep (a virtual-Coriolis drive in phase with the displacement): the "
+                   "rate channel reads sin(phi) of it; otherwise it is a bias and a second-order gain loss")
 
     def __check_init__(self):
         check_finite("QuadraturePhase", "phase", self.phase)

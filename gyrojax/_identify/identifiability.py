@@ -5,12 +5,10 @@ along a direction the data leave open (its determinacy)."""
 
 import numpy as np
 
-from .._fitdata import BIASED_SWEEPS, FitData
+from .._fitdata import FitData
+from .._sweeps.registry import sweep_kind
 from .covariance import joint_jacobian
 from .fit import Unidentifiable
-
-
-_SWEEP_WORDS = {"rate_table": "rate-table", "vcf_static": "static-VCF", "vcf_dynamic": "dynamic-VCF", "dac": "DAC"}
 
 
 # A held direction moves the scale factor by g.v per natural unit of the parameters (one internal unit: an
@@ -69,9 +67,9 @@ def _count_text(data: FitData, d: int) -> tuple[str, int, int]:
         m = np.asarray(data.blocks[s].mask[d])
         k = int(m.sum())
         if k:
-            parts.append(f"{k} {_SWEEP_WORDS.get(s, s)} point{'s' if k != 1 else ''}")
+            parts.append(f"{k} {sweep_kind(s).title} point{'s' if k != 1 else ''}")
             points += k
-            if s in BIASED_SWEEPS:
+            if sweep_kind(s).biased:
                 biases += int(np.sum(np.any(m, axis=-1)))
     text = " and ".join([", ".join(parts[:-1]), parts[-1]] if len(parts) > 1 else parts) or "no points"
     return text, points, biases

@@ -8,7 +8,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._fitdata import BIASED_SWEEPS, FitData
+from .._fitdata import FitData
+from .._sweeps.registry import sweep_kind
 from .covariance import mc_p_value, pooled_dof
 from .fit import Fit
 
@@ -193,7 +194,7 @@ def estimated_noise(fit: Fit, seed: int):
     notes, determined, nulls = [], [], []
     for d in range(n):
         blocks = [(np.asarray(data.blocks[s].inputs[d]), np.asarray(data.blocks[s].mask[d]),
-                   1.0 / np.asarray(data.blocks[s].sigmas[d]), s in BIASED_SWEEPS) for s in sweeps]
+                   1.0 / np.asarray(data.blocks[s].sigmas[d]), sweep_kind(s).biased) for s in sweeps]
         res = np.asarray(fit.residual_vector[d])[:rows]
         jac = np.asarray(fit.jacobian[d])[:rows][:, free]
         if not (np.all(np.isfinite(res)) and np.all(np.isfinite(jac))):

@@ -8,6 +8,7 @@ import numpy as np
 
 from .._fitdata import FitData
 from .._parameters import PARAMETERS
+from .._sweeps.registry import sweep_kind
 
 
 # A reading this many times the largest other reading of its run is refused: a 24-bit readout spans 1.7e7
@@ -48,8 +49,6 @@ def check_absurd_outputs(data: FitData):
 _FLIP_SIGMAS = 5.0
 
 
-_SIGNED_SWEEPS = ("rate_table", "vcf_static", "dac")
-
 
 def _slope(x, y, w):
     """Weighted least-squares slope of y on (1, x), its standard error from the given weights (`known`) and
@@ -71,7 +70,8 @@ def check_signs(data: FitData, predictions, model_name: str):
     input) flipped against the model's, which no positive gain or factor of the model can fit."""
     bad = []
     for s in data.sweeps:
-        if s not in _SIGNED_SWEEPS or s not in predictions:
+        # a straight-line sweep's output runs with its input with the sign the model predicts
+        if not sweep_kind(s).straight_line or s not in predictions:
             continue
         block = data.blocks[s]
         x, y, m, sig = (np.asarray(a) for a in (block.inputs, block.outputs, block.mask, block.sigmas))

@@ -14,6 +14,7 @@ from .._fitdata import FitData
 from .._parameters import PARAMETERS, Entry, Model, apply_u, batched, build_entries, read_values
 from .._residuals import device_residuals
 from .._simulate.tiers import Steady
+from .._sweeps.registry import sweep_kind
 
 
 @contextlib.contextmanager
@@ -101,9 +102,9 @@ def _residuals_jvp(primals, tangents):
 
 
 def sf_temperature(data):
-    """Temperature at which the fit's scale factor is reported: the mean of the rate-table points (else of
-    all recorded points, else the reference 25 C)."""
-    blocks = [data.blocks["rate_table"]] if "rate_table" in data.blocks else list(data.blocks.values())
+    """Temperature at which the fit's scale factor is reported: the mean of the points of rate-input sweeps
+    (a rate table; else of all recorded points, else the reference 25 C)."""
+    blocks = [b for s, b in data.blocks.items() if sweep_kind(s).rate_input] or list(data.blocks.values())
     total = sum(jnp.sum(jnp.where(b.mask & jnp.isfinite(b.temperatures), b.temperatures, 0.0), axis=(1, 2))
                 for b in blocks)
     count = sum(jnp.sum(b.mask & jnp.isfinite(b.temperatures), axis=(1, 2)) for b in blocks).astype(float)

@@ -41,7 +41,7 @@ def _cj(re, im):
     return jax.lax.complex(jnp.asarray(re, dtype=float), jnp.asarray(im, dtype=float))
 
 
-def _expj(phase):
+def expj(phase):
     return jax.lax.complex(jnp.cos(phase), jnp.sin(phase))
 
 
@@ -94,19 +94,19 @@ class Controls(eqx.Module):
     d_rebalance: jax.Array
 
 
-def _controls(gyro: Gyroscope, loops: Loops) -> Controls:
+def controls(gyro: Gyroscope, loops: Loops) -> Controls:
     dl = gyro.drive_loop
-    e_d = _c(loops.drive_lpf[-1]) * _expj(-dl.reference_phase)
+    e_d = _c(loops.drive_lpf[-1]) * expj(-dl.reference_phase)
     omega, v_d, d_pll, d_agc = dl.control(e_d, loops.pll, loops.agc)
     if gyro.closed_loop:
         rl = gyro.rebalance_loop
-        e_s = _c(loops.sense_lpf[-1]) * _expj(-rl.reference_phase)
+        e_s = _c(loops.sense_lpf[-1]) * expj(-rl.reference_phase)
         word, dz = rl.control(e_s, _c(loops.rebalance))
         rate, quad = jnp.real(word), jnp.imag(word)
         d_reb = _r(dz)
     else:
         ro = gyro.readout
-        e_s = _c(loops.sense_lpf[-1]) * _expj(-(ro.reference_phase + ro.phase_error))
+        e_s = _c(loops.sense_lpf[-1]) * expj(-(ro.reference_phase + ro.phase_error))
         word = jnp.zeros((), dtype=complex)
         rate, quad = jnp.real(e_s), jnp.imag(e_s)
         d_reb = -loops.rebalance  # unused state: relax it to zero so the steady Jacobian stays regular
@@ -135,11 +135,11 @@ def _loop_derivatives(gyro, loops, ctl, drive_demod, sense_demod):
     )
 
 
-def _dac_voltage(gyro, word, carrier_phase, omega):
+def dac_voltage(gyro, word, carrier_phase, omega):
     """Instantaneous DAC output (after the hold's fundamental gain) for the carrier phase(s) given."""
     dac = gyro.excitation.dac
     hold_gain, hold_delay = dac.hold(omega)
-    sample = jnp.real(1j * word * _expj(carrier_phase + gyro.rebalance_loop.carrier_phase - hold_delay))
+    sample = jnp.real(1j * word * expj(carrier_phase + gyro.rebalance_loop.carrier_phase - hold_delay))
     return dac(sample) * hold_gain
 
 
@@ -149,7 +149,7 @@ def _sense_force(gyro, y, word, carrier_phase, omega, temperature):
     r = gyro.resonator
     force = -r.mass * r.duffing_y * y**3
     if gyro.closed_loop:
-        v_plus, v_minus = gyro.feedback_voltages(_dac_voltage(gyro, word, carrier_phase, omega))
+        v_plus, v_minus = gyro.feedback_voltages(dac_voltage(gyro, word, carrier_phase, omega))
         force = force + gyro.feedback_electrode.force(y, v_plus, v_minus, temperature - r.t_ref)
     return force
 
@@ -162,7 +162,7 @@ def _rate_equivalent(gyro, temperature, time, rate):
     return total
 
 
-def _phase_grid(n):
+def phase_grid(n):
     return 2.0 * jnp.pi * jnp.arange(n, dtype=float) / n
 
 
@@ -170,8 +170,8 @@ def sense_force_fundamental(gyro, sense_phasor, word, omega, omega_y, temperatur
     """Fundamental phasor (N) and DC deflection (m) of the sense force, by quadrature over the phase, at
     the die `temperature` (deg C; default the reference temperature)."""
     temperature = gyro.resonator.t_ref if temperature is None else temperature
-    theta = _phase_grid(gyro.phase_points)
-    wave = jnp.real(sense_phasor * _expj(theta))
+    theta = phase_grid(gyro.phase_points)
+    wave = jnp.real(sense_phasor * expj(theta))
     stiffness = gyro.resonator.mass * omega_y**2
 
     def deflect(y0, _):
@@ -179,7 +179,7 @@ def sense_force_fundamental(gyro, sense_phasor, word, omega, omega_y, temperatur
 
     y0, _ = jax.lax.scan(deflect, jnp.zeros(()), None, length=3)
     force = _sense_force(gyro, y0 + wave, word, theta, omega, temperature)
-    return 2.0 * jnp.mean(_cx(force) * _expj(-theta)), y0
+    return 2.0 * jnp.mean(_cx(force) * expj(-theta)), y0
 
 
 def averaged_field(t, state: SlowState, gyro: Gyroscope, stim: Stimulus):
@@ -188,7 +188,7 @@ def averaged_field(t, state: SlowState, gyro: Gyroscope, stim: Stimulus):
     gyro = gyro.at_die_temperature(temp)
     r = gyro.resonator
     wx, wy, qx, qy = r.at_temperature(temp)
-    ctl = _controls(gyro, state.loops)
+    ctl = controls(gyro, state.loops)
     w = ctl.omega
     m = r.mass
     X, Y = _c(state.drive), _c(state.sense)
@@ -201,7 +201,9 @@ def averaged_field(t, state: SlowState, gyro: Gyroscope, stim: Stimulus):
     f_x = (_cj(0.0, gyro.drive_electrode.force(ctl.drive_voltage))
            - _cx(0.75 * m * r.duffing_x * jnp.abs(X) ** 2) * X)
     f_y, _ = sense_force_fundamental(gyro, Y, ctl.word, w, wy, temp)
-    f_y = f_y - _cj(0.0, gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t))
+    # The virtual force's phasor -j K V_ac V_fc e^{j vcf_phase}: -j (in phase with velocity) at phase 0.
+    vcf = gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t)
+    f_y = f_y - _cj(-vcf * jnp.sin(stim.vcf_phase), vcf * jnp.cos(stim.vcf_phase))
 
     force_gain = _cj(0.0, 2 * w * m)
     dX = -_cj(gx, -dx) * X + _cj(ag * om - c / 2, kap / (2 * w)) * Y + f_x / force_gain
@@ -219,7 +221,7 @@ def full_field(t, state: WaveState, gyro: Gyroscope, stim: Stimulus):
     gyro = gyro.at_die_temperature(temp)
     r = gyro.resonator
     wx, wy, qx, qy = r.at_temperature(temp)
-    ctl = _controls(gyro, state.loops)
+    ctl = controls(gyro, state.loops)
     m = r.mass
     x, vx = state.drive[0], state.drive[1]
     y, vy = state.sense[0], state.sense[1]
@@ -230,12 +232,12 @@ def full_field(t, state: WaveState, gyro: Gyroscope, stim: Stimulus):
 
     f_x = gyro.drive_electrode.force(ctl.drive_voltage) * (-jnp.sin(theta)) - m * r.duffing_x * x**3
     f_y = (_sense_force(gyro, y, ctl.word, theta, ctl.omega, temp)
-           + gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t) * jnp.sin(theta))
+           + gyro.vcf_electrode.force_per_volt2 * stim.vcf_at(t) * jnp.sin(theta + stim.vcf_phase))
     ax = f_x / m - (wx / qx) * vx - wx**2 * x - c * vy - kap * y + 2 * ag * om * vy
     ay = f_y / m - (wy / qy) * vy - wy**2 * y - c * vx - kap * x - 2 * ag * om_sense * vx
 
     # Demodulation: 2 v cos(theta) and -2 v sin(theta) are the phasor's re/im parts plus 2w ripple.
-    carrier = 2.0 * _expj(-theta)
+    carrier = 2.0 * expj(-theta)
     drive_demod = _cx(gyro.drive_frontend.sample(x, vx)) * carrier
     sense_demod = _cx(gyro.sense_frontend.sample(y, vy)) * carrier
     dloops = _loop_derivatives(gyro, state.loops, ctl, drive_demod, sense_demod)
@@ -282,9 +284,9 @@ def operating_point(gyro: Gyroscope, stim: Stimulus):
         _, hold_delay = gyro.excitation.dac.hold(w)
         fb = gyro.feedback_electrode
         bias_ratio = fb.bias(temp - r.t_ref) / fb.v_dc
-        needed = coupling + _cx(vcf / (2 * w * m))
+        needed = coupling + _cx(vcf / (2 * w * m)) * expj(stim.vcf_phase)
         word = (needed * _cx(2 * w * m / gyro.rebalance_gain(w)) / _cx(bias_ratio)
-                * _expj(-(gyro.rebalance_loop.carrier_phase - hold_delay)))
+                * expj(-(gyro.rebalance_loop.carrier_phase - hold_delay)))
         rebalance = _r(-word)
     else:
         # Open loop: the sense answers quasi-statically, and its Coriolis back-action pulls the drive
@@ -294,14 +296,14 @@ def operating_point(gyro: Gyroscope, stim: Stimulus):
         dy = (wy**2 - w**2) / (2 * w)
         coupling = _cj((r.angular_gain * om_sense + r.damping_coupling / 2) * a,
                        -r.stiffness_coupling * a / (2 * w))
-        force = -coupling - _cx(vcf / (2 * w * m))
+        force = -coupling - _cx(vcf / (2 * w * m)) * expj(stim.vcf_phase)
         Y = force / _cj(gy, -dy)
         for _ in range(3):  # the sense's cubic stiffness: d_y + 3/8 duffing_y |Y|^2 / w, by fixed point
             Y = force / _cj(gy, -(dy + 0.375 * r.duffing_y * jnp.abs(Y) ** 2 / w))
         rebalance = jnp.zeros(2)
         drive_meas = gyro.drive_frontend.phasor_gain(w) * X
     sense_meas = gyro.sense_frontend.phasor_gain(w) * Y
-    phase_meas = jnp.angle(drive_meas * _expj(-dl.reference_phase))
+    phase_meas = jnp.angle(drive_meas * expj(-dl.reference_phase))
     loops = Loops(
         pll=w - dl.center_frequency - dl.pll_kp * phase_meas,
         agc=jnp.asarray(v_d - dl.agc_kp * err, dtype=float),

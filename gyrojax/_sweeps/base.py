@@ -42,6 +42,8 @@ class AbstractSweep(eqx.Module):
     - `rate_input`: `input` is a rate in deg/s, so a run that looks converted to rad/s is refused.
     - `timed`: points follow one another in a power-on run (a time axis, a point order, a die temperature
       per point); False for a bench measurement.
+    - `rate_output`: `output` is the gyro's rate channel (LSB): it scales with the gain of the rate path, and
+      the diagnosis's generic gain shapes act on it.
     - `rate_noise`: the simulator's noise is rate noise (deg/s) converted to LSB with each device's
       rate-table scale factor.
     - `fit_against_rate`: the metrics also fit `output` against the `rate_dps` column when it is given.
@@ -59,6 +61,7 @@ class AbstractSweep(eqx.Module):
     word_input: ClassVar[bool] = False
     rate_input: ClassVar[bool] = False
     timed: ClassVar[bool] = True
+    rate_output: ClassVar[bool] = False
     rate_noise: ClassVar[bool] = False
     fit_against_rate: ClassVar[bool] = False
 
@@ -73,7 +76,8 @@ class AbstractSweep(eqx.Module):
         if not self.straight_line:
             return None
         unit = f"({self.input_unit})" if "/" in self.input_unit else self.input_unit
-        return f"{self.output_unit}/{unit}"
+        out = f"({self.output_unit})" if "/" in self.output_unit else self.output_unit
+        return f"{out}/{unit}"
 
     # -- protocol ------------------------------------------------------------------------------------------------
 

@@ -45,6 +45,7 @@ class RateTable(AbstractSteadySweep):
     input_meaning = "the table rate, deg/s (a physical rate on a rate table, seed 000 §5)"
     output_meaning = ("the gyro's rate output, LSB: the rebalance word in closed loop, the readout's ADC word in "
                       "open loop")
+    rate_output = True
     rate_input = True
 
     def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:

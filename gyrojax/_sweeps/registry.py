@@ -3,13 +3,20 @@
 import difflib
 
 from .base import AbstractSweep
+from .branch_voltages import BranchRatio
 from .dac import Dac
+from .drive_amplitude import DriveAmplitude
+from .drive_frequency import DriveFrequency
+from .quadrature_injection import QuadratureInjection
 from .rate_table import RateTable
+from .setpoint_zero_rate import SetpointZeroRate
 from .vcf_dynamic import VcfDynamic
 from .vcf_static import VcfStatic
 
 
-SWEEP_KINDS: dict[str, type[AbstractSweep]] = {cls.name: cls for cls in (RateTable, VcfStatic, VcfDynamic, Dac)}
+SWEEP_KINDS: dict[str, type[AbstractSweep]] = {cls.name: cls for cls in (
+    RateTable, VcfStatic, VcfDynamic, Dac, QuadratureInjection, DriveAmplitude, DriveFrequency, SetpointZeroRate,
+    BranchRatio)}
 """The sweep kinds by their `sweep` name, in the data format's order (a kind's position also numbers its
 random streams in `gyrojax.simulate_table`, so registering one leaves the others' draws unchanged)."""
 

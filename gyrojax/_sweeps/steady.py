@@ -49,7 +49,7 @@ class AbstractSteadySweep(AbstractSweep):
         return settled.rate, settled.result != RESULTS.successful
 
     def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
-        inputs = campaign.applied(self, self.inputs(campaign.protocol, campaign.gyro))
+        inputs = campaign.applied(self, campaign.protocol.inputs(self, campaign.gyro))
         temps, times, full = campaign.temperatures(self), campaign.times(self), campaign.shape(self)
         settled = campaign.settled.get(self.name)
         if settled is None:
@@ -71,13 +71,13 @@ class AbstractSteadySweep(AbstractSweep):
                 "time_s": np.broadcast_to(times, full)}
 
 
-def _times(times, like):
+def point_times(times, like):
     """Times since power-on (s) per point; not recorded (None or NaN) is 0."""
     t = jnp.zeros_like(like) if times is None else jnp.broadcast_to(jnp.asarray(times, dtype=float), like.shape)
     return jnp.where(jnp.isnan(t), 0.0, t)
 
 
-def _read_out(gyro: Gyroscope, settled: Settled, sweep: AbstractSweep, inputs, temperatures, times) -> Settled:
+def read_out(gyro: Gyroscope, settled: Settled, sweep: AbstractSweep, inputs, temperatures, times) -> Settled:
     """The settled rate output through the device's readout terms (`AbstractOutputTerm`)."""
     terms = gyro.terms_of(AbstractOutputTerm)
     if not terms:
@@ -111,7 +111,7 @@ def steady_points(gyro: Gyroscope, requests, tier: AbstractTier = Steady()) -> t
             raise ValueError(f"steady_points: {sweep!r} is not a steady sweep (an AbstractSteadySweep).")
         x = jnp.atleast_1d(jnp.asarray(inputs, dtype=float))
         temps = jnp.broadcast_to(jnp.asarray(temperatures, dtype=float), x.shape)
-        t = _times(times, x)
+        t = point_times(times, x)
 
         def one(value, temp, time, sweep=sweep):
             return at_temperature(gyro, temp), sweep.stimulus(value, time)
@@ -124,7 +124,7 @@ def steady_points(gyro: Gyroscope, requests, tier: AbstractTier = Steady()) -> t
     out, start = [], 0
     for size, (sweep, x, temps, t) in zip(sizes, views):
         piece = jax.tree.map(lambda leaf, a=start, b=start + size: leaf[a:b], settled)
-        out.append(_read_out(gyro, piece, sweep, x, temps, t))
+        out.append(read_out(gyro, piece, sweep, x, temps, t))
         start += size
     return tuple(out)
 

@@ -61,6 +61,7 @@ class VcfDynamic(AbstractSweep):
     input_meaning = "the modulation frequency of V_ac, Hz (V_ac = 20 mV; seed 003's dynamic test)"
     output_meaning = ("the amplitude of the rate output at that frequency, LSB (a lock-in reading); its phase goes "
                       "in `phase_deg`")
+    rate_output = True
     biased = False
     straight_line = False
     rate_noise = True
@@ -95,7 +96,7 @@ class VcfDynamic(AbstractSweep):
 
     def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
         protocol = campaign.protocol
-        inputs = campaign.applied(self, self.inputs(protocol))
+        inputs = campaign.applied(self, protocol.inputs(self))
         temps, full = campaign.temperatures(self), campaign.shape(self)
         amp, phase = _lot_vcf_dynamic(lot, jnp.asarray(inputs), jnp.asarray(temps),
                                       float(protocol.vcf_dynamic_amplitude_v))

@@ -47,6 +47,7 @@ class VcfStatic(AbstractSteadySweep):
     input_meaning = ("the virtual-rate voltage V_ac on the virtual-Coriolis electrode, V, signed (at the fixed "
                      "carrier V_fc = 1 V; seed 003 Eq. (7))")
     output_meaning = "the gyro's rate output, LSB"
+    rate_output = True
 
     def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:
         if protocol.vcf_amplitudes_v is not None:

@@ -1,0 +1,47 @@
+"""The drive-frequency sweep: the PLL frequency read against the AGC set-point. Reveals `duffing_drive`.
+
+The baseline's frequency is w_x at the die temperature, the same at every set-point; a cubic drive spring
+bends it along the backbone w = w_x (1 + 3/8 kappa a^2) (the closed form of the AGC set-point sweeps). A free
+`omega_x` takes the mean and the rho^2 shape is left: at typical size 38 ppm x (rho^2 - 1) on paper-qmg,
+500 ppm x (rho^2 - 1) on vcf-2018. At the nominal set-point alone it is an `omega_x` shift.
+"""
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .setpoint import AbstractSetpointSweep, SetpointReading
+
+
+if TYPE_CHECKING:
+    from .lot import LotCampaign
+    from .protocol import Protocol
+
+
+FREQUENCY_SIGMA_PPM = 1.0
+"""Relative standard uncertainty of an averaged drive-frequency reading, ASSUMPTION: set by the die temperature
+during the sweep, not by the PLL: silicon's -30 ppm/K times a chamber holding the die within ~0.03 K over
+the sweep (4.6 mHz on paper-qmg, 1.8 mHz on vcf-2018)."""
+
+
+class DriveFrequency(AbstractSetpointSweep):
+    """The PLL (drive) frequency read at each AGC set-point, zero table rate. Inputs `Protocol.setpoint_ratios`
+    times the device's nominal set-point (LSB); dwell `Protocol.drive_dwell_s`; noise `FREQUENCY_SIGMA_PPM`
+    of the reading, independent per point."""
+
+    name = "drive_frequency"
+    title = "drive-frequency"
+    output_unit = "Hz"
+    input_meaning = "the AGC set-point, drive ADC LSB, at zero table rate (as for `drive_amplitude`)"
+    output_meaning = "the PLL's drive frequency, Hz (a register of the drive loop)"
+    biased = False
+
+    def dwell_s(self, protocol: "Protocol") -> float:
+        return protocol.drive_dwell_s
+
+    def reading(self, points: SetpointReading):
+        return points.frequency_hz
+
+    def add_noise(self, out: np.ndarray, campaign: "LotCampaign") -> tuple[np.ndarray, np.ndarray]:
+        sigma = FREQUENCY_SIGMA_PPM * 1e-6 * np.abs(out)
+        return out + sigma * campaign.rng(self).standard_normal(out.shape), sigma
