@@ -34,6 +34,7 @@ from .._diagnose import baseline_model, first_device, full_key, is_lot
 from .._effects.registry import EFFECTS
 from .._fitdata import FitData, fit_data
 from .._identify import Fit, identify
+from .._noise import RateNoise
 from .._parameters import DEFAULT_FREE, Model, as_model, zero_effect
 from .._progress import as_progress
 from .._sweeps.protocol import Protocol
@@ -44,6 +45,10 @@ from .power import power, required_noncentrality
 SF_HELD_TOL = 0.1
 """A design determines the scale factor when the part of its gradient along directions the design cannot fix
 is below this many standard errors (identification's own test)."""
+
+MAX_EXACT_COMBINATIONS = 4096
+"""Above this many combinations of runs (`(max_repeats + 1) ** experiments`), the cheapest set is searched
+greedily instead of exactly."""
 
 SAME_SHAPE = 0.95
 """|cos| between two candidates' fingerprints on the data given above which they are ambiguous (the
@@ -150,6 +155,7 @@ class Plan(eqx.Module):
     target_power: float = eqx.field(static=True)
     max_repeats: int = eqx.field(static=True)
     devices: tuple = eqx.field(static=True)
+    search: str = eqx.field(static=True, default="exact")
 
     def candidate(self, name: str) -> CandidatePlan:
         for c in self.candidates:
@@ -163,7 +169,7 @@ class Plan(eqx.Module):
                 "scale_factor": self.scale_factor.to_json(),
                 "experiments": {e.name: e.to_json() for e in self.experiments},
                 "alpha": self.alpha, "target_power": self.target_power, "max_repeats": self.max_repeats,
-                "search": f"exact: every combination of 0..{self.max_repeats} runs of each experiment, cheapest first",
+                "search": self.search,
                 "devices": list(self.devices)})
 
     def summary(self) -> str:
@@ -401,12 +407,21 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     say = as_progress(progress, "gyrojax.plan")
     fit, candidates = _baseline(data, model, fit, candidates, free, say)
     one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, fit.model.device)
-    if experiments is None:
+    defaults = experiments is None
+    if defaults:
         experiments = default_experiments(one, protocol)
     experiments = tuple(experiments)
     for e in experiments:
         if not isinstance(e, CandidateExperiment):
             raise ValueError(f"experiments must be gyrojax.CandidateExperiment, got {type(e).__name__}.")
+    if defaults:
+        # A kind with no noise model of its own (AbstractSweep.point_sigmas) is planned only where the data
+        # give its points' sigmas.
+        dropped = [e.name for e in experiments if e.kind not in fit.data.blocks and e.sweep.point_sigmas(
+            np.asarray(e.inputs), protocol, RateNoise(), 1.0, 1.0) is None]
+        if dropped:
+            say(f"left out (no noise model, none of their points in the data): {', '.join(dropped)}")
+        experiments = tuple(e for e in experiments if e.name not in dropped)
     names = [e.name for e in experiments]
     if len(set(names)) != len(names) or not names:
         raise ValueError(f"experiments need distinct names, at least one; got {names}.")
@@ -445,8 +460,12 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
             fp.append(f)
         prints[c] = np.concatenate(fp)
     plans = []
+    exact = (max_repeats + 1) ** len(experiments) <= MAX_EXACT_COMBINATIONS
     combos = sorted(itertools.product(range(max_repeats + 1), repeat=len(experiments)),
-                    key=lambda n: (sum(k * e.minutes for k, e in zip(n, experiments)), sum(n)))
+                    key=lambda n: (sum(k * e.minutes for k, e in zip(n, experiments)), sum(n))) if exact else None
+    search = (f"exact: every combination of 0..{max_repeats} runs of each experiment, cheapest first" if exact else
+              f"greedy: one run at a time, the largest expected-chi2 gain per minute, up to {max_repeats} runs of "
+              f"each experiment ({len(experiments)} experiments: more than {MAX_EXACT_COMBINATIONS} combinations)")
     for c in candidates:
         cols = cand_cols[c]
         df = len(cols) * n_dev
@@ -478,11 +497,25 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
             reason = "testable on the data given"
         else:
             found = None
-            for counts in combos[1:]:
-                lc = lam(counts)
-                if lc >= need:
-                    found = (counts, lc)
-                    break
+            if exact:
+                for counts in combos[1:]:
+                    lc = lam(counts)
+                    if lc >= need:
+                        found = (counts, lc)
+                        break
+            else:
+                counts, lc = (0,) * len(experiments), now
+                while found is None:
+                    steps = [tuple(k + (i == j) for i, k in enumerate(counts)) for j in range(len(experiments))
+                             if counts[j] < max_repeats]
+                    if not steps:
+                        break
+                    gains = [(lam(c) - lc) / experiments[j].minutes for j, c in
+                             zip([j for j in range(len(experiments)) if counts[j] < max_repeats], steps)]
+                    counts = steps[int(np.argmax(gains))]
+                    lc = lam(counts)
+                    if lc >= need:
+                        found = (counts, lc)
             if found is None:
                 top = lam((max_repeats,) * len(experiments))
                 reason = (f"no combination of up to {max_repeats} runs of {', '.join(names)} makes it testable: a "
@@ -498,7 +531,7 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
                         lk = lam(only)
                         recs.append(Recommendation(experiments[j], k, lk, power(lk, df, alpha)))
                 recommended = tuple(recs)
-                reason = "cheapest combination (exact search)"
+                reason = "cheapest combination (exact search)" if exact else "greedy search (most chi2 per minute)"
         plans.append(CandidatePlan(c, df, now, p_now, testable, amb, tuple(per), recommended, rec_chi2, rec_power,
                                    reason))
         say(f"{c}: now chi2 {now:.3g} (power {p_now:.2f})" + ("" if testable else (
@@ -506,7 +539,8 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
             else "; not reachable with these experiments")))
     design = _sf_design(fit, jac0, g, sf, all_exps, jac_e, noise, pool, budget_min, protocol,
                         identifiability_threshold, say)
-    return Plan(tuple(plans), design, experiments, fit, float(alpha), float(target_power), max_repeats, fit.devices)
+    return Plan(tuple(plans), design, experiments, fit, float(alpha), float(target_power), max_repeats, fit.devices,
+                search)
 
 
 def _columns(fit: Fit):
