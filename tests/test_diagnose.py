@@ -100,7 +100,7 @@ def test_gain_and_bias_effects_are_reported_untestable(hidden_dac_inl):
     assert damping.visible_chi2 < 1.0
     text = d.summary()
     assert "pushpull_mismatch: a typical size would change the chi2 by" in text and "k_vf absorbs 100 % of it" in text
-    assert "Revealed by: the two feedback branches' AC voltages measured separately" in text
+    assert "Revealed by: a branch_ratio sweep (the two feedback branches' AC voltages compared" in text
     # A quadrature phase error is a bias (Q sin phi) and a second-order gain loss
     assert "quadrature_phase: a typical size changes the chi2 by" in text and "the run biases take it up" in text
     report = d.to_json()
