@@ -34,8 +34,10 @@ def test_batch_calibration_small():
     # identify's own uncertainties are the script's SVD covariance (the pseudo-inverse of J^T J was not:
     # shared-gain stderr off by 3681 sigma).
     np.testing.assert_allclose(s["shared"]["identify_stderr"], s["shared"]["stderr"], rtol=1e-6)
+    # identify's scale factor (and so its gradient) is a central difference over +/-1 deg/s, the script's an
+    # exact derivative at zero rate: they differ by the difference's truncation, ~1e-6 relative (measured 1.04e-6)
     np.testing.assert_allclose([r["identify_stderr"] for r in records], [r["model_stderr"] for r in records],
-                               rtol=1e-6)
+                               rtol=1e-5)
     # The joint solve: one shared parameter, per-device ones for every device.
     assert fit.lot_names == ("sense_gain",)
     assert set(fit.names) == {"vcf_gain", "omega_y", "q_y", "angular_gain"}
