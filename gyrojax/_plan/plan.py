@@ -30,7 +30,7 @@ import jax
 import numpy as np
 
 from .._data.table import Table
-from .._diagnose import baseline_model, first_device, full_key, is_lot
+from .._diagnose import baseline_model, candidate_effects, full_key
 from .._effects.registry import EFFECTS
 from .._fitdata import FitData, fit_data
 from .._identify import Fit, identify
@@ -272,8 +272,6 @@ def _typical(fit: Fit, name: str, cols) -> np.ndarray:
 def _baseline(data, model, fit, candidates, free, say):
     """The baseline fit with every candidate effect in the model at zero and held (as the diagnosis fits it),
     reusing a given fit's Jacobian when it has the candidates' columns. Returns (fit, candidates)."""
-    from .._effects.registry import supported_effects
-
     if fit is not None:
         if data is not None:
             data = data if isinstance(data, FitData) else fit_data(data)
@@ -289,23 +287,7 @@ def _baseline(data, model, fit, candidates, free, say):
             raise ValueError("plan needs data (a gyrojax.Table or FitData) or a fit of it; got neither.")
         data = data if isinstance(data, FitData) else fit_data(data)
         base = as_model(model)
-    one = first_device(base.device) if is_lot(base.device) else base.device
-    available = supported_effects(one)
-    present = set(base.effect_names)
-    if candidates is None:
-        candidates = tuple(c for c in available if c not in present)
-    for c in candidates:
-        if c not in EFFECTS:
-            raise ValueError(f"unknown candidate effect {c!r}; expected names of gyrojax.EFFECTS: "
-                             f"{', '.join(EFFECTS)}.")
-        if c not in available:
-            raise ValueError(f"candidate effect {c!r} cannot act on device {one.name!r} "
-                             f"(supported: {', '.join(available)}).")
-        if c in present:
-            raise ValueError(f"candidate effect {c!r} is already fitted in the baseline; plan for the others.")
-    if not candidates:
-        raise ValueError("plan needs at least one candidate effect not already in the model.")
-    candidates = tuple(candidates)
+    candidates = candidate_effects(base, candidates, "plan")
     if fit is not None:
         have = set(fit.names)
         missing = [c for c in candidates if not any(n.startswith(c + ".") for n in have)]

@@ -1,0 +1,74 @@
+"""The diagnosis's baseline and its candidates: a given fit as the baseline, a lot's first device, the
+candidate effects checked against the device, and what decides a new compile of the fit with all of them."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._effects.registry import EFFECTS
+from .._fitdata import FitData
+from .._identify import Fit
+from .._parameters import Model
+
+
+def full_key(model: Model, data: FitData):
+    """What decides whether a fit of `model` to `data` compiles anew: the model's structure and the data's
+    shapes."""
+    shapes = tuple((s, tuple(np.shape(data.blocks[s].inputs))) for s in data.sweeps)
+    return jax.tree.structure(eqx.filter(model, eqx.is_array)), shapes
+
+
+def baseline_model(fit: Fit, data: FitData) -> Model:
+    """The fitted model of `fit` as the diagnosis's baseline, after checking that it was fitted to `data`."""
+    if not isinstance(fit, Fit):
+        raise TypeError(f"fit must be a gyrojax.Fit (from identify or load_fit), got {type(fit).__name__}.")
+    if tuple(fit.devices) != tuple(data.devices):
+        raise ValueError(f"fit: it was fitted to devices {list(fit.devices)}, the data have {list(data.devices)}; "
+                         "give the fit of this data (or no fit, to fit the baseline here).")
+    theirs = {s: int(np.asarray(fit.data.blocks[s].mask).sum()) for s in fit.data.sweeps}
+    ours = {s: int(np.asarray(data.blocks[s].mask).sum()) for s in data.sweeps}
+    if theirs != ours:
+        raise ValueError(f"fit: it was fitted to {theirs} points per sweep, the data have {ours}; give the fit of "
+                         "this data (or no fit, to fit the baseline here).")
+    # Effects held at exactly zero (a previous diagnosis's candidates) were never fitted: candidates again.
+    kept = tuple(e for e in fit.model.effects
+                 if any(np.any(np.asarray(x) != 0) for x in jax.tree.leaves(e)))
+    return Model(fit.model.device, kept)
+
+
+def is_lot(device) -> bool:
+    """Whether `device` is a lot: every array leaf has a leading device axis."""
+    leaves = [x for x in jax.tree.leaves(device) if eqx.is_array(x)]
+    return bool(leaves) and all(jnp.ndim(x) >= 1 for x in leaves)
+
+
+def first_device(device):
+    """The first device of a lot (leaves indexed at 0 on their device axis)."""
+    return jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, device)
+
+
+def candidate_effects(base: Model, candidates, who: str) -> tuple[str, ...]:
+    """The candidate effects to test against the baseline `base`: `candidates` (default: every registered
+    effect that the device supports and `base` does not hold), each checked to be a registered effect that can
+    act on the device and is not fitted in `base` already. `who` names the caller in the messages."""
+    from .._effects.registry import supported_effects
+
+    one = first_device(base.device) if is_lot(base.device) else base.device
+    available = supported_effects(one)
+    present = set(base.effect_names)
+    if candidates is None:
+        candidates = tuple(c for c in available if c not in present)
+    candidates = tuple(candidates)
+    for c in candidates:
+        if c not in EFFECTS:
+            raise ValueError(f"unknown candidate effect {c!r}; expected names of gyrojax.EFFECTS: "
+                             f"{', '.join(EFFECTS)}.")
+        if c not in available:
+            raise ValueError(f"candidate effect {c!r} cannot act on device {one.name!r} "
+                             f"(supported: {', '.join(available)}).")
+        if c in present:
+            raise ValueError(f"candidate effect {c!r} is already fitted in the baseline; {who} tests the others.")
+    if not candidates:
+        raise ValueError(f"{who} needs at least one candidate effect not already in the model.")
+    return candidates

@@ -1,0 +1,156 @@
+"""Where the misfit lives: the generic shapes (probes) scored at a fit, which of them are one shape on this
+data, and which library effect has each significant shape."""
+
+import dataclasses
+
+import numpy as np
+
+from .._fitdata import FitData
+from .._identify import Fit
+from .._probes import PROBES, design, score_columns
+from .columns import base_columns, effect_columns, excess_chi2, row_blocks
+
+
+# A candidate "has" a residual shape when the shape, beyond the baseline and the candidate, keeps less than this
+# share of the chi2 it explains alone. Not a significance test: at a misfit of 1e7 chi2 every difference between
+# two shapes is significant, and the candidate's Jacobian is taken at the baseline, not at the truth, so even
+# the right effect leaves a few percent (3.7 % for the demo lot's hidden DAC INL, which its refit then explains
+# to the noise).
+SHAPE_SHARE_LEFT = 0.1
+
+
+
+@dataclasses.dataclass(frozen=True)
+class Discrepancy:
+    """Where an unexplained misfit lives: a generic shape (a probe) along a recorded coordinate, with the share
+    of the misfit it explains and the size of the term it implies."""
+
+    probe: str
+    coordinate: str  # a data column (input, temperature_c, time_s, drive_freq_hz), "order" or "run"
+    shape: str
+    sweeps: tuple  # (sweep, share of the probe's fingerprint) where it acts on this data, largest first
+    chi2_explained: float  # the score S: the chi2 it would remove
+    df: int
+    share: float  # of the chi2 in excess of the degrees of freedom
+    p_value: float
+    significant: bool
+    coefficient: float  # the lot's mean fitted coefficient (largest |.| for a multi-column probe), in `unit`
+    coefficient_spread: float  # standard deviation over the devices
+    unit: str
+    fingerprint: np.ndarray
+    same_shape_as: tuple = ()  # other significant probes this data cannot tell from it
+    library: str = ""  # which library effect has this fingerprint, and at what size
+    within: str = ""  # a more explanatory probe this one adds nothing beyond (it is part of that misfit)
+
+    @property
+    def description(self) -> str:
+        where = ", ".join(f"{s} {100 * f:.0f} %" for s, f in self.sweeps)
+        size = f"{self.coefficient:.3g} {self.unit}"
+        if self.coefficient_spread > 0:
+            size += f" (device spread {self.coefficient_spread:.2g})"
+        text = f"{100 * self.share:.0f} % of the misfit is {self.shape} ({where}): about {size}"
+        if self.same_shape_as:
+            text += f"; this data cannot tell it from {', '.join(self.same_shape_as)}"
+        return text + (f"; {self.library}" if self.library else "")
+
+    def to_json(self) -> dict:
+        return {"coordinate": self.coordinate, "shape": self.shape, "sweeps": [s for s, _ in self.sweeps],
+                "chi2_explained": self.chi2_explained, "share": self.share, "p": self.p_value,
+                "description": self.description, "probe": self.probe, "df": self.df,
+                "coefficient": self.coefficient, "coefficient_spread": self.coefficient_spread, "unit": self.unit,
+                "same_shape_as": list(self.same_shape_as), "within": self.within, "library": self.library}
+
+
+def _sweep_shares(fingerprint, data: FitData):
+    total = float(np.sum(fingerprint**2))
+    if total <= 0:
+        return ()
+    shares = [(sweep, float(np.sum(fingerprint[:, i:j] ** 2)) / total) for sweep, i, j in row_blocks(data)]
+    return tuple(sorted(((s, f) for s, f in shares if f > 0.05), key=lambda x: -x[1]))
+
+
+def score_probes(fit: Fit, probes=PROBES, *, alpha: float = 0.01):
+    """Every probe scored against `fit`: (Discrepancy per probe, most explanatory first; their designs by
+    name). A probe is significant at p < alpha / (number of probes the data can test)."""
+    base = base_columns(fit)
+    res = np.asarray(fit.residual_vector)
+    excess = excess_chi2(fit)
+    designs, scored = {}, []
+    for probe in probes:
+        cols = design(fit, probe)
+        if cols.shape[-1] == 0 or not np.any(cols):
+            continue
+        designs[probe.name] = cols
+        scored.append((probe, score_columns(base, cols, res)))
+    testable = [x for x in scored if x[1].df > 0]
+    cut = alpha / max(len(testable), 1)
+    out = []
+    for probe, sc in testable:
+        coef = sc.coefficients
+        mag = coef[:, np.argmax(np.max(np.abs(coef), axis=0))] if coef.shape[1] > 1 else coef[:, 0]
+        share = min(max(sc.statistic - sc.df, 0.0) / excess, 1.0) if excess > 0 else 0.0
+        out.append(Discrepancy(probe.name, probe.coordinate, probe.shape, _sweep_shares(sc.fingerprint, fit.data),
+                               sc.statistic, sc.df, share, sc.p_value, sc.p_value < cut, float(np.mean(mag)),
+                               float(np.std(mag)) if len(mag) > 1 else 0.0, probe.unit, sc.fingerprint))
+    out.sort(key=lambda d: (not d.significant, -d.chi2_explained))
+    # A significant shape that adds nothing beyond a more explanatory one is part of it (a drift in time seen
+    # through an input swept in time order); two that add nothing beyond each other are the same shape here.
+    within, same = {}, {d.probe: [] for d in out}
+    significant = [d for d in out if d.significant]
+    for i, d in enumerate(significant):
+        for e in significant[:i]:
+            if e.probe in within:
+                continue
+            d_beyond = score_columns(np.concatenate([base, designs[e.probe]], -1), designs[d.probe], res)
+            if d_beyond.p_value < cut:
+                continue
+            e_beyond = score_columns(np.concatenate([base, designs[d.probe]], -1), designs[e.probe], res)
+            if e_beyond.p_value < cut:
+                within[d.probe] = e.probe
+                break
+            same[d.probe].append(e.probe)
+            same[e.probe].append(d.probe)
+    final = tuple(dataclasses.replace(d, same_shape_as=tuple(same[d.probe]), within=within.get(d.probe, ""))
+                  for d in out)
+    return final, designs
+
+
+def with_library(fit, discrepancy, designs, scores, rejected, max_multiple, alpha):
+    """The discrepancies with `library` filled in: which candidate takes the whole of a shape's misfit (the
+    shape adds nothing beyond it, at the probes' significance), and why it does not explain it (implausible
+    size, refused), or that none does."""
+    reasons = {r.effect: r.kind or r.reason for r in rejected}
+    base = base_columns(fit)
+    res = np.asarray(fit.residual_vector)
+    jac = np.asarray(fit.jacobian)
+    cut = alpha / max(len(discrepancy), 1)
+    out = []
+    for d in discrepancy:
+        if not d.significant or d.within:
+            out.append(d)
+            continue
+        parts, plausible = [], False
+        for c in scores:
+            if not c.testable:
+                continue
+            je = jac[:, :, effect_columns(fit, c.effect)]
+            left = score_columns(np.concatenate([base, je], axis=-1), designs[d.probe], res)
+            # the shape leaves misfit this candidate cannot take: significant, and a share of what the shape
+            # explained (see SHAPE_SHARE_LEFT)
+            if left.p_value < cut and left.statistic > SHAPE_SHARE_LEFT * d.chi2_explained:
+                continue
+            if c.effect in reasons:
+                parts.append(f"{c.effect} has it but was not confirmed ({reasons[c.effect]})")
+            elif c.implied_multiple > max_multiple:
+                parts.append(f"{c.effect} has it only at ~{c.implied_multiple:.3g}x its typical size")
+            else:
+                parts.append(f"{c.effect} has it")
+                plausible = True
+        if not parts:
+            text = "no effect in the library has this fingerprint"
+        elif not plausible:
+            text = "no effect in the library explains it: " + "; ".join(parts)
+        else:
+            text = "; ".join(parts)
+        out.append(dataclasses.replace(d, library=text))
+    return tuple(out)

@@ -1,0 +1,88 @@
+"""What stops a significant candidate from being confirmed (an implausible size, a probe that explains its
+misfit better, a sweep its refit makes worse), the `Rejection` that says why, and the verdict."""
+
+import dataclasses
+
+import numpy as np
+
+from .._compare import chi2_sf
+from .._identify import Fit
+from .._probes import score_columns
+from .columns import base_columns, effect_columns, excess_chi2
+from .score import CandidateScore
+
+
+# ASSUMPTION: beyond 100 times its typical size an effect is not physical any more (a 16-bit DAC's INL at
+# 100x is ~5 % of full scale, a damping coupling at 100x breaks passivity on paper-qmg): a candidate that
+# explains the misfit only there is not confirmed.
+MAX_TYPICAL_MULTIPLE = 100.0
+
+
+
+def chi2_isf(p: float, df: int) -> float:
+    """The chi2 value whose survival probability is `p` (bisection on `chi2_sf`)."""
+    if df <= 0:
+        return 0.0
+    lo, hi = 0.0, max(10.0 * df, 100.0)
+    while chi2_sf(hi, df) > p:
+        hi *= 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if chi2_sf(mid, df) > p else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+@dataclasses.dataclass(frozen=True)
+class Rejection:
+    """A candidate that scored but was not confirmed, and why (in physical words)."""
+
+    effect: str
+    reason: str
+    contradicted_by: tuple = ()  # sweeps whose misfit the refit made significantly worse
+    kind: str = ""  # the reason in two words: "implausible size", "not its shape", "contradicted", ...
+
+
+def probe_guard(fit, candidate: CandidateScore, discrepancy, designs, candidate_cut, alpha):
+    """A reason not to confirm `candidate`, or None: a significant probe explains the misfit the candidate is
+    credited with, and more (what the probe takes beyond the candidate is significant at alpha over the
+    probes), while the candidate adds nothing beyond the probe (not significant at `candidate_cut`)."""
+    base = base_columns(fit)
+    res = np.asarray(fit.residual_vector)
+    je = np.asarray(fit.jacobian)[:, :, effect_columns(fit, candidate.effect)]
+    probe_cut = alpha / max(len(discrepancy), 1)
+    worst = None
+    for d in (d for d in discrepancy if d.significant):
+        gp = designs[d.probe]
+        beyond_probe = score_columns(np.concatenate([base, gp], axis=-1), je, res)
+        beyond_candidate = score_columns(np.concatenate([base, je], axis=-1), gp, res)
+        if beyond_probe.p_value >= candidate_cut and beyond_candidate.p_value < probe_cut:
+            if worst is None or beyond_candidate.statistic > worst[1].statistic:
+                worst = (d, beyond_candidate, beyond_probe)
+    if worst is None:
+        return None
+    d, extra, own = worst
+    excess = excess_chi2(fit)
+    share_c = min(candidate.statistic / excess, 1.0) if excess > 0 else 0.0
+    return (f"it would take {100 * share_c:.0f} % of the misfit, whose shape it does not have: {d.shape} "
+            f"({', '.join(s for s, _ in d.sweeps)}) explains {100 * d.share:.0f} %, leaves chi2 {extra.statistic:.4g} "
+            f"that {candidate.effect} cannot take (p = {extra.p_value:.2g}), and {candidate.effect} adds nothing "
+            f"beyond it (S = {own.statistic:.3g}, df {own.df}, p = {own.p_value:.2g})")
+
+
+def _sweep_chi2(fit: Fit) -> dict:
+    return {s: float(np.sum(np.asarray(fit.residuals[s]) ** 2)) for s in fit.data.sweeps}
+
+
+def contradictions(before: Fit, after: Fit, alpha: float, df: int):
+    """Sweeps whose chi2 the refit raised by more than the (1 - alpha) quantile of chi2(df), df the step's
+    new parameters over the lot: a real effect, fitted, does not make a sweep's misfit significantly worse."""
+    limit = chi2_isf(alpha, max(df, 1))
+    a, b = _sweep_chi2(before), _sweep_chi2(after)
+    points = {s: int(np.asarray(before.data.blocks[s].mask).sum()) for s in a}
+    return tuple((s, a[s], b[s], points[s]) for s in a if b[s] - a[s] > limit)
+
+
+def verdict_of(comparison, steps) -> str:
+    if not comparison.fails and not comparison.flagged:
+        return "explained"
+    return "partly explained" if steps else "unexplained"

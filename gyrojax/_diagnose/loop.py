@@ -1,0 +1,188 @@
+"""`diagnose`: the baseline fit with every candidate at zero, then score, guard, refit and confirm one effect
+at a time until no candidate is significant."""
+
+import math
+
+import numpy as np
+
+from .._compare import chi2_sf, compare, nonlinearity_residual_ppm
+from .._data.table import Table
+from .._fitdata import fit_data
+from .._identify import Fit, identify
+from .._parameters import DEFAULT_FREE, Model, as_model, zero_effect
+from .._probes import PROBES
+from .._progress import as_progress
+from .candidates import baseline_model, candidate_effects, full_key
+from .columns import effect_columns
+from .discrepancy import score_probes, with_library
+from .guards import MAX_TYPICAL_MULTIPLE, Rejection, contradictions, probe_guard, verdict_of
+from .score import cosine, score_candidates, separating_sweep
+from .solution import Diagnosis, Step
+
+
+def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alpha: float = 0.01,
+             max_effects: int = 4, ambiguity: float = 0.95, min_typical_chi2: float = 1.0,
+             max_typical_multiple: float = MAX_TYPICAL_MULTIPLE, probes=PROBES, starts: int = 1,
+             fit: Fit | None = None, progress=True) -> Diagnosis:
+    r"""Compare `model` with `data`, rank every candidate effect, add the significant ones one at a time, and
+    say where what is left lives.
+
+    **Arguments:**
+
+    - `data`: a `gyrojax.Table` (or `FitData`) of any sweeps.
+    - `model`: the baseline: a preset name, a `Gyroscope`, or a `gyrojax.Model` (its effects stay in).
+    - `candidates`: effect names to consider (default: every registered effect the device supports).
+    - `free`: baseline physical parameters free per device (see `gyrojax.identify`).
+    - `alpha`: family-wise significance per step, in (0, 0.5]; a candidate must reach p < alpha /
+      n_candidates in the score test and p < alpha in the likelihood-ratio test after its refit.
+    - `max_effects`: stop after this many (0: only rank the candidates at the baseline, no refit).
+    - `ambiguity`: |cos| between fingerprints above which two candidates are reported as ambiguous.
+    - `min_typical_chi2`: a candidate whose typical-size fingerprint, after the baseline took up what it
+      could, changes the lot's chi2 by less than this (and whose score is not significant) is reported as
+      not testable on this data.
+    - `max_typical_multiple`: a candidate whose score implies a size beyond this many times its typical
+      size is not confirmed (the reason says so).
+    - `probes`: the generic shapes scored beside the candidates (`gyrojax.PROBES`).
+    - `fit`: a `gyrojax.Fit` of this data (from `identify`, or `gyrojax.load_fit`) to use as the baseline
+      instead of fitting it again; its model replaces `model`, and its parameters are the refits' start.
+    - `progress`: `True` (default) reports each step on standard error (fits, compiles, what was confirmed),
+      `False` is silent, a callable receives the messages.
+
+    Guards before a candidate is confirmed: its implied size is plausible; no probe explains the misfit it is
+    credited with while it adds nothing beyond that probe; the refit passes the likelihood-ratio test and
+    converges; and no sweep's misfit gets significantly worse (else it is "contradicted by" that sweep).
+
+    **Returns:** a `Diagnosis` (with a `verdict`: explained, partly explained or unexplained).
+    """
+    if not (isinstance(alpha, (int, float)) and 0.0 < alpha <= 0.5):
+        raise ValueError(f"alpha must be a significance level in (0, 0.5], got {alpha!r}.")
+    if not isinstance(max_effects, int) or isinstance(max_effects, bool) or max_effects < 0:
+        raise ValueError(f"max_effects must be an integer >= 0, got {max_effects!r}.")
+    if not (isinstance(max_typical_multiple, (int, float)) and max_typical_multiple > 1.0):
+        raise ValueError(f"max_typical_multiple must be a number > 1, got {max_typical_multiple!r}.")
+    if isinstance(data, Table):
+        data = fit_data(data)
+    if fit is not None:
+        base = baseline_model(fit, data)
+    else:
+        base = as_model(model)
+    candidates = candidate_effects(base, candidates, "diagnose")
+    full = Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates))
+    say = as_progress(progress, "gyrojax.diagnose")
+
+    weights = {"data": data, "estimate_noise": None}
+
+    def fit_with(selected, evaluate_only=False):
+        held = tuple(c for c in candidates if c not in selected)
+        return identify(full, weights["data"], free=free, hold=held, starts=starts, evaluate_only=evaluate_only,
+                        estimate_noise=weights["estimate_noise"], progress=False)
+
+    if fit is None:
+        say(f"fitting the baseline: {len(data.devices)} device(s), {data.num_points()} points, every one of "
+            f"{len(candidates)} candidate effects held at zero")
+        say.compiling(("identify", full_key(full, data)), "the lot's fit with every candidate")
+        fit = fit_with(())
+    else:  # the saved fit is the baseline: evaluated where it ended, with the candidates at zero
+        say("evaluating the given baseline fit with every candidate at zero")
+        fit = fit_with((), evaluate_only=True)
+    baseline = fit
+    if not data.weighted:
+        # The noise was estimated from the baseline's residuals: every refit keeps those weights, so that the
+        # likelihood-ratio tests compare fits of the same weighted data.
+        weights.update(data=baseline.data, estimate_noise=False)
+        say("the data give no output_sigma: every fit uses the noise estimated from the baseline's residuals")
+    fits, steps, ambiguous, rejected = [fit], [], [], []
+    ranking0, untestable = None, ()
+    selected: list[str] = []
+    remaining = list(candidates)
+    discrepancy, designs = score_probes(fit, probes, alpha=alpha)
+    baseline_discrepancy, baseline_designs = discrepancy, designs
+    def first_ranking(scores, threshold):
+        return scores, tuple(c.effect for c in scores if not c.testable or (
+            c.typical_chi2 < min_typical_chi2 and c.p_value >= threshold))
+
+    if remaining and max_effects == 0:  # rank at the baseline only
+        ranking0, untestable = first_ranking(score_candidates(fit, remaining), alpha / len(remaining))
+    while remaining and len(selected) < max_effects:
+        scores = score_candidates(fit, remaining)
+        threshold = alpha / len(remaining)
+        if ranking0 is None:
+            ranking0, untestable = first_ranking(scores, threshold)
+        significant = [c for c in scores if c.testable and c.p_value < threshold]
+        if not significant:
+            break
+        best = significant[0]
+        if best.implied_multiple > max_typical_multiple:
+            rejected.append(Rejection(best.effect, (
+                f"it explains the misfit only at ~{best.implied_multiple:.3g}x its typical size, beyond "
+                f"{max_typical_multiple:g}x, where its physics does not reach: another effect, perhaps not in the "
+                "library, leaves a similar fingerprint"),
+                kind=f"only at ~{best.implied_multiple:.3g}x its typical size"))
+            remaining.remove(best.effect)
+            continue
+        guard = probe_guard(fit, best, discrepancy, designs, threshold, alpha)
+        if guard is not None:
+            rejected.append(Rejection(best.effect, guard, kind="not its shape"))
+            remaining.remove(best.effect)
+            continue
+        group = tuple(c.effect for c in significant[1:]
+                      if abs(cosine(best.fingerprint, c.fingerprint)) > ambiguity)
+        separated = None
+        if group:
+            others = [c for c in significant if c.effect in group]
+            seps = {separating_sweep(best.fingerprint, c.fingerprint, data, ambiguity) for c in others}
+            separated = seps.pop() if len(seps) == 1 else None
+        say(f"refitting with {best.effect} (step {len(selected) + 1}; score S = {best.statistic:.4g}, "
+            f"p = {best.p_value:.2g})")
+        new = fit_with(tuple(selected) + (best.effect,))
+        lr = fit.chi2_total - new.chi2_total
+        df = int(np.sum(new.free)) - int(np.sum(fit.free))
+        df_total = df * len(data.devices)
+        p_lr = chi2_sf(lr, df_total)
+        n_points = int(np.sum([np.asarray(b.mask).sum() for b in data.blocks.values()]))
+        delta_bic = -lr + df_total * math.log(max(n_points, 2))
+        remaining.remove(best.effect)
+        if df <= 0:
+            rejected.append(Rejection(best.effect, (
+                "the refit cannot fix its parameters: a change of its typical size moves the chi2 by less than the "
+                f"noise does, so the score implies ~{best.implied_multiple:.3g}x its typical size"),
+                kind="not determined by the data"))
+            continue
+        if "not converged" in new.status:
+            rejected.append(Rejection(best.effect, f"the refit did not converge: {new.result_message}",
+                                      kind="refit did not converge"))
+            continue
+        if p_lr >= alpha:
+            rejected.append(Rejection(best.effect, f"likelihood-ratio p = {p_lr:.3g} >= alpha: the refit does not "
+                                                   "confirm what the score promised", kind="refit rejects it"))
+            continue
+        worse = contradictions(fit, new, alpha, df_total)
+        if worse:
+            rejected.append(Rejection(best.effect, "contradicted by " + "; ".join(
+                f"{s} (its misfit rose from chi2 {a:.4g} to {b:.4g} over {n} points)" for s, a, b, n in worse),
+                tuple(s for s, _, _, _ in worse), kind="contradicted by " + ", ".join(s for s, _, _, _ in worse)))
+            continue
+        if group:
+            ambiguous.append((best.effect,) + group)
+        selected.append(best.effect)
+        fit = new
+        fits.append(fit)
+        cols = effect_columns(fit, best.effect)
+        multiple = float(np.max(np.abs(np.asarray(fit.u)[:, cols])))
+        steps.append(Step(best.effect, best.statistic, best.p_value, lr, df_total, p_lr, delta_bic,
+                          fit.chi2_red_total, nonlinearity_residual_ppm(fit), scores, group, separated, multiple,
+                          best.implied_multiple))
+        discrepancy, designs = score_probes(fit, probes, alpha=alpha)
+    if ranking0 is None:
+        ranking0 = ()
+    # Which library effect has the shape of what is left: every candidate not selected, at the final fit.
+    others = [c for c in candidates if c not in selected]
+    final_scores = score_candidates(fit, others) if others else ()
+    baseline_discrepancy = with_library(baseline, baseline_discrepancy, baseline_designs, ranking0, rejected,
+                                         max_typical_multiple, alpha)
+    discrepancy = with_library(fit, discrepancy, designs, final_scores, rejected, max_typical_multiple, alpha)
+    comparisons = tuple(compare(f, alpha=alpha) for f in fits)
+    say(f"done: {verdict_of(comparisons[-1], steps)}; selected {', '.join(selected) or 'none'}")
+    return Diagnosis(baseline, fit, tuple(fits), ranking0, tuple(steps), tuple(ambiguous), untestable,
+                     tuple(rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2, comparisons,
+                     baseline_discrepancy, discrepancy, verdict_of(comparisons[-1], steps), max_typical_multiple)

@@ -1,0 +1,98 @@
+"""The score test of each candidate effect at a fitted model, its fingerprint, what makes it testable, and
+the sweep on which two fingerprints differ most."""
+
+import dataclasses
+import math
+
+import numpy as np
+
+from .._effects.registry import EFFECTS
+from .._fitdata import FitData
+from .._identify import Fit
+from .._probes import score_columns
+from .columns import effect_columns, row_blocks
+
+
+@dataclasses.dataclass(frozen=True)
+class CandidateScore:
+    """One candidate effect scored against a fitted model (no refit)."""
+
+    effect: str
+    statistic: float
+    df: int
+    p_value: float
+    testable: bool
+    fingerprint: np.ndarray  # (device, residual): predicted residual change
+    description: str
+    typical_chi2: float = 0.0  # chi2 left by the most visible typical-size combination, summed over devices
+    # The same before the baseline's free parameters take their share (after the run biases), and the free
+    # parameters that take it: what hides the candidate when it is not testable.
+    visible_chi2: float = 0.0
+    absorbed_by: tuple = ()
+
+    @property
+    def implied_multiple(self) -> float:
+        """The size, in units of its typical size, at which the candidate would explain what its score
+        credits it with: sqrt(S / typical_chi2) (its most visible combination)."""
+        if self.typical_chi2 <= 0:
+            return math.inf
+        return math.sqrt(max(self.statistic, 0.0) / self.typical_chi2)
+
+    @property
+    def absorption(self) -> str:
+        """Why the data cannot test it, in words: what takes up its fingerprint, and what would reveal it."""
+        if self.visible_chi2 < 1.0:
+            what = (f"a typical size changes the chi2 by {self.visible_chi2:.2g} once the run biases are "
+                    "out: the run biases take it up, or this data barely sees it")
+        else:
+            share = 1.0 - self.typical_chi2 / self.visible_chi2
+            who = ", ".join(self.absorbed_by) or "the free parameters together"
+            what = (f"a typical size would change the chi2 by {self.visible_chi2:.3g}; {who} "
+                    f"{'absorbs' if len(self.absorbed_by) == 1 else 'absorb'} {100 * share:.4g} % of it, "
+                    f"leaving {self.typical_chi2:.2g}")
+        reveal = EFFECTS[self.effect].revealed_by
+        return what + (f". Revealed by: {reveal}" if reveal else "")
+
+
+def score_candidates(fit: Fit, candidates, *, rank_tol: float = 1e-4) -> tuple[CandidateScore, ...]:
+    """Score test of each candidate (effect name held at zero in `fit.model`) against the fitted model."""
+    jac = np.asarray(fit.jacobian)
+    res = np.asarray(fit.residual_vector)
+    free = np.asarray(fit.free)
+    names_free = [nm for nm, f in zip(fit.names, free) if f]
+    out = []
+    for name in candidates:
+        cols = effect_columns(fit, name)
+        visible = 0.0
+        share = np.zeros(len(names_free))  # of the most visible fingerprint's chi2, per free parameter
+        for d in range(jac.shape[0]):
+            jb, je = jac[d][:, free], jac[d][:, cols]
+            if je.shape[1]:
+                evals, evecs = np.linalg.eigh(je.T @ je)
+                visible += max(float(evals[-1]), 0.0)
+                if jb.shape[1]:
+                    # |P f|^2 = sum_k c_k (b_k . f) with c the least-squares coefficients of f on the columns
+                    f = je @ evecs[:, -1]
+                    c = np.linalg.lstsq(jb, f, rcond=None)[0]
+                    share += c * (jb.T @ f)
+        scored = score_columns(jac[:, :, free], jac[:, :, cols], res, rank_tol=rank_tol)
+        order = np.argsort(-share)
+        absorbed_by = tuple(names_free[k] for k in order if share[k] > 0.1 * max(np.sum(share), 0.0))
+        out.append(CandidateScore(name, scored.statistic, scored.df, scored.p_value, scored.df > 0,
+                                  scored.fingerprint, EFFECTS[name].description, scored.information, visible,
+                                  absorbed_by))
+    return tuple(sorted(out, key=lambda c: (not c.testable, c.p_value, -c.statistic)))
+
+
+def cosine(a, b):
+    na, nb = np.linalg.norm(a), np.linalg.norm(b)
+    return 0.0 if na == 0 or nb == 0 else float(np.sum(a * b) / (na * nb))
+
+
+def separating_sweep(a, b, data: FitData, ambiguity):
+    best, best_cos = None, ambiguity
+    for sweep, i, j in row_blocks(data):
+        c = abs(cosine(a[:, i:j], b[:, i:j]))
+        if (np.linalg.norm(a[:, i:j]) > 0 or np.linalg.norm(b[:, i:j]) > 0) and c < best_cos:
+            best, best_cos = sweep, c
+    return best

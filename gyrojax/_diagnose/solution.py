@@ -1,0 +1,186 @@
+"""The solution of `diagnose`: the accepted steps and the `Diagnosis`, with its summary, verdict in words and
+JSON."""
+
+import dataclasses
+import math
+
+from .._compare import nonlinearity_residual_ppm
+from .._effects.registry import EFFECTS
+from .._identify import Fit
+from .guards import MAX_TYPICAL_MULTIPLE
+from .report import write_report
+
+
+# ASSUMPTION: each effect's `typical(1.0)` is a realistic size with a provenance; a device more than 20 times
+# worse than that is outside what the library's sources support.
+IMPLAUSIBLE_MULTIPLE = 20.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Step:
+    """One accepted effect: its score at selection, the refit's likelihood-ratio test and chi2 after."""
+
+    effect: str
+    statistic: float
+    p_value: float
+    lr_statistic: float
+    lr_df: int
+    lr_p_value: float
+    delta_bic: float
+    chi2_red_after: float
+    nonlinearity_ppm_after: float
+    ranking: tuple
+    ambiguous_with: tuple
+    separated_by: str | None
+    # Largest fitted parameter of the effect over the lot, in units of its typical size: far above 1, the
+    # effect explains the data only at an implausible size (another effect may leave this fingerprint).
+    typical_multiple: float = float("nan")
+    implied_multiple: float = float("nan")  # at the score stage, before the refit
+    contradicted_by: tuple = ()  # sweeps whose misfit the step made significantly worse (none when accepted)
+
+
+VERDICTS = ("explained", "partly explained", "unexplained")
+
+
+@dataclasses.dataclass(frozen=True)
+class Diagnosis:
+    """The solution of `diagnose`: the baseline fit, the ranking at the first step, the accepted steps, the
+    final fit, what was ambiguous, untestable or rejected, where the misfit that is left lives, and a
+    verdict."""
+
+    baseline: Fit
+    final: Fit
+    fits: tuple  # baseline, then the fit after each step
+    ranking: tuple  # CandidateScore at the first step, best first
+    steps: tuple  # Step per accepted effect
+    ambiguous: tuple  # groups of names
+    untestable: tuple  # names not testable on this data at the first step
+    rejected: tuple  # Rejection per candidate that scored but was not confirmed
+    alpha: float
+    baseline_nonlinearity_ppm: float
+    min_typical_chi2: float = 1.0
+    comparisons: tuple = ()  # `Comparison` of each fit in `fits`: where it fails, structure in its residuals
+    baseline_discrepancy: tuple = ()  # Discrepancy per probe at the baseline, most explanatory first
+    discrepancy: tuple = ()  # the same at the final fit: where what is left lives
+    verdict: str = "unexplained"
+    max_typical_multiple: float = MAX_TYPICAL_MULTIPLE
+
+    @property
+    def selected(self) -> tuple[str, ...]:
+        return tuple(s.effect for s in self.steps)
+
+    @property
+    def absorptions(self) -> dict:
+        """Each untestable candidate: what hid it on this data and what would reveal it, in words."""
+        scores = {c.effect: c for c in self.ranking}
+        return {name: scores[name].absorption for name in self.untestable}
+
+    @property
+    def remaining(self) -> tuple:
+        """The significant discrepancies of the final fit, most explanatory first (a shape that is only part of
+        a more explanatory one is left out)."""
+        return tuple(d for d in self.discrepancy if d.significant and not d.within)
+
+    def verdict_text(self) -> str:
+        final = self.comparisons[-1] if self.comparisons else None
+        tail = (f" (chi2 {final.chi2:.4g} over {final.points} points, p = {final.p_value:.2g})"
+                if final is not None else "")
+        if self.verdict == "explained":
+            what = (f"{', '.join(self.selected)} explain" if self.steps else "the baseline explains")
+            return f"verdict: explained: {what} the data at the noise level{tail}"
+        left = self.remaining
+        where = (f"; what is left: {left[0].description}" if left else
+                 "; no generic shape (bias or gain in temperature, time, run; cubics; bow; K+/K-) explains what "
+                 "is left: see where the model fails")
+        if self.verdict == "partly explained":
+            base = max(self.baseline.chi2_total - self.baseline.dof_total, 1e-300)
+            gone = (self.baseline.chi2_total - self.final.chi2_total) / base
+            return (f"verdict: partly explained: {', '.join(self.selected)} take {100 * min(gone, 1.0):.0f} % of "
+                    f"the baseline's excess misfit, but the model still fails{tail}{where}")
+        return f"verdict: unexplained: no library effect is confirmed and the model fails{tail}{where}"
+
+    def summary(self, comparisons: bool = True) -> str:
+        """A few dozen lines for a terminal; `comparisons=False` leaves out the `compare` blocks of the baseline
+        and the final fit."""
+        lines = [f"baseline: chi2_red {self.baseline.chi2_red_total:.3f}, model-vs-measurement nonlinearity "
+                 f"{self.baseline_nonlinearity_ppm:.2f} ppm"]
+        if self.comparisons and comparisons:
+            lines += ["  " + x for x in self.comparisons[0].summary().splitlines()]
+        found = [d for d in self.baseline_discrepancy if d.significant and not d.within]
+        if found:
+            lines.append("where the misfit lives (generic shapes, score test, no refit):")
+            lines += [f"  {d.coordinate:<14} {d.description} (S = {d.chi2_explained:.4g}, p = {d.p_value:.2g})"
+                      for d in found[:4]]
+        lines.append("candidates at the first step (score test, no refit):")
+        for c in self.ranking:
+            what = (f"S = {c.statistic:10.2f}  df {c.df:3d}  p = {c.p_value:.3g}  typical-size chi2 "
+                    f"{c.typical_chi2:.3g}, implies ~{c.implied_multiple:.3g}x typical" if c.testable
+                    else "not testable on this data")
+            lines.append(f"  {c.effect:<18} {what}")
+        if self.untestable:
+            lines.append(f"not testable on this data (absorbed by the baseline, or a typical-size effect leaves a "
+                         f"chi2 below {self.min_typical_chi2:g}):")
+            lines += [f"  {name}: {why}" for name, why in self.absorptions.items()]
+        for s in self.steps:
+            amb = f" (ambiguous with {', '.join(s.ambiguous_with)}" + (
+                f"; {s.separated_by} separates them)" if s.separated_by else "; no sweep here separates them)") \
+                if s.ambiguous_with else ""
+            lines.append(f"+ {s.effect}: LR {s.lr_statistic:.1f} (df {s.lr_df}, p {s.lr_p_value:.2g}), dBIC "
+                         f"{s.delta_bic:.1f} -> chi2_red {s.chi2_red_after:.3f}, nonlinearity residual "
+                         f"{s.nonlinearity_ppm_after:.2f} ppm{amb}; fitted at {s.typical_multiple:.3g}x its "
+                         "typical size")
+            if s.typical_multiple > IMPLAUSIBLE_MULTIPLE:
+                lines.append(f"  ! {s.effect} explains the data only at {s.typical_multiple:.3g}x its typical size "
+                             "(beyond the library's plausible range): another effect, perhaps not among the "
+                             "candidates, may leave this fingerprint; see where the model still fails")
+        if not self.steps:
+            lines.append("no candidate effect is confirmed." if self.rejected else
+                         "no candidate effect is significant.")
+        for r in self.rejected:
+            lines.append(f"  not confirmed: {r.effect}: {r.reason}")
+        lines.append(f"final: chi2_red {self.final.chi2_red_total:.3f}, selected: {', '.join(self.selected) or 'none'}")
+        if self.steps and self.comparisons and comparisons:
+            lines += ["  " + x for x in self.comparisons[-1].summary().splitlines()]
+        lines.append(self.verdict_text())
+        return "\n".join(lines)
+
+    def write_report(self, out_dir) -> dict:
+        """The report folder (Markdown, JSON, PNG plots) of `write_report`; returns the JSON."""
+        return write_report(self, out_dir)
+
+    def to_json(self) -> dict:
+        """The diagnosis as JSON: baseline, ranking, steps, selected, ambiguous, untestable, rejected, final,
+        verdict, discrepancy (what is left, most explanatory first), baseline_discrepancy, compare."""
+        return {
+            "baseline": {"chi2_red": self.baseline.chi2_red_total,
+                         "nonlinearity_ppm": self.baseline_nonlinearity_ppm},
+            "ranking": [{"effect": c.effect, "statistic": c.statistic, "df": c.df, "p_value": c.p_value,
+                         "testable": c.testable, "typical_chi2": c.typical_chi2, "visible_chi2": c.visible_chi2,
+                         "implied_multiple": _finite(c.implied_multiple),
+                         "absorbed_by": list(c.absorbed_by), "revealed_by": EFFECTS[c.effect].revealed_by}
+                        for c in self.ranking],
+            "steps": [{"effect": s.effect, "statistic": s.statistic, "p_value": s.p_value,
+                       "chi2_red_after": s.chi2_red_after, "lr_statistic": s.lr_statistic, "lr_df": s.lr_df,
+                       "lr_p_value": s.lr_p_value, "delta_bic": s.delta_bic,
+                       "nonlinearity_ppm_after": s.nonlinearity_ppm_after,
+                       "ambiguous_with": list(s.ambiguous_with), "separated_by": s.separated_by,
+                       "typical_multiple": s.typical_multiple, "implied_multiple": _finite(s.implied_multiple),
+                       "contradicted_by": list(s.contradicted_by)}
+                      for s in self.steps],
+            "selected": list(self.selected),
+            "ambiguous": [list(g) for g in self.ambiguous],
+            "untestable": list(self.untestable),
+            "rejected": [{"effect": r.effect, "reason": r.reason, "contradicted_by": list(r.contradicted_by)}
+                         for r in self.rejected],
+            "final": {"chi2_red": self.final.chi2_red_total,
+                      "nonlinearity_ppm": nonlinearity_residual_ppm(self.final)},
+            "verdict": self.verdict,
+            "verdict_text": self.verdict_text(),
+            "discrepancy": [d.to_json() for d in self.remaining],
+            "baseline_discrepancy": [d.to_json() for d in self.baseline_discrepancy if d.significant and not d.within],
+            "compare": [c.to_json() for c in self.comparisons],
+        }
+
+
+def _finite(x):
+    return float(x) if math.isfinite(x) else None
