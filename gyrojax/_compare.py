@@ -32,12 +32,9 @@ import dataclasses
 import math
 
 import numpy as np
-from jax.scipy.special import gammaincc, ndtr
+from jax.scipy.special import ndtr
 
-
-def chi2_sf(x, df):
-    """Survival function of the chi-squared distribution."""
-    return 1.0 if df <= 0 else float(gammaincc(df / 2.0, max(float(x), 0.0) / 2.0))
+from ._stats import chi2_sf
 
 
 def _normal_cdf(z):

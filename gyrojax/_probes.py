@@ -24,7 +24,7 @@ from typing import ClassVar
 import equinox as eqx
 import numpy as np
 
-from ._compare import chi2_sf
+from ._stats import chi2_sf
 from ._sweeps.registry import sweep_kind
 
 

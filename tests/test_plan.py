@@ -10,7 +10,8 @@ from scipy.stats import chi2 as scipy_chi2, ncx2
 import gyrojax as gj
 from gyrojax._plan.experiment import NoiseLevel, weighted_rows
 from gyrojax._plan.plan import _kept, _reduce, _residual_chi2
-from gyrojax._plan.power import chi2_isf, ncx2_sf, power, required_noncentrality
+from gyrojax._plan.power import power, required_noncentrality
+from gyrojax._stats import chi2_isf, ncx2_sf
 from gyrojax.cli import main
 
 

@@ -5,9 +5,9 @@ import dataclasses
 
 import numpy as np
 
-from .._compare import chi2_sf
 from .._identify import Fit
 from .._probes import score_columns
+from .._stats import chi2_isf
 from .columns import base_columns, effect_columns, excess_chi2
 from .score import CandidateScore
 
@@ -16,20 +16,6 @@ from .score import CandidateScore
 # 100x is ~5 % of full scale, a damping coupling at 100x breaks passivity on paper-qmg): a candidate that
 # explains the misfit only there is not confirmed.
 MAX_TYPICAL_MULTIPLE = 100.0
-
-
-
-def chi2_isf(p: float, df: int) -> float:
-    """The chi2 value whose survival probability is `p` (bisection on `chi2_sf`)."""
-    if df <= 0:
-        return 0.0
-    lo, hi = 0.0, max(10.0 * df, 100.0)
-    while chi2_sf(hi, df) > p:
-        hi *= 2.0
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if chi2_sf(mid, df) > p else (lo, mid)
-    return 0.5 * (lo + hi)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -5,13 +5,14 @@ import math
 
 import numpy as np
 
-from .._compare import chi2_sf, compare, nonlinearity_residual_ppm
+from .._compare import compare, nonlinearity_residual_ppm
 from .._data.table import Table
 from .._fitdata import fit_data
 from .._identify import Fit, identify
 from .._parameters import DEFAULT_FREE, Model, as_model, zero_effect
 from .._probes import PROBES
 from .._progress import as_progress
+from .._stats import chi2_sf
 from .candidates import baseline_model, candidate_effects, full_key
 from .columns import effect_columns
 from .discrepancy import score_probes, with_library
