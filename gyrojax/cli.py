@@ -257,24 +257,30 @@ def _cmd_compensate(args):
     return EXIT_OK
 
 
-def _cmd_diagnose(args):
+def _table_and_fit(args):
+    """The table of the command's data file and the fit of its --fit file (None without one), read after the
+    effects are registered (a saved fit may hold a plugin's effect); the fit's warnings go to standard error."""
     from ._data.files import read_table
-    from ._diagnose import diagnose, write_report
 
-    _check_outputs(("--json", args.json, False), ("--report", args.report, True))
     _load_effects(args)
     table = read_table(args.data)
     fit = None
     if args.fit:
-        import warnings
-
         from ._fitio import load_fit
 
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             fit = load_fit(args.fit)
         for w in caught:
-            print(f"gyrojax diagnose: warning: {w.message}", file=sys.stderr)
+            print(f"gyrojax {args.command}: warning: {w.message}", file=sys.stderr)
+    return table, fit
+
+
+def _cmd_diagnose(args):
+    from ._diagnose import diagnose, write_report
+
+    _check_outputs(("--json", args.json, False), ("--report", args.report, True))
+    table, fit = _table_and_fit(args)
     diag = diagnose(table, args.model, alpha=args.alpha, fit=fit, progress=not args.quiet)
     print(diag.summary())
     if args.report:
@@ -293,21 +299,10 @@ def _cmd_diagnose(args):
 
 
 def _cmd_plan(args):
-    from ._data.files import read_table
     from ._plan import plan
 
     _check_outputs(("--json", args.json, False))
-    _load_effects(args)
-    table = read_table(args.data)
-    fit = None
-    if args.fit:
-        from ._fitio import load_fit
-
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            fit = load_fit(args.fit)
-        for w in caught:
-            print(f"gyrojax plan: warning: {w.message}", file=sys.stderr)
+    table, fit = _table_and_fit(args)
     result = plan(table, args.model, fit=fit, budget_min=args.budget_min, progress=not args.quiet)
     print(result.summary())
     if args.json:
