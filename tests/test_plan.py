@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from _virtual_rate_sweep import AbstractRateTableWithVirtualRate
 from scipy.stats import chi2 as scipy_chi2, ncx2
 
 import gyrojax as gj
@@ -102,20 +103,11 @@ def test_default_experiments_minutes_follow_the_protocol():
     assert np.all(np.isnan(exps["dac"].temperatures_c))  # a bench measurement of the DAC alone
 
 
-class _OffsetRateTable(gj.AbstractSteadySweep):
+class _OffsetRateTable(AbstractRateTableWithVirtualRate):
     """A sweep kind the planner has never heard of: a rate table with a constant virtual rate on the
-    virtual-Coriolis electrode, at 3 rates."""
-
-    offset_v: float = 0.5
+    virtual-Coriolis electrode, at 3 rates and a dwell of its own."""
 
     name = "plan_test_offset_rate_table"
-    title = "rate-table with a virtual rate"
-    input_quantity = "table rate"
-    input_unit = "deg/s"
-    output_unit = "LSB"
-    input_meaning = "the table rate, deg/s, with V_ac = 0.5 V"
-    output_meaning = "the gyro's rate output, LSB"
-    rate_input = True
 
     def inputs(self, protocol, gyro=None):
         return np.asarray((-100.0, 0.0, 100.0))
@@ -125,16 +117,6 @@ class _OffsetRateTable(gj.AbstractSteadySweep):
 
     def dwell_s(self, protocol):
         return 60.0
-
-    def sample_rate_hz(self, protocol):
-        return protocol.sample_rate_hz
-
-    def check_device(self, gyro, protocol):
-        pass
-
-    def stimulus(self, value, time):
-        return gj.Stimulus(rate=value * gj.units.DEG, vcf_ac=0.0 * value + self.offset_v,
-                           vcf_fc=gj.VCF_CARRIER_V, time=time)
 
 
 def test_a_registered_sweep_kind_is_a_candidate_with_its_own_minutes_and_noise():

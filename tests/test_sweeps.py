@@ -2,51 +2,17 @@
 
 The new experiment here is a rate table run with a constant virtual rate on the virtual-Coriolis electrode
 (V_ac fixed, the table rate swept): it checks that the Coriolis force of a real and of a virtual rate add. It
-lives in this file only, registers itself, and goes through the simulator, a CSV file and the data layer.
+lives in one file (`tests/_virtual_rate_sweep.py`), registers itself, and goes through the simulator, a CSV
+file and the data layer.
 """
 
 import re
 
 import numpy as np
 import pytest
+from _virtual_rate_sweep import RateTableWithVirtualRate
 
 import gyrojax as gj
-
-
-class RateTableWithVirtualRate(gj.AbstractSteadySweep):
-    """A rate table with a constant virtual rate: V_ac = `offset_v` at the fixed carrier on the
-    virtual-Coriolis electrode while the table turns at each rate."""
-
-    offset_v: float = 0.5
-
-    name = "rate_table_vcf_offset"
-    title = "rate-table with a virtual rate"
-    input_quantity = "table rate"
-    input_unit = "deg/s"
-    output_unit = "LSB"
-    input_meaning = "the table rate, deg/s, with V_ac = 0.5 V on the virtual-Coriolis electrode"
-    output_meaning = "the gyro's rate output, LSB"
-    rate_input = True
-
-    def inputs(self, protocol, gyro=None):
-        return np.asarray(protocol.rates_dps)
-
-    def n_points(self, protocol):
-        return len(protocol.rates_dps)
-
-    def dwell_s(self, protocol):
-        return protocol.dwell_s
-
-    def sample_rate_hz(self, protocol):
-        return protocol.sample_rate_hz
-
-    def check_device(self, gyro, protocol):
-        if float(np.asarray(gyro.vcf_electrode.force_per_volt2)) == 0.0:
-            raise ValueError(f"{self.name} needs a virtual-Coriolis electrode; {gyro.name!r} has none.")
-
-    def stimulus(self, value, time):
-        return gj.Stimulus(rate=value * gj.units.DEG, vcf_ac=0.0 * value + self.offset_v,
-                           vcf_fc=gj.VCF_CARRIER_V, time=time)
 
 
 @pytest.fixture

@@ -90,13 +90,13 @@ class AbstractSweep(eqx.Module):
     def n_points(self, protocol: "Protocol") -> int:
         """Number of points of this sweep under `protocol` (without a device)."""
 
-    @abc.abstractmethod
     def dwell_s(self, protocol: "Protocol") -> float:
-        """Averaging time of one point, s."""
+        """Averaging time of one point, s. Default: the protocol's `dwell_s`."""
+        return protocol.dwell_s
 
-    @abc.abstractmethod
     def sample_rate_hz(self, protocol: "Protocol") -> float:
-        """Output sampling rate of one point, Hz."""
+        """Output sampling rate of one point, Hz. Default: the protocol's `sample_rate_hz`."""
+        return protocol.sample_rate_hz
 
     @abc.abstractmethod
     def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:

@@ -124,12 +124,6 @@ class BranchRatio(AbstractSweep):
     def n_points(self, protocol: "Protocol") -> int:
         return len(protocol.branch_rates_dps)
 
-    def dwell_s(self, protocol: "Protocol") -> float:
-        return protocol.dwell_s
-
-    def sample_rate_hz(self, protocol: "Protocol") -> float:
-        return protocol.sample_rate_hz
-
     def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
         if not gyro.closed_loop:
             raise ValueError(f"a branch_ratio sweep needs a closed-loop device (push-pull feedback combs); "

@@ -49,12 +49,6 @@ class Dac(AbstractSweep):
     def n_points(self, protocol: "Protocol") -> int:
         return len(protocol.rates_dps)
 
-    def dwell_s(self, protocol: "Protocol") -> float:
-        return protocol.dwell_s
-
-    def sample_rate_hz(self, protocol: "Protocol") -> float:
-        return protocol.sample_rate_hz
-
     def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
         if not gyro.closed_loop:
             raise ValueError(f"a dac sweep needs a closed-loop device; {gyro.name!r} is open loop.")

@@ -92,12 +92,6 @@ class QuadratureInjection(AbstractSteadySweep):
         given = protocol.quadrature_amplitudes_v
         return len(given if given is not None else protocol.quadrature_rates_dps)
 
-    def dwell_s(self, protocol: "Protocol") -> float:
-        return protocol.dwell_s
-
-    def sample_rate_hz(self, protocol: "Protocol") -> float:
-        return protocol.sample_rate_hz
-
     def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
         if float(np.asarray(gyro.vcf_electrode.force_per_volt2)) == 0.0:
             raise ValueError(f"a quadrature_injection sweep needs a virtual-Coriolis electrode; {gyro.name!r} has "

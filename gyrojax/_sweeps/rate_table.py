@@ -54,12 +54,6 @@ class RateTable(AbstractSteadySweep):
     def n_points(self, protocol: "Protocol") -> int:
         return len(protocol.rates_dps)
 
-    def dwell_s(self, protocol: "Protocol") -> float:
-        return protocol.dwell_s
-
-    def sample_rate_hz(self, protocol: "Protocol") -> float:
-        return protocol.sample_rate_hz
-
     def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
         pass
 

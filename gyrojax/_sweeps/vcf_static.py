@@ -60,12 +60,6 @@ class VcfStatic(AbstractSteadySweep):
     def n_points(self, protocol: "Protocol") -> int:
         return len(protocol.vcf_amplitudes_v if protocol.vcf_amplitudes_v is not None else protocol.vcf_rates_dps)
 
-    def dwell_s(self, protocol: "Protocol") -> float:
-        return protocol.dwell_s
-
-    def sample_rate_hz(self, protocol: "Protocol") -> float:
-        return protocol.sample_rate_hz
-
     def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
         # Voltages set from the electrode's design values need an electrode (`Protocol.vcf_static_amplitudes`
         # raises); explicit voltages on a device without one read zero, as measured.
