@@ -31,7 +31,7 @@ from .candidates import (
 )
 from .discrepancy import Discrepancy as Discrepancy, score_probes as score_probes
 from .guards import MAX_TYPICAL_MULTIPLE as MAX_TYPICAL_MULTIPLE, Rejection as Rejection
-from .loop import diagnose as diagnose
+from .diagnose import diagnose as diagnose
 from .report import write_report as write_report
 from .score import CandidateScore as CandidateScore, score_candidates as score_candidates
 from .solution import (
