@@ -338,8 +338,12 @@ def test_to_arrays_layout():
     np.testing.assert_array_equal(arrays.outputs[1, 0], [30 + 5, 40 + 5, 0, 0])  # padded with 0
     np.testing.assert_array_equal(arrays.sigmas[1, 1], [1, 1, 1, 1])  # padding sigma 1
     assert arrays.inputs.dtype == jnp.float64
-    assert set(arrays.aux) == {"temperature_c"}
-    assert np.isnan(arrays.aux["temperature_c"][0, 0, 1])  # not given stays NaN
+    assert arrays.aux == {}  # temperature_c is the field temperatures
+    assert np.isnan(arrays.temperatures[0, 0, 1])  # not given stays NaN
+    np.testing.assert_array_equal(arrays.temperatures[0, 1], [23.0, 24.0, 26.0, 27.0])
+    np.testing.assert_array_equal(arrays.temperatures[1], [[28.0, 29.0, 25.0, 25.0], [25.0] * 4])  # padding 25
+    assert np.all(np.isnan(arrays.times)) and np.all(np.isnan(arrays.drive_freqs))  # not recorded
+    np.testing.assert_array_equal(arrays.order[0], [[0, 1, 2, 0], [0, 1, 2, 3]])  # file order, padding 0
 
 
 def test_arrays_round_trip_exact():
