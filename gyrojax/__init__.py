@@ -195,11 +195,11 @@ from ._sweeps.quadrature_injection import (  # noqa: E402
     QuadratureInjection as QuadratureInjection,
 )
 from ._sweeps.rate_table import (  # noqa: E402
-    SEED000_RATES_DPS as SEED000_RATES_DPS,
+    DING_ZHOU_2025_RATES_DPS as DING_ZHOU_2025_RATES_DPS,
     RateTable as RateTable,
+    ding_zhou_2025_rates as ding_zhou_2025_rates,
     rate_sweep as rate_sweep,
     rate_table_points as rate_table_points,
-    seed000_rates as seed000_rates,
 )
 from ._sweeps.registry import (  # noqa: E402
     SWEEP_KINDS as SWEEP_KINDS,

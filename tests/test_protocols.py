@@ -72,7 +72,7 @@ def test_every_sweep_for_both_presets(qmg, vcf):
             assert arr.mask.shape == (devices, runs, n_points[s]) and bool(arr.mask.all())
             assert np.all(np.asarray(arr.sigmas) > 0)
         rate = t.to_arrays("rate_table")
-        np.testing.assert_array_equal(np.asarray(rate.inputs[1, -1]), gj.SEED000_RATES_DPS)
+        np.testing.assert_array_equal(np.asarray(rate.inputs[1, -1]), gj.DING_ZHOU_2025_RATES_DPS)
         assert np.all(np.asarray(rate.aux["n_samples"]) == 120 * 100)  # seed 000: 2 min at 100 Hz
         dyn = t.to_arrays("vcf_dynamic")
         np.testing.assert_array_equal(np.asarray(dyn.inputs[0, 0]), np.arange(10.0, 501.0, 10.0))
