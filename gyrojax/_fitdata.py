@@ -13,20 +13,21 @@ from ._sweeps.registry import sweep_names
 
 
 class FitData(eqx.Module):
-    """All sweeps of a lot, each a [`gyrojax.SweepArrays`][] aligned on the same devices.
+    """All sweeps of a lot, each a `SweepArrays` aligned on the same devices.
 
     `blocks` maps each sweep kind to its arrays (without `aux`: the fit reads the model's coordinates only);
     a device a sweep lacks has only padding there. `weighted` is False when the table had no `output_sigma`:
     then unit weights are used (`sigmas` 1) and the fit's covariance is scaled by its reduced chi2. `source`
     names the table, for messages.
 
-    The labels (`devices`, `run_ids`, `source`) are for reports: `unlabelled()` is the same data without them,
-    the form the compiled fit sees, so that every lot of the same shapes shares its compiled programs.
+    The labels (`devices`, `run_ids`, `source`) and `weighted` are read outside the compiled functions only:
+    `unlabelled()` is the same arrays without them (None), the form the compiled fit sees, so that every lot of
+    the same shapes, weighted or not, shares its traced and compiled programs.
     """
 
     blocks: dict[str, SweepArrays]
-    weighted: bool = eqx.field(static=True)
-    source: str = eqx.field(static=True, default="")
+    weighted: bool | None = eqx.field(static=True)
+    source: str | None = eqx.field(static=True, default=None)
 
     @property
     def sweeps(self) -> tuple[str, ...]:
@@ -46,9 +47,10 @@ class FitData(eqx.Module):
         return self.blocks[sweep].runs
 
     def unlabelled(self) -> "FitData":
-        """The same arrays without device names, run ids and source: what compiled functions are given."""
+        """The same arrays without device names, run ids, source and `weighted` (None): what compiled
+        functions are given."""
         return FitData({s: dataclasses.replace(b, devices=None, runs=None, column_order=())
-                        for s, b in self.blocks.items()}, self.weighted)
+                        for s, b in self.blocks.items()}, None)
 
     def device_slice(self, i: int) -> "FitData":
         import jax

@@ -15,6 +15,7 @@ import pytest
 
 import gyrojax as gj
 from gyrojax import rate_table_points
+from gyrojax._residuals import device_residuals, run_biases
 
 
 LOT = {"devices": 3, "runs": 2, "sweeps": ("rate_table", "vcf_static", "dac"), "seed": 11}
@@ -217,6 +218,39 @@ def test_a_joint_solve_that_did_not_converge_is_retried_as_a_whole(table):
     assert all("re-solved from the start with gauss-newton after bfgs" in m for m in f.result_message)
     np.testing.assert_array_equal(np.asarray(f.u), np.asarray(g.u))
     np.testing.assert_array_equal(np.asarray(f.u_lot), np.asarray(g.u_lot))
+
+
+@pytest.mark.slow
+def test_a_lot_of_the_same_shapes_reuses_the_traced_fit(rate_only, monkeypatch):
+    """The compiled fit sees arrays and shapes only: a second lot with the same shapes but other device names,
+    run ids and source, or without output_sigma, is fitted without tracing anything again, and gives the same
+    numbers under its own labels. Python functions called inside the compiled fit count its traces: one device's
+    residuals (its own jit, keyed by one device's shapes) and the run biases (in the lot's evaluation pass)."""
+    traced = []
+    monkeypatch.setattr("gyrojax._identify.problem.device_residuals",
+                        lambda *a, **k: traced.append("residuals") or device_residuals(*a, **k))
+    monkeypatch.setattr("gyrojax._identify.lot.run_biases",
+                        lambda *a, **k: traced.append("biases") or run_biases(*a, **k))
+    options = dict(free=("k_vf", "angular_gain"), priors=VAGUE)
+    a = gj.identify("paper-qmg", rate_only, **options)  # traced here or by an earlier test
+    cols = dict(rate_only.columns)
+    cols["device"] = np.asarray(["other-" + d for d in cols["device"]])
+    cols["run"] = cols["run"] + 7
+    relabelled = gj.Table(cols, source="another lot")
+    no_sigma = gj.Table({k: v for k, v in cols.items() if k != "output_sigma"}, source="a lot without sigmas")
+    traced.clear()
+    b = gj.identify("paper-qmg", relabelled, **options)
+    c = gj.identify("paper-qmg", no_sigma, estimate_noise=False, **options)
+    assert traced == []
+    assert b.devices == tuple("other-" + d for d in a.devices) and b.data.run_ids("rate_table")[0] == (7, 8)
+    assert "another lot" in b.summary()
+    for name in ("values", "stderr", "chi2", "scale_factor"):
+        np.testing.assert_array_equal(np.asarray(getattr(b, name)), np.asarray(getattr(a, name)))
+    assert not c.data.weighted and float(np.asarray(c.chi2)[0]) != float(np.asarray(a.chi2)[0])
+    # The counter does see a trace: a lot of two devices is another shape (of the lot's pass, not of one device).
+    two = rate_only.select(np.flatnonzero(rate_only["device"] != a.devices[-1]))
+    gj.identify("paper-qmg", two, evaluate_only=True, **options)
+    assert "biases" in traced
 
 
 @pytest.mark.slow

@@ -31,7 +31,7 @@ class SweepArrays(eqx.Module):
     Ragged lots (devices with different numbers of runs, runs with different numbers of points) are padded;
     `mask` is True on real points. Padding holds values that keep masked sums and their gradients finite (see
     below). Build with `Table.to_arrays(sweep)`; `to_table()` inverts it. It is also the form the fit takes:
-    every sweep of [`gyrojax.FitData`][] (`FitData.blocks`) is one, aligned on the lot's devices.
+    every sweep of a fit's data (`Fit.data.blocks`, a `FitData`) is one, aligned on the lot's devices.
 
     **Fields** (float64 unless said; see the data format, docs/data_format.md, for units per sweep kind):
 
