@@ -6,10 +6,15 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ._data.arrays import SweepArrays
-from ._data.cells import DataError
+from ._data.arrays import COORDINATES, SweepArrays
+from ._data.cells import REQUIRED_COLUMNS, DataError
 from ._data.table import Table
 from ._sweeps.registry import sweep_names
+
+
+FIT_COLUMNS = REQUIRED_COLUMNS + ("output_sigma",) + tuple(COORDINATES.values())
+"""The columns a sweep of `FitData` holds (its `column_order`, whatever the table's was: one static
+structure for every fit's data, as a fit file rebuilds it)."""
 
 
 class FitData(eqx.Module):
@@ -88,5 +93,5 @@ def fit_data(table: Table, sweeps=None) -> FitData:
                                 f"{np.asarray(arr.sigmas)[d, r, p]!r}.", source=table.source, column="output_sigma")
         else:
             arr = dataclasses.replace(arr, sigmas=jnp.ones_like(arr.outputs))
-        blocks[s] = dataclasses.replace(arr, aux={}).aligned(devices)
+        blocks[s] = dataclasses.replace(arr, aux={}, column_order=FIT_COLUMNS).aligned(devices)
     return FitData(blocks, weighted, table.source)

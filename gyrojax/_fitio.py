@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._data.arrays import ARRAY_FIELDS, SweepArrays
-from ._fitdata import FitData
+from ._fitdata import FIT_COLUMNS, FitData
 from ._identify import Fit, Unidentifiable, chi2_p_value
 from ._io import atomic_write_bytes
 from ._parameters import Entry, Model, batched, zero_effect
@@ -109,7 +109,7 @@ def _skeleton_block(sweep: str, fields, runs) -> SweepArrays:
     shape = (len(runs), max((len(r) for r in runs), default=0), 1)
     return SweepArrays(**{f: (np.zeros(shape, dtype=bool if f == "mask" else np.float64) if f in fields else None)
                           for f in ARRAY_FIELDS}, sweep=sweep, devices=tuple(d for d, _ in runs),
-                       runs=tuple(r for _, r in runs))
+                       runs=tuple(r for _, r in runs), column_order=FIT_COLUMNS)
 
 
 def _skeleton_fit(header: dict, model: Model) -> Fit:

@@ -128,8 +128,7 @@ class SweepArrays(eqx.Module):
         order += [c for c in values if c not in order and c in self.aux]
         if self.sigmas is not None and "output_sigma" not in order:
             order.append("output_sigma")
-        if self.sigmas is None and "output_sigma" in order:
-            order.remove("output_sigma")
+        order = [c for c in order if c not in values or values[c] is not None]
         cols: dict[str, list] = {c: [] for c in order}
         for d, dev in enumerate(self.devices):
             for k, r in enumerate(self.runs[d]):
