@@ -94,9 +94,14 @@ from ._fitio import load_fit as load_fit, save_fit as save_fit  # noqa: E402
 from ._fitreport import fit_report as fit_report  # noqa: E402
 from ._identify import (  # noqa: E402
     AbstractLotSolve as AbstractLotSolve,
+    AbstractRecovery as AbstractRecovery,
+    DecrementCertificate as DecrementCertificate,
     Fit as Fit,
     JointSolve as JointSolve,
     LoopSolve as LoopSolve,
+    MultiStart as MultiStart,
+    RestartRunoffs as RestartRunoffs,
+    RetryWithSolver as RetryWithSolver,
     Unidentifiable as Unidentifiable,
     VmapSolve as VmapSolve,
     identify as identify,
