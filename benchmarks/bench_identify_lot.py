@@ -91,10 +91,10 @@ def run(sizes, scipy_devices, seed=0, preset="paper-qmg", chunk=None, scipy_back
         t_sim = time.perf_counter() - t0
         t0 = time.perf_counter()
         lot_chunk = "auto" if chunk is None else (chunk if n > chunk else None)
-        fit = gj.identify(preset, table, lot_chunk=lot_chunk)
+        fit = gj.identify(preset, table, lot_solve=gj.VmapSolve(chunk=lot_chunk))
         t_first = time.perf_counter() - t0
         t0 = time.perf_counter()
-        fit = gj.identify(preset, table, lot_chunk=lot_chunk)
+        fit = gj.identify(preset, table, lot_solve=gj.VmapSolve(chunk=lot_chunk))
         t_gj = time.perf_counter() - t0
         rss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
         device_gb = _device_peak_gb()
@@ -152,8 +152,8 @@ def main(argv=None):
     ap.add_argument("--sizes", default="1,16,256,1024")
     ap.add_argument("--scipy-devices", type=int, default=16)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--chunk", type=int, help="identify(lot_chunk=...) for lots larger than this (default: "
-                    "identify's 'auto', 16 on a CPU)")
+    ap.add_argument("--chunk", type=int, help="identify(lot_solve=VmapSolve(chunk=...)) for lots larger than "
+                    "this (default: VmapSolve's 'auto', 16 on a CPU)")
     ap.add_argument("--scipy-backend", default="cpu", help="JAX backend of scipy's residual (default: cpu)")
     ap.add_argument("--json")
     args = ap.parse_args(argv)

@@ -139,8 +139,8 @@ def measured_drive_frequency(table, design):
     arr = table.to_arrays("vcf_static")
     r = design.resonator
     mask = np.asarray(arr.mask)
-    w = 2 * np.pi * np.asarray(arr.aux["drive_freq_hz"])
-    w0 = w / (1.0 + float(r.tcf) * (np.asarray(arr.aux["temperature_c"]) - float(r.t_ref)))
+    w = 2 * np.pi * np.asarray(arr.drive_freqs)
+    w0 = w / (1.0 + float(r.tcf) * (np.asarray(arr.temperatures) - float(r.t_ref)))
     return np.sum(np.where(mask, w0, 0.0), axis=(1, 2)) / np.sum(mask, axis=(1, 2)), arr.devices
 
 

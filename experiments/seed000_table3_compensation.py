@@ -145,7 +145,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--rates", default=None, help="comma-separated table rates, deg/s (default seed 000's 22)")
     ap.add_argument("--quick", action="store_true", help="skip the sensitivity rows (for tests)")
     args = ap.parse_args(argv)
-    rates = gj.SEED000_RATES_DPS if args.rates is None else tuple(float(r) for r in args.rates.split(","))
+    rates = gj.DING_ZHOU_2025_RATES_DPS if args.rates is None else tuple(float(r) for r in args.rates.split(","))
     os.makedirs(args.out, exist_ok=True)
 
     table = simulate_runs(inl_scale=args.inl_scale, rise=args.warmup_rise, seed=args.seed, rates_dps=rates)

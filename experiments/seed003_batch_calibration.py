@@ -100,7 +100,7 @@ def run(devices=13, runs=1, seed=3):
     for d in range(devices):
         g = jax.tree.map(lambda x: x[d], lot)
         r = g.resonator
-        temp = float(np.mean(np.asarray(rate.aux["temperature_c"][d])))
+        temp = float(np.mean(np.asarray(rate.temperatures[d])))
         w = float(r.at_temperature(temp)[0])
         phys = (2.0 * float(r.angular_gain) * float(r.mass) * float(g.drive_amplitude(w)) * w
                 / (float(g.vcf_electrode.force_per_volt2) * gj.VCF_CARRIER_V))

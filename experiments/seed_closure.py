@@ -37,7 +37,7 @@ def seed000():
     # Eq. (3)-(4): w_x(Om) = sqrt(w_x^2 - Om^2) -> relative SF change 1 - sqrt(1 - (Om/w_x)^2)
     eq4_ppm = (1 - math.sqrt(1 - (rate / omega) ** 2)) * 1e6
     g = gj.paper_qmg()
-    sf_model = float(gj.rate_sweep(g, gj.seed000_rates()).rate[-1]) / (200.0)
+    sf_model = float(gj.rate_sweep(g, gj.ding_zhou_2025_rates()).rate[-1]) / (200.0)
     return {
         "coriolis_force_at_200dps_N": coriolis_force,
         "kvf_printed_N_per_V": P.QMG_KVF_PRINTED,

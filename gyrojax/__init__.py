@@ -94,9 +94,14 @@ from ._fitio import load_fit as load_fit, save_fit as save_fit  # noqa: E402
 from ._fitreport import fit_report as fit_report  # noqa: E402
 from ._identify import (  # noqa: E402
     AbstractLotSolve as AbstractLotSolve,
+    AbstractRecovery as AbstractRecovery,
+    DecrementCertificate as DecrementCertificate,
     Fit as Fit,
     JointSolve as JointSolve,
     LoopSolve as LoopSolve,
+    MultiStart as MultiStart,
+    RestartRunoffs as RestartRunoffs,
+    RetryWithSolver as RetryWithSolver,
     Unidentifiable as Unidentifiable,
     VmapSolve as VmapSolve,
     identify as identify,
@@ -195,11 +200,11 @@ from ._sweeps.quadrature_injection import (  # noqa: E402
     QuadratureInjection as QuadratureInjection,
 )
 from ._sweeps.rate_table import (  # noqa: E402
-    SEED000_RATES_DPS as SEED000_RATES_DPS,
+    DING_ZHOU_2025_RATES_DPS as DING_ZHOU_2025_RATES_DPS,
     RateTable as RateTable,
+    ding_zhou_2025_rates as ding_zhou_2025_rates,
     rate_sweep as rate_sweep,
     rate_table_points as rate_table_points,
-    seed000_rates as seed000_rates,
 )
 from ._sweeps.registry import (  # noqa: E402
     SWEEP_KINDS as SWEEP_KINDS,

@@ -99,7 +99,7 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print, progress: bool 
     log("[3/4] paper-qmg + dac_inl on 22 rates in the steady, averaged"
         + (" and full-waveform tiers (the full tier takes a minute)" if full_tier else " tiers"))
     gyro = gj.add_effect(gj.paper_qmg(), "dac_inl")
-    rates = gj.seed000_rates()
+    rates = gj.ding_zhou_2025_rates()
     x = np.asarray(rates) / DEG
     tiers = {"steady": gj.Steady(), "averaged": gj.Averaged()}
     if full_tier:

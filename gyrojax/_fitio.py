@@ -29,7 +29,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._fitdata import FitData, SweepBlock
+from ._data.arrays import ARRAY_FIELDS, SweepArrays
+from ._fitdata import FIT_COLUMNS, FitData
 from ._identify import Fit, Unidentifiable, chi2_p_value
 from ._io import atomic_write_bytes
 from ._parameters import Entry, Model, batched, zero_effect
@@ -40,7 +41,7 @@ MAGIC = b"GYROJAX-FIT\n"
 FORMAT_VERSION = 2
 READABLE_VERSIONS = (1, 2)
 
-# The fields of a SweepBlock that version 1 files stored (later fields were added to the class since).
+# The array fields of a sweep's arrays that version 1 files stored (later ones were added to the class since).
 _V1_BLOCK_FIELDS = ("inputs", "outputs", "sigmas", "temperatures", "mask")
 _V1_NOTE = ("this fit file (format version 1) predates the status checks: its scale factor was not checked for "
             "being determined by the data, for misfit or for plausibility")
@@ -97,9 +98,18 @@ def _entry_from(d: dict) -> Entry:
                  bool(d["shared"]), tuple(float(s) for s in d["scale"]))
 
 
-def _block_fields(block: SweepBlock) -> list[str]:
-    """The fields a sweep block holds data in (optional ones may be None)."""
-    return [f.name for f in dataclasses.fields(SweepBlock) if getattr(block, f.name) is not None]
+def _block_fields(block: SweepArrays) -> list[str]:
+    """The array fields a sweep's arrays hold data in (optional ones may be None)."""
+    return [f for f in ARRAY_FIELDS if getattr(block, f) is not None]
+
+
+def _skeleton_block(sweep: str, fields, runs) -> SweepArrays:
+    """Arrays of `sweep` with the labels `runs` (per device) and zeros in `fields` (the others None), shaped so
+    that they are valid (the leaves are replaced on loading)."""
+    shape = (len(runs), max((len(r) for r in runs), default=0), 1)
+    return SweepArrays(**{f: (np.zeros(shape, dtype=bool if f == "mask" else np.float64) if f in fields else None)
+                          for f in ARRAY_FIELDS}, sweep=sweep, devices=tuple(d for d, _ in runs),
+                       runs=tuple(r for _, r in runs), column_order=FIT_COLUMNS)
 
 
 def _skeleton_fit(header: dict, model: Model) -> Fit:
@@ -110,15 +120,13 @@ def _skeleton_fit(header: dict, model: Model) -> Fit:
     v1 = header["format_version"] == 1
     sweeps = header["sweeps"]
     stored = header.get("block_fields") or {s: list(_V1_BLOCK_FIELDS) for s in sweeps}
-    unknown = sorted({nm for s in sweeps for nm in stored[s]} - {f.name for f in dataclasses.fields(SweepBlock)})
+    unknown = sorted({nm for s in sweeps for nm in stored[s]} - set(ARRAY_FIELDS))
     if unknown:
         raise ValueError(f"the file's data hold fields this gyrojax does not know: {', '.join(unknown)}")
-    # By name, so that fields added to SweepBlock later are None (not stored) rather than misplaced.
-    blocks = {s: SweepBlock(**{f.name: (z if f.name in stored[s] else None) for f in dataclasses.fields(SweepBlock)})
-              for s in sweeps}
-    data = FitData(blocks, tuple(header["devices"]),
-                   tuple((s, tuple(tuple(r) for r in runs)) for s, runs in header["data_runs"]),
-                   bool(header["data_weighted"]), header["data_source"])
+    # By name, so that fields added to SweepArrays later are None (not stored) rather than misplaced.
+    runs = {s: tuple(zip(header["devices"], (tuple(r) for r in per_device))) for s, per_device in header["data_runs"]}
+    blocks = {s: _skeleton_block(s, stored[s], runs[s]) for s in sweeps}
+    data = FitData(blocks, bool(header["data_weighted"]), header["data_source"])
     per_sweep = {s: z for s in header["result_sweeps"]}
     n = len(header["devices"])
     new = None if v1 else z

@@ -107,7 +107,7 @@ class _AbstractLinear(AbstractProbe):
     in a coordinate of the data."""
 
     gain: ClassVar[bool]  # a gain (ppm of the prediction) rather than a bias (deg/s)
-    field: ClassVar[str]  # the SweepBlock field of the coordinate
+    field: ClassVar[str]  # the SweepArrays field of the coordinate
     per: ClassVar[float]  # coordinate units per unit of the coefficient
     origin: ClassVar[float | None]  # where the term is zero; None: the device's mean
 

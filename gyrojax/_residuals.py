@@ -13,7 +13,8 @@ chi2, covariance and score tests are those of the full model with the biases fre
 import jax
 import jax.numpy as jnp
 
-from ._fitdata import FitData, SweepBlock
+from ._data.arrays import SweepArrays
+from ._fitdata import FitData
 from ._gyroscope import Gyroscope
 from ._simulate.tiers import Steady
 from ._solution import RESULTS
@@ -32,7 +33,7 @@ def _flag(settled, mask):
     return (settled.result != RESULTS.successful) & jnp.ravel(mask)
 
 
-def predict_block(gyro: Gyroscope, sweep: str, block: SweepBlock, tier=Steady()):
+def predict_block(gyro: Gyroscope, sweep: str, block: SweepArrays, tier=Steady()):
     """Noise-free, bias-free predictions of one device's sweep block, shape (run, point), and a flag of
     points that could not be evaluated (not settled, not finite)."""
     shape = block.inputs.shape
@@ -56,7 +57,7 @@ def _steady(gyro, blocks, tier, sf_temperature=None):
     return settled[:-1], (step[1] - step[0]) / (2.0 * SF_STEP_DPS)
 
 
-def run_biases(sweep: str, block: SweepBlock, pred):
+def run_biases(sweep: str, block: SweepArrays, pred):
     """Best bias per run (weighted mean of the raw residuals), shape (run,); zero for unbiased sweeps."""
     if not sweep_kind(sweep).biased:
         return jnp.zeros(block.inputs.shape[0])
@@ -65,7 +66,7 @@ def run_biases(sweep: str, block: SweepBlock, pred):
     return jnp.sum(w * raw, axis=-1) / jnp.maximum(jnp.sum(w, axis=-1), jnp.finfo(float).tiny)
 
 
-def block_residuals(sweep: str, block: SweepBlock, pred):
+def block_residuals(sweep: str, block: SweepArrays, pred):
     """Standardised residuals (run, point) after the run biases; zero on padding."""
     b = run_biases(sweep, block, pred)
     r = (block.outputs - pred - b[:, None]) / block.sigmas

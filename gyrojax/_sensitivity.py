@@ -48,7 +48,7 @@ from ._lot import as_arrays
 from ._metrics import FULL_SCALE_CONVENTIONS, fit_scale_factor
 from ._parameters import PARAMETERS, Model, effect_leaves
 from ._simulate.tiers import Steady
-from ._sweeps.rate_table import SEED000_RATES_DPS, rate_sweep
+from ._sweeps.rate_table import DING_ZHOU_2025_RATES_DPS, rate_sweep
 from ._units import DEG
 
 
@@ -255,7 +255,7 @@ _joint_grad = eqx.filter_jit(eqx.filter_grad(_joint_max_ppm))
 
 
 def nonlinearity_budget(model, effects: Sequence | None = None, *,
-                        rates_dps: Float[ArrayLike, " point"] = SEED000_RATES_DPS, device: int | None = None,
+                        rates_dps: Float[ArrayLike, " point"] = DING_ZHOU_2025_RATES_DPS, device: int | None = None,
                         full_scale: str = "half_range",
                         gradients: bool = True) -> NonlinearityBudget:
     r"""Scale-factor nonlinearity of each effect alone and of all jointly, shares and gradients.

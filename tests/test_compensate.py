@@ -36,7 +36,7 @@ def warmup_table():
     slowly (it sweeps through its warm-up). The same device and protocol as the Table 3 experiment, so the
     compiled sweep is shared."""
     gyro = gj.add_effect(gj.paper_qmg(), "dac_inl", 1.0)
-    protocol = EXPERIMENT.protocol(EXPERIMENT.WARMUP_RISE_K, gj.SEED000_RATES_DPS)
+    protocol = EXPERIMENT.protocol(EXPERIMENT.WARMUP_RISE_K, gj.DING_ZHOU_2025_RATES_DPS)
     table = gj.simulate_table(gyro, runs=3, noise_free=True, protocol=protocol)
     return gj.Table(table.columns, source="warmup.csv")
 
@@ -94,14 +94,14 @@ def test_composite_counter_threshold_is_configurable():
 def _piecewise_points(f_hz, bias):
     """Calibrated outputs u (LSB) whose rate is a different cubic of u on each side of zero, measured at drive
     frequencies f_hz (so the raw output is (u + bias) f / k_t with k_t the mean training frequency 4634 Hz)."""
-    rates_u = 1.0e4 * np.asarray(gj.SEED000_RATES_DPS)
+    rates_u = 1.0e4 * np.asarray(gj.DING_ZHOU_2025_RATES_DPS)
     s = rates_u / 2.0e6
     rate = np.where(s >= 0, 200 * s + 0.3 * s**2 - 0.9 * s**3, 200 * s - 0.2 * s**2 + 0.5 * s**3)
     return rate, (rates_u + bias) * f_hz / 4634.0
 
 
 def test_composite_is_exact_on_a_piecewise_cubic_with_its_own_calibration():
-    n = len(gj.SEED000_RATES_DPS)
+    n = len(gj.DING_ZHOU_2025_RATES_DPS)
     f_train = np.concatenate([np.full(n, 4634.0 * (1 + 2e-4)), np.full(n, 4634.0 * (1 - 2e-4))])  # mean 4634
     rate_a, out_a = _piecewise_points(f_train[:n], 50.0)
     rate_b, out_b = _piecewise_points(f_train[n:], 50.0)
@@ -351,7 +351,7 @@ def test_table3_experiment_reproduces_the_ordering(tmp_path, capsys):
 def test_a_run_whose_outputs_do_not_change_is_refused_by_name():
     """A disconnected or saturated output gives the same value at every rate: no scale factor to compensate,
     so no 'after' figure may be computed from round-off (it was 3.5 ppm from a 1e-11 slope)."""
-    rates = np.asarray(gj.SEED000_RATES_DPS)
+    rates = np.asarray(gj.DING_ZHOU_2025_RATES_DPS)
     records = [{"device": "d", "run": r, "sweep": "rate_table", "input": x,
                 "output": 13709.8 * x if r == 0 else 5.0, "drive_freq_hz": 4634.0 + 1e-3 * i}
                for r in (0, 1) for i, x in enumerate(rates)]

@@ -108,8 +108,8 @@ def test_dac_sweep_reproduces_table2_scale():
 
 def test_effect_nests_at_zero():
     g = gj.paper_qmg()
-    s0 = gj.rate_sweep(g, gj.seed000_rates())
-    s1 = gj.rate_sweep(gj.add_effect(g, gj.DacInl.typical(0.0)), gj.seed000_rates())
+    s0 = gj.rate_sweep(g, gj.ding_zhou_2025_rates())
+    s1 = gj.rate_sweep(gj.add_effect(g, gj.DacInl.typical(0.0)), gj.ding_zhou_2025_rates())
     assert np.array_equal(np.asarray(s0.rate), np.asarray(s1.rate))
 
 

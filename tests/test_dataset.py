@@ -338,8 +338,12 @@ def test_to_arrays_layout():
     np.testing.assert_array_equal(arrays.outputs[1, 0], [30 + 5, 40 + 5, 0, 0])  # padded with 0
     np.testing.assert_array_equal(arrays.sigmas[1, 1], [1, 1, 1, 1])  # padding sigma 1
     assert arrays.inputs.dtype == jnp.float64
-    assert set(arrays.aux) == {"temperature_c"}
-    assert np.isnan(arrays.aux["temperature_c"][0, 0, 1])  # not given stays NaN
+    assert arrays.aux == {}  # temperature_c is the field temperatures
+    assert np.isnan(arrays.temperatures[0, 0, 1])  # not given stays NaN
+    np.testing.assert_array_equal(arrays.temperatures[0, 1], [23.0, 24.0, 26.0, 27.0])
+    np.testing.assert_array_equal(arrays.temperatures[1], [[28.0, 29.0, 25.0, 25.0], [25.0] * 4])  # padding 25
+    assert np.all(np.isnan(arrays.times)) and np.all(np.isnan(arrays.drive_freqs))  # not recorded
+    np.testing.assert_array_equal(arrays.order[0], [[0, 1, 2, 0], [0, 1, 2, 3]])  # file order, padding 0
 
 
 def test_arrays_round_trip_exact():
@@ -361,6 +365,38 @@ def test_arrays_vmap():
 
     out = jax.vmap(masked_mean)(arrays)  # vmap over the device axis of every array field
     np.testing.assert_allclose(out, [[0.0, 2.0], [40.0, 0.0]])
+
+
+def test_fit_data_holds_sweep_arrays_aligned_on_the_lot():
+    """A fit's data is one SweepArrays per sweep kind on the lot's device axis: a device a sweep lacks has
+    padding only; `unlabelled()` keeps the arrays and drops the labels."""
+    from gyrojax._fitdata import fit_data
+
+    rows = [{"device": d, "run": r, "sweep": "rate_table", "input": x, "output": 2 * x, "output_sigma": 0.1}
+            for d, r, xs in (("A", 0, [-1.0, 0.0, 1.0]), ("B", 5, [3.0, 4.0])) for x in xs]
+    rows += [{"device": "B", "run": 1, "sweep": "vcf_static", "input": x, "output": x, "output_sigma": 0.2,
+              "time_s": t} for x, t in ((0.5, 20.0), (1.0, 10.0))]
+    data = fit_data(Table.from_records(rows))
+    assert data.devices == ("A", "B") and data.sweeps == ("rate_table", "vcf_static") and data.weighted
+    vcf = data.blocks["vcf_static"]
+    assert isinstance(vcf, SweepArrays) and vcf.devices == ("A", "B") and vcf.aux == {}
+    assert data.run_ids("vcf_static") == ((), (1,)) and data.run_ids("rate_table") == ((0,), (5,))
+    np.testing.assert_array_equal(vcf.mask, [[[False, False]], [[True, True]]])
+    np.testing.assert_array_equal(vcf.inputs[1, 0], [0.5, 1.0])
+    np.testing.assert_array_equal(vcf.order[1, 0], [1, 0])  # by time_s, not file order
+    np.testing.assert_array_equal(vcf.sigmas[0], [[1.0, 1.0]])  # padding
+    np.testing.assert_array_equal(vcf.temperatures[0], [[25.0, 25.0]])  # padding
+    assert np.all(np.isnan(vcf.temperatures[1])) and np.all(np.isnan(vcf.times[0]))  # not recorded; padding
+    back = vcf.to_table()
+    np.testing.assert_array_equal(back["time_s"], [20.0, 10.0])
+    bare = data.unlabelled()
+    assert bare.devices is None and bare.weighted is None and bare.source is None
+    assert bare.blocks["vcf_static"].runs is None
+    for a, b in zip(jax.tree.leaves(data), jax.tree.leaves(bare)):
+        assert a is b
+    unweighted = fit_data(Table.from_records([{k: v for k, v in r.items() if k != "output_sigma"} for r in rows]))
+    assert not unweighted.weighted
+    np.testing.assert_array_equal(unweighted.blocks["rate_table"].sigmas, np.ones((2, 1, 3)))
 
 
 def test_to_arrays_missing_sweep():

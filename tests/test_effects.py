@@ -453,7 +453,7 @@ def test_comb_gap_needs_residual_motion_and_is_an_odd_cubic():
 
 @pytest.mark.slow
 def test_steady_and_averaged_agree_closed_loop():
-    rates = gj.seed000_rates()  # the shape test_tiers.py compiles for: shared programs
+    rates = gj.ding_zhou_2025_rates()  # the shape test_tiers.py compiles for: shared programs
     for name, cls in gj.EFFECTS.items():
         base = LEAKY if name in ("comb_gap", "duffing_sense") else QMG
         dev = _at(cls.typical().apply(base), T_HOT)

@@ -15,6 +15,7 @@ import pytest
 
 import gyrojax as gj
 from gyrojax import rate_table_points
+from gyrojax._residuals import device_residuals, run_biases
 
 
 LOT = {"devices": 3, "runs": 2, "sweeps": ("rate_table", "vcf_static", "dac"), "seed": 11}
@@ -146,11 +147,12 @@ def test_a_prior_pulls_and_fixes_the_combination(rate_only):
 
 # BFGS stopped at 5 steps: the retry test below reuses this compiled solve.
 NOT_CONVERGED = dict(free=("k_vf", "angular_gain"), priors=VAGUE, solver="bfgs", max_steps=5)
+NO_RETRY = (gj.DecrementCertificate(), gj.RestartRunoffs())  # the default recovery without the retry
 
 
 @pytest.mark.slow
 def test_a_fit_that_cannot_converge_says_so(rate_only):
-    f = gj.identify("paper-qmg", rate_only, retry_solver=None, **NOT_CONVERGED)
+    f = gj.identify("paper-qmg", rate_only, recovery=NO_RETRY, **NOT_CONVERGED)
     assert not bool(np.any(np.asarray(f.converged)))
     assert all("Try:" in m and "max_steps" in m for m in f.result_message)
     with pytest.raises(RuntimeError, match="did not converge for paper-qmg-000: .*max_steps"):
@@ -161,15 +163,15 @@ def test_a_fit_that_cannot_converge_says_so(rate_only):
 @pytest.mark.slow
 def test_a_solve_stopped_near_the_minimum_is_certified_by_the_gauss_newton_decrement(rate_only):
     """A solve that stops at max_steps counts as converged when a full Gauss-Newton step from there would gain
-    less than decrement_tol in chi2, device by device. The BFGS solve stopped at 5 steps above is left far
-    from the minimum; its decrement is checked against the chi2 each device still had to gain (the converged
-    fit's), and tolerances around it certify exactly the devices below them."""
+    less than the DecrementCertificate's tol in chi2, device by device. The BFGS solve stopped at 5 steps above
+    is left far from the minimum; its decrement is checked against the chi2 each device still had to gain (the
+    converged fit's), and tolerances around it certify exactly the devices below them."""
     base = gj.identify("paper-qmg", rate_only, free=("k_vf", "angular_gain"), priors=VAGUE)
-    stopped = gj.identify("paper-qmg", rate_only, retry_solver=None, decrement_tol=0.0, **NOT_CONVERGED)
+    stopped = gj.identify("paper-qmg", rate_only, recovery=(gj.DecrementCertificate(0.0),), **NOT_CONVERGED)
     assert not np.any(np.asarray(stopped.converged))
     gap = np.asarray(stopped.chi2) - np.asarray(base.chi2)  # per device, the chi2 left to gain
     assert np.all(gap > 0) and len(set(np.round(np.log10(gap), 3))) == len(gap)
-    f = gj.identify("paper-qmg", rate_only, retry_solver=None, decrement_tol=2 * gap.max(), **NOT_CONVERGED)
+    f = gj.identify("paper-qmg", rate_only, recovery=(gj.DecrementCertificate(2 * gap.max()),), **NOT_CONVERGED)
     assert f.all_converged
     prefix = "converged (stopped at max_steps=5, where a full Gauss-Newton step would lower chi2 by only "
     assert all(m.startswith(prefix) for m in f.result_message)
@@ -178,7 +180,7 @@ def test_a_solve_stopped_near_the_minimum_is_certified_by_the_gauss_newton_decre
     np.testing.assert_allclose(decrement, gap, rtol=5e-3)  # as printed: 3 digits
     np.testing.assert_array_equal(np.asarray(f.u), np.asarray(stopped.u))
     tol = np.sort(gap)[1]  # between the smallest gap and the others
-    g = gj.identify("paper-qmg", rate_only, retry_solver=None, decrement_tol=tol * (1 + 1e-6), **NOT_CONVERGED)
+    g = gj.identify("paper-qmg", rate_only, recovery=(gj.DecrementCertificate(tol * (1 + 1e-6)),), **NOT_CONVERGED)
     np.testing.assert_array_equal(np.asarray(g.converged), gap < tol * (1 + 1e-6))
     assert sum(np.asarray(g.converged)) == 2
 
@@ -186,7 +188,7 @@ def test_a_solve_stopped_near_the_minimum_is_certified_by_the_gauss_newton_decre
 @pytest.mark.slow
 def test_a_solve_that_did_not_converge_is_retried_with_gauss_newton(rate_only):
     """BFGS stopped at max_steps=5 is solved again from the start with Gauss-Newton (5 steps here), which
-    lands on the Levenberg-Marquardt fit, and the message says so; with retry_solver=None the failure
+    lands on the Levenberg-Marquardt fit, and the message says so; without that recovery policy the failure
     stands."""
     kw = NOT_CONVERGED
     f = gj.identify("paper-qmg", rate_only, **kw)
@@ -197,7 +199,7 @@ def test_a_solve_that_did_not_converge_is_retried_with_gauss_newton(rate_only):
     assert np.all(np.asarray(f.num_steps) > 5)  # both solves counted
     np.testing.assert_allclose(np.asarray(f.scale_factor), np.asarray(base.scale_factor), rtol=1e-9)
     np.testing.assert_allclose(np.asarray(f.chi2_red), np.asarray(base.chi2_red), rtol=1e-7)
-    g = gj.identify("paper-qmg", rate_only, retry_solver=None, **kw)
+    g = gj.identify("paper-qmg", rate_only, recovery=NO_RETRY, **kw)
     assert not np.any(np.asarray(g.converged))
     assert all("Try:" in m for m in g.result_message)
     assert not any("re-solved" in m for m in g.result_message)
@@ -220,13 +222,48 @@ def test_a_joint_solve_that_did_not_converge_is_retried_as_a_whole(table):
 
 
 @pytest.mark.slow
+def test_a_lot_of_the_same_shapes_reuses_the_traced_fit(rate_only, monkeypatch):
+    """The compiled fit sees arrays and shapes only: a second lot with the same shapes but other device names,
+    run ids and source, or without output_sigma, is fitted without tracing anything again, and gives the same
+    numbers under its own labels. Python functions called inside the compiled fit count its traces: one device's
+    residuals (its own jit, keyed by one device's shapes) and the run biases (in the lot's evaluation pass)."""
+    traced = []
+    monkeypatch.setattr("gyrojax._identify.problem.device_residuals",
+                        lambda *a, **k: traced.append("residuals") or device_residuals(*a, **k))
+    monkeypatch.setattr("gyrojax._identify.lot.run_biases",
+                        lambda *a, **k: traced.append("biases") or run_biases(*a, **k))
+    options = dict(free=("k_vf", "angular_gain"), priors=VAGUE)
+    a = gj.identify("paper-qmg", rate_only, **options)  # traced here or by an earlier test
+    cols = dict(rate_only.columns)
+    cols["device"] = np.asarray(["other-" + d for d in cols["device"]])
+    cols["run"] = cols["run"] + 7
+    relabelled = gj.Table(cols, source="another lot")
+    no_sigma = gj.Table({k: v for k, v in cols.items() if k != "output_sigma"}, source="a lot without sigmas")
+    traced.clear()
+    b = gj.identify("paper-qmg", relabelled, **options)
+    c = gj.identify("paper-qmg", no_sigma, estimate_noise=False, **options)
+    assert traced == []
+    assert b.devices == tuple("other-" + d for d in a.devices) and b.data.run_ids("rate_table")[0] == (7, 8)
+    assert "another lot" in b.summary()
+    for name in ("values", "stderr", "chi2", "scale_factor"):
+        np.testing.assert_array_equal(np.asarray(getattr(b, name)), np.asarray(getattr(a, name)))
+    assert not c.data.weighted and float(np.asarray(c.chi2)[0]) != float(np.asarray(a.chi2)[0])
+    # The counter does see a trace: a lot of two devices is another shape (of the lot's pass, not of one device).
+    two = rate_only.select(np.flatnonzero(rate_only["device"] != a.devices[-1]))
+    gj.identify("paper-qmg", two, evaluate_only=True, **options)
+    assert "biases" in traced
+
+
+@pytest.mark.slow
 def test_bad_names_are_refused(table):
     with pytest.raises(ValueError, match="unknown parameter 'k_vff' in free"):
         gj.identify("paper-qmg", table, free=("k_vff",))
     with pytest.raises(ValueError, match="'mass' .* is not a parameter of this fit"):
         gj.identify("paper-qmg", table, hold=("mass",))
     with pytest.raises(ValueError, match="starts must be an integer >= 1"):
-        gj.identify("paper-qmg", table, starts=0)
+        gj.identify("paper-qmg", table, start=gj.MultiStart(starts=0))
+    with pytest.raises(TypeError, match="recovery must be a tuple of gyrojax.AbstractRecovery policies"):
+        gj.identify("paper-qmg", table, recovery=gj.RestartRunoffs())
 
 
 @pytest.mark.slow
@@ -315,7 +352,7 @@ import gyrojax as gj
 
 assert len(jax.devices()) == 8, jax.devices()
 fit = gj.identify("paper-qmg", gj.read_table(sys.argv[1]), free=("k_vf", "angular_gain"),
-                  priors={"angular_gain": (1.0, 1e3)}, lot_solve="vmap", shard=True)
+                  priors={"angular_gain": (1.0, 1e3)}, lot_solve=gj.VmapSolve(shard=True))
 json.dump({"values": np.asarray(fit.values).tolist(), "stderr": np.asarray(fit.stderr).tolist(),
            "chi2": np.asarray(fit.chi2).tolist(), "converged": np.asarray(fit.converged).tolist()},
           open(sys.argv[2], "w"))
@@ -349,7 +386,7 @@ def test_lot_sharded_over_eight_cpu_devices_gives_the_same_fit(rate_only, tmp_pa
 
 
 def test_chunks_map_like_vmap_with_padding_and_empty_leaves():
-    """identify(lot_chunk=N)'s machinery: the lot padded to a multiple of N (copies of the last device, then
+    """VmapSolve(chunk=N)'s machinery: the lot padded to a multiple of N (copies of the last device, then
     dropped), jax.lax.map over vmapped chunks, equal to one vmap, with an empty (device, 0) leaf as the
     priors are. (Every identify of more than 16 devices runs chunked on a CPU: the Monte Carlo test's 100.)"""
     from gyrojax._identify.lot import LotSpread, map_devices
@@ -374,18 +411,16 @@ def test_chunks_map_like_vmap_with_padding_and_empty_leaves():
 
 @pytest.mark.slow
 def test_lot_chunk_is_checked(table):
-    with pytest.raises(ValueError, match="lot_chunk must be .auto., None or an integer >= 1"):
-        gj.identify("paper-qmg", table, lot_chunk=0)
-    with pytest.raises(ValueError, match="lot_chunk applies to the vmapped solve"):
-        gj.identify("paper-qmg", table, lot_chunk=2, shared=("dac_gain_error",))
+    with pytest.raises(ValueError, match="chunk must be .auto., None or an integer >= 1"):
+        gj.VmapSolve(chunk=0)
+    with pytest.raises(ValueError, match="shared parameters need JointSolve"):
+        gj.identify("paper-qmg", table, lot_solve=gj.VmapSolve(chunk=2), shared=("dac_gain_error",))
 
 
 @pytest.mark.slow
 def test_lot_strategies_are_checked_and_the_shortcuts_name_them(table):
     """A lot strategy object takes shard and chunk itself, and must match the fit (joint where parameters are
     shared); the strings are shortcuts for the same objects."""
-    with pytest.raises(ValueError, match="shard and lot_chunk go into the lot strategy"):
-        gj.identify("paper-qmg", table, lot_solve=gj.VmapSolve(), lot_chunk=2)
     with pytest.raises(ValueError, match="shared parameters need JointSolve"):
         gj.identify("paper-qmg", table, lot_solve=gj.VmapSolve(chunk=2), shared=("dac_gain_error",))
     with pytest.raises(ValueError, match="a joint solve, which needs shared parameters"):
@@ -394,11 +429,10 @@ def test_lot_strategies_are_checked_and_the_shortcuts_name_them(table):
         gj.identify("paper-qmg", table, lot_solve="sharded")
     from gyrojax._identify.shortcuts import lot_solve_from
 
-    assert lot_solve_from("vmap", None, "auto", joint=False) == gj.VmapSolve()
-    assert lot_solve_from("vmap", True, 4, joint=False) == gj.VmapSolve(chunk=4, shard=True)
-    assert lot_solve_from("loop", None, "auto", joint=False) == gj.LoopSolve()
-    assert lot_solve_from("vmap", None, "auto", joint=True) == gj.JointSolve()
-    assert lot_solve_from("loop", None, "auto", joint=True) == gj.JointSolve(shard=False)
+    assert lot_solve_from("vmap", joint=False) == gj.VmapSolve()
+    assert lot_solve_from("loop", joint=False) == gj.LoopSolve()
+    assert lot_solve_from("vmap", joint=True) == gj.JointSolve()
+    assert lot_solve_from("loop", joint=True) == gj.JointSolve(shard=False)
     at_start = gj.identify("paper-qmg", table, evaluate_only=True, lot_solve="loop", progress=False)
     same = gj.identify("paper-qmg", table, evaluate_only=True, lot_solve=gj.LoopSolve(), progress=False)
     np.testing.assert_array_equal(np.asarray(same.residual_vector), np.asarray(at_start.residual_vector))

@@ -72,12 +72,12 @@ def test_every_sweep_for_both_presets(qmg, vcf):
             assert arr.mask.shape == (devices, runs, n_points[s]) and bool(arr.mask.all())
             assert np.all(np.asarray(arr.sigmas) > 0)
         rate = t.to_arrays("rate_table")
-        np.testing.assert_array_equal(np.asarray(rate.inputs[1, -1]), gj.SEED000_RATES_DPS)
+        np.testing.assert_array_equal(np.asarray(rate.inputs[1, -1]), gj.DING_ZHOU_2025_RATES_DPS)
         assert np.all(np.asarray(rate.aux["n_samples"]) == 120 * 100)  # seed 000: 2 min at 100 Hz
         dyn = t.to_arrays("vcf_dynamic")
         np.testing.assert_array_equal(np.asarray(dyn.inputs[0, 0]), np.arange(10.0, 501.0, 10.0))
         assert np.all(np.isfinite(np.asarray(dyn.aux["phase_deg"])))
-        assert np.all(np.isnan(np.asarray(dyn.aux["drive_freq_hz"])))
+        assert np.all(np.isnan(np.asarray(dyn.drive_freqs)))
     # the static VCF voltages are the virtual equivalents of seed 000's rates (seed 003 Eq. 7): on vcf-2018
     # with Table 1's design values 200 deg/s is 6.546 mV; on paper-qmg's electrode 2 V
     v_vcf = vcf["noisy"].to_arrays("vcf_static").inputs[0, 0]
@@ -99,11 +99,11 @@ def test_noise_free_closed_loop_is_the_physics(qmg):
     rate, vcf_s = t.to_arrays("rate_table"), t.to_arrays("vcf_static")
     for d in range(QMG_DEVICES):
         g = _device(lot, d)
-        temp = np.asarray(rate.aux["temperature_c"][d])
+        temp = np.asarray(rate.temperatures[d])
         w = np.asarray(g.resonator.at_temperature(jnp.asarray(temp))[0])
         sf = np.asarray(g.ideal_scale_factor(jnp.asarray(temp)))
         np.testing.assert_allclose(np.asarray(rate.outputs[d]), sf * np.asarray(rate.inputs[d]) * DEG, rtol=1e-8)
-        np.testing.assert_allclose(np.asarray(rate.aux["drive_freq_hz"][d]), w / (2 * np.pi), rtol=1e-12)
+        np.testing.assert_allclose(np.asarray(rate.drive_freqs[d]), w / (2 * np.pi), rtol=1e-12)
         gain = np.asarray(g.rebalance_gain(jnp.asarray(w)))
         word = float(g.vcf_electrode.force_per_volt2) * gj.VCF_CARRIER_V * np.asarray(vcf_s.inputs[d]) / gain
         np.testing.assert_allclose(np.asarray(vcf_s.outputs[d]), word, rtol=1e-8)
@@ -121,11 +121,11 @@ def test_noise_free_outputs_are_the_observe_predictions(which, qmg, vcf):
         arr = t.to_arrays(sweep)
         inputs = np.asarray(arr.inputs)
         assert np.all(inputs == inputs[:1, :1])  # one input list for the whole lot
-        request = (gj.sweep_kind(sweep), jnp.asarray(inputs[0, 0]), arr.aux["temperature_c"], jnp.nan)
+        request = (gj.sweep_kind(sweep), jnp.asarray(inputs[0, 0]), arr.temperatures, jnp.nan)
         settled = lot_steady(lot, (request,), gj.CAMPAIGN_TIER)[0]
         np.testing.assert_array_equal(np.asarray(settled.rate), np.asarray(arr.outputs))
     arr = t.to_arrays("vcf_dynamic")
-    amp, phase = sweeps_vcf_dynamic._lot_vcf_dynamic(lot, arr.inputs[0, 0], arr.aux["temperature_c"], 0.02)
+    amp, phase = sweeps_vcf_dynamic._lot_vcf_dynamic(lot, arr.inputs[0, 0], arr.temperatures, 0.02)
     np.testing.assert_array_equal(np.asarray(amp), np.asarray(arr.outputs))
     np.testing.assert_array_equal(np.asarray(phase), np.asarray(arr.aux["phase_deg"]))
     if which == "qmg":
@@ -157,8 +157,8 @@ def test_vcf_to_rate_scale_factor_ratio_is_physical(which, qmg, vcf):
     for d in range(rate.mask.shape[0]):
         g = _device(lot, d)
         r = g.resonator
-        temp = np.asarray(rate.aux["temperature_c"][d])
-        np.testing.assert_array_equal(temp, np.asarray(vs.aux["temperature_c"][d]))
+        temp = np.asarray(rate.temperatures[d])
+        np.testing.assert_array_equal(temp, np.asarray(vs.temperatures[d]))
         w = np.asarray(r.at_temperature(jnp.asarray(temp))[0])
         a = np.asarray(g.drive_amplitude(jnp.asarray(w)))
         phys = 2 * float(r.angular_gain) * float(r.mass) * a * w / (float(g.vcf_electrode.force_per_volt2)
@@ -182,14 +182,14 @@ def test_vcf_to_rate_scale_factor_ratio_is_physical(which, qmg, vcf):
 def test_temperature_follows_the_warm_up(qmg):
     t = qmg["noisy"]
     for sweep, dwell in (("rate_table", 120.0), ("vcf_static", 120.0), ("vcf_dynamic", 10.0)):
-        temp = np.asarray(t.to_arrays(sweep).aux["temperature_c"])
+        temp = np.asarray(t.to_arrays(sweep).temperatures)
         mid = 60.0 + (np.arange(temp.shape[-1]) + 0.5) * dwell  # 1 min warm-up, middle of each dwell
         np.testing.assert_allclose(temp[:, 0], np.broadcast_to(25.0 + 2.0 * (1 - np.exp(-mid / 600.0)),
                                                                temp[:, 0].shape), rtol=1e-12)
         np.testing.assert_allclose(temp[:, 1:], np.broadcast_to(25.0 + 2.0 * (1 - np.exp(-mid / 120.0)),
                                                                 temp[:, 1:].shape), rtol=1e-12)
     rate = t.to_arrays("rate_table")
-    temp = np.asarray(rate.aux["temperature_c"])
+    temp = np.asarray(rate.temperatures)
     # the first run is still warming at its last point (25 mK short of the plateau), the later ones settled
     assert temp[0, 0, -1] < 27.0 - 0.02 and temp[0, 1, -1] > 27.0 - 1e-6 and np.ptp(temp[0, 0]) > 1.5
     # the DAC bench sweep has no die temperature: not given (NaN)
@@ -295,9 +295,9 @@ def test_round_trip_csv_and_parquet(qmg, tmp_path):
         assert back.column_names == t.column_names
         for sweep in ALL:
             a, b = t.to_arrays(sweep), back.to_arrays(sweep)
-            for name in ("inputs", "outputs", "sigmas", "mask"):
+            for name in ("inputs", "outputs", "sigmas", "temperatures", "mask", "times", "drive_freqs", "order"):
                 np.testing.assert_array_equal(np.asarray(getattr(a, name)), np.asarray(getattr(b, name)))
-            assert a.aux.keys() == b.aux.keys() and {"temperature_c", "n_samples"} <= set(a.aux)
+            assert a.aux.keys() == b.aux.keys() and "n_samples" in a.aux and "temperature_c" not in a.aux
             for k in a.aux:
                 np.testing.assert_array_equal(np.asarray(a.aux[k]), np.asarray(b.aux[k]))
             assert (a.devices, a.runs) == (b.devices, b.runs)

@@ -12,7 +12,7 @@ import gyrojax as gj
 DEG = gj.units.DEG
 
 
-RATES = gj.seed000_rates()
+RATES = gj.ding_zhou_2025_rates()
 X = np.asarray(RATES)
 
 

@@ -21,6 +21,7 @@ import pytest
 
 import gyrojax as gj
 from gyrojax import _fitio
+from gyrojax._data.arrays import ARRAY_FIELDS
 from gyrojax._fitdata import fit_data
 from gyrojax._identify import EXIT_CODES, HELD_LABEL, chi2_p_value
 from gyrojax._identify.identifiability import sf_determinacy
@@ -400,8 +401,7 @@ def _as_version_1(fit, path):
 
 
 def _v1_block(block):
-    return dataclasses.replace(block, **{f.name: None for f in dataclasses.fields(block)
-                                         if f.name not in _fitio._V1_BLOCK_FIELDS})
+    return dataclasses.replace(block, **{f: None for f in ARRAY_FIELDS if f not in _fitio._V1_BLOCK_FIELDS})
 
 
 @slow

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import equinox as eqx
@@ -13,39 +14,65 @@ from .cells import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, DataError, check_sweep_na
 from .table import Table
 
 
+COORDINATES = {"temperatures": "temperature_c", "times": "time_s", "drive_freqs": "drive_freq_hz"}
+"""The fields of `SweepArrays` that hold a recorded coordinate of each point, and the column each comes from."""
+
+PADDING = {"inputs": 0.0, "outputs": 0.0, "sigmas": 1.0, "temperatures": 25.0, "mask": False, "times": np.nan,
+           "drive_freqs": np.nan, "order": 0.0}
+"""What each array field holds on padding points (`aux` holds 0)."""
+
+ARRAY_FIELDS = tuple(PADDING)
+"""The array fields of `SweepArrays`, in the order its leaves flatten (`aux` follows them)."""
+
+
 class SweepArrays(eqx.Module):
     """One sweep kind of a lot as padded arrays, shape (n_device, n_run, n_point), with a mask.
 
     Ragged lots (devices with different numbers of runs, runs with different numbers of points) are padded;
-    `mask` is True on real points. Padding holds 0 in `inputs`, `outputs` and `aux`, and 1 in `sigmas`, so that
-    masked sums and their gradients stay finite. Build with `Table.to_arrays(sweep)`; `to_table()` inverts it.
+    `mask` is True on real points. Padding holds values that keep masked sums and their gradients finite (see
+    below). Build with `Table.to_arrays(sweep)`; `to_table()` inverts it. It is also the form the fit takes:
+    every sweep of a fit's data (`Fit.data.blocks`, a `FitData`) is one, aligned on the lot's devices.
 
-    **Fields:**
+    **Fields** (float64 unless said; see the data format, docs/data_format.md, for units per sweep kind):
 
-    - `inputs`, `outputs`: float64 (see the data format, docs/data_format.md, for units per sweep kind).
-    - `sigmas`: float64 `output_sigma` (NaN where not given), or None if the table had no such column.
+    - `inputs`, `outputs`: padding 0.
+    - `sigmas`: `output_sigma` (NaN where not given), padding 1; None if the table had no such column (in
+      `FitData`, 1 on every point then: unit weights).
+    - `temperatures` (deg C, from `temperature_c`), `times` (s since the run's power-on, from `time_s`),
+      `drive_freqs` (Hz, from `drive_freq_hz`): NaN where not recorded; padding 25, NaN, NaN.
     - `mask`: bool, True on real points.
-    - `aux`: the other optional columns the table had (`n_samples`, `rate_dps`, ...), float64, NaN where a
-      value was not given.
-    - `sweep`, `devices`, `runs` (run ids per device), `column_order`: static metadata.
+    - `order`: each point's position in its run in time order (by `times` where every point of the run has
+      one, else file order), padding 0.
+    - `aux`: the other optional columns the table had (`n_samples`, `rate_dps`, ...), NaN where a value was
+      not given, padding 0 (`FitData` keeps none).
+    - `sweep`: the sweep kind; `devices`, `runs` (run ids per device), `column_order`: labels for reports and
+      `to_table`, static. `FitData.unlabelled()` sets `devices` and `runs` to None, so that compiled fits see
+      only arrays and shapes.
+
+    `temperatures`, `times`, `drive_freqs` and `order` are None only in a fit read from a file of an early
+    format (which did not store them).
     """
 
     inputs: Float[Array, "device run point"]
     outputs: Float[Array, "device run point"]
     sigmas: Float[Array, "device run point"] | None
+    temperatures: Float[Array, "device run point"] | None
     mask: Bool[Array, "device run point"]
-    aux: dict[str, Float[Array, "device run point"]]
-    sweep: str = eqx.field(static=True)
-    devices: tuple[str, ...] = eqx.field(static=True)
-    runs: tuple[tuple[int, ...], ...] = eqx.field(static=True)
-    column_order: tuple[str, ...] = eqx.field(static=True, default=REQUIRED_COLUMNS)
+    times: Float[Array, "device run point"] | None = None
+    drive_freqs: Float[Array, "device run point"] | None = None
+    order: Float[Array, "device run point"] | None = None
+    aux: dict[str, Float[Array, "device run point"]] = eqx.field(default_factory=dict)
+    sweep: str = eqx.field(static=True, kw_only=True)
+    devices: tuple[str, ...] | None = eqx.field(static=True, kw_only=True, default=None)
+    runs: tuple[tuple[int, ...], ...] | None = eqx.field(static=True, kw_only=True, default=None)
+    column_order: tuple[str, ...] = eqx.field(static=True, kw_only=True, default=REQUIRED_COLUMNS)
 
     def __check_init__(self):
         check_sweep_name(self.sweep)
         shape = self.mask.shape
         if len(shape) != 3:
             raise ValueError(f"SweepArrays.mask must have shape (device, run, point), got {shape}.")
-        arrays = {"inputs": self.inputs, "outputs": self.outputs, "sigmas": self.sigmas,
+        arrays = {**{f: getattr(self, f) for f in ARRAY_FIELDS if f != "mask"},
                   **{f"aux[{k!r}]": v for k, v in self.aux.items()}}
         for name, arr in arrays.items():
             if arr is None:
@@ -57,10 +84,12 @@ class SweepArrays(eqx.Module):
                                  "jax_enable_x64; importing gyrojax does).")
         if self.mask.dtype != jnp.bool_:
             raise ValueError(f"SweepArrays.mask has dtype {self.mask.dtype}, expected bool.")
-        if len(self.devices) != shape[0] or len(self.runs) != shape[0]:
+        if (self.devices is None) != (self.runs is None):
+            raise ValueError("SweepArrays: devices and runs are given together or not at all.")
+        if self.devices is not None and (len(self.devices) != shape[0] or len(self.runs) != shape[0]):
             raise ValueError(f"SweepArrays: {len(self.devices)} device ids and {len(self.runs)} run lists for "
                              f"{shape[0]} devices.")
-        if any(len(r) > shape[1] for r in self.runs):
+        if self.runs is not None and any(len(r) > shape[1] for r in self.runs):
             raise ValueError(f"SweepArrays: a device has more run ids than the run axis ({shape[1]}).")
 
     @property
@@ -68,17 +97,38 @@ class SweepArrays(eqx.Module):
         """True where (device, run) holds at least one point."""
         return jnp.any(self.mask, axis=-1)
 
+    def aligned(self, devices) -> SweepArrays:
+        """These arrays with one row per device of `devices`, in that order: a device this sweep lacks gets
+        padding only (no runs)."""
+        index = [self.devices.index(d) if d in self.devices else -1 for d in devices]
+
+        def align(x, fill):
+            if x is None:
+                return None
+            x = np.asarray(x)
+            out = np.full((len(index),) + x.shape[1:], fill, dtype=x.dtype)
+            for k, i in enumerate(index):
+                if i >= 0:
+                    out[k] = x[i]
+            return jnp.asarray(out)
+
+        return dataclasses.replace(self, **{f: align(getattr(self, f), PADDING[f]) for f in ARRAY_FIELDS},
+                                   aux={c: align(v, 0.0) for c, v in self.aux.items()}, devices=tuple(devices),
+                                   runs=tuple(self.runs[i] if i >= 0 else () for i in index))
+
     def to_table(self, *, source: str | None = None) -> Table:
         """The real (unmasked) points back as a [`gyrojax.Table`][], grouped by device then run."""
+        if self.devices is None:
+            raise ValueError("SweepArrays.to_table: these arrays have no device and run labels (unlabelled).")
         mask = np.asarray(self.mask)
-        inputs, outputs = np.asarray(self.inputs), np.asarray(self.outputs)
+        values = {"input": self.inputs, "output": self.outputs, "output_sigma": self.sigmas,
+                  **{c: getattr(self, f) for f, c in COORDINATES.items()}, **self.aux}
         order = list(self.column_order)
         order += [c for c in REQUIRED_COLUMNS if c not in order]
+        order += [c for c in values if c not in order and c in self.aux]
         if self.sigmas is not None and "output_sigma" not in order:
             order.append("output_sigma")
-        order += [c for c in self.aux if c not in order]
-        if self.sigmas is None and "output_sigma" in order:
-            order.remove("output_sigma")
+        order = [c for c in order if c not in values or values[c] is not None]
         cols: dict[str, list] = {c: [] for c in order}
         for d, dev in enumerate(self.devices):
             for k, r in enumerate(self.runs[d]):
@@ -87,20 +137,29 @@ class SweepArrays(eqx.Module):
                 cols["device"] += [dev] * m
                 cols["run"] += [r] * m
                 cols["sweep"] += [self.sweep] * m
-                cols["input"] += inputs[d, k][sel].tolist()
-                cols["output"] += outputs[d, k][sel].tolist()
-                if "output_sigma" in cols:
-                    cols["output_sigma"] += np.asarray(self.sigmas)[d, k][sel].tolist()
-                for c, v in self.aux.items():
-                    cols[c] += np.asarray(v)[d, k][sel].tolist()
+                for c in order:
+                    if c not in ("device", "run", "sweep"):
+                        cols[c] += np.asarray(values[c])[d, k][sel].tolist()
         return Table({c: np.asarray(v, dtype=np.float64) if c not in ("device", "run", "sweep")
                       else np.asarray(v) for c, v in cols.items()},
                      source=source or f"<SweepArrays {self.sweep}>")
 
 
+def time_order(times, mask):
+    """Each real point's position in its run in time order: by `times` where every point of the run has one,
+    else the file order (a stable sort keeps file order among equal times)."""
+    order = np.zeros(mask.shape)
+    for d, k in np.ndindex(mask.shape[:2]):
+        m = mask[d, k]
+        t = times[d, k][m]
+        rank = np.argsort(np.argsort(t, kind="stable"), kind="stable") if np.all(np.isfinite(t)) else np.arange(t.size)
+        order[d, k][m] = rank
+    return order
+
+
 def padded_columns(table: Table, sweep: str) -> dict[str, Any]:
-    """The padded NumPy arrays and metadata of one sweep kind of `table` (behind `Table.to_arrays`; the metrics
-    report uses them as they are: NumPy, no compilation)."""
+    """The padded NumPy arrays and labels of one sweep kind of `table`, by `SweepArrays` field (behind
+    `Table.to_arrays`; the metrics report uses them as they are: NumPy, no compilation)."""
     columns = table.columns
     check_sweep_name(sweep)
     groups = table.groups(sweep)
@@ -118,31 +177,28 @@ def padded_columns(table: Table, sweep: str) -> dict[str, Any]:
     n_dev, n_run = len(devices), max(len(v) for v in runs.values())
     n_pt = max(len(v) for v in groups.values())
     shape = (n_dev, n_run, n_pt)
-    inputs, outputs = np.zeros(shape), np.zeros(shape)
+    sources = {"inputs": "input", "outputs": "output", "sigmas": "output_sigma", **COORDINATES}
+    arrays = {f: np.full(shape, PADDING[f]) for f in sources}
     mask = np.zeros(shape, dtype=bool)
-    aux_names = [c for c in columns if c in OPTIONAL_COLUMNS and c != "output_sigma"]
+    aux_names = [c for c in columns if c in OPTIONAL_COLUMNS and c not in sources.values()]
     aux = {c: np.zeros(shape) for c in aux_names}
-    has_sigma = "output_sigma" in columns
-    sigmas = np.ones(shape)
     for (dev, r, _), rows in groups.items():
         d, k, m = devices.index(dev), runs[dev].index(r), len(rows)
-        inputs[d, k, :m] = columns["input"][rows]
-        outputs[d, k, :m] = columns["output"][rows]
         mask[d, k, :m] = True
-        if has_sigma:
-            sigmas[d, k, :m] = columns["output_sigma"][rows]
+        for f, c in sources.items():
+            arrays[f][d, k, :m] = columns[c][rows] if c in columns else np.nan
         for c in aux_names:
             aux[c][d, k, :m] = columns[c][rows]
-    return {"inputs": inputs, "outputs": outputs, "sigmas": sigmas if has_sigma else None, "mask": mask,
-            "aux": aux, "sweep": sweep, "devices": tuple(devices), "runs": tuple(tuple(runs[d]) for d in devices),
+    if "output_sigma" not in columns:
+        arrays["sigmas"] = None
+    return {**arrays, "mask": mask, "order": time_order(arrays["times"], mask), "aux": aux, "sweep": sweep,
+            "devices": tuple(devices), "runs": tuple(tuple(runs[d]) for d in devices),
             "column_order": tuple(c for c in columns if c in REQUIRED_COLUMNS or c in OPTIONAL_COLUMNS)}
 
 
 def sweep_arrays(table: Table, sweep: str) -> SweepArrays:
     """`table.to_arrays(sweep)`: the padded arrays of `padded_columns` as a `SweepArrays`."""
     p = padded_columns(table, sweep)
-    return SweepArrays(
-        inputs=jnp.asarray(p["inputs"]), outputs=jnp.asarray(p["outputs"]),
-        sigmas=None if p["sigmas"] is None else jnp.asarray(p["sigmas"]), mask=jnp.asarray(p["mask"]),
-        aux={c: jnp.asarray(v) for c, v in p["aux"].items()}, sweep=sweep, devices=p["devices"],
-        runs=p["runs"], column_order=p["column_order"])
+    return SweepArrays(**{f: None if p[f] is None else jnp.asarray(p[f]) for f in ARRAY_FIELDS},
+                       aux={c: jnp.asarray(v) for c, v in p["aux"].items()}, sweep=sweep, devices=p["devices"],
+                       runs=p["runs"], column_order=p["column_order"])

@@ -8,7 +8,7 @@ import numpy as np
 from .._compare import compare, nonlinearity_residual_ppm
 from .._data.table import Table
 from .._fitdata import fit_data
-from .._identify import Fit, identify
+from .._identify import Fit, MultiStart, identify
 from .._parameters import DEFAULT_FREE, Model, as_model, zero_effect
 from .._probes import PROBES
 from .._progress import as_progress
@@ -75,8 +75,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
 
     def fit_with(selected, evaluate_only=False):
         held = tuple(c for c in candidates if c not in selected)
-        return identify(full, weights["data"], free=free, hold=held, starts=starts, evaluate_only=evaluate_only,
-                        estimate_noise=weights["estimate_noise"], progress=False)
+        return identify(full, weights["data"], free=free, hold=held, start=MultiStart(starts=starts),
+                        evaluate_only=evaluate_only, estimate_noise=weights["estimate_noise"], progress=False)
 
     if fit is None:
         say(f"fitting the baseline: {len(data.devices)} device(s), {data.num_points()} points, every one of "

@@ -32,3 +32,10 @@ from .lot import (
     LoopSolve as LoopSolve,
     VmapSolve as VmapSolve,
 )
+from .recovery import (
+    AbstractRecovery as AbstractRecovery,
+    DecrementCertificate as DecrementCertificate,
+    MultiStart as MultiStart,
+    RestartRunoffs as RestartRunoffs,
+    RetryWithSolver as RetryWithSolver,
+)

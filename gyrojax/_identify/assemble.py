@@ -27,7 +27,7 @@ def _message(converged, result_text, unsettled):
                 "fewer parameters")
     if converged:
         return "converged"
-    return (f"{result_text}. Try: more starts (starts=8), a larger max_steps, another solver "
+    return (f"{result_text}. Try: more starts (start=MultiStart(starts=8)), a larger max_steps, another solver "
             "(solver='gauss-newton' or 'bfgs'), holding a parameter (free=...), or priors on the design values")
 
 

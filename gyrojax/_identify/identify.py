@@ -22,6 +22,8 @@ What the fit reports is checked before it is called a result (`Fit.status`, `Fit
   opposite sign of the model's, are refused before fitting (`ValueError`: no fit could mean anything).
 """
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import numpy as np
@@ -39,17 +41,16 @@ from .lot import AbstractLotSolve, Lot
 from .noise import estimated_noise, reweighted
 from .plausibility import check_absurd_outputs, check_signs
 from .problem import make_problem, with_free
-from .recovery import DecrementCertificate, MultiStart, RestartRunoffs, RetryWithSolver, Solution, Solving
-from .shortcuts import check_lot_options, lot_solve_from, solver_from
+from .recovery import RECOVERY, AbstractRecovery, DecrementCertificate, MultiStart, RetryWithSolver, Solution, Solving
+from .shortcuts import lot_solve_from, solver_from
 
 
-def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="levenberg-marquardt",
-             starts: int = 1, start_spread: float = 0.05, seed: int = 0, rtol: float = 1e-8, atol: float = 1e-8,
-             max_steps: int = 200, identifiability_threshold: float = 1.0, hold=(), tier=Steady(),
-             evaluate_only: bool = False, lot_solve: str | AbstractLotSolve = "vmap", shard: bool | None = None,
-             lot_chunk: int | None | str = "auto", restart_runoffs: bool = True,
-             retry_solver: str | None = "gauss-newton", decrement_tol: float = 1e-6, reject_alpha: float = 0.01,
-             estimate_noise: bool | None = None, progress=True) -> Fit:
+def identify(model, data, *, free=DEFAULT_FREE, shared=(), hold=(), priors=None, tier=Steady(),
+             solver="levenberg-marquardt", rtol: float = 1e-8, atol: float = 1e-8, max_steps: int = 200,
+             start: MultiStart = MultiStart(), lot_solve: str | AbstractLotSolve = "vmap",
+             recovery: tuple[AbstractRecovery, ...] = RECOVERY, identifiability_threshold: float = 1.0,
+             reject_alpha: float = 0.01, estimate_noise: bool | None = None, evaluate_only: bool = False,
+             progress=True) -> Fit:
     r"""Fit the free parameters of `model` to every sweep in `data`, per device (vmapped) or jointly.
 
     **Arguments:**
@@ -61,58 +62,42 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
       parameter of every effect in the model is fitted too.
     - `shared`: names (physical, or effect fields like `"dac_inl.coefficients"`) fitted as one value for the
       whole lot: the lot is then fitted jointly.
+    - `hold`: names held at their start values regardless.
     - `priors`: `{name: (value, sigma)}` Gaussian priors in physical units (design values with tolerances);
       only for per-device physical parameters.
-    - `solver`: `"levenberg-marquardt"` (default), `"gauss-newton"`, `"bfgs"`, or an optimistix solver.
-    - `starts`, `start_spread`, `seed`: multi-start: `starts` starts per device, the first at the model, the
-      others perturbed by `start_spread` in internal units; the lowest chi2 wins.
+    - `tier`: the settling tier for rate-table and static-VCF points (`Steady()`).
+    - `solver`: `"levenberg-marquardt"` (default), `"gauss-newton"`, `"bfgs"`, or an optimistix solver;
+      `rtol`, `atol` for a named one; `max_steps` for any.
+    - `start`: the first solve, `gyrojax.MultiStart(starts=1, spread=0.05, seed=0)`: `starts` starts per
+      device, the first at the model, the others perturbed by `spread` in internal units; the lowest chi2
+      wins.
+    - `lot_solve`: how the lot's devices are solved: a strategy, `gyrojax.VmapSolve(chunk=..., shard=...)`
+      (all devices' independent fits in one vmapped, compiled solve, in chunks of devices and sharded over
+      JAX devices: see `VmapSolve`), `gyrojax.LoopSolve()` (one device after another through one compiled
+      single-device solve: less memory) or `gyrojax.JointSolve(shard=...)` (one fit of the whole lot; the
+      only one for `shared` parameters); or a shortcut: `"vmap"` (default: `VmapSolve()`, or `JointSolve()`
+      where parameters are shared), `"loop"`.
+    - `recovery`: what is tried, in turn, after the first solve (`gyrojax.AbstractRecovery` policies); the
+      default is `(DecrementCertificate(tol=1e-6), RetryWithSolver("gauss-newton"), RestartRunoffs())`:
+      a solve stopped at `max_steps` where a full Gauss-Newton step would lower chi2 by less than `tol` counts
+      as converged; a device that did not converge is solved again with Gauss-Newton (only after a named
+      solver other than it); a device whose solution ran off along a direction the data no longer fix is
+      restarted with it held, then released. `()`: none. With `evaluate_only`, only `DecrementCertificate`
+      applies.
     - `identifiability_threshold`: directions with a singular value of the weighted Jacobian below this (in
       internal units: relative change for positive parameters, typical size for effects) are held.
-    - `hold`: names held at their start values regardless.
-    - `tier`: the settling tier for rate-table and static-VCF points (`Steady()`).
-    - `lot_solve`: how the lot's devices are solved: a strategy, `gyrojax.VmapSolve(chunk=..., shard=...)`
-      (all devices' independent fits in one vmapped, compiled solve), `gyrojax.LoopSolve()` (one device
-      after another through one compiled single-device solve: less memory) or `gyrojax.JointSolve(shard=...)`
-      (one fit of the whole lot; the only one for `shared` parameters); or a shortcut with `shard` and
-      `lot_chunk` below: `"vmap"` (default; `JointSolve` where parameters are shared), `"loop"`.
-    - `shard`: spread the device axis over every JAX device (`jax.sharding`, a 1-D mesh named `"lot"`; the
-      lot is padded to a multiple of the device count). `None` (default): when more than one JAX device
-      exists. Applies to the vmapped solve and the Jacobian passes; a joint (shared-parameter) fit is
-      sharded only when the lot divides evenly.
-    - `lot_chunk`: with `lot_solve="vmap"`, solve and differentiate at most this many devices at a time
-      (`jax.lax.map` over chunks of the vmapped solve; the lot is padded to a multiple of it). It bounds
-      memory on large lots and lets each chunk stop at its own slowest device. `None`: the whole lot at
-      once. `"auto"` (default), for independent fits on one JAX device: 16 on a CPU backend (measured on 256
-      devices: chunks of 16 ran 3-4x faster per device than chunks of 128, whose batched steady solves
-      outgrow the cache), 1024 on an accelerator (4096 devices on an H100: 2.2 ms per device in chunks of
-      1024, 3.0 ms at once, where every device waits for the slowest's 28 LM steps); else `None`. Not with
-      `shard` over several JAX devices, nor for a joint fit.
-    - `restart_runoffs`: a device whose solution leaves a direction the data no longer fix (a parameter run
-      off towards 0 or infinity, e.g. an open-loop Q_y whose steep sense resonance the first steps overshot)
-      is solved again from its start with that direction held, then released from there; the lower chi2
-      wins, and its message says so. Independent fits only (default on; costs two more solves when it
-      fires).
-    - `retry_solver`: a device whose solve did not converge (e.g. Levenberg-Marquardt crawling to
-      `max_steps` in a curved valley) is solved again from its start with this solver (`"gauss-newton"`
-      by default; `None`: no retry); the retry is kept when it converged at no higher chi2, and the device's
-      message says so (a joint fit is retried as a whole). Only with a named `solver` other than this one.
-    - `decrement_tol`: a solve that stopped at `max_steps` counts as converged when a full Gauss-Newton step
-      from where it stopped would lower chi2 by less than this (the Gauss-Newton decrement
-      r^T J (J^T J)^+ J^T r: the point is then within sqrt(decrement_tol) standard errors of the minimum),
-      and its message says so. The solver's own test asks every parameter and residual to move by less than
-      rtol/atol, which the round-off of the steady-state solves can keep failing on a large joint fit.
-    - `evaluate_only`: do not solve; return the `Fit` at the start (residuals, Jacobian, covariance there),
-      e.g. to test a candidate effect at zero against an already fitted model.
     - `reject_alpha`: significance level of each device's chi2 test (and the lot's): p below it marks the
       device `"model rejected"` and scales its standard errors by sqrt(chi2_red) in `stderr_scaled`. Each
       device is tested at this level, so a lot of N devices with a right model has about N x reject_alpha
       rejected by chance.
     - `estimate_noise`: estimate each sweep's noise per device from the residuals of a first fit, re-weight
       and fit again (from differences between runs at repeated inputs, else of neighbouring inputs
-      within a run; unbiased for white noise). `None` (default): when the data have no `output_sigma`.
-      `False` takes the data's sigmas as the noise (unit weights for a table without `output_sigma`, so the
-      chi2 then tests nothing; e.g. for `fit.data` of an earlier fit, whose sigmas were estimated already).
-
+      within a run; unbiased for white noise; its chi2 null distribution drawn with `start.seed`). `None`
+      (default): when the data have no `output_sigma`. `False` takes the data's sigmas as the noise (unit
+      weights for a table without `output_sigma`, so the chi2 then tests nothing; e.g. for `fit.data` of an
+      earlier fit, whose sigmas were estimated already).
+    - `evaluate_only`: do not solve; return the `Fit` at the start (residuals, Jacobian, covariance there),
+      e.g. to test a candidate effect at zero against an already fitted model.
     - `progress`: `True` (default) reports the fit's steps on standard error (what it fits, when it compiles,
       the statuses at the end, the elapsed time), `False` is silent, a callable receives the messages.
 
@@ -132,20 +117,18 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         raise ValueError(f"reject_alpha must be a significance level in (0, 1), got {reject_alpha!r}.")
     if estimate_noise not in (None, True, False):
         raise ValueError(f"estimate_noise must be None, True or False, got {estimate_noise!r}.")
-    check_lot_options(lot_solve, shard, lot_chunk)
-    if not isinstance(starts, int) or starts < 1:
-        raise ValueError(f"starts must be an integer >= 1, got {starts!r}.")
+    if not isinstance(start, MultiStart):
+        raise TypeError(f"start must be a gyrojax.MultiStart, got {type(start).__name__}.")
+    if isinstance(recovery, AbstractRecovery) or not all(isinstance(r, AbstractRecovery) for r in recovery):
+        raise TypeError(f"recovery must be a tuple of gyrojax.AbstractRecovery policies, got {recovery!r}.")
     check_absurd_outputs(data)
     # The strategies, composed once for every fit below: the solver, the first solve, the recovery policies.
-    recoveries = (DecrementCertificate(decrement_tol),)
-    if not evaluate_only and retry_solver is not None and isinstance(solver, str) and solver != retry_solver:
-        recoveries += (RetryWithSolver(retry_solver, rtol, atol),)
-    if not evaluate_only and restart_runoffs:
-        recoveries += (RestartRunoffs(),)
+    recoveries = tuple(_with_tolerances(r, rtol, atol) for r in recovery
+                       if not (isinstance(r, RetryWithSolver) and not (isinstance(solver, str) and solver != r.solver))
+                       and not (evaluate_only and not isinstance(r, DecrementCertificate)))
     options = dict(free=free, shared=shared, priors=priors, hold=hold, tier=tier,
-                   solver=solver_from(solver, rtol, atol), solver_name=solver,
-                   lot_options=(lot_solve, shard, lot_chunk),
-                   first=None if evaluate_only else MultiStart(starts, start_spread, seed), recoveries=recoveries,
+                   solver=solver_from(solver, rtol, atol), solver_name=solver, lot_solve=lot_solve,
+                   first=None if evaluate_only else start, recoveries=recoveries,
                    max_steps=max_steps, threshold=identifiability_threshold, reject_alpha=reject_alpha)
     say = as_progress(progress, "gyrojax.identify")
     say(f"{'evaluating' if evaluate_only else 'fitting'} {len(data.devices)} device(s), {data.num_points()} points "
@@ -160,14 +143,22 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), priors=None, solver="
         first_fit = _fit_once(model, data, noise=None, **options)
         say("estimating the noise from the first fit's residuals (the data give no output_sigma); fitting again "
             "with those weights")
-        kappa, noise = estimated_noise(first_fit, seed)
+        kappa, noise = estimated_noise(first_fit, start.seed)
         fit = _fit_once(model, reweighted(data, kappa), noise=noise, **options)
     counts = {st: fit.status.count(st) for st in dict.fromkeys(fit.status)}
     say("done: " + ", ".join(f"{k} device(s) {st}" for st, k in counts.items()))
     return fit
 
 
-def _fit_once(model, data, *, free, shared, priors, hold, tier, solver, solver_name, lot_options, first, recoveries,
+def _with_tolerances(policy, rtol, atol):
+    """A `RetryWithSolver` without tolerances of its own gets `identify`'s."""
+    if isinstance(policy, RetryWithSolver):
+        return dataclasses.replace(policy, rtol=rtol if policy.rtol is None else policy.rtol,
+                                   atol=atol if policy.atol is None else policy.atol)
+    return policy
+
+
+def _fit_once(model, data, *, free, shared, priors, hold, tier, solver, solver_name, lot_solve, first, recoveries,
               max_steps, threshold, reject_alpha, noise) -> Fit:
     """One fit of `identify` (arguments checked there) with the data's sigmas as they are: the problem, the lot
     strategy, what to hold, the first solve (`first`; None: evaluate at the start) and the `recoveries` in
@@ -176,7 +167,7 @@ def _fit_once(model, data, *, free, shared, priors, hold, tier, solver, solver_n
     n = len(data.devices)
     problem_all, layout = make_problem(model, data, free=free, shared=shared, hold=hold, priors=priors, tier=tier)
     n_dev, n_lot = len(layout.names_dev), len(layout.names_lot)
-    lot = Lot(lot_solve_from(*lot_options, joint=bool(n_lot)), n)
+    lot = Lot(lot_solve_from(lot_solve, joint=bool(n_lot)), n)
     # One compiled evaluation, at the start and at the solution: the Jacobian over every per-device entry.
     at_start = lot.evaluate(problem_all, np.zeros((n, n_dev)), np.zeros(n_lot), "at the start")
     check_signs(data, {s: np.asarray(v) for s, v in at_start.predictions.items()}, problem_all.model.device.name)

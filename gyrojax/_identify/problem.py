@@ -3,7 +3,6 @@ and the standardised residuals of every sweep with their custom JVP; `make_probl
 data and the choice of free, shared, held and prior parameters."""
 
 import contextlib
-import dataclasses
 
 import equinox as eqx
 import jax
@@ -154,10 +153,9 @@ def make_problem(model: Model, data: FitData, *, free, shared, hold, priors, tie
         prior_idx.append(names_dev.index(name))
         prior_mu.append(mu)
         prior_sd.append(sd)
-    # Names, run ids and the source are static metadata: keep them out of the compiled functions' keys, so
-    # that every dataset of the same shapes shares one compile.
-    data_jit = dataclasses.replace(data, devices=(), runs=(), source="")
-    problem = Problem(model, start, data_jit, jnp.broadcast_to(jnp.asarray(np.ones(n_dev)), (n, n_dev)), n_dev,
+    # Names, run ids and the source are labels for reports: keep them out of the compiled functions' keys, so
+    # that every lot of the same shapes shares one trace and one compile.
+    problem = Problem(model, start, data.unlabelled(), jnp.broadcast_to(jnp.asarray(np.ones(n_dev)), (n, n_dev)), n_dev,
                       entries, tier, jnp.broadcast_to(jnp.asarray(prior_idx, dtype=int), (n, len(prior_idx))),
                       jnp.asarray(np.stack(prior_mu, -1) if prior_mu else np.zeros((n, 0))),
                       jnp.asarray(np.stack(prior_sd, -1) if prior_sd else np.ones((n, 0))),

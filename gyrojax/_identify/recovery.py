@@ -68,12 +68,18 @@ def _better(new, old):
 
 
 class MultiStart(eqx.Module):
-    """`starts` solves per device, the first from the model, the others perturbed by `spread` in internal
-    units (drawn with `seed`); the lowest chi2 wins, per device (for a joint fit: the lot's sum)."""
+    """The first solve of `identify(start=...)`: `starts` solves per device, the first from the model, the
+    others perturbed by `spread` in internal units (drawn with `seed`); the lowest chi2 wins, per device (for a
+    joint fit: the lot's sum). `seed` also seeds the Monte Carlo of the noise estimate of data without
+    `output_sigma`."""
 
-    starts: int = eqx.field(static=True)
-    spread: float
-    seed: int = eqx.field(static=True)
+    starts: int = eqx.field(static=True, default=1)
+    spread: float = 0.05
+    seed: int = eqx.field(static=True, default=0)
+
+    def __check_init__(self):
+        if not isinstance(self.starts, int) or isinstance(self.starts, bool) or self.starts < 1:
+            raise ValueError(f"starts must be an integer >= 1, got {self.starts!r}.")
 
     def __call__(self, solving: Solving) -> Solution:
         n, n_dev = solving.problem.free_mask.shape
@@ -108,7 +114,8 @@ class MultiStart(eqx.Module):
 
 
 class AbstractRecovery(eqx.Module):
-    """A policy that may improve a solution after the first solve."""
+    """A policy that may improve a solution after the first solve: `identify(recovery=...)` applies each of a
+    tuple of them in turn."""
 
     @abc.abstractmethod
     def __call__(self, solving: Solving, solution: Solution) -> Solution:
@@ -118,9 +125,10 @@ class AbstractRecovery(eqx.Module):
 class DecrementCertificate(AbstractRecovery):
     """A solve that stopped at `max_steps` counts as converged when a full Gauss-Newton step from where it
     stopped would lower chi2 by less than `tol` (the point is then within sqrt(tol) standard errors of the
-    minimum); the solver's own test can keep failing on the round-off of the steady-state solves."""
+    minimum); the solver's own test can keep failing on the round-off of the steady-state solves (the
+    Gauss-Newton decrement r^T J (J^T J)^+ J^T r)."""
 
-    tol: float
+    tol: float = 1e-6
 
     def __call__(self, solving, solution):
         final, code = solution.final, solution.code
@@ -132,20 +140,22 @@ class DecrementCertificate(AbstractRecovery):
                                            joint=bool(solving.lot.joint))
         certified = stopped & (decrement < self.tol)
         notes = tuple(f"stopped at max_steps={solving.max_steps}, where a full Gauss-Newton step would lower chi2 "
-                      f"by only {dec:.3g} < decrement_tol={self.tol:g}" if c else note
+                      f"by only {dec:.3g} < tol={self.tol:g}" if c else note
                       for note, c, dec in zip(solution.notes, certified, decrement))
         code = np.where(certified, result_code(RESULTS.successful), code)
         return dataclasses.replace(solution, code=code, notes=notes)
 
 
 class RetryWithSolver(AbstractRecovery):
-    """A device whose solve did not converge is solved again from its start with the solver named `solver`
-    (a name of `SOLVERS`, with `rtol`, `atol`); the retry is kept where it converged at no higher chi2 (a
-    joint fit is retried as a whole: all devices or none)."""
+    """A device whose solve did not converge (e.g. Levenberg-Marquardt crawling to `max_steps` in a curved
+    valley) is solved again from its start with the solver named `solver` (`"gauss-newton"`,
+    `"levenberg-marquardt"` or `"bfgs"`, with `rtol`, `atol`; None: `identify`'s); the retry is kept where it
+    converged at no higher chi2, and the device's message says so (a joint fit is retried as a whole: all
+    devices or none). `identify` applies it only after a named solver other than this one."""
 
-    solver: str = eqx.field(static=True)
-    rtol: float
-    atol: float
+    solver: str = eqx.field(static=True, default="gauss-newton")
+    rtol: float | None = None
+    atol: float | None = None
 
     def __call__(self, solving, solution):
         # Levenberg-Marquardt can crawl where a full Gauss-Newton step would not (measured: a leaky-rebalance
@@ -179,8 +189,8 @@ class RetryWithSolver(AbstractRecovery):
 class RestartRunoffs(AbstractRecovery):
     """A device whose solution leaves a direction the data no longer fix (a parameter run off towards 0 or
     infinity, e.g. an open-loop Q_y whose steep sense resonance the first steps overshot) is solved again from
-    its start with that direction held, then released from there; the lower chi2 wins. Independent fits
-    only."""
+    its start with that direction held, then released from there; the lower chi2 wins, and its message says
+    so. Independent fits only (costs two more solves when it fires)."""
 
     def __call__(self, solving, solution):
         if solving.lot.joint:
@@ -213,3 +223,7 @@ class RestartRunoffs(AbstractRecovery):
         return Solution(u_free, solution.u_lot, np.where(better, code2, solution.code),
                         np.where(better, solution.steps + steps1 + steps2, solution.steps), solution.chi2,
                         u_full, final, notes)
+
+
+RECOVERY = (DecrementCertificate(), RetryWithSolver(), RestartRunoffs())
+"""`identify`'s default recovery policies, applied in this order."""

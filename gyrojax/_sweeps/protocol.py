@@ -18,7 +18,7 @@ from .._units import DEG
 from .base import AbstractSweep
 from .branch_voltages import BRANCH_RATES_DPS
 from .quadrature_injection import INJECTED_QUADRATURE_DPS
-from .rate_table import RATE_TABLE_DWELL_S, RATE_TABLE_SAMPLE_RATE_HZ, RATE_TABLE_WARMUP_S, SEED000_RATES_DPS
+from .rate_table import DING_ZHOU_2025_RATES_DPS, RATE_TABLE_DWELL_S, RATE_TABLE_SAMPLE_RATE_HZ, RATE_TABLE_WARMUP_S
 from .registry import stream_index, sweep_kind
 from .setpoint import DRIVE_REGISTER_DWELL_S, SETPOINT_RATIOS
 from .vcf_dynamic import (
@@ -161,7 +161,7 @@ class Protocol(eqx.Module):
     none). See the module's constants for each number's source.
     """
 
-    rates_dps: tuple = eqx.field(converter=_float_tuple, default=SEED000_RATES_DPS)
+    rates_dps: tuple = eqx.field(converter=_float_tuple, default=DING_ZHOU_2025_RATES_DPS)
     vcf_rates_dps: tuple = eqx.field(converter=_float_tuple, default=VCF_STATIC_RATES_DPS)
     vcf_amplitudes_v: tuple | None = eqx.field(converter=_optional_float_tuple, default=None)
     vcf_frequencies_hz: tuple = eqx.field(converter=_float_tuple, default=VCF_DYNAMIC_FREQUENCIES_HZ)

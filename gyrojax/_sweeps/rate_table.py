@@ -19,9 +19,9 @@ if TYPE_CHECKING:
     from .protocol import Protocol
 
 
-SEED000_RATES_DPS = (-200.0, -100.0, -50.0, -20.0, -10.0, -5.0, -2.0, -1.0, -0.5, -0.2, -0.1,
+DING_ZHOU_2025_RATES_DPS = (-200.0, -100.0, -50.0, -20.0, -10.0, -5.0, -2.0, -1.0, -0.5, -0.2, -0.1,
                      0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0)
-"""Seed 000 §5: the 22 table rates, deg/s."""
+"""The 22 table rates of the rate-table protocol of Ding & Zhou 2025 (seed 000 §5), deg/s, in sweep order."""
 
 RATE_TABLE_WARMUP_S = 60.0
 """s, seed 000 §5: "after powering the gyroscope and allowing a 1 min warm-up"."""
@@ -97,6 +97,7 @@ def rate_sweep(gyro: Gyroscope, rates: Float[ArrayLike, " point"], *, tier: Abst
     return _rate_sweep(gyro, rates, times, tier)
 
 
-def seed000_rates() -> Float[Array, " 22"]:
-    """Seed 000's 22 table rates in rad/s."""
-    return jnp.asarray(SEED000_RATES_DPS) * DEG
+def ding_zhou_2025_rates() -> Float[Array, " 22"]:
+    """The 22 table rates of the rate-table protocol of Ding & Zhou 2025 (seed 000 §5: -200 ... 200 deg/s),
+    in rad/s (`DING_ZHOU_2025_RATES_DPS` in deg/s)."""
+    return jnp.asarray(DING_ZHOU_2025_RATES_DPS) * DEG

@@ -8,7 +8,7 @@ from jaxtyping import ArrayLike, Float
 from .._gyroscope import Gyroscope
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._stimulus import Stimulus
-from .rate_table import SEED000_RATES_DPS
+from .rate_table import DING_ZHOU_2025_RATES_DPS
 from .steady import AbstractSteadySweep, steady_points
 
 
@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     from .protocol import Protocol
 
 
-VCF_STATIC_RATES_DPS = SEED000_RATES_DPS
+VCF_STATIC_RATES_DPS = DING_ZHOU_2025_RATES_DPS
 """deg/s, the static virtual-Coriolis sweep as a "virtual rate table" (seed 003 Fig. 4b): V_ac is set so that
 seed 003 Eq. (7), Om = K_svf V_fc V_ac / (2 m Ag a w_d), with the device's design values gives these rates
 (seed 000's 22). Seed 003 prints no static voltages. With Table 1's values (vcf-2018) 200 deg/s is
