@@ -29,9 +29,9 @@ from .candidates import (
     full_key as full_key,
     is_lot as is_lot,
 )
+from .diagnose import diagnose as diagnose
 from .discrepancy import Discrepancy as Discrepancy, score_probes as score_probes
 from .guards import MAX_TYPICAL_MULTIPLE as MAX_TYPICAL_MULTIPLE, Rejection as Rejection
-from .diagnose import diagnose as diagnose
 from .report import write_report as write_report
 from .score import CandidateScore as CandidateScore, score_candidates as score_candidates
 from .solution import (
