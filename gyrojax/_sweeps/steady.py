@@ -1,4 +1,5 @@
-"""Steady sweeps: points read from the settled rate output, all settled by one call of the tier.
+"""Settled sweeps: points read from settled states of the tier (the steady kinds from the rate output, the AGC
+set-point kinds from the drive loop's registers too), all settled by one call of the tier.
 
 Each point is evaluated at its own die temperature (the `temperature_c` column): the device's temperature
 history is replaced by a constant at that temperature, since a settled point sees the temperature of its
@@ -192,10 +193,10 @@ def per_run(x, temperatures):
 
 @eqx.filter_jit
 def lot_steady(lot, requests, tier):
-    """`steady_points` for every device (axis 0) and run (axis 1), several steady sweeps in one call (one
+    """`steady_points` for every device (axis 0) and run (axis 1), several settled sweeps in one call (one
     compiled settle): `requests` is a tuple of `(sweep, inputs, temperatures, times)` with temperatures
-    (device, run, point) and inputs and times (point,) or (run, point) (times NaN: not recorded). Returns a
-    `Settled` per request, (device, run, point)."""
+    (device, run, point) and inputs and times (point,) or (run, point) (times NaN: not recorded). Returns what
+    each request's kind keeps (a `Settled` or a `SetpointReading`), (device, run, point)."""
     temps = tuple(r[2] for r in requests)
     inputs = tuple(per_run(r[1], t) for r, t in zip(requests, temps))
     times = tuple(per_run(r[3], t) for r, t in zip(requests, temps))
