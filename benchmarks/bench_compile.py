@@ -14,7 +14,10 @@ static virtual-Coriolis + DAC sweeps, with the demo's hidden `dac_inl`):
 - `diagnose`: `gj.diagnose(table, "paper-qmg")` (every candidate effect and probe);
 - `compensate`: `gj.compensate(table, method="model")` (the model-based compensator, the one that compiles);
 - `demo`: what `gyrojax demo` runs (`run_demo(folder)`, without the full-waveform tier, as the command's
-  default).
+  default);
+- `simulate_revealing`: `gj.simulate_table` of paper-qmg with the steady and AGC set-point kinds
+  (`REVEALING_SWEEPS`: rate table, static VCF, quadrature injection, drive amplitude, drive frequency,
+  set-point zero rate), the demo's devices and runs, noise-free: all of them settle in one program.
 
 For each entry point and each state (cold, warm) a subprocess imports gyrojax with `GYROJAX_CACHE_DIR`
 pointing at a folder of its own (JAX's own cache variables removed) and runs the entry point once. JAX's
@@ -40,7 +43,9 @@ import tempfile
 import time
 
 
-ENTRIES = ("simulate_table", "identify", "diagnose", "compensate", "demo")
+ENTRIES = ("simulate_table", "identify", "diagnose", "compensate", "demo", "simulate_revealing")
+REVEALING_SWEEPS = ("rate_table", "vcf_static", "quadrature_injection", "drive_amplitude", "drive_frequency",
+                    "setpoint_zero_rate")
 QUICK_ENTRIES = ("simulate_table", "identify")
 STAGES = {"trace": "/jax/core/compile/jaxpr_trace_duration",
           "lower": "/jax/core/compile/jaxpr_to_mlir_module_duration",
@@ -87,6 +92,9 @@ def _worker(entry, data_path, out_path):
             gj.compensate(table, method="model")
         elif entry == "demo":
             run_demo(scratch, full_tier=False, log=lambda *a: None)
+        elif entry == "simulate_revealing":
+            lot = {k: v for k, v in DEMO_LOT.items() if k in ("devices", "runs", "seed")}
+            gj.simulate_table(gj.paper_qmg(), sweeps=REVEALING_SWEEPS, noise_free=True, progress=False, **lot)
         else:
             raise ValueError(f"entry must be one of {', '.join(ENTRIES)}, got {entry!r}.")
         wall = time.perf_counter() - t

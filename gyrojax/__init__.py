@@ -219,6 +219,7 @@ from ._sweeps.setpoint import (  # noqa: E402
     setpoint_points as setpoint_points,
 )
 from ._sweeps.setpoint_zero_rate import SetpointZeroRate as SetpointZeroRate  # noqa: E402
+from ._sweeps.steady import AbstractSettledSweep as AbstractSettledSweep  # noqa: E402
 from ._sweeps.steady import AbstractSteadySweep as AbstractSteadySweep  # noqa: E402
 from ._sweeps.vcf_dynamic import (  # noqa: E402
     VCF_DYNAMIC_AMPLITUDE_V as VCF_DYNAMIC_AMPLITUDE_V,

@@ -27,7 +27,7 @@ from ._sweeps.lot import LotCampaign
 from ._sweeps.protocol import Protocol
 from ._sweeps.rate_table import RateTable
 from ._sweeps.registry import SWEEP_KINDS, sweep_kind
-from ._sweeps.steady import AbstractSteadySweep, lot_steady, raise_unsettled
+from ._sweeps.steady import AbstractSettledSweep, lot_steady, raise_unsettled
 
 
 SIMULATED_SWEEPS = tuple(SWEEP_KINDS)
@@ -145,7 +145,7 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
 
     def announce(kind, k, compiles=True):
         say(f"sweep {k}/{len(kinds)}: {kind.name}, {devices} device(s) x {runs} run(s) x "
-            f"{protocol.n_points(kind)} points" + ("" if compiles else " (settled with the rate table)"))
+            f"{protocol.n_points(kind)} points" + ("" if compiles else " (settled with the other settled sweeps)"))
         if compiles:
             say.compiling(("simulate", kind, structure, devices, runs, protocol.n_points(kind), tier),
                           f"the {kind.name} measurement model")
@@ -153,10 +153,11 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     rate = RateTable()
     if rate in kinds or (not noise_free and any(k.rate_noise for k in kinds)):
         # The rate-table sweep: an output, and each device's scale factor for the noise in LSB. The other
-        # steady sweeps settle in the same call (one compiled program) when they use the same tier.
+        # settled sweeps (steady and set-point kinds) settle in the same call (one compiled program) when they
+        # use the same tier.
         rate_tier = tier if rate in kinds else CAMPAIGN_TIER
         announce(rate, kinds.index(rate) + 1 if rate in kinds else 0)
-        shared = [rate] + [k for k in kinds if isinstance(k, AbstractSteadySweep) and k != rate
+        shared = [rate] + [k for k in kinds if isinstance(k, AbstractSettledSweep) and k != rate
                            and rate_tier is tier]
         requests = tuple((k, jnp.asarray(campaign.applied(k, protocol.inputs(k, gyro))),
                           jnp.asarray(campaign.temperatures(k)), jnp.asarray(campaign.times(k))) for k in shared)
@@ -169,6 +170,17 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
         lsb_per_dps = np.abs(_slope(rates_run[0], np.asarray(steady[0].rate[:, 0], dtype=float)))
         campaign = dataclasses.replace(campaign, lsb_per_dps=lsb_per_dps,
                                        settled={k.name: s for k, s in zip(shared, steady) if k in kinds})
+
+    rest = [k for k in kinds if isinstance(k, AbstractSettledSweep) and k.name not in campaign.settled]
+    if len(rest) > 1:
+        # The settled sweeps not settled with the rate table, in one call of the campaign's tier.
+        requests = tuple((k, jnp.asarray(campaign.applied(k, protocol.inputs(k, gyro))),
+                          jnp.asarray(campaign.temperatures(k)), jnp.asarray(campaign.times(k))) for k in rest)
+        say.compiling(("simulate", tuple(rest), structure, devices, runs, tier),
+                      "the measurement model of " + ", ".join(k.name for k in rest))
+        for k, settled in zip(rest, lot_steady(lot, requests, tier)):
+            raise_unsettled(settled.result, k.title)
+            campaign = dataclasses.replace(campaign, settled={**campaign.settled, k.name: settled})
 
     prefix = device_prefix or gyro.name
     device_ids = np.asarray([f"{prefix}-{i:03d}" for i in range(devices)])

@@ -17,20 +17,15 @@ from ._data.arrays import SweepArrays
 from ._fitdata import FitData
 from ._gyroscope import Gyroscope
 from ._simulate.tiers import Steady
-from ._solution import RESULTS
 from ._sweeps.rate_table import RateTable
 from ._sweeps.registry import sweep_kind
-from ._sweeps.steady import AbstractSteadySweep, steady_points
+from ._sweeps.steady import AbstractSettledSweep, steady_points
 
 
 SF_STEP_DPS = 1.0
 """deg/s: the scale factor at zero rate is the central difference of the rate output at +/- this rate (a secant
 over 2 deg/s differs from the tangent by the curvature over it: ~1e-14 relative on the presets with every
 effect at its typical size), settled in the same call as the data's steady points."""
-
-
-def _flag(settled, mask):
-    return (settled.result != RESULTS.successful) & jnp.ravel(mask)
 
 
 def predict_block(gyro: Gyroscope, sweep: str, block: SweepArrays, tier=Steady()):
@@ -77,17 +72,18 @@ def device_residuals(gyro: Gyroscope, data: FitData, tier=Steady(), sf_temperatu
     """All standardised residuals of one device (data without the device axis), flattened in the order of
     `data.sweeps`, the number of points that did not settle, the predictions per sweep (run, point), and the
     zero-rate scale factor (LSB per deg/s) at die temperature `sf_temperature` (None when not given). The
-    steady sweeps and the scale factor's points settle in one call (one compiled settle)."""
+    settled sweeps (steady and set-point kinds) and the scale factor's points settle in one call (one compiled
+    settle)."""
     steady = {sweep: data.blocks[sweep] for sweep in data.sweeps
-              if isinstance(sweep_kind(sweep), AbstractSteadySweep)}
+              if isinstance(sweep_kind(sweep), AbstractSettledSweep)}
     settled, sf = _steady(gyro, steady, tier, sf_temperature) if steady or sf_temperature is not None else ((), None)
     settled = dict(zip(steady, settled))
     parts, preds, failed = [], {}, jnp.zeros((), dtype=int)
     for sweep in data.sweeps:
         block = data.blocks[sweep]
         if sweep in settled:
-            pred = jnp.reshape(settled[sweep].rate, block.inputs.shape)
-            bad = _flag(settled[sweep], block.mask)
+            pred, bad = sweep_kind(sweep).read(settled[sweep])
+            pred, bad = jnp.reshape(pred, block.inputs.shape), bad & jnp.ravel(block.mask)
         else:
             pred, bad = predict_block(gyro, sweep, block, tier)
         parts.append(jnp.ravel(block_residuals(sweep, block, pred)))

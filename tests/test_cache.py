@@ -52,6 +52,19 @@ def _entries(folder):
     return sorted(p.name for p in folder.iterdir() if p.name.endswith("-cache")) if folder.exists() else []
 
 
+def test_a_second_process_loads_a_small_program(tmp_path):
+    """The fast tier's check of loading (the settle below is the slow tier's): a second process hits every
+    program the first wrote and writes none."""
+    cache = tmp_path / "moved"
+    first = _run(tmp_path, TINY, GYROJAX_CACHE_DIR=str(cache))
+    written = _entries(cache)
+    assert written and first["writes"] == len(written) and first["y"] == 6.0
+    second = _run(tmp_path, TINY, GYROJAX_CACHE_DIR=str(cache))
+    assert second["y"] == 6.0 and second["writes"] == 0 and second["hits"] >= len(written)
+    assert _entries(cache) == written
+
+
+@pytest.mark.slow
 def test_a_second_process_loads_what_the_first_compiled(tmp_path):
     cache = tmp_path / "moved"
     first = _run(tmp_path, SETTLE, GYROJAX_CACHE_DIR=str(cache))

@@ -190,7 +190,7 @@ RATES = np.array([-200, -100, -50, -20, -10, -5, -2, -1, -0.5, -0.2, -0.1, 0.1, 
                   200.0])
 
 
-@pytest.mark.parametrize("runs", [1, 2])
+@pytest.mark.parametrize("runs", [1, pytest.param(2, marks=pytest.mark.slow)])  # 2: Monte Carlo, slow tier
 def test_the_noise_estimate_is_unbiased_for_white_noise(runs):
     """The method of moments over the fit's residual maker: the mean of the variance estimate over 4000 noise
     draws is the true variance within its Monte Carlo error, for one run (local contrasts) and for two
@@ -226,7 +226,7 @@ def test_the_noise_estimate_is_unbiased_for_white_noise(runs):
     assert methods[0].startswith("differences between runs" if runs == 2 else "combinations of 4 neighbouring")
 
 
-@pytest.mark.parametrize("runs", [1, 2])
+@pytest.mark.parametrize("runs", [1, pytest.param(2, marks=pytest.mark.slow)])  # 2: Monte Carlo, slow tier
 def test_the_chi2_test_with_estimated_noise_holds_its_level(runs):
     """With the noise estimated from the same residuals, chi2 / dof is narrower than F (measured: 1 % of right
     models below p = 0.05 with the F test, on one run). Against its Monte Carlo null a right model is

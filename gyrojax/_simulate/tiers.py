@@ -91,9 +91,11 @@ class AbstractTier(eqx.Module):
     def settle(self, gyro: Gyroscope, stimulus: Stimulus) -> Settled:
         """Settle `gyro` under a constant `stimulus`."""
 
-    def settle_points(self, gyros: Gyroscope, stimuli: Stimulus) -> Settled:
+    def settle_points(self, gyros: Gyroscope, stimuli: Stimulus, groups=None) -> Settled:
         """Settle the points of a sweep: `gyros` and `stimuli` carry a leading point axis on every array leaf
-        (e.g. the device at each point's die temperature). Default: `settle` vmapped over the points."""
+        (e.g. the device at each point's die temperature). `groups` (None: one) is a tuple of `(start, stop)`
+        slices of the points that belong together (several sweeps settled in one call; `Steady` forms one
+        chord Jacobian per group). Default: `settle` vmapped over the points."""
         return jax.vmap(self.settle)(gyros, stimuli)
 
 
@@ -136,19 +138,20 @@ class Steady(AbstractTier):
                                            residual=ft.partial(_steady_residual, orders))
         return _steady_settled(gyro, stimulus, orders, z, result == RESULTS.successful, steps)
 
-    def settle_points(self, gyros, stimuli):
+    def settle_points(self, gyros, stimuli, groups=None):
         """A sweep's points from one Jacobian (`jacobian="once"`): formed and factorised at the sweep's centre
         (the mean over points of every parameter and input: zero rate for a symmetric rate table), then
         refined per point by Broyden updates (`_sweep_broyden`); each point costs only evaluations of the
-        equations. Each point's derivative is still exact (the implicit function theorem at its own root).
-        Newton (`"every_step"`) settles point by point."""
+        equations. With `groups`, one Jacobian per group, at the group's centre, all groups in one loop (a point
+        takes the same steps as in a call of its group alone). Each point's derivative is still exact (the
+        implicit function theorem at its own root). Newton (`"every_step"`) settles point by point."""
         if self.jacobian != "once":
             return super().settle_points(gyros, stimuli)
         _check_constant(stimuli)
         one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, gyros)
         orders = _orders(one)
         frozen = jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x, (gyros, stimuli))
-        z, ok, steps = _sweep_broyden(self, orders, frozen)
+        z, ok, steps = _sweep_broyden(self, orders, frozen, groups)
 
         def point(gyro, stimulus, z_i, ok_i, steps_i):
             z_i, _ = implicit_root((gyro, stimulus, z_i), find=_given_root,
@@ -192,12 +195,13 @@ def _steady_start(inputs):
     return _div(_last_stages(operating_point(gyro, stimulus)), _last_stages(slow_scales(gyro)))
 
 
-def _sweep_broyden(tier, orders, inputs):
+def _sweep_broyden(tier, orders, inputs, groups=None):
     """Every point of a sweep from one Jacobian, formed and factorised once at the sweep's centre, then
     improved per point by Broyden's rank-one secant updates of its inverse (O(n^2) per step, no further
     Jacobian). Measured on paper-qmg + typical INL, 22 points: 2-3 steps per point where the plain chord took
     3-6 (its edges at +/-200 deg/s converge slowly on the centre's Jacobian). Stops per point on
     optimistix's Chord test (max norm: step within atol + rtol |z|, residual within atol). Not differentiated.
+    `groups`: `(start, stop)` slices of the points, each with its own centre and Jacobian (None: one group).
     """
     y0 = jax.vmap(lambda i: ravel_pytree(_steady_start(i))[0])(inputs)
     _, unravel = ravel_pytree(_steady_start(jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, inputs)))
@@ -205,11 +209,25 @@ def _sweep_broyden(tier, orders, inputs):
     def residual(z, inp):
         return ravel_pytree(_steady_residual(orders, unravel(z), inp))[0]
 
-    centre = jax.tree.map(lambda x: (jnp.mean(x, axis=0) if jnp.issubdtype(x.dtype, jnp.inexact) else x[0])
-                          if eqx.is_array(x) else x, inputs)
-    lu, perm = lu_factor(jax.jacfwd(residual)(ravel_pytree(_steady_start(centre))[0], centre))
-    n_unknowns = y0.shape[1]
-    inverse = jax.vmap(lambda e: lu_solve(lu, perm, e), out_axes=1)(jnp.eye(n_unknowns))
+    def centre_of(a, b):
+        return jax.tree.map(lambda x: (jnp.mean(x[a:b], axis=0) if jnp.issubdtype(x.dtype, jnp.inexact) else x[a])
+                            if eqx.is_array(x) else x, inputs)
+
+    def inverse_at(centre):
+        lu, perm = lu_factor(jax.jacfwd(residual)(ravel_pytree(_steady_start(centre))[0], centre))
+        return jax.vmap(lambda e: lu_solve(lu, perm, e), out_axes=1)(jnp.eye(n_unknowns))
+
+    n, n_unknowns = y0.shape
+    if groups is None or len(groups) == 1:
+        h0 = jnp.broadcast_to(inverse_at(centre_of(0, n)), (n, n_unknowns, n_unknowns))
+    else:
+        # One traced Jacobian for all groups (vmapped over their centres).
+        centres = jax.tree.map(lambda *x: jnp.stack(x) if eqx.is_array(x[0]) else x[0],
+                               *[centre_of(a, b) for a, b in groups])
+        arrays, static = eqx.partition(centres, eqx.is_array)
+        inverses = jax.vmap(lambda c: inverse_at(eqx.combine(c, static)))(arrays)
+        h0 = jnp.concatenate([jnp.broadcast_to(inverses[i], (b - a, n_unknowns, n_unknowns))
+                              for i, (a, b) in enumerate(groups)])
     batched = jax.vmap(residual)
 
     def cond(carry):
@@ -234,8 +252,6 @@ def _sweep_broyden(tier, orders, inputs):
         return (jnp.where(keep, z, z_new), jnp.where(keep, f, f_new), jnp.where(keep[..., None], h, h_new),
                 done | small, steps + jnp.where(done, 0, 1), k + 1)
 
-    n = y0.shape[0]
-    h0 = jnp.broadcast_to(inverse, (n, n_unknowns, n_unknowns))
     z, _, _, done, steps, _ = jax.lax.while_loop(
         cond, body, (y0, batched(y0, inputs), h0, jnp.zeros(n, bool), jnp.zeros(n, int), 0))
     return jax.vmap(unravel)(z), done, steps

@@ -37,8 +37,8 @@ from .._simulate._model import SlowState, WaveState
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._solution import RESULTS
 from .._stimulus import Stimulus
-from .base import AbstractSweep, at_temperature
-from .steady import per_run, point_times, raise_unsettled, read_out
+from .base import AbstractSweep
+from .steady import AbstractSettledSweep, lot_steady, raise_unsettled, read_out, steady_points
 
 
 if TYPE_CHECKING:
@@ -70,6 +70,11 @@ class SetpointReading(eqx.Module):
     rate_lsb: jax.Array
     settled: Settled
 
+    @property
+    def result(self):
+        """The tier's result per point (`settled.result`)."""
+        return self.settled.result
+
 
 def with_setpoint(gyro: Gyroscope, setpoint_lsb) -> Gyroscope:
     """`gyro` with its AGC set-point at `setpoint_lsb` (drive ADC LSB; the drive amplitude follows)."""
@@ -88,12 +93,14 @@ def displacement_amplitude(state, frequency):
 
 def setpoint_points(gyro: Gyroscope, sweep: AbstractSweep, setpoints_lsb, temperatures, times=None,
                     tier: AbstractTier = Steady()) -> SetpointReading:
-    """The settled set-points of one device at zero table rate.
+    """The settled set-points of one device at zero table rate (`steady_points` settles them with other
+    sweeps' points in one call).
 
     **Arguments:**
 
     - `gyro`: the device (a single one; vmap for a lot).
-    - `sweep`: the sweep kind read (its name reaches the device's readout terms).
+    - `sweep`: the set-point sweep kind read (an `AbstractSetpointSweep`; its name reaches the device's readout
+      terms).
     - `setpoints_lsb`: the AGC set-point of each point, drive ADC LSB (1-d).
     - `temperatures`: die temperature of each point, deg C (NaN: the device's own at power-on).
     - `times`: time since power-on of each point, s (None or NaN: 0).
@@ -101,37 +108,17 @@ def setpoint_points(gyro: Gyroscope, sweep: AbstractSweep, setpoints_lsb, temper
 
     **Returns:** a `SetpointReading`.
     """
-    s = jnp.atleast_1d(jnp.asarray(setpoints_lsb, dtype=float))
-    temps = jnp.broadcast_to(jnp.asarray(temperatures, dtype=float), s.shape)
-    t = point_times(times, s)
-
-    def one(value, temp, time):
-        return with_setpoint(at_temperature(gyro, temp), value), Stimulus(rate=0.0 * value, time=time)
-
-    gyros, stimuli = jax.vmap(one)(s, temps, t)
-    settled = tier.settle_points(gyros, stimuli)
-    a = displacement_amplitude(settled.state, settled.frequency)
-    gain = jnp.abs(jax.vmap(lambda g, w: g.drive_frontend.phasor_gain(w))(gyros, settled.frequency))
-    rate = read_out(gyro, settled, sweep, s, temps, t).rate
-    return SetpointReading(settled.frequency / (2.0 * jnp.pi), gain * a, rate, settled)
+    if not isinstance(sweep, AbstractSetpointSweep):
+        raise ValueError(f"setpoint_points: {sweep!r} is not a set-point sweep (an AbstractSetpointSweep).")
+    return steady_points(gyro, [(sweep, setpoints_lsb, temperatures, times)], tier)[0]
 
 
-@eqx.filter_jit
-def lot_setpoint_points(lot, setpoints_lsb, temperatures, times, tier, sweep):
-    """`setpoint_points` for every device (axis 0) and run (axis 1): temperatures (device, run, point),
-    set-points and times (point,) or (run, point)."""
-    s, t = per_run(setpoints_lsb, temperatures), per_run(times, temperatures)
-
-    def device(g, temps):
-        return jax.vmap(lambda x, tt, tm: setpoint_points(g, sweep, x, tt, tm, tier))(s, temps, t)
-
-    return eqx.filter_vmap(device)(lot, temperatures)
-
-
-class AbstractSetpointSweep(AbstractSweep):
+class AbstractSetpointSweep(AbstractSettledSweep):
     """A sweep of the AGC set-point at zero table rate, one reading of the settled loops per point (see the
     module's docstring). Inputs: the set-point in drive ADC LSB, `Protocol.setpoint_ratios` times the nominal
-    device's set-point. A kind says which reading it takes (`reading`), its dwell and its noise."""
+    device's set-point. A kind says which reading it takes (`reading`), its dwell and its noise. Its points
+    settle in one call with the device's other settled sweeps (`steady_points`), from a chord Jacobian of
+    their own."""
 
     input_quantity = "AGC set-point"
     input_unit = "LSB"
@@ -163,17 +150,27 @@ class AbstractSetpointSweep(AbstractSweep):
             raise ValueError(f"a {self.name} sweep needs a positive AGC set-point; {gyro.name!r} has "
                              f"drive_loop.amplitude_setpoint = {gyro.drive_loop.amplitude_setpoint!r}.")
 
-    def predict(self, gyro, inputs, temperatures, times, tier=Steady()):
-        points = setpoint_points(gyro, self, inputs, temperatures, times, tier)
+    def point(self, gyro, value, time):
+        return with_setpoint(gyro, value), Stimulus(rate=0.0 * value, time=time)
+
+    def finish(self, gyro, gyros, settled, inputs, temperatures, times):
+        a = displacement_amplitude(settled.state, settled.frequency)
+        gain = jnp.abs(jax.vmap(lambda g, w: g.drive_frontend.phasor_gain(w))(gyros, settled.frequency))
+        rate = read_out(gyro, settled, self, inputs, temperatures, times).rate
+        return SetpointReading(settled.frequency / (2.0 * jnp.pi), gain * a, rate, settled)
+
+    def read(self, points):
         out = self.reading(points)
         return out, (points.settled.result != RESULTS.successful) | ~jnp.isfinite(out)
 
     def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
         inputs = campaign.applied(self, campaign.protocol.inputs(self, campaign.gyro))
         temps, times, full = campaign.temperatures(self), campaign.times(self), campaign.shape(self)
-        points = lot_setpoint_points(lot, jnp.asarray(inputs), jnp.asarray(temps), jnp.asarray(times),
-                                     campaign.tier, self)
-        raise_unsettled(points.settled.result, self.title)
+        points = campaign.settled.get(self.name)
+        if points is None:
+            points = lot_steady(lot, ((self, jnp.asarray(inputs), jnp.asarray(temps), jnp.asarray(times)),),
+                                campaign.tier)[0]
+            raise_unsettled(points.result, self.title)
         out = np.asarray(self.reading(points), dtype=float)
         if campaign.noise_free:
             sigma = np.zeros(full)

@@ -1,4 +1,5 @@
-"""Steady sweeps: points read from the settled rate output, all settled by one call of the tier.
+"""Settled sweeps: points read from settled states of the tier (the steady kinds from the rate output, the AGC
+set-point kinds from the drive loop's registers too), all settled by one call of the tier.
 
 Each point is evaluated at its own die temperature (the `temperature_c` column): the device's temperature
 history is replaced by a constant at that temperature, since a settled point sees the temperature of its
@@ -28,15 +29,50 @@ if TYPE_CHECKING:
     from .lot import LotCampaign
 
 
-class AbstractSteadySweep(AbstractSweep):
+class AbstractSettledSweep(AbstractSweep):
+    """A sweep whose points are settled states of the steady (or another) tier, one device configuration and
+    constant `Stimulus` per point. Every such sweep of a device settles in one call of the tier (one compiled
+    settle, `steady_points`): a kind says what a point is (`point`), what it reads from the settled points
+    (`finish`, `read`) and which points share a chord Jacobian of the steady tier (`chord_group`)."""
+
+    chord_group: str | None = None
+    """The steady tier's chord Jacobian is formed at the centre of each group: the points of every kind of
+    one named group share it, a kind without a group (None) has its own. The grouping only moves where the
+    root find starts its Broyden updates, not the roots (within its tolerance)."""
+
+    @abc.abstractmethod
+    def point(self, gyro: Gyroscope, value, time) -> tuple[Gyroscope, Stimulus]:
+        """The device (already at the point's die temperature) and the stimulus of one point: `value` from the
+        `input` column, `time` since power-on (s). Every field of the returned `Stimulus` must be an array
+        shaped like `value` (`0.0 * value` for zero), so that the points of several sweeps stack into one
+        settle."""
+
+    @abc.abstractmethod
+    def finish(self, gyro: Gyroscope, gyros: Gyroscope, settled: Settled, inputs, temperatures, times):
+        """What the kind keeps of its settled points (a `Settled` or the kind's own module): `gyro` the device,
+        `gyros` the device at each point (`point`'s), `inputs`, `temperatures` (NaN: not recorded) and `times`
+        per point."""
+
+    @abc.abstractmethod
+    def read(self, points) -> tuple[jax.Array, jax.Array]:
+        """The noise-free output per point of `finish`'s points, and a flag of points that could not be
+        evaluated (not settled, not finite)."""
+
+    def predict(self, gyro, inputs, temperatures, times, tier=Steady()):
+        (points,) = steady_points(gyro, [(self, inputs, temperatures, times)], tier)
+        return self.read(points)
+
+
+class AbstractSteadySweep(AbstractSettledSweep):
     """A sweep read from the settled rate output of the steady tier: a point is a `Stimulus` held until the
-    device settles. Every steady sweep of a device settles in one call of the tier (one compiled settle),
-    so a kind only says what it applies (`stimulus`). The output carries the run's turn-on bias; the noise
-    is rate noise averaged over the dwell."""
+    device settles. Every steady sweep of a device settles in one call of the tier (one compiled settle, one
+    chord Jacobian), so a kind only says what it applies (`stimulus`). The output carries the run's turn-on
+    bias; the noise is rate noise averaged over the dwell."""
 
     biased = True
     straight_line = True
     rate_noise = True
+    chord_group = "steady"
 
     @abc.abstractmethod
     def stimulus(self, value, time) -> Stimulus:
@@ -44,9 +80,14 @@ class AbstractSteadySweep(AbstractSweep):
         of the returned `Stimulus` must be an array shaped like `value` (`0.0 * value` for zero), so that
         the points of several steady sweeps stack into one settle."""
 
-    def predict(self, gyro, inputs, temperatures, times, tier=Steady()):
-        (settled,) = steady_points(gyro, [(self, inputs, temperatures, times)], tier)
-        return settled.rate, settled.result != RESULTS.successful
+    def point(self, gyro, value, time):
+        return gyro, self.stimulus(value, time)
+
+    def finish(self, gyro, gyros, settled, inputs, temperatures, times):
+        return read_out(gyro, settled, self, inputs, temperatures, times)
+
+    def read(self, points):
+        return points.rate, points.result != RESULTS.successful
 
     def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
         inputs = campaign.applied(self, campaign.protocol.inputs(self, campaign.gyro))
@@ -94,38 +135,54 @@ def read_out(gyro: Gyroscope, settled: Settled, sweep: AbstractSweep, inputs, te
 
 
 def steady_points(gyro: Gyroscope, requests, tier: AbstractTier = Steady()) -> tuple:
-    """Settled points of several steady sweeps of one device in one call of the tier (one compiled settle
-    for all of them: a static VCF point is the same equations as a rate point, at another input).
+    """Settled points of several sweeps of one device in one call of the tier (one compiled settle for all of
+    them: a static VCF point is the same equations as a rate point, at another input; an AGC set-point point
+    the same at another set-point).
 
     **Arguments:**
 
-    - `requests`: a sequence of `(sweep, inputs, temperatures, times)`: `sweep` an `AbstractSteadySweep`, the
-      inputs in its data unit, one die temperature (deg C) and one time since power-on (s; None or NaN: not
-      recorded) per point.
+    - `requests`: a sequence of `(sweep, inputs, temperatures, times)`: `sweep` an `AbstractSettledSweep` (an
+      `AbstractSteadySweep` or `AbstractSetpointSweep`), the inputs in its data unit, one die temperature
+      (deg C) and one time since power-on (s; None or NaN: not recorded) per point.
 
-    **Returns:** a `Settled` per request, in order, with the device's readout terms applied.
+    **Returns:** per request, in order, what its kind keeps (`AbstractSettledSweep.finish`): a `Settled` with
+    the device's readout terms applied for a steady sweep, a `SetpointReading` for a set-point sweep.
     """
-    parts, sizes, views = [], [], []
-    for sweep, inputs, temperatures, times in requests:
-        if not isinstance(sweep, AbstractSteadySweep):
-            raise ValueError(f"steady_points: {sweep!r} is not a steady sweep (an AbstractSteadySweep).")
+    views, named = [], {}
+    for k, (sweep, inputs, temperatures, times) in enumerate(requests):
+        if not isinstance(sweep, AbstractSettledSweep):
+            raise ValueError(f"steady_points: {sweep!r} is not a settled sweep (an AbstractSteadySweep or "
+                             "AbstractSetpointSweep).")
         x = jnp.atleast_1d(jnp.asarray(inputs, dtype=float))
         temps = jnp.broadcast_to(jnp.asarray(temperatures, dtype=float), x.shape)
         t = point_times(times, x)
 
         def one(value, temp, time, sweep=sweep):
-            return at_temperature(gyro, temp), sweep.stimulus(value, time)
+            return sweep.point(at_temperature(gyro, temp), value, time)
 
-        parts.append(jax.vmap(one)(x, temps, t))
-        sizes.append(x.shape[0])
-        views.append((sweep, x, temps, t))
+        group = (sweep.chord_group,) if sweep.chord_group is not None else (None, k)
+        named.setdefault(group, []).append(k)
+        views.append((sweep, x, temps, t, jax.vmap(one)(x, temps, t)))
+    # The points of a chord group are contiguous, its kinds in request order (one group: the requests' order).
+    order = [k for members in named.values() for k in members]
+    bounds, slices, start = [], {}, 0
+    for members in named.values():
+        first = start
+        for k in members:
+            slices[k] = (start, start + views[k][1].shape[0])
+            start = slices[k][1]
+        bounds.append((first, start))
+    parts = [views[k][4] for k in order]
     gyros, stimuli = jax.tree.map(lambda *leaves: jnp.concatenate(leaves), *parts) if len(parts) > 1 else parts[0]
-    settled = tier.settle_points(gyros, stimuli)
-    out, start = [], 0
-    for size, (sweep, x, temps, t) in zip(sizes, views):
-        piece = jax.tree.map(lambda leaf, a=start, b=start + size: leaf[a:b], settled)
-        out.append(read_out(gyro, piece, sweep, x, temps, t))
-        start += size
+    if len(bounds) > 1:
+        settled = tier.settle_points(gyros, stimuli, groups=tuple(bounds))
+    else:
+        settled = tier.settle_points(gyros, stimuli)
+    out = []
+    for k, (sweep, x, temps, t, (gyros_k, _)) in enumerate(views):
+        a, b = slices[k]
+        piece = jax.tree.map(lambda leaf: leaf[a:b], settled) if len(parts) > 1 else settled
+        out.append(sweep.finish(gyro, gyros_k, piece, x, temps, t))
     return tuple(out)
 
 
@@ -136,10 +193,10 @@ def per_run(x, temperatures):
 
 @eqx.filter_jit
 def lot_steady(lot, requests, tier):
-    """`steady_points` for every device (axis 0) and run (axis 1), several steady sweeps in one call (one
+    """`steady_points` for every device (axis 0) and run (axis 1), several settled sweeps in one call (one
     compiled settle): `requests` is a tuple of `(sweep, inputs, temperatures, times)` with temperatures
-    (device, run, point) and inputs and times (point,) or (run, point) (times NaN: not recorded). Returns a
-    `Settled` per request, (device, run, point)."""
+    (device, run, point) and inputs and times (point,) or (run, point) (times NaN: not recorded). Returns what
+    each request's kind keeps (a `Settled` or a `SetpointReading`), (device, run, point)."""
     temps = tuple(r[2] for r in requests)
     inputs = tuple(per_run(r[1], t) for r, t in zip(requests, temps))
     times = tuple(per_run(r[3], t) for r, t in zip(requests, temps))
