@@ -142,9 +142,6 @@ class AbstractSetpointSweep(AbstractSettledSweep):
     def n_points(self, protocol: "Protocol") -> int:
         return len(protocol.setpoint_ratios)
 
-    def sample_rate_hz(self, protocol: "Protocol") -> float:
-        return protocol.sample_rate_hz
-
     def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
         if not float(np.asarray(gyro.drive_loop.amplitude_setpoint)) > 0:
             raise ValueError(f"a {self.name} sweep needs a positive AGC set-point; {gyro.name!r} has "

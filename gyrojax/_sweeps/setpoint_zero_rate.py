@@ -49,9 +49,7 @@ class SetpointZeroRate(AbstractSetpointSweep):
     output_meaning = "the gyro's rate output, LSB (as for `rate_table`)"
     biased = True
     rate_noise = True
-
-    def dwell_s(self, protocol: "Protocol") -> float:
-        return protocol.dwell_s
+    # dwell_s: the protocol's rate-output dwell (AbstractSweep's default), not the drive registers' drive_dwell_s
 
     def reading(self, points: SetpointReading):
         return points.rate_lsb
