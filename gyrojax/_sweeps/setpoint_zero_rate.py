@@ -33,7 +33,6 @@ from .setpoint import AbstractSetpointSweep, SetpointReading
 
 if TYPE_CHECKING:
     from .lot import LotCampaign
-    from .protocol import Protocol
 
 
 class SetpointZeroRate(AbstractSetpointSweep):
