@@ -12,7 +12,7 @@ from .._gyroscope import Gyroscope
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._stimulus import Stimulus
 from .._units import DEG
-from .steady import AbstractSteadySweep, steady_points
+from .steady import AbstractSteadySweep, settled_points
 
 
 if TYPE_CHECKING:
@@ -65,7 +65,7 @@ def rate_table_points(gyro: Gyroscope, rates_dps: Float[ArrayLike, " point"], te
                       tier: AbstractTier = Steady(), *, times: Float[ArrayLike, "*#point"] | None = None) -> Settled:
     """Settled rate-table points: table rates in deg/s, one die temperature (deg C) and optionally one time
     since power-on (s) per point."""
-    return steady_points(gyro, [(RateTable(), rates_dps, temperatures, times)], tier)[0]
+    return settled_points(gyro, [(RateTable(), rates_dps, temperatures, times)], tier)[0]
 
 
 @eqx.filter_jit

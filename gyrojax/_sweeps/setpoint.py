@@ -38,7 +38,7 @@ from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._solution import RESULTS
 from .._stimulus import Stimulus
 from .base import AbstractSweep
-from .steady import AbstractSettledSweep, lot_steady, raise_unsettled, read_out, steady_points
+from .steady import AbstractSettledSweep, lot_steady, raise_unsettled, read_out, settled_points
 
 
 if TYPE_CHECKING:
@@ -110,7 +110,7 @@ def setpoint_points(gyro: Gyroscope, sweep: AbstractSweep, setpoints_lsb, temper
     """
     if not isinstance(sweep, AbstractSetpointSweep):
         raise ValueError(f"setpoint_points: {sweep!r} is not a set-point sweep (an AbstractSetpointSweep).")
-    return steady_points(gyro, [(sweep, setpoints_lsb, temperatures, times)], tier)[0]
+    return settled_points(gyro, [(sweep, setpoints_lsb, temperatures, times)], tier)[0]
 
 
 class AbstractSetpointSweep(AbstractSettledSweep):

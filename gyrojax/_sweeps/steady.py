@@ -186,6 +186,11 @@ def steady_points(gyro: Gyroscope, requests, tier: AbstractTier = Steady()) -> t
     return tuple(out)
 
 
+
+settled_points = eqx.filter_jit(steady_points)
+"""`steady_points` compiled once per structure and shape, for the public point functions called outside a
+traced program (eagerly, each call of a settle's while loop would compile it again)."""
+
 def per_run(x, temperatures):
     """Inputs or times, (point,) or (run, point), as (run, point) like the temperatures' last two axes."""
     return jnp.broadcast_to(jnp.asarray(x, dtype=float), temperatures.shape[1:])

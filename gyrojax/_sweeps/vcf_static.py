@@ -9,7 +9,7 @@ from .._gyroscope import Gyroscope
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._stimulus import Stimulus
 from .rate_table import DING_ZHOU_2025_RATES_DPS
-from .steady import AbstractSteadySweep, steady_points
+from .steady import AbstractSteadySweep, settled_points
 
 
 if TYPE_CHECKING:
@@ -74,4 +74,4 @@ def vcf_static_points(gyro: Gyroscope, amplitudes_v: Float[ArrayLike, " point"],
                       *, times: Float[ArrayLike, "*#point"] | None = None) -> Settled:
     """Settled static virtual-Coriolis points (seed 003 Eq. 7): the virtual-rate voltage V_ac (V, signed)
     times the fixed carrier V_fc, one die temperature and optionally one time since power-on per point."""
-    return steady_points(gyro, [(VcfStatic(carrier_v), amplitudes_v, temperatures, times)], tier)[0]
+    return settled_points(gyro, [(VcfStatic(carrier_v), amplitudes_v, temperatures, times)], tier)[0]
