@@ -155,6 +155,20 @@ def test_a_registered_sweep_kind_is_a_candidate_with_its_own_minutes_and_noise()
     assert exps["dac"].sigmas(level) == pytest.approx(np.full(22, 1e-5))
 
 
+def test_relative_noise_kinds_take_their_fraction_of_the_predicted_reading():
+    exps = {e.name: e for e in gj.default_experiments(gj.preset("paper-qmg"))}
+    level = NoiseLevel(lsb_per_dps=1000.0, scale=2.0, voltmeter_sigma_v=1e-5)
+    reading = np.linspace(0.9, 1.1, 7)
+    # 1 ppm of the AGC registers' reading, sqrt(2) x 10 ppm of the branch ratio, not scaled by the rate noise
+    assert exps["drive_amplitude"].sigmas(level, 4.0e6 * reading) == pytest.approx(4.0 * reading, rel=1e-12)
+    assert exps["drive_frequency"].sigmas(level, 2.0e4 * reading) == pytest.approx(0.02 * reading, rel=1e-12)
+    branch = exps["branch_ratio"]
+    ratio = np.linspace(0.999, 1.001, branch.points)
+    assert branch.sigmas(level, ratio) == pytest.approx(np.sqrt(2.0) * 1e-5 * ratio, rel=1e-12)
+    with pytest.raises(ValueError, match="relative_sigma with predicted outputs"):
+        branch.sigmas(level)
+
+
 def test_plan_rejects_bad_arguments():
     with pytest.raises(ValueError, match="budget_min must be at least one run of seed 000's protocol"):
         gj.plan(None, budget_min=30.0)

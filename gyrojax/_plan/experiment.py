@@ -3,7 +3,8 @@
 Everything the planner knows about an experiment is here: its name, its sweep kind, its minutes of test time,
 the noise-free outputs of its points for a device (the kind's own measurement model, `AbstractSweep.predict`,
 shared with simulation and fitting; the steady kinds settled in one call) and the standard uncertainty of each
-point (`AbstractSweep.point_sigmas`). The default candidates are the registered sweep kinds, so a kind added
+point (`AbstractSweep.point_sigmas`, or `AbstractSweep.relative_sigma` times the predicted reading). The
+default candidates are the registered sweep kinds, so a kind added
 with `gyrojax.register_sweep` is a candidate without changing the planner.
 """
 
@@ -109,19 +110,25 @@ class CandidateExperiment(eqx.Module):
         return {"sweep": self.name, "kind": self.kind, "settings": dict(self.settings), "minutes": self.minutes,
                 "points": self.points}
 
-    def sigmas(self, noise: "NoiseLevel") -> np.ndarray:
+    def sigmas(self, noise: "NoiseLevel", outputs=None) -> np.ndarray:
         """Standard uncertainty of each point for one device whose noise is `noise`: the kind's own noise
-        model (`AbstractSweep.point_sigmas`), rate noise scaled to the data's level; else the median sigma of
-        this kind's points in the data. Raises a `ValueError` when neither gives one."""
+        model (`AbstractSweep.point_sigmas`), rate noise scaled to the data's level; else, for a kind whose
+        noise is relative to its reading (`AbstractSweep.relative_sigma`), that fraction of the predicted
+        `outputs` (one per point); else the median sigma of this kind's points in the data. Raises a
+        `ValueError` when none gives one."""
         sigma = self.sweep.point_sigmas(np.asarray(self.inputs), self.protocol, noise.rate_noise,
                                         noise.lsb_per_dps, noise.voltmeter_sigma_v)
+        relative = self.sweep.relative_sigma(self.protocol)
         if sigma is not None:
             sigma = np.asarray(sigma, dtype=float) * (noise.scale if self.sweep.rate_noise else 1.0)
+        elif relative is not None and outputs is not None:
+            sigma = float(relative) * np.abs(np.asarray(outputs, dtype=float))
         elif self.kind in noise.measured:
             sigma = np.full(self.points, noise.measured[self.kind])
         else:
             raise ValueError(f"experiment {self.name!r}: the sweep kind {self.kind!r} has no noise model "
-                             "(AbstractSweep.point_sigmas) and the data have no points of it to take one from.")
+                             "(AbstractSweep.point_sigmas, or relative_sigma with predicted outputs) and the data "
+                             "have no points of it to take one from.")
         if sigma.shape != (self.points,) or not np.all(sigma > 0):
             raise ValueError(f"experiment {self.name!r}: point sigmas must be > 0, one per point; got {sigma!r}.")
         return sigma

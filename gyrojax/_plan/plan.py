@@ -415,10 +415,11 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
         if not isinstance(e, CandidateExperiment):
             raise ValueError(f"experiments must be gyrojax.CandidateExperiment, got {type(e).__name__}.")
     if defaults:
-        # A kind with no noise model of its own (AbstractSweep.point_sigmas) is planned only where the data
-        # give its points' sigmas.
+        # A kind with no noise model of its own (AbstractSweep.point_sigmas, relative_sigma) is planned only
+        # where the data give its points' sigmas.
         dropped = [e.name for e in experiments if e.kind not in fit.data.blocks and e.sweep.point_sigmas(
-            np.asarray(e.inputs), protocol, RateNoise(), 1.0, 1.0) is None]
+            np.asarray(e.inputs), protocol, RateNoise(), 1.0, 1.0) is None
+            and e.sweep.relative_sigma(protocol) is None]
         if dropped:
             say(f"left out (no noise model, none of their points in the data): {', '.join(dropped)}")
         experiments = tuple(e for e in experiments if e.name not in dropped)
@@ -431,7 +432,7 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     say(f"Jacobians of {len(all_exps)} experiments' points ({sum(e.points for e in all_exps)} points per device) "
         f"at the baseline, {len(fit.devices)} device(s)")
     t_sf = _sf_temperature(fit.data)
-    (jac_e, g), (_, sf) = jacobians(fit.model, fit.entries, all_exps, t_sf)
+    (jac_e, g), (pred_e, sf) = jacobians(fit.model, fit.entries, all_exps, t_sf)
     noise = noise_levels(fit.data, sf, protocol)
     n_dev = len(fit.devices)
     jac0 = np.asarray(fit.jacobian, dtype=float)
@@ -442,7 +443,7 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     pool = sorted(set(phys) | {i for i in np.nonzero(free_mask)[0] if i not in held_cands})
     base_free = [int(i) for i in np.nonzero(free_mask)[0]]
     r0 = [_reduce(jac0[d]) for d in range(n_dev)]
-    rk = [[_reduce(weighted_rows(e, jac_e[k][d], e.sigmas(noise[d]))) for d in range(n_dev)]
+    rk = [[_reduce(weighted_rows(e, jac_e[k][d], e.sigmas(noise[d], pred_e[k][d]))) for d in range(n_dev)]
           for k, e in enumerate(experiments)]
     say(f"expected chi2 of {len(candidates)} candidate effects on the data given and with every combination of "
         f"0..{max_repeats} runs of {len(experiments)} experiments")
