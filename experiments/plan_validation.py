@@ -15,7 +15,8 @@ run of the experiment are simulated for `SEEDS` noise seeds, and the diagnosis's
 baseline (`gyrojax.diagnose(..., max_effects=0)`: its ranking, no refit) is counted: the detection fraction
 against the predicted power, the mean statistic against df + lambda.
 
-Run: `python experiments/plan_validation.py sf` (about 15 minutes on a 2-core CPU, most of it compiling) or
+Run: `python experiments/plan_validation.py sf [DEVICES [OUT.json]]` (about 15 minutes on a 2-core CPU, most of
+it compiling) or
 `python experiments/plan_validation.py detection [OUT.json]` (about 5 minutes once compiled).
 """
 
@@ -41,7 +42,9 @@ def spread(protocol, runs, seed):
     return float(np.std(sf, ddof=1)), float(np.mean(np.asarray(fit.scale_factor_stderr))), fit.status
 
 
-def scale_factor():
+def scale_factor(devices=None, out=None):
+    global DEVICES
+    DEVICES = devices or DEVICES
     t0 = time.time()
     given = gj.simulate_table(gj.preset("paper-qmg"), runs=2, seed=1, progress=False)
     plan = gj.plan(given, "paper-qmg", max_repeats=2, progress=False)
@@ -63,6 +66,13 @@ def scale_factor():
     ratio_unc = ratio_mc * math.sqrt((rows[0][4] / rows[0][3]) ** 2 + (rows[1][4] / rows[1][3]) ** 2)
     print(f"stderr ratio design / seed 000: predicted {ratio_pred:.3f}, Monte Carlo {ratio_mc:.3f} +/- "
           f"{ratio_unc:.2f}")
+    if out:
+        gj.atomic_write_json({"devices": DEVICES, "seed_of_the_data_given": 1, "seed_of_the_monte_carlo": 11,
+                              "rows": [dict(zip(("protocol", "runs", "predicted_stderr", "mc_std", "mc_std_unc",
+                                                 "fits_stderr"), r)) for r in rows],
+                              "ratio_predicted": ratio_pred, "ratio_mc": ratio_mc, "ratio_mc_unc": ratio_unc,
+                              "design": design.to_json()}, out)
+        print(f"wrote {out}")
 
 
 SEEDS = 16
@@ -136,7 +146,7 @@ def detections(out=None):
 if __name__ == "__main__":
     what = sys.argv[1] if len(sys.argv) > 1 else ""
     if what == "sf":
-        scale_factor()
+        scale_factor(int(sys.argv[2]) if len(sys.argv) > 2 else None, sys.argv[3] if len(sys.argv) > 3 else None)
     elif what == "detection":
         detections(sys.argv[2] if len(sys.argv) > 2 else None)
     else:

@@ -8,8 +8,8 @@ import pytest
 from scipy.stats import chi2 as scipy_chi2, ncx2
 
 import gyrojax as gj
-from gyrojax._plan.experiment import NoiseLevel, weighted_rows
-from gyrojax._plan.plan import _kept, _reduce, _residual_chi2
+from gyrojax._plan.experiment import NoiseLevel, weighted_rows, window_correlation
+from gyrojax._plan.plan import _kept, _reduce, _residual_chi2, _run_info, _sf_variance
 from gyrojax._plan.power import chi2_isf, ncx2_sf, power, required_noncentrality
 from gyrojax.cli import main
 
@@ -167,6 +167,31 @@ def test_relative_noise_kinds_take_their_fraction_of_the_predicted_reading():
     assert branch.sigmas(level, ratio) == pytest.approx(np.sqrt(2.0) * 1e-5 * ratio, rel=1e-12)
     with pytest.raises(ValueError, match="relative_sigma with predicted outputs"):
         branch.sigmas(level)
+
+
+def test_window_correlation_matches_the_simulated_point_noise():
+    noise = gj.RateNoise()
+    corr = window_correlation(noise, 4, 120.0)
+    _, x = noise.sample_point_means(np.random.default_rng(5), (40000,), 4, 120.0)
+    # neighbours share 0.1225 of the variance through the 30 s wander (x = T / tau = 4); two apart e^-4 of it
+    assert corr[0, 1] == pytest.approx(0.12251, abs=1e-5)
+    assert corr[0, 2] == pytest.approx(corr[0, 1] * np.exp(-4.0), rel=1e-12)
+    assert np.allclose(np.corrcoef(x.T), corr, atol=0.012)
+    assert np.allclose(np.diag(corr), 1.0)
+
+
+def test_sandwich_variance_of_a_slope_under_correlated_noise():
+    # one run of y = b + s x with a fitted bias: the planner's variance with and without the noise's
+    # correlation against the weighted least-squares slope's exact variance
+    x = np.linspace(-1.0, 1.0, 5)
+    rows, sig = x[:, None], np.full(5, 2.0)
+    corr = np.array([[0.3 ** abs(i - j) for j in range(5)] for i in range(5)])
+    info, meat = _run_info(rows, sig, list(range(5)), lambda n: corr)
+    xc = x - x.mean()
+    c = xc / np.sum(xc**2)  # the slope's weights
+    exact = float(c @ (4.0 * corr) @ c)
+    assert _sf_variance(info, np.ones(1), [0], 0.0, meat) == pytest.approx(exact, rel=1e-12)
+    assert _sf_variance(info, np.ones(1), [0], 0.0) == pytest.approx(4.0 / np.sum(xc**2), rel=1e-12)
 
 
 def test_plan_rejects_bad_arguments():

@@ -206,6 +206,19 @@ def jacobians(model, entries, experiments, sf_temperature, tier=Steady()):
             (tuple(np.asarray(p) for p in pred), np.asarray(sf)))
 
 
+def window_correlation(noise: RateNoise, n: int, dwell_s: float) -> np.ndarray:
+    """Correlation matrix (n, n) of the noise of `n` settled points averaged over back-to-back windows of
+    `dwell_s`, about the run's turn-on bias, as the simulator draws it (`RateNoise.sample_point_means`): the
+    white part is independent, the Gauss-Markov wander's window means of points k apart share
+    q^2 (tau / T)^2 (1 - exp(-T / tau))^2 exp(-(k - 1) T / tau)."""
+    q, tau = noise.wander_sigma_dps, noise.bias_correlation_s
+    x = dwell_s / tau
+    var = noise.point_sigma_dps(dwell_s) ** 2
+    lag = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    cov = q**2 * (tau / dwell_s) ** 2 * math.expm1(-x) ** 2 * np.exp(-x * np.maximum(lag - 1, 0))
+    return np.where(lag == 0, 1.0, cov / var)
+
+
 def weighted_rows(experiment: CandidateExperiment, jac: np.ndarray, sigmas: np.ndarray) -> np.ndarray:
     """One run's rows of the standardised residuals' Jacobian (point, param) for one device: each point
     over its sigma, with the run's turn-on bias projected out (the weighted mean of the run removed, as

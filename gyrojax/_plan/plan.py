@@ -22,6 +22,7 @@ budget greedily (largest variance reduction per minute), for a number of rate-ta
 keeps the best; seed 000's 22-rate protocol at equal time is the reference.
 """
 
+import functools
 import itertools
 import math
 
@@ -38,7 +39,14 @@ from .._noise import RateNoise
 from .._parameters import DEFAULT_FREE, Model, as_model, zero_effect
 from .._progress import as_progress
 from .._sweeps.protocol import Protocol
-from .experiment import CandidateExperiment, default_experiments, jacobians, noise_levels, weighted_rows
+from .experiment import (
+    CandidateExperiment,
+    default_experiments,
+    jacobians,
+    noise_levels,
+    weighted_rows,
+    window_correlation,
+)
 from .power import power, required_noncentrality
 
 
@@ -338,10 +346,12 @@ def _data_rows(fit: Fit) -> int:
     return int(sum(int(np.prod(fit.data.blocks[s].inputs.shape[1:])) for s in fit.data.sweeps))
 
 
-def _sf_variance(info, g, cols, threshold):
+def _sf_variance(info, g, cols, threshold, meat=None):
     """Variance of the scale factor g^T I^+ g over the columns `cols` a fit of this information would free,
     and whether those determine it (its gradient's part along what the design cannot fix is below
-    `SF_HELD_TOL` standard errors). `info` is (param, param)."""
+    `SF_HELD_TOL` standard errors). `info` is (param, param). With `meat` (param, param: J^T R J, R the
+    standardised noise's correlation), the variance of the weighted least-squares estimate under correlated
+    noise, g^T I^+ meat I^+ g."""
     sub = info[np.ix_(cols, cols)]
     d = np.sqrt(np.maximum(np.diag(sub), 0.0))
     if not cols or np.any(d <= 0):
@@ -350,7 +360,11 @@ def _sf_variance(info, g, cols, threshold):
     keep = evals > evals.max() * 1e-12
     gs = g[cols] / d
     proj = evecs[:, keep].T @ gs
-    var = float(np.sum(proj**2 / evals[keep]))
+    if meat is None:
+        var = float(np.sum(proj**2 / evals[keep]))
+    else:
+        h = evecs[:, keep] @ (proj / evals[keep])  # I^+ g in the scaled coordinates
+        var = float(h @ (meat[np.ix_(cols, cols)] / np.outer(d, d)) @ h)
     # determined: the gradient lies in the span of what the data fix (singular values >= threshold)
     ev_all, vec_all = np.linalg.eigh(sub)
     weak = vec_all[:, np.sqrt(np.maximum(ev_all, 0.0)) < threshold]
@@ -552,13 +566,15 @@ def _columns(fit: Fit):
     return out
 
 
-def _run_info(rows_j, sig, subset):
+def _run_info(rows_j, sig, subset, corr=None):
     """Fisher information of one run at the points `subset` (their Jacobian rows and sigmas), its bias
-    projected out."""
+    projected out, and the matching J^T R J of its noise's correlation `corr` (a function of the number of
+    points, applied back to back in the listed order; None: independent points)."""
     w = 1.0 / sig[subset] ** 2
     mean = (w @ rows_j[subset]) / np.sum(w)
     jp = (rows_j[subset] - mean) / sig[subset, None]
-    return jp.T @ jp
+    info = jp.T @ jp
+    return info, (info if corr is None else jp.T @ corr(len(subset)) @ jp)
 
 
 def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, threshold, say):
@@ -578,15 +594,21 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
         rows["vcf_static"] = [jac_e[by_name["vcf_static"]][d] for d in range(n_dev)]
         sigs["vcf_static"] = [v.sigmas(noise[d]) for d in range(n_dev)]
     cols = list(pool)
+    # Both kinds' points are settled means over back-to-back windows of the protocol's dwell: their noise
+    # shares the bias wander between neighbours (window_correlation); the fit weighs them as independent.
+    model = noise[0].rate_noise
+    corrs = {k: functools.lru_cache(maxsize=None)(
+        lambda n: window_correlation(model, n, protocol.dwell_s)) for k in levels}
+
+    def per_device(sets, runs, d):
+        return _per_device(prior, rows, sigs, sets, runs, g, cols, threshold, d, corrs)
 
     def variance(sets, runs):
-        return float(np.mean([_per_device(prior, rows, sigs, sets, runs, g, cols, threshold, d)
-                              for d in range(n_dev)]))
+        return float(np.mean([per_device(sets, runs, d) for d in range(n_dev)]))
 
     seed_runs = int(budget // ((protocol.warmup_s + len(protocol.rates_dps) * protocol.dwell_s) / 60.0))
     seed_sets = {"rate_table": tuple(range(len(levels["rate_table"])))}
-    seed_var = [_per_device(prior, rows, sigs, seed_sets, {"rate_table": seed_runs}, g, cols, threshold, d)
-                for d in range(n_dev)]
+    seed_var = [per_device(seed_sets, {"rate_table": seed_runs}, d) for d in range(n_dev)]
     best = None
     max_rate_runs = int(budget // (warm + 2 * dwell))
     kinds = list(levels)
@@ -634,7 +656,7 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
             if best is None or current < best[0]:
                 best = (current, dict(sets), dict(runs), used)
     _, sets, runs, used = best
-    stderr = [math.sqrt(_per_device(prior, rows, sigs, sets, runs, g, cols, threshold, d)) for d in range(n_dev)]
+    stderr = [math.sqrt(per_device(sets, runs, d)) for d in range(n_dev)]
     data_free = [int(i) for i in np.nonzero(np.asarray(fit.free))[0]]
     data_se = []
     for d in range(n_dev):
@@ -655,10 +677,12 @@ def _sqrt_info(info):
     return (evecs * np.sqrt(np.maximum(evals, 0.0))).T
 
 
-def _per_device(prior, rows, sigs, sets, runs, g, cols, threshold, d):
+def _per_device(prior, rows, sigs, sets, runs, g, cols, threshold, d, corrs=None):
     info = prior[d].copy()
+    meat = prior[d].copy()
     for kind, idx in sets.items():
         if runs.get(kind) and len(idx) >= 2:
-            info = info + runs[kind] * _run_info(rows[kind][d], sigs[kind][d], list(idx))
+            a, b = _run_info(rows[kind][d], sigs[kind][d], list(idx), (corrs or {}).get(kind))
+            info, meat = info + runs[kind] * a, meat + runs[kind] * b
     kept = _kept([_sqrt_info(info)], cols, threshold)
-    return _sf_variance(info, g[d], kept, threshold)
+    return _sf_variance(info, g[d], kept, threshold, meat if corrs else None)
