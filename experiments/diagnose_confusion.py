@@ -236,7 +236,7 @@ def run_plan_case(preset, hidden, first, d, *, devices, runs, seed, max_repeats,
     for h in hidden:
         g = gj.add_effect(g, h, 1.0)
     t0 = time.perf_counter()
-    p = gj.plan(fit=d.baseline, max_repeats=max_repeats, progress=progress)
+    p = gj.plan(fit=d.baseline, max_repeats=max_repeats, scale_factor=False, progress=progress)
     t1 = time.perf_counter()
     recs = recommended_runs(p)
     parts = simulate_recommended(g, recs, devices=devices, runs=runs, seed=seed)

@@ -250,3 +250,46 @@ def test_diagnose_max_effects_is_a_count():
     for bad in (-1, 1.5, True):
         with pytest.raises(ValueError, match="max_effects must be an integer >= 0"):
             gj.diagnose(None, "paper-qmg", max_effects=bad)
+
+
+SMALL = gj.Protocol(rates_dps=(-200.0, -50.0, -5.0, 5.0, 50.0, 200.0),
+                    vcf_rates_dps=(-200.0, -50.0, -5.0, 5.0, 50.0, 200.0))
+
+
+def _join(table, extra, runs_before):
+    cols = {}
+    for c in dict.fromkeys(table.column_names + extra.column_names):
+        a = np.asarray(table[c]) if c in table else np.full(len(table), np.nan)
+        b = np.asarray(extra[c]) if c in extra else np.full(len(extra), np.nan)
+        cols[c] = np.concatenate([a, b + runs_before if c == "run" else b])
+    return gj.Table.from_columns(cols)
+
+
+@pytest.mark.slow
+def test_a_hidden_quadrature_phase_is_found_with_the_recommended_run():
+    """A row of the confusion table with the planner (experiments/diagnose_confusion.py --plan), on one device:
+    the standard sweeps cannot test a hidden quadrature_phase; the plan on their baseline recommends the
+    quadrature injection; simulated for the same device (another noise seed) and added, the diagnosis selects
+    it, its test sees about the chi2 the plan promised, and the final fit is within the chi2 band."""
+    gyro = gj.add_effect(gj.paper_qmg(), gj.QuadraturePhase.typical(1.0))
+    table = gj.simulate_table(gyro, runs=2, protocol=SMALL, seed=3, progress=False,
+                              sweeps=("rate_table", "vcf_static"))
+    cands = ("quadrature_phase", "damping_coupling")
+    d = gj.diagnose(table, "paper-qmg", candidates=cands, progress=False)
+    assert "quadrature_phase" in d.untestable and not d.selected
+    exps = tuple(e for e in gj.default_experiments(gj.paper_qmg(), SMALL)
+                 if e.name in ("rate_table", "vcf_static", "quadrature_injection"))
+    p = gj.plan(fit=d.baseline, experiments=exps, max_repeats=2, protocol=SMALL, progress=False)
+    c = p.candidate("quadrature_phase")
+    assert not c.testable and c.expected_chi2 < 1e-3
+    assert [r.experiment.name for r in c.recommended] == ["quadrature_injection"]
+    runs = c.recommended[0].runs
+    # the run biases take damping_coupling up whatever is added: no recommendation, a reason
+    assert not p.candidate("damping_coupling").recommended
+    extra = gj.simulate_table(gyro, runs=runs, protocol=SMALL, seed=4, progress=False,
+                              sweeps=("quadrature_injection",))
+    d2 = gj.diagnose(_join(table, extra, 2), "paper-qmg", candidates=cands, progress=False)
+    assert d2.selected == ("quadrature_phase",)
+    assert 0.7 <= d2.final.chi2_red_total <= 1.4
+    seen = next(s for s in d2.ranking if s.effect == "quadrature_phase")
+    assert 0.5 <= seen.typical_chi2 / c.recommended_chi2 <= 2.0, (seen.typical_chi2, c.recommended_chi2)

@@ -156,7 +156,7 @@ class Plan(eqx.Module):
     experiments considered, the baseline fit, and how the search was made."""
 
     candidates: tuple  # CandidatePlan
-    scale_factor: ScaleFactorDesign
+    scale_factor: ScaleFactorDesign | None  # None when plan was told not to design it
     experiments: tuple  # CandidateExperiment
     baseline: Fit  # the fit whose Jacobians the plan used (with every candidate at zero)
     alpha: float = eqx.field(static=True)
@@ -174,7 +174,7 @@ class Plan(eqx.Module):
     def to_json(self) -> dict:
         """The plan as JSON (numbers that are not finite, e.g. an undetermined stderr, are null)."""
         return _finite({"candidates": {c.effect: c.to_json() for c in self.candidates},
-                "scale_factor": self.scale_factor.to_json(),
+                "scale_factor": None if self.scale_factor is None else self.scale_factor.to_json(),
                 "experiments": {e.name: e.to_json() for e in self.experiments},
                 "alpha": self.alpha, "target_power": self.target_power, "max_repeats": self.max_repeats,
                 "search": self.search,
@@ -199,6 +199,8 @@ class Plan(eqx.Module):
             else:
                 lines.append(f"  {'':<20} {c.reason}")
         s = self.scale_factor
+        if s is None:
+            return "\n".join(lines)
         mean = float(np.mean(s.stderr))
         ref = float(np.mean(s.seed000_stderr))
         lines += [f"scale factor in {s.budget_min:g} min (per device, LSB per deg/s, mean over the lot; assumes "
@@ -375,7 +377,7 @@ def _sf_variance(info, g, cols, threshold, meat=None):
 def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=None, experiments=None,
          budget_min: float | None = None, alpha: float = 0.01, target_power: float = 0.9, max_repeats: int = 3,
          protocol: Protocol = Protocol(), free=DEFAULT_FREE, identifiability_threshold: float = 1.0,
-         progress=True) -> Plan:
+         scale_factor: bool = True, progress=True) -> Plan:
     r"""Plan the measurements that make each candidate effect testable, and the scale factor's calibration.
 
     **Arguments:**
@@ -398,6 +400,8 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     - `protocol`: timing and inputs of the default experiments and of seed 000's reference.
     - `free`: the baseline's free parameters when it is fitted here.
     - `identifiability_threshold`: identification's threshold (what a joint fit would hold).
+    - `scale_factor`: False to plan the effects only (`Plan.scale_factor` is then None; the design's greedy
+      search is the slow part of a plan on a lot).
     - `progress`: as for `gyrojax.diagnose`.
 
     **Returns:** a `Plan`.
@@ -552,8 +556,8 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
         say(f"{c}: now chi2 {now:.3g} (power {p_now:.2f})" + ("" if testable else (
             f"; add {' + '.join(f'{r.runs} x {r.experiment.name}' for r in recommended)}" if recommended
             else "; not reachable with these experiments")))
-    design = _sf_design(fit, jac0, g, sf, all_exps, jac_e, noise, pool, budget_min, protocol,
-                        identifiability_threshold, say)
+    design = None if not scale_factor else _sf_design(fit, jac0, g, sf, all_exps, jac_e, noise, pool, budget_min,
+                                                      protocol, identifiability_threshold, say)
     return Plan(tuple(plans), design, experiments, fit, float(alpha), float(target_power), max_repeats, fit.devices,
                 search)
 
