@@ -219,9 +219,13 @@ def test_plan_on_a_rate_table(tmp_path):
     sfd = plan.scale_factor
     # the scale factor's stderr on the data given is the fit's own (its covariance and gradient)
     assert sfd.data_stderr[0] == pytest.approx(float(fit.scale_factor_stderr[0]), rel=1e-6)
-    # three runs of the seed-000 protocol against the two given: sqrt(2/3) of the stderr
+    # three runs of the seed-000 protocol against the two given: sqrt(2/3) of the stderr, times 1.06 for the
+    # bias wander that neighbouring points share (the fit's own stderr weighs them as independent)
     assert sfd.seed000_runs == 3
-    assert sfd.seed000_stderr[0] == pytest.approx(sfd.data_stderr[0] * np.sqrt(2 / 3), rel=0.02)
+    assert sfd.seed000_stderr[0] / (sfd.data_stderr[0] * np.sqrt(2 / 3)) == pytest.approx(1.0595, abs=0.005)
+    # the +/-200 deg/s design: the shared wander cancels in each pair's difference
+    assert sfd.rates_dps == (-200.0, 200.0) and sfd.rate_runs == 27
+    assert sfd.ratio == pytest.approx(0.339, abs=0.005)
     assert sfd.minutes <= sfd.budget_min + 1e-9 and sfd.ratio < 1.0
     dac = plan.candidate("dac_inl")
     assert dac.testable and dac.power > 0.99 and not dac.recommended

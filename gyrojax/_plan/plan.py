@@ -203,8 +203,8 @@ class Plan(eqx.Module):
             return "\n".join(lines)
         mean = float(np.mean(s.stderr))
         ref = float(np.mean(s.seed000_stderr))
-        lines += [f"scale factor in {s.budget_min:g} min (per device, LSB per deg/s, mean over the lot; assumes "
-                  "independent point noise at the data's output_sigma):",
+        lines += [f"scale factor in {s.budget_min:g} min (per device, LSB per deg/s, mean over the lot; point "
+                  "noise at the data's output_sigma, neighbours sharing the bias wander):",
                   f"  on the data given: stderr {np.mean(s.data_stderr):.4g} (SF {np.mean(s.scale_factor):.6g})",
                   f"  seed 000's 22 rates x {s.seed000_runs} run(s) ({s.seed000_minutes:.0f} min): stderr {ref:.4g}",
                   f"  design: rates {list(s.rates_dps)} x {s.rate_runs} run(s)"
