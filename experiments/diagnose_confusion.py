@@ -40,6 +40,7 @@ Markdown), so a long run can be read while it goes on.
 
 import argparse
 import dataclasses
+import inspect
 import os
 import sys
 import time
@@ -66,6 +67,7 @@ SWEEPS = {
 # sense motion its gains allow (19 nm at 200 deg/s), where comb_gap's typical size is a few ppm of odd cubic
 # (gyrojax/_effects/comb_gap.py; tests/test_effects.py uses the same device).
 LEAKY_LEAK = 1e4
+BASE_FREE = inspect.signature(gj.diagnose).parameters["free"].default  # the baseline's free parameters
 PAIR = ("dac_inl", "vref_drift")  # issue 5: "two effects hidden at once"
 CHI2_BAND = (0.7, 1.4)  # issue 5's acceptance band for the final reduced chi2
 
@@ -241,7 +243,10 @@ def run_plan_case(preset, hidden, first, d, *, devices, runs, seed, max_repeats,
     recs = recommended_runs(p)
     parts = simulate_recommended(g, recs, devices=devices, runs=runs, seed=seed)
     t2 = time.perf_counter()
-    d2 = gj.diagnose(join(first, parts), base_device(preset), progress=progress) if parts else d
+    # The drive frequency reads the drive resonance to 1 ppm, far inside the lot's spread of omega_x, which the
+    # standard sweeps do not see (DEFAULT_FREE holds it): the second diagnosis frees it with these data.
+    free = BASE_FREE + (("omega_x",) if any(e.kind == "drive_frequency" for e, _, _ in recs.values()) else ())
+    d2 = gj.diagnose(join(first, parts), base_device(preset), free=free, progress=progress) if parts else d
     t3 = time.perf_counter()
     report = d2.to_json()
     scores = {s.effect: s for s in d2.ranking}
@@ -261,7 +266,7 @@ def run_plan_case(preset, hidden, first, d, *, devices, runs, seed, max_repeats,
             "seen_statistic": None if s2 is None else float(s2.statistic),
             "seen_df": None if s2 is None else int(s2.df),
         }
-    row = {"preset": preset, "hidden": list(hidden),
+    row = {"preset": preset, "hidden": list(hidden), "free": list(free),
            "recommended": {n: {"runs": k, "minutes": k * e.minutes, "for": who} for n, (e, k, who) in recs.items()},
            "unreachable": [c.effect for c in p.candidates if not c.testable and not c.recommended],
            "selected": list(d2.selected), "ambiguous": [list(x) for x in d2.ambiguous],
