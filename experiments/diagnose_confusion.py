@@ -250,10 +250,12 @@ def run_plan_case(preset, hidden, first, d, *, devices, runs, seed, max_repeats,
     t3 = time.perf_counter()
     report = d2.to_json()
     scores = {s.effect: s for s in d2.ranking}
+    first_scores = {s.effect: s for s in d.ranking}
     planned = {}
     for h in hidden:
         c = next((c for c in p.candidates if c.effect == h), None)
-        s2 = scores.get(h)
+        # an effect testable on the standard sweeps is planned on them: compare with the first diagnosis
+        s2 = first_scores.get(h) if c is not None and c.testable else scores.get(h)
         planned[h] = {
             "planned_testable": None if c is None else bool(c.testable),
             "planned_df": None if c is None else c.df,
