@@ -348,8 +348,9 @@ def plan_markdown(rows, settings) -> str:
                      f"{amb} | {_fmt(r['untestable'])} | {_num(r['baseline_chi2_red'], '.3g')} -> "
                      f"{_num(r['final_chi2_red'], '.3f')} | {secs:.0f} | {r['verdict']} |")
     lines += ["", "Planned against seen (the hidden effect at its typical size; planned: the expected chi2 with "
-              "its own recommended runs added, at the standard sweeps' baseline; seen: the second diagnosis's "
-              "`typical_chi2` at the joint baseline, and its score statistic minus df, one noise draw):", "",
+              "its own recommended runs added, at the standard sweeps' baseline; seen: the diagnosis's `typical_chi2` "
+              "at its baseline, of standard + recommended data (of the standard sweeps for an effect they test "
+              "already), and its score statistic minus df, one noise draw):", "",
               "| hidden | recommended for it | df | planned chi2 now -> with them (power) | seen typical_chi2 "
               "| seen statistic - df | seen / planned |", "|---|---|---|---|---|---|---|"]
     for r in rows:
