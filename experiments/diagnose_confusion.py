@@ -1,7 +1,7 @@
 """Finding a hidden effect: the confusion table of `diagnose` over every candidate effect.
 
 Run: python experiments/diagnose_confusion.py [--out DIR] [--effects NAME,...] [--presets NAME,...]
-                                              [--devices 3] [--runs 2] [--seed 7]
+                                              [--devices 3] [--runs 2] [--seed 7] [--plan [--max-repeats 2]]
 
 Each candidate effect is hidden in turn, at its typical size (`gyrojax.effect(name, 1.0)`), in a simulated lot
 (`gyrojax.simulate_table`: noise on, the default `ProcessSpread`, a fixed seed shared by every case, so each
@@ -22,19 +22,34 @@ Each row: hidden -> selected (in order), the ambiguity groups reported, the cand
 - `+spurious`: something was selected that was not hidden and is not grouped with a hidden effect;
 - `chi2 ok` when the final chi2_red is within [0.7, 1.4] (issue 5's acceptance band).
 
+**With the planner (`--plan`).** Each case is then taken one step further, as a lab would: `gyrojax.plan` runs on
+the diagnosis's baseline fit of the standard sweeps (every candidate at zero; default experiments, at most
+`--max-repeats` runs of each), and the experiments it recommends for every candidate it finds untestable (the
+union over candidates, the most runs any one asks for) are simulated for the same devices (the lot of the
+standard sweeps, `gyrojax.campaign_lot`, one device at a time with its own seed: an independent noise draw)
+and appended to the table as further runs; `diagnose` then runs again on the standard + recommended data.
+A row of the second table adds what was recommended (and for which candidates), the hidden effect's
+planned expected chi2 (its own recommended set, typical size: the noncentrality of its test) against what
+the second diagnosis's score test sees at its baseline (`typical_chi2`, the same quantity at the joint
+fit, and the statistic minus its df, one noise draw of it), and the verdict on the added data.
+
 Every case on one preset shares data shapes and the candidate set, so `identify` compiles once per preset;
 the simulation compiles once per hidden effect. Results are written after every case (atomic JSON and
 Markdown), so a long run can be read while it goes on.
 """
 
 import argparse
+import dataclasses
+import inspect
 import os
 import sys
 import time
 import traceback
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 
 import gyrojax as gj
 
@@ -52,6 +67,7 @@ SWEEPS = {
 # sense motion its gains allow (19 nm at 200 deg/s), where comb_gap's typical size is a few ppm of odd cubic
 # (gyrojax/_effects/comb_gap.py; tests/test_effects.py uses the same device).
 LEAKY_LEAK = 1e4
+BASE_FREE = inspect.signature(gj.diagnose).parameters["free"].default  # the baseline's free parameters
 PAIR = ("dac_inl", "vref_drift")  # issue 5: "two effects hidden at once"
 CHI2_BAND = (0.7, 1.4)  # issue 5's acceptance band for the final reduced chi2
 
@@ -130,6 +146,12 @@ def verdict(hidden, d) -> dict:
 
 
 def run_case(preset, hidden, *, devices, runs, seed, progress=None):
+    """One row of the confusion table (see `case_and_data`)."""
+    return case_and_data(preset, hidden, devices=devices, runs=runs, seed=seed, progress=progress)[0]
+
+
+def case_and_data(preset, hidden, *, devices, runs, seed, progress=None):
+    """Hide `hidden` on `preset`, simulate the standard sweeps, diagnose: (row, table, diagnosis)."""
     g = base_device(preset)
     for h in hidden:
         g = gj.add_effect(g, h, 1.0)
@@ -149,7 +171,125 @@ def run_case(preset, hidden, *, devices, runs, seed, progress=None):
     row.update(verdict(hidden, d))
     # why an absorbed hidden effect could not be tested, in the diagnosis's own words
     row["absorption"] = {h: d.absorptions[h] for h in row["absorbed"]}
+    return row, table, d
+
+
+PLAN_NOISE_SEED = 1000  # the recommended runs of device i are simulated with seed + PLAN_NOISE_SEED + i
+
+
+def recommended_runs(p) -> dict:
+    """The union of the experiments `p` (a `gyrojax.Plan`) recommends for its untestable candidates: per
+    experiment name, (the experiment, the most runs any candidate asks for, the candidates asking)."""
+    out = {}
+    for c in p.candidates:
+        if c.testable:
+            continue
+        for r in c.recommended:
+            e, runs, who = out.get(r.experiment.name, (r.experiment, 0, []))
+            out[r.experiment.name] = (e, max(runs, r.runs), who + [c.effect])
+    return out
+
+
+def simulate_recommended(gyro, recs, *, devices, runs, seed):
+    """The recommended runs of the lot `simulate_table(gyro, devices=devices, seed=seed)` would draw, each device
+    simulated on its own with an independent noise seed, labelled as that table's devices and numbered after
+    its `runs` runs. An experiment at a warmer chamber (`<kind>_hot`) is a one-plateau run at its chamber
+    temperature. Returns the columns (dict of arrays), or None when nothing is recommended."""
+    if not recs:
+        return None
+    lot = gj.campaign_lot(gyro, devices=devices, seed=seed)
+    prefix = gyro.name
+    parts = []
+    for name, (e, k, _) in recs.items():
+        settings = dict(e.settings)
+        protocol = e.protocol
+        if name.endswith("_hot"):
+            protocol = dataclasses.replace(protocol, chamber_plateaus_c=(float(settings["chamber_c"]),))
+        for i in range(devices):
+            one = jax.tree.map(lambda x, i=i: x[i] if eqx.is_array(x) else x, lot)
+            t = gj.simulate_table(one, devices=1, runs=k, sweeps=(e.kind,), protocol=protocol,
+                                  seed=seed + PLAN_NOISE_SEED + i, progress=False)
+            cols = dict(t.columns)
+            cols["device"] = np.full(len(t), f"{prefix}-{i:03d}")
+            cols["run"] = np.asarray(cols["run"]) + runs + (1 + max(r for _, r, _ in recs.values()) if
+                                                               name.endswith("_hot") else 0)
+            parts.append(cols)
+    return parts
+
+
+def join(table, parts):
+    """`table` with the columns of `parts` appended (a column missing from a part is NaN there)."""
+    allc = list(table.column_names) + [c for p in parts for c in p if c not in table.column_names]
+    allc = list(dict.fromkeys(allc))
+    cols = {}
+    for c in allc:
+        pieces = []
+        for p in [table.columns] + parts:
+            n = len(next(iter(p.values())))
+            pieces.append(np.asarray(p[c]) if c in p else np.full(n, np.nan))
+        cols[c] = np.concatenate(pieces)
+    return gj.Table.from_columns(cols)
+
+
+def run_plan_case(preset, hidden, first, d, *, devices, runs, seed, max_repeats, progress=None):
+    """The planner step of a case (see the module notes): plan on the first diagnosis's baseline, simulate the
+    recommended runs, diagnose again. `first`: the case's table of the standard sweeps; `d` its diagnosis."""
+    g = base_device(preset)
+    for h in hidden:
+        g = gj.add_effect(g, h, 1.0)
+    t0 = time.perf_counter()
+    p = gj.plan(fit=d.baseline, max_repeats=max_repeats, scale_factor=False, progress=progress)
+    t1 = time.perf_counter()
+    recs = recommended_runs(p)
+    parts = simulate_recommended(g, recs, devices=devices, runs=runs, seed=seed)
+    t2 = time.perf_counter()
+    # The drive frequency reads the drive resonance to 1 ppm, far inside the lot's spread of omega_x, which the
+    # standard sweeps do not see (DEFAULT_FREE holds it): the second diagnosis frees it with these data.
+    free = BASE_FREE + (("omega_x",) if any(e.kind == "drive_frequency" for e, _, _ in recs.values()) else ())
+    d2 = gj.diagnose(join(first, parts), base_device(preset), free=free, progress=progress) if parts else d
+    t3 = time.perf_counter()
+    report = d2.to_json()
+    scores = {s.effect: s for s in d2.ranking}
+    first_scores = {s.effect: s for s in d.ranking}
+    planned = {}
+    for h in hidden:
+        c = next((c for c in p.candidates if c.effect == h), None)
+        # an effect testable on the standard sweeps is planned on them: compare with the first diagnosis
+        s2 = first_scores.get(h) if c is not None and c.testable else scores.get(h)
+        planned[h] = {
+            "planned_testable": None if c is None else bool(c.testable),
+            "planned_df": None if c is None else c.df,
+            "planned_chi2_now": None if c is None else c.expected_chi2,
+            "planned_chi2": None if c is None else c.recommended_chi2,
+            "planned_power": None if c is None else c.recommended_power,
+            "planned_runs": None if c is None else {r.experiment.name: r.runs for r in c.recommended},
+            "planned_reason": None if c is None else c.reason,
+            "seen_typical_chi2": None if s2 is None else float(s2.typical_chi2),
+            "seen_statistic": None if s2 is None else float(s2.statistic),
+            "seen_df": None if s2 is None else int(s2.df),
+        }
+    row = {"preset": preset, "hidden": list(hidden), "free": list(free),
+           "recommended": {n: {"runs": k, "minutes": k * e.minutes, "for": who} for n, (e, k, who) in recs.items()},
+           "unreachable": [c.effect for c in p.candidates if not c.testable and not c.recommended],
+           "selected": list(d2.selected), "ambiguous": [list(x) for x in d2.ambiguous],
+           "untestable": list(d2.untestable), "rejected": report["rejected"], "ranking": report["ranking"],
+           "baseline_chi2_red": d2.baseline.chi2_red_total, "final_chi2_red": d2.final.chi2_red_total,
+           "planned": planned, "seconds_plan": t1 - t0, "seconds_simulate": t2 - t1, "seconds_diagnose": t3 - t2}
+    row.update(verdict(hidden, d2))
+    row["absorption"] = {h: d2.absorptions[h] for h in row["absorbed"]}
+    row["ambiguity_reasons"] = {"; ".join(x): r for x, r in zip(row["ambiguous"], _ambiguity_reasons(d2))}
     return row
+
+
+def _ambiguity_reasons(d):
+    """Why each ambiguity group stands, in the diagnosis's words (its steps' `separated_by`)."""
+    out = []
+    steps = d.to_json()["steps"]
+    for grp in d.ambiguous:
+        step = next((s for s in steps if s.get("effect") == grp[0]), {})
+        sep = step.get("separated_by")
+        out.append(f"{sep} separates them" if sep else "no sweep in these data separates them")
+    return out
 
 
 def _fmt(x):
@@ -188,6 +328,46 @@ def markdown(rows, unsupported, settings) -> str:
     return "\n".join(lines) + "\n"
 
 
+def plan_markdown(rows, settings) -> str:
+    lines = ["", "## With the planner's recommended runs", "",
+             f"`gyrojax.plan(fit=baseline, max_repeats={settings['max_repeats']})` on each case's standard sweeps; "
+             "the union of its recommendations for the candidates it finds untestable simulated for the same "
+             f"devices (noise seed = seed + {PLAN_NOISE_SEED} + device) and `diagnose` run again on standard + "
+             "recommended.", "",
+             "| hidden | preset | recommended (runs, for) | selected | ambiguity group (why) | untestable "
+             "| chi2_red before -> after | s | verdict |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if r.get("error"):
+            lines.append(f"| {' + '.join(r['hidden']) or 'none'} | {r['preset']} | | | | | | | {r['verdict']} |")
+            continue
+        rec = "; ".join(f"{v['runs']} x {n} ({', '.join(v['for'])})" for n, v in r["recommended"].items()) or "-"
+        amb = "; ".join(f"{_fmt(g)} ({r['ambiguity_reasons'].get('; '.join(g), '')})" for g in r["ambiguous"]) or "-"
+        secs = r["seconds_plan"] + r["seconds_simulate"] + r["seconds_diagnose"]
+        lines.append(f"| {' + '.join(r['hidden']) or 'none'} | {r['preset']} | {rec} | {_fmt(r['selected'])} | "
+                     f"{amb} | {_fmt(r['untestable'])} | {_num(r['baseline_chi2_red'], '.3g')} -> "
+                     f"{_num(r['final_chi2_red'], '.3f')} | {secs:.0f} | {r['verdict']} |")
+    lines += ["", "Planned against seen (the hidden effect at its typical size; planned: the expected chi2 with "
+              "its own recommended runs added, at the standard sweeps' baseline; seen: the diagnosis's `typical_chi2` "
+              "at its baseline, of standard + recommended data (of the standard sweeps for an effect they test "
+              "already), and its score statistic minus df, one noise draw):", "",
+              "| hidden | recommended for it | df | planned chi2 now -> with them (power) | seen typical_chi2 "
+              "| seen statistic - df | seen / planned |", "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        for h, x in r.get("planned", {}).items():
+            if x["planned_chi2"] is None:
+                continue
+            ratio = (x["seen_typical_chi2"] / x["planned_chi2"]) if x["seen_typical_chi2"] is not None and \
+                x["planned_chi2"] > 0 else None
+            runs = ", ".join(f"{k} x {n}" for n, k in (x["planned_runs"] or {}).items()) or (
+                "testable already" if x["planned_testable"] else x["planned_reason"])
+            stat = None if x["seen_statistic"] is None else x["seen_statistic"] - x["seen_df"]
+            lines.append(f"| {h} | {runs} | {x['planned_df']} | {_num(x['planned_chi2_now'], '.3g')} -> "
+                         f"{_num(x['planned_chi2'], '.3g')} ({_num(x['planned_power'], '.2f')}) | "
+                         f"{_num(x['seen_typical_chi2'], '.3g')} | {_num(stat, '.3g')} | {_num(ratio, '.2f')} |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", help="folder for diagnose_confusion.json and .md (written after every case)")
@@ -197,13 +377,18 @@ def main(argv=None):
     ap.add_argument("--devices", type=int, default=3, help="lot size (default 3)")
     ap.add_argument("--runs", type=int, default=2, help="runs per device and sweep (default 2)")
     ap.add_argument("--seed", type=int, default=7, help="PRNG seed of the lot and the noise, shared by all cases")
+    ap.add_argument("--plan", action="store_true", help="also plan on each case's baseline, simulate the "
+                                                        "recommended runs and diagnose again (see the notes)")
+    ap.add_argument("--max-repeats", type=int, default=2, help="the plan's max_repeats (default 2)")
     ap.add_argument("--quiet", action="store_true", help="no progress messages")
     args = ap.parse_args(argv)
     effects = None if args.effects is None else tuple(e.strip() for e in args.effects.split(",") if e.strip())
     presets = None if args.presets is None else tuple(p.strip() for p in args.presets.split(",") if p.strip())
     todo, unsupported = cases(effects, presets)
     settings = {"devices": args.devices, "runs": args.runs, "seed": args.seed}
-    rows = []
+    if args.plan:
+        settings.update({"plan": True, "max_repeats": args.max_repeats, "plan_noise_seed": PLAN_NOISE_SEED})
+    rows, plan_rows = [], []
     say = None if args.quiet else (lambda m: print("   ", m, file=sys.stderr, flush=True))
     if args.out:
         os.makedirs(args.out, exist_ok=True)
@@ -213,7 +398,25 @@ def main(argv=None):
         if say:
             say(f"case: hidden {' + '.join(hidden) or 'none'} on {preset}")
         try:
-            r = run_case(preset, hidden, devices=args.devices, runs=args.runs, seed=args.seed, progress=say)
+            r, table, d = case_and_data(preset, hidden, devices=args.devices, runs=args.runs, seed=args.seed,
+                                        progress=say)
+            if args.plan:
+                if say:
+                    say("planning on its baseline, simulating the recommended runs, diagnosing again")
+                try:
+                    pr = run_plan_case(preset, hidden, table, d, devices=args.devices, runs=args.runs,
+                                       seed=args.seed, max_repeats=args.max_repeats, progress=say)
+                except Exception as e:
+                    if args.out:
+                        with open(os.path.join(args.out, "errors.log"), "a") as f:
+                            f.write(f"=== plan: {' + '.join(hidden) or 'none'} on {preset}\n"
+                                    f"{traceback.format_exc()}\n")
+                    msg = " ".join(str(e).strip().splitlines()[-6:])
+                    pr = {"preset": preset, "hidden": list(hidden), "error": True,
+                          "verdict": f"error: {type(e).__name__}: {msg}"[:400]}
+                plan_rows.append(pr)
+                print(f"  + plan: {_fmt(list(pr.get('recommended', {})))} -> {_fmt(pr.get('selected'))}; "
+                      f"{pr['verdict']}", flush=True)
         except Exception as e:  # recorded, not hidden: one failing case must not lose the others
             # JAX runtime errors put the stack first: keep the message's last lines, the full trace in a log
             msg = " ".join(str(e).strip().splitlines()[-6:])
@@ -231,12 +434,14 @@ def main(argv=None):
               f"{_num(r['final_chi2_red'], '7.3f')}  {r['verdict']}   (untestable: {_fmt(r['untestable'])}; "
               f"{r['seconds_simulate'] + r['seconds_diagnose']:.0f} s)", flush=True)
         out = {"settings": settings, "sweeps": {k: list(v) for k, v in SWEEPS.items()}, "rows": rows,
+               "plan_rows": plan_rows,
                "unsupported": unsupported, "complete": len(rows) == len(todo),
                "versions": {"gyrojax": gj.__version__}}
         if args.out:
             gj.atomic_write_json(out, os.path.join(args.out, "diagnose_confusion.json"))
             gj.atomic_write_bytes(os.path.join(args.out, "diagnose_confusion.md"),
-                               markdown(rows, unsupported, settings).encode())
+                               (markdown(rows, unsupported, settings)
+                                + (plan_markdown(plan_rows, settings) if args.plan else "")).encode())
     if unsupported:
         print(f"not simulated (no preset supports them): {', '.join(unsupported)}")
     return out

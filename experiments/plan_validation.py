@@ -15,10 +15,14 @@ run of the experiment are simulated for `SEEDS` noise seeds, and the diagnosis's
 baseline (`gyrojax.diagnose(..., max_effects=0)`: its ranking, no refit) is counted: the detection fraction
 against the predicted power, the mean statistic against df + lambda.
 
-Run: `python experiments/plan_validation.py sf` (about 15 minutes on a 2-core CPU, most of it compiling) or
-`python experiments/plan_validation.py detection [OUT.json]` (about 5 minutes once compiled).
+Run: `python experiments/plan_validation.py sf [DEVICES [OUT.json]]` (about 15 minutes on a 2-core CPU, most of
+it compiling) or
+`python experiments/plan_validation.py detection [OUT.json]` (about 5 minutes once compiled);
+`python experiments/plan_validation.py more SEED DEVICES PREVIOUS.json OUT.json` adds a Monte Carlo draw to
+an `sf` run's JSON (pooled).
 """
 
+import json
 import math
 import sys
 import time
@@ -41,7 +45,9 @@ def spread(protocol, runs, seed):
     return float(np.std(sf, ddof=1)), float(np.mean(np.asarray(fit.scale_factor_stderr))), fit.status
 
 
-def scale_factor():
+def scale_factor(devices=None, out=None):
+    global DEVICES
+    DEVICES = devices or DEVICES
     t0 = time.time()
     given = gj.simulate_table(gj.preset("paper-qmg"), runs=2, seed=1, progress=False)
     plan = gj.plan(given, "paper-qmg", max_repeats=2, progress=False)
@@ -63,6 +69,48 @@ def scale_factor():
     ratio_unc = ratio_mc * math.sqrt((rows[0][4] / rows[0][3]) ** 2 + (rows[1][4] / rows[1][3]) ** 2)
     print(f"stderr ratio design / seed 000: predicted {ratio_pred:.3f}, Monte Carlo {ratio_mc:.3f} +/- "
           f"{ratio_unc:.2f}")
+    if out:
+        gj.atomic_write_json({"devices": DEVICES, "seed_of_the_data_given": 1, "seed_of_the_monte_carlo": 11,
+                              "rows": [dict(zip(("protocol", "runs", "predicted_stderr", "mc_std", "mc_std_unc",
+                                                 "fits_stderr"), r)) for r in rows],
+                              "ratio_predicted": ratio_pred, "ratio_mc": ratio_mc, "ratio_mc_unc": ratio_unc,
+                              "design": design.to_json()}, out)
+        print(f"wrote {out}")
+
+
+def more_monte_carlo(seed, devices, previous, out):
+    """Another Monte Carlo draw (`seed`, `devices`) of the two protocols of a previous `sf` run's JSON, pooled
+    with it: the scatter's variance averaged over the draws (each with its own mean), its uncertainty
+    std / sqrt(2 (N - draws))."""
+    global DEVICES
+    DEVICES = devices
+    with open(previous) as f:
+        prev = json.load(f)
+    design = prev["design"]
+    draws = prev.get("draws", [{"seed": prev["seed_of_the_monte_carlo"], "devices": prev["devices"],
+                                "mc_std": [r["mc_std"] for r in prev["rows"]]}])
+    new = []
+    for row, protocol, runs in zip(prev["rows"], (gj.Protocol(), gj.Protocol(rates_dps=tuple(design["rates_dps"]))),
+                                   (design["seed000"]["runs"], design["rate_runs"])):
+        sd, fit_se, status = spread(protocol, runs, seed=seed)
+        new.append(sd)
+        print(f"{row['protocol']}: seed {seed}, {devices} devices: std {sd:.4g}; statuses {sorted(set(status))}")
+    draws.append({"seed": seed, "devices": devices, "mc_std": new})
+    rows = []
+    for k, row in enumerate(prev["rows"]):
+        n = sum(d["devices"] for d in draws)
+        var = sum((d["devices"] - 1) * d["mc_std"][k] ** 2 for d in draws) / (n - len(draws))
+        sd = math.sqrt(var)
+        rows.append({**row, "mc_std": sd, "mc_std_unc": sd / math.sqrt(2 * (n - len(draws))), "devices": n})
+        print(f"{row['protocol']}: pooled over {n} devices: std {sd:.4g} +/- {rows[-1]['mc_std_unc']:.2g}, "
+              f"predicted {row['predicted_stderr']:.4g} ({row['predicted_stderr'] / sd:.3f} x)")
+    ratio_mc = rows[1]["mc_std"] / rows[0]["mc_std"]
+    ratio_unc = ratio_mc * math.hypot(rows[0]["mc_std_unc"] / rows[0]["mc_std"],
+                                      rows[1]["mc_std_unc"] / rows[1]["mc_std"])
+    print(f"stderr ratio design / seed 000: predicted {prev['ratio_predicted']:.3f}, Monte Carlo {ratio_mc:.3f} "
+          f"+/- {ratio_unc:.3f}")
+    gj.atomic_write_json({**prev, "rows": rows, "draws": draws, "ratio_mc": ratio_mc, "ratio_mc_unc": ratio_unc},
+                         out)
 
 
 SEEDS = 16
@@ -136,8 +184,11 @@ def detections(out=None):
 if __name__ == "__main__":
     what = sys.argv[1] if len(sys.argv) > 1 else ""
     if what == "sf":
-        scale_factor()
+        scale_factor(int(sys.argv[2]) if len(sys.argv) > 2 else None, sys.argv[3] if len(sys.argv) > 3 else None)
+    elif what == "more":
+        more_monte_carlo(int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], sys.argv[5])
     elif what == "detection":
         detections(sys.argv[2] if len(sys.argv) > 2 else None)
     else:
-        sys.exit("usage: python experiments/plan_validation.py sf | detection [OUT.json]")
+        sys.exit("usage: python experiments/plan_validation.py sf [DEVICES [OUT.json]] | more SEED DEVICES "
+                 "PREVIOUS.json OUT.json | detection [OUT.json]")

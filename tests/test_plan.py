@@ -9,8 +9,8 @@ from _virtual_rate_sweep import AbstractRateTableWithVirtualRate
 from scipy.stats import chi2 as scipy_chi2, ncx2
 
 import gyrojax as gj
-from gyrojax._plan.experiment import NoiseLevel, weighted_rows
-from gyrojax._plan.plan import _kept, _reduce, _residual_chi2
+from gyrojax._plan.experiment import NoiseLevel, weighted_rows, window_correlation
+from gyrojax._plan.plan import _kept, _reduce, _residual_chi2, _run_info, _sf_variance
 from gyrojax._plan.power import power, required_noncentrality
 from gyrojax._stats import chi2_isf, ncx2_sf
 from gyrojax.cli import main
@@ -138,6 +138,45 @@ def test_a_registered_sweep_kind_is_a_candidate_with_its_own_minutes_and_noise()
     assert exps["dac"].sigmas(level) == pytest.approx(np.full(22, 1e-5))
 
 
+def test_relative_noise_kinds_take_their_fraction_of_the_predicted_reading():
+    exps = {e.name: e for e in gj.default_experiments(gj.preset("paper-qmg"))}
+    level = NoiseLevel(lsb_per_dps=1000.0, scale=2.0, voltmeter_sigma_v=1e-5)
+    reading = np.linspace(0.9, 1.1, 7)
+    # 1 ppm of the AGC registers' reading, sqrt(2) x 10 ppm of the branch ratio, not scaled by the rate noise
+    assert exps["drive_amplitude"].sigmas(level, 4.0e6 * reading) == pytest.approx(4.0 * reading, rel=1e-12)
+    assert exps["drive_frequency"].sigmas(level, 2.0e4 * reading) == pytest.approx(0.02 * reading, rel=1e-12)
+    branch = exps["branch_ratio"]
+    ratio = np.linspace(0.999, 1.001, branch.points)
+    assert branch.sigmas(level, ratio) == pytest.approx(np.sqrt(2.0) * 1e-5 * ratio, rel=1e-12)
+    with pytest.raises(ValueError, match="relative_sigma with predicted outputs"):
+        branch.sigmas(level)
+
+
+def test_window_correlation_matches_the_simulated_point_noise():
+    noise = gj.RateNoise()
+    corr = window_correlation(noise, 4, 120.0)
+    _, x = noise.sample_point_means(np.random.default_rng(5), (40000,), 4, 120.0)
+    # neighbours share 0.1225 of the variance through the 30 s wander (x = T / tau = 4); two apart e^-4 of it
+    assert corr[0, 1] == pytest.approx(0.12251, abs=1e-5)
+    assert corr[0, 2] == pytest.approx(corr[0, 1] * np.exp(-4.0), rel=1e-12)
+    assert np.allclose(np.corrcoef(x.T), corr, atol=0.012)
+    assert np.allclose(np.diag(corr), 1.0)
+
+
+def test_sandwich_variance_of_a_slope_under_correlated_noise():
+    # one run of y = b + s x with a fitted bias: the planner's variance with and without the noise's
+    # correlation against the weighted least-squares slope's exact variance
+    x = np.linspace(-1.0, 1.0, 5)
+    rows, sig = x[:, None], np.full(5, 2.0)
+    corr = np.array([[0.3 ** abs(i - j) for j in range(5)] for i in range(5)])
+    info, meat = _run_info(rows, sig, list(range(5)), lambda n: corr)
+    xc = x - x.mean()
+    c = xc / np.sum(xc**2)  # the slope's weights
+    exact = float(c @ (4.0 * corr) @ c)
+    assert _sf_variance(info, np.ones(1), [0], 0.0, meat) == pytest.approx(exact, rel=1e-12)
+    assert _sf_variance(info, np.ones(1), [0], 0.0) == pytest.approx(4.0 / np.sum(xc**2), rel=1e-12)
+
+
 def test_plan_rejects_bad_arguments():
     with pytest.raises(ValueError, match="budget_min must be at least one run of seed 000's protocol"):
         gj.plan(None, budget_min=30.0)
@@ -163,9 +202,13 @@ def test_plan_on_a_rate_table(tmp_path):
     sfd = plan.scale_factor
     # the scale factor's stderr on the data given is the fit's own (its covariance and gradient)
     assert sfd.data_stderr[0] == pytest.approx(float(fit.scale_factor_stderr[0]), rel=1e-6)
-    # three runs of the seed-000 protocol against the two given: sqrt(2/3) of the stderr
+    # three runs of the seed-000 protocol against the two given: sqrt(2/3) of the stderr, times 1.06 for the
+    # bias wander that neighbouring points share (the fit's own stderr weighs them as independent)
     assert sfd.seed000_runs == 3
-    assert sfd.seed000_stderr[0] == pytest.approx(sfd.data_stderr[0] * np.sqrt(2 / 3), rel=0.02)
+    assert sfd.seed000_stderr[0] / (sfd.data_stderr[0] * np.sqrt(2 / 3)) == pytest.approx(1.0595, abs=0.005)
+    # the +/-200 deg/s design: the shared wander cancels in each pair's difference
+    assert sfd.rates_dps == (-200.0, 200.0) and sfd.rate_runs == 27
+    assert sfd.ratio == pytest.approx(0.339, abs=0.005)
     assert sfd.minutes <= sfd.budget_min + 1e-9 and sfd.ratio < 1.0
     dac = plan.candidate("dac_inl")
     assert dac.testable and dac.power > 0.99 and not dac.recommended
@@ -194,3 +237,46 @@ def test_diagnose_max_effects_is_a_count():
     for bad in (-1, 1.5, True):
         with pytest.raises(ValueError, match="max_effects must be an integer >= 0"):
             gj.diagnose(None, "paper-qmg", max_effects=bad)
+
+
+SMALL = gj.Protocol(rates_dps=(-200.0, -50.0, -5.0, 5.0, 50.0, 200.0),
+                    vcf_rates_dps=(-200.0, -50.0, -5.0, 5.0, 50.0, 200.0))
+
+
+def _join(table, extra, runs_before):
+    cols = {}
+    for c in dict.fromkeys(table.column_names + extra.column_names):
+        a = np.asarray(table[c]) if c in table else np.full(len(table), np.nan)
+        b = np.asarray(extra[c]) if c in extra else np.full(len(extra), np.nan)
+        cols[c] = np.concatenate([a, b + runs_before if c == "run" else b])
+    return gj.Table.from_columns(cols)
+
+
+@pytest.mark.slow
+def test_a_hidden_quadrature_phase_is_found_with_the_recommended_run():
+    """A row of the confusion table with the planner (experiments/diagnose_confusion.py --plan), on one device:
+    the standard sweeps cannot test a hidden quadrature_phase; the plan on their baseline recommends the
+    quadrature injection; simulated for the same device (another noise seed) and added, the diagnosis selects
+    it, its test sees about the chi2 the plan promised, and the final fit is within the chi2 band."""
+    gyro = gj.add_effect(gj.paper_qmg(), gj.QuadraturePhase.typical(1.0))
+    table = gj.simulate_table(gyro, runs=2, protocol=SMALL, seed=3, progress=False,
+                              sweeps=("rate_table", "vcf_static"))
+    cands = ("quadrature_phase", "damping_coupling")
+    d = gj.diagnose(table, "paper-qmg", candidates=cands, progress=False)
+    assert "quadrature_phase" in d.untestable and not d.selected
+    exps = tuple(e for e in gj.default_experiments(gj.paper_qmg(), SMALL)
+                 if e.name in ("rate_table", "vcf_static", "quadrature_injection"))
+    p = gj.plan(fit=d.baseline, experiments=exps, max_repeats=2, protocol=SMALL, progress=False)
+    c = p.candidate("quadrature_phase")
+    assert not c.testable and c.expected_chi2 < 1e-3
+    assert [r.experiment.name for r in c.recommended] == ["quadrature_injection"]
+    runs = c.recommended[0].runs
+    # the run biases take damping_coupling up whatever is added: no recommendation, a reason
+    assert not p.candidate("damping_coupling").recommended
+    extra = gj.simulate_table(gyro, runs=runs, protocol=SMALL, seed=4, progress=False,
+                              sweeps=("quadrature_injection",))
+    d2 = gj.diagnose(_join(table, extra, 2), "paper-qmg", candidates=cands, progress=False)
+    assert d2.selected == ("quadrature_phase",)
+    assert 0.7 <= d2.final.chi2_red_total <= 1.4
+    seen = next(s for s in d2.ranking if s.effect == "quadrature_phase")
+    assert 0.5 <= seen.typical_chi2 / c.recommended_chi2 <= 2.0, (seen.typical_chi2, c.recommended_chi2)

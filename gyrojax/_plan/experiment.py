@@ -3,7 +3,8 @@
 Everything the planner knows about an experiment is here: its name, its sweep kind, its minutes of test time,
 the noise-free outputs of its points for a device (the kind's own measurement model, `AbstractSweep.predict`,
 shared with simulation and fitting; the steady kinds settled in one call) and the standard uncertainty of each
-point (`AbstractSweep.point_sigmas`). The default candidates are the registered sweep kinds, so a kind added
+point (`AbstractSweep.point_sigmas`, or `AbstractSweep.relative_sigma` times the predicted reading). The
+default candidates are the registered sweep kinds, so a kind added
 with `gyrojax.register_sweep` is a candidate without changing the planner.
 """
 
@@ -23,7 +24,7 @@ from .._sweeps.base import AbstractSweep
 from .._sweeps.protocol import Protocol
 from .._sweeps.rate_table import RateTable
 from .._sweeps.registry import SWEEP_KINDS
-from .._sweeps.steady import AbstractSteadySweep, steady_points
+from .._sweeps.steady import AbstractSettledSweep, AbstractSteadySweep, steady_points
 
 
 CHAMBER_STEP_K = 20.0
@@ -109,19 +110,25 @@ class CandidateExperiment(eqx.Module):
         return {"sweep": self.name, "kind": self.kind, "settings": dict(self.settings), "minutes": self.minutes,
                 "points": self.points}
 
-    def sigmas(self, noise: "NoiseLevel") -> np.ndarray:
+    def sigmas(self, noise: "NoiseLevel", outputs=None) -> np.ndarray:
         """Standard uncertainty of each point for one device whose noise is `noise`: the kind's own noise
-        model (`AbstractSweep.point_sigmas`), rate noise scaled to the data's level; else the median sigma of
-        this kind's points in the data. Raises a `ValueError` when neither gives one."""
+        model (`AbstractSweep.point_sigmas`), rate noise scaled to the data's level; else, for a kind whose
+        noise is relative to its reading (`AbstractSweep.relative_sigma`), that fraction of the predicted
+        `outputs` (one per point); else the median sigma of this kind's points in the data. Raises a
+        `ValueError` when none gives one."""
         sigma = self.sweep.point_sigmas(np.asarray(self.inputs), self.protocol, noise.rate_noise,
                                         noise.lsb_per_dps, noise.voltmeter_sigma_v)
+        relative = self.sweep.relative_sigma(self.protocol)
         if sigma is not None:
             sigma = np.asarray(sigma, dtype=float) * (noise.scale if self.sweep.rate_noise else 1.0)
+        elif relative is not None and outputs is not None:
+            sigma = float(relative) * np.abs(np.asarray(outputs, dtype=float))
         elif self.kind in noise.measured:
             sigma = np.full(self.points, noise.measured[self.kind])
         else:
             raise ValueError(f"experiment {self.name!r}: the sweep kind {self.kind!r} has no noise model "
-                             "(AbstractSweep.point_sigmas) and the data have no points of it to take one from.")
+                             "(AbstractSweep.point_sigmas, or relative_sigma with predicted outputs) and the data "
+                             "have no points of it to take one from.")
         if sigma.shape != (self.points,) or not np.all(sigma > 0):
             raise ValueError(f"experiment {self.name!r}: point sigmas must be > 0, one per point; got {sigma!r}.")
         return sigma
@@ -141,20 +148,20 @@ class NoiseLevel(eqx.Module):
 
 def predict(gyro: Gyroscope, experiments, sf_temperature=None, tier=Steady()):
     """Noise-free outputs of every point of `experiments` (one device) through each kind's measurement model,
-    the steady kinds' points settled in one call of the tier (one compiled settle); with `sf_temperature`
-    (deg C) also the zero-rate scale factor there (LSB per deg/s, the central difference identification
+    the settled kinds' points (steady and set-point) in one call of the tier (one compiled settle); with
+    `sf_temperature` (deg C) also the zero-rate scale factor there (LSB per deg/s, the central difference identification
     reports).
 
     **Returns:** `(outputs per experiment, scale factor or None)`.
     """
-    steady = [e for e in experiments if isinstance(e.sweep, AbstractSteadySweep)]
+    steady = [e for e in experiments if isinstance(e.sweep, AbstractSettledSweep)]
     requests = [(e.sweep, jnp.asarray(e.inputs), jnp.asarray(e.temperatures_c), jnp.asarray(e.times_s))
                 for e in steady]
     if sf_temperature is not None:
         requests.append((RateTable(), jnp.asarray([-SF_STEP_DPS, SF_STEP_DPS]),
                          jnp.broadcast_to(jnp.asarray(sf_temperature, dtype=float), (2,)), None))
     settled = steady_points(gyro, requests, tier) if requests else ()
-    by_name = {e.name: s.rate for e, s in zip(steady, settled)}
+    by_name = {e.name: e.sweep.read(s)[0] for e, s in zip(steady, settled)}
     out = []
     for e in experiments:
         if e.name in by_name:
@@ -197,6 +204,19 @@ def jacobians(model, entries, experiments, sf_temperature, tier=Steady()):
                                       jnp.asarray(sf_temperature, dtype=float), tier)
     return ((tuple(np.asarray(j) for j in jac), np.asarray(g)),
             (tuple(np.asarray(p) for p in pred), np.asarray(sf)))
+
+
+def window_correlation(noise: RateNoise, n: int, dwell_s: float) -> np.ndarray:
+    """Correlation matrix (n, n) of the noise of `n` settled points averaged over back-to-back windows of
+    `dwell_s`, about the run's turn-on bias, as the simulator draws it (`RateNoise.sample_point_means`): the
+    white part is independent, the Gauss-Markov wander's window means of points k apart share
+    q^2 (tau / T)^2 (1 - exp(-T / tau))^2 exp(-(k - 1) T / tau)."""
+    q, tau = noise.wander_sigma_dps, noise.bias_correlation_s
+    x = dwell_s / tau
+    var = noise.point_sigma_dps(dwell_s) ** 2
+    lag = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    cov = q**2 * (tau / dwell_s) ** 2 * math.expm1(-x) ** 2 * np.exp(-x * np.maximum(lag - 1, 0))
+    return np.where(lag == 0, 1.0, cov / var)
 
 
 def weighted_rows(experiment: CandidateExperiment, jac: np.ndarray, sigmas: np.ndarray) -> np.ndarray:

@@ -22,6 +22,7 @@ budget greedily (largest variance reduction per minute), for a number of rate-ta
 keeps the best; seed 000's 22-rate protocol at equal time is the reference.
 """
 
+import functools
 import itertools
 import math
 
@@ -38,7 +39,14 @@ from .._noise import RateNoise
 from .._parameters import DEFAULT_FREE, Model, as_model, zero_effect
 from .._progress import as_progress
 from .._sweeps.protocol import Protocol
-from .experiment import CandidateExperiment, default_experiments, jacobians, noise_levels, weighted_rows
+from .experiment import (
+    CandidateExperiment,
+    default_experiments,
+    jacobians,
+    noise_levels,
+    weighted_rows,
+    window_correlation,
+)
 from .power import power, required_noncentrality
 
 
@@ -148,7 +156,7 @@ class Plan(eqx.Module):
     experiments considered, the baseline fit, and how the search was made."""
 
     candidates: tuple  # CandidatePlan
-    scale_factor: ScaleFactorDesign
+    scale_factor: ScaleFactorDesign | None  # None when plan was told not to design it
     experiments: tuple  # CandidateExperiment
     baseline: Fit  # the fit whose Jacobians the plan used (with every candidate at zero)
     alpha: float = eqx.field(static=True)
@@ -166,7 +174,7 @@ class Plan(eqx.Module):
     def to_json(self) -> dict:
         """The plan as JSON (numbers that are not finite, e.g. an undetermined stderr, are null)."""
         return _finite({"candidates": {c.effect: c.to_json() for c in self.candidates},
-                "scale_factor": self.scale_factor.to_json(),
+                "scale_factor": None if self.scale_factor is None else self.scale_factor.to_json(),
                 "experiments": {e.name: e.to_json() for e in self.experiments},
                 "alpha": self.alpha, "target_power": self.target_power, "max_repeats": self.max_repeats,
                 "search": self.search,
@@ -191,10 +199,12 @@ class Plan(eqx.Module):
             else:
                 lines.append(f"  {'':<20} {c.reason}")
         s = self.scale_factor
+        if s is None:
+            return "\n".join(lines)
         mean = float(np.mean(s.stderr))
         ref = float(np.mean(s.seed000_stderr))
-        lines += [f"scale factor in {s.budget_min:g} min (per device, LSB per deg/s, mean over the lot; assumes "
-                  "independent point noise at the data's output_sigma):",
+        lines += [f"scale factor in {s.budget_min:g} min (per device, LSB per deg/s, mean over the lot; point "
+                  "noise at the data's output_sigma, neighbours sharing the bias wander):",
                   f"  on the data given: stderr {np.mean(s.data_stderr):.4g} (SF {np.mean(s.scale_factor):.6g})",
                   f"  seed 000's 22 rates x {s.seed000_runs} run(s) ({s.seed000_minutes:.0f} min): stderr {ref:.4g}",
                   f"  design: rates {list(s.rates_dps)} x {s.rate_runs} run(s)"
@@ -320,10 +330,12 @@ def _data_rows(fit: Fit) -> int:
     return int(sum(int(np.prod(fit.data.blocks[s].inputs.shape[1:])) for s in fit.data.sweeps))
 
 
-def _sf_variance(info, g, cols, threshold):
+def _sf_variance(info, g, cols, threshold, meat=None):
     """Variance of the scale factor g^T I^+ g over the columns `cols` a fit of this information would free,
     and whether those determine it (its gradient's part along what the design cannot fix is below
-    `SF_HELD_TOL` standard errors). `info` is (param, param)."""
+    `SF_HELD_TOL` standard errors). `info` is (param, param). With `meat` (param, param: J^T R J, R the
+    standardised noise's correlation), the variance of the weighted least-squares estimate under correlated
+    noise, g^T I^+ meat I^+ g."""
     sub = info[np.ix_(cols, cols)]
     d = np.sqrt(np.maximum(np.diag(sub), 0.0))
     if not cols or np.any(d <= 0):
@@ -332,7 +344,11 @@ def _sf_variance(info, g, cols, threshold):
     keep = evals > evals.max() * 1e-12
     gs = g[cols] / d
     proj = evecs[:, keep].T @ gs
-    var = float(np.sum(proj**2 / evals[keep]))
+    if meat is None:
+        var = float(np.sum(proj**2 / evals[keep]))
+    else:
+        h = evecs[:, keep] @ (proj / evals[keep])  # I^+ g in the scaled coordinates
+        var = float(h @ (meat[np.ix_(cols, cols)] / np.outer(d, d)) @ h)
     # determined: the gradient lies in the span of what the data fix (singular values >= threshold)
     ev_all, vec_all = np.linalg.eigh(sub)
     weak = vec_all[:, np.sqrt(np.maximum(ev_all, 0.0)) < threshold]
@@ -343,7 +359,7 @@ def _sf_variance(info, g, cols, threshold):
 def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=None, experiments=None,
          budget_min: float | None = None, alpha: float = 0.01, target_power: float = 0.9, max_repeats: int = 3,
          protocol: Protocol = Protocol(), free=DEFAULT_FREE, identifiability_threshold: float = 1.0,
-         progress=True) -> Plan:
+         scale_factor: bool = True, progress=True) -> Plan:
     r"""Plan the measurements that make each candidate effect testable, and the scale factor's calibration.
 
     **Arguments:**
@@ -366,6 +382,8 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     - `protocol`: timing and inputs of the default experiments and of seed 000's reference.
     - `free`: the baseline's free parameters when it is fitted here.
     - `identifiability_threshold`: identification's threshold (what a joint fit would hold).
+    - `scale_factor`: False to plan the effects only (`Plan.scale_factor` is then None; the design's greedy
+      search is the slow part of a plan on a lot).
     - `progress`: as for `gyrojax.diagnose`.
 
     **Returns:** a `Plan`.
@@ -397,10 +415,11 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
         if not isinstance(e, CandidateExperiment):
             raise ValueError(f"experiments must be gyrojax.CandidateExperiment, got {type(e).__name__}.")
     if defaults:
-        # A kind with no noise model of its own (AbstractSweep.point_sigmas) is planned only where the data
-        # give its points' sigmas.
+        # A kind with no noise model of its own (AbstractSweep.point_sigmas, relative_sigma) is planned only
+        # where the data give its points' sigmas.
         dropped = [e.name for e in experiments if e.kind not in fit.data.blocks and e.sweep.point_sigmas(
-            np.asarray(e.inputs), protocol, RateNoise(), 1.0, 1.0) is None]
+            np.asarray(e.inputs), protocol, RateNoise(), 1.0, 1.0) is None
+            and e.sweep.relative_sigma(protocol) is None]
         if dropped:
             say(f"left out (no noise model, none of their points in the data): {', '.join(dropped)}")
         experiments = tuple(e for e in experiments if e.name not in dropped)
@@ -413,7 +432,7 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     say(f"Jacobians of {len(all_exps)} experiments' points ({sum(e.points for e in all_exps)} points per device) "
         f"at the baseline, {len(fit.devices)} device(s)")
     t_sf = _sf_temperature(fit.data)
-    (jac_e, g), (_, sf) = jacobians(fit.model, fit.entries, all_exps, t_sf)
+    (jac_e, g), (pred_e, sf) = jacobians(fit.model, fit.entries, all_exps, t_sf)
     noise = noise_levels(fit.data, sf, protocol)
     n_dev = len(fit.devices)
     jac0 = np.asarray(fit.jacobian, dtype=float)
@@ -424,7 +443,7 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     pool = sorted(set(phys) | {i for i in np.nonzero(free_mask)[0] if i not in held_cands})
     base_free = [int(i) for i in np.nonzero(free_mask)[0]]
     r0 = [_reduce(jac0[d]) for d in range(n_dev)]
-    rk = [[_reduce(weighted_rows(e, jac_e[k][d], e.sigmas(noise[d]))) for d in range(n_dev)]
+    rk = [[_reduce(weighted_rows(e, jac_e[k][d], e.sigmas(noise[d], pred_e[k][d]))) for d in range(n_dev)]
           for k, e in enumerate(experiments)]
     say(f"expected chi2 of {len(candidates)} candidate effects on the data given and with every combination of "
         f"0..{max_repeats} runs of {len(experiments)} experiments")
@@ -519,8 +538,8 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
         say(f"{c}: now chi2 {now:.3g} (power {p_now:.2f})" + ("" if testable else (
             f"; add {' + '.join(f'{r.runs} x {r.experiment.name}' for r in recommended)}" if recommended
             else "; not reachable with these experiments")))
-    design = _sf_design(fit, jac0, g, sf, all_exps, jac_e, noise, pool, budget_min, protocol,
-                        identifiability_threshold, say)
+    design = None if not scale_factor else _sf_design(fit, jac0, g, sf, all_exps, jac_e, noise, pool, budget_min,
+                                                      protocol, identifiability_threshold, say)
     return Plan(tuple(plans), design, experiments, fit, float(alpha), float(target_power), max_repeats, fit.devices,
                 search)
 
@@ -533,13 +552,15 @@ def _columns(fit: Fit):
     return out
 
 
-def _run_info(rows_j, sig, subset):
+def _run_info(rows_j, sig, subset, corr=None):
     """Fisher information of one run at the points `subset` (their Jacobian rows and sigmas), its bias
-    projected out."""
+    projected out, and the matching J^T R J of its noise's correlation `corr` (a function of the number of
+    points, applied back to back in the listed order; None: independent points)."""
     w = 1.0 / sig[subset] ** 2
     mean = (w @ rows_j[subset]) / np.sum(w)
     jp = (rows_j[subset] - mean) / sig[subset, None]
-    return jp.T @ jp
+    info = jp.T @ jp
+    return info, (info if corr is None else jp.T @ corr(len(subset)) @ jp)
 
 
 def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, threshold, say):
@@ -559,15 +580,21 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
         rows["vcf_static"] = [jac_e[by_name["vcf_static"]][d] for d in range(n_dev)]
         sigs["vcf_static"] = [v.sigmas(noise[d]) for d in range(n_dev)]
     cols = list(pool)
+    # Both kinds' points are settled means over back-to-back windows of the protocol's dwell: their noise
+    # shares the bias wander between neighbours (window_correlation); the fit weighs them as independent.
+    model = noise[0].rate_noise
+    corrs = {k: functools.lru_cache(maxsize=None)(
+        lambda n: window_correlation(model, n, protocol.dwell_s)) for k in levels}
+
+    def per_device(sets, runs, d):
+        return _per_device(prior, rows, sigs, sets, runs, g, cols, threshold, d, corrs)
 
     def variance(sets, runs):
-        return float(np.mean([_per_device(prior, rows, sigs, sets, runs, g, cols, threshold, d)
-                              for d in range(n_dev)]))
+        return float(np.mean([per_device(sets, runs, d) for d in range(n_dev)]))
 
     seed_runs = int(budget // ((protocol.warmup_s + len(protocol.rates_dps) * protocol.dwell_s) / 60.0))
     seed_sets = {"rate_table": tuple(range(len(levels["rate_table"])))}
-    seed_var = [_per_device(prior, rows, sigs, seed_sets, {"rate_table": seed_runs}, g, cols, threshold, d)
-                for d in range(n_dev)]
+    seed_var = [per_device(seed_sets, {"rate_table": seed_runs}, d) for d in range(n_dev)]
     best = None
     max_rate_runs = int(budget // (warm + 2 * dwell))
     kinds = list(levels)
@@ -615,7 +642,7 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
             if best is None or current < best[0]:
                 best = (current, dict(sets), dict(runs), used)
     _, sets, runs, used = best
-    stderr = [math.sqrt(_per_device(prior, rows, sigs, sets, runs, g, cols, threshold, d)) for d in range(n_dev)]
+    stderr = [math.sqrt(per_device(sets, runs, d)) for d in range(n_dev)]
     data_free = [int(i) for i in np.nonzero(np.asarray(fit.free))[0]]
     data_se = []
     for d in range(n_dev):
@@ -636,10 +663,12 @@ def _sqrt_info(info):
     return (evecs * np.sqrt(np.maximum(evals, 0.0))).T
 
 
-def _per_device(prior, rows, sigs, sets, runs, g, cols, threshold, d):
+def _per_device(prior, rows, sigs, sets, runs, g, cols, threshold, d, corrs=None):
     info = prior[d].copy()
+    meat = prior[d].copy()
     for kind, idx in sets.items():
         if runs.get(kind) and len(idx) >= 2:
-            info = info + runs[kind] * _run_info(rows[kind][d], sigs[kind][d], list(idx))
+            a, b = _run_info(rows[kind][d], sigs[kind][d], list(idx), (corrs or {}).get(kind))
+            info, meat = info + runs[kind] * a, meat + runs[kind] * b
     kept = _kept([_sqrt_info(info)], cols, threshold)
-    return _sf_variance(info, g[d], kept, threshold)
+    return _sf_variance(info, g[d], kept, threshold, meat if corrs else None)

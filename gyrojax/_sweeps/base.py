@@ -176,6 +176,12 @@ class AbstractSweep(eqx.Module):
         sigma = noise.point_sigma_dps(self.dwell_s(protocol)) * abs(float(lsb_per_dps))
         return np.full(np.shape(inputs), sigma)
 
+    def relative_sigma(self, protocol: "Protocol") -> float | None:
+        """Standard uncertainty of each point relative to its reading (a ratio, e.g. 1e-6 for 1 ppm), for a kind
+        whose noise is a fraction of what it reads (`point_sigmas` gives None for it): a planner multiplies it
+        by the predicted reading. Default None (not relative)."""
+        return None
+
 
 def at_temperature(gyro: Gyroscope, temperature) -> Gyroscope:
     """`gyro` held at `temperature` (deg C); NaN keeps the device's own temperature at power-on."""

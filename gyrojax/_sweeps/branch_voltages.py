@@ -133,6 +133,9 @@ class BranchRatio(AbstractSweep):
         ratio, settled = branch_ratio_points(gyro, inputs, temperatures, times, tier)
         return ratio, (settled.result != RESULTS.successful) | ~jnp.isfinite(ratio)
 
+    def relative_sigma(self, protocol: "Protocol") -> float:
+        return float(np.sqrt(2.0) * BRANCH_SIGMA_PPM * 1e-6)
+
     def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
         inputs = campaign.applied(self, campaign.protocol.inputs(self))
         temps, times, full = campaign.temperatures(self), campaign.times(self), campaign.shape(self)

@@ -46,6 +46,9 @@ class DriveAmplitude(AbstractSetpointSweep):
     def reading(self, points: SetpointReading):
         return points.amplitude_lsb
 
+    def relative_sigma(self, protocol: "Protocol") -> float:
+        return float(AMPLITUDE_SIGMA_PPM * 1e-6)
+
     def add_noise(self, out: np.ndarray, campaign: "LotCampaign") -> tuple[np.ndarray, np.ndarray]:
         sigma = AMPLITUDE_SIGMA_PPM * 1e-6 * np.abs(out)
         return out + sigma * campaign.rng(self).standard_normal(out.shape), sigma

@@ -42,6 +42,9 @@ class DriveFrequency(AbstractSetpointSweep):
     def reading(self, points: SetpointReading):
         return points.frequency_hz
 
+    def relative_sigma(self, protocol: "Protocol") -> float:
+        return float(FREQUENCY_SIGMA_PPM * 1e-6)
+
     def add_noise(self, out: np.ndarray, campaign: "LotCampaign") -> tuple[np.ndarray, np.ndarray]:
         sigma = FREQUENCY_SIGMA_PPM * 1e-6 * np.abs(out)
         return out + sigma * campaign.rng(self).standard_normal(out.shape), sigma
