@@ -26,6 +26,7 @@ from gyrojax._fitdata import fit_data
 from gyrojax._identify import EXIT_CODES, HELD_LABEL, chi2_p_value
 from gyrojax._identify.identifiability import sf_determinacy
 from gyrojax._identify.noise import contrasts, noise_scales
+from gyrojax._identify.plausibility import check_signs
 
 
 slow = pytest.mark.slow
@@ -454,3 +455,19 @@ def test_the_cli_exit_code_says_whether_the_result_is_a_measurement(columns, tmp
     assert main(["identify", str(one)]) == 4
     captured = capsys.readouterr()
     assert "SF NOT DETERMINED" in captured.out and "not determined" in captured.err
+
+
+def test_sign_check_needs_a_model_slope_clear_of_zero():
+    """A flipped sign is named only where the model predicts a slope the data could see: against a model slope
+    within noise of zero (the drive frequency against the AGC set-point without a cubic spring) the data's
+    clear slope is the effect to be found, not a flipped convention. No fit: the check alone."""
+    x = np.linspace(-1.0, 1.0, 7)
+    rows = {"device": ["d0"] * 7, "run": [0] * 7, "sweep": ["rate_table"] * 7, "input": x,
+            "output": -3.0 * x, "output_sigma": np.full(7, 0.01)}
+    data = fit_data(gj.Table(rows, source="signs.csv"))
+    flat = {"rate_table": jnp.asarray(1e-4 * x)[None, None, :]}  # 1e-4 per unit: 0.03 standard errors
+    check_signs(data, flat, "paper-qmg")  # no error
+    clear = {"rate_table": jnp.asarray(3.0 * x)[None, None, :]}
+    with pytest.raises(ValueError, match=r"signs\.csv: the outputs change with the input with the opposite sign .* "
+                                         r"device 'd0', run 0: slope -3 \+/- .*, the model's 3"):
+        check_signs(data, clear, "paper-qmg")

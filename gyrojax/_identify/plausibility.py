@@ -66,7 +66,8 @@ def _slope(x, y, w):
 
 def check_signs(data: FitData, predictions, model_name: str):
     """Raise a ValueError naming each device and run whose outputs run against the input with the opposite
-    sign of the start model's predictions (`_FLIP_SIGMAS`): a sign convention of the data (output, or
+    sign of the start model's predictions, both slopes at more than `_FLIP_SIGMAS` standard errors of the
+    data's slope from zero: a sign convention of the data (output, or
     input) flipped against the model's, which no positive gain or factor of the model can fit."""
     bad = []
     for s in data.sweeps:
@@ -85,8 +86,11 @@ def check_signs(data: FitData, predictions, model_name: str):
             b, known, scatter = _slope(x[d, k][sel], y[d, k][sel], w)
             b_model, _, _ = _slope(x[d, k][sel], pred[d, k][sel], w)
             se = known if data.weighted else scatter
+            # Both slopes clear of zero: a model that predicts (almost) no slope, like the drive frequency
+            # against the AGC set-point of a device without a cubic spring, cannot say which sign is right;
+            # there the data's slope is the effect to be found, not a flipped convention.
             if (np.isfinite(b) and np.isfinite(b_model) and np.isfinite(se) and se > 0 and b * b_model < 0
-                    and abs(b) > _FLIP_SIGMAS * se):
+                    and abs(b) > _FLIP_SIGMAS * se and abs(b_model) > _FLIP_SIGMAS * se):
                 bad.append(f"sweep {s!r}, device {data.devices[d]!r}, run {runs[d][k]}: slope {b:.6g} +/- {se:.2g} "
                            f"per input unit, the model's {b_model:.6g}")
     if bad:
