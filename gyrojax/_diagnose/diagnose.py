@@ -23,7 +23,7 @@ from .solution import Diagnosis, Step
 
 def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alpha: float = 0.01,
              max_effects: int = 4, ambiguity: float = 0.95, min_typical_chi2: float = 1.0,
-             max_typical_multiple: float = MAX_TYPICAL_MULTIPLE, probes=PROBES, starts: int = 1,
+             max_typical_multiple: float = MAX_TYPICAL_MULTIPLE, probes=PROBES, start: MultiStart = MultiStart(),
              fit: Fit | None = None, progress=True) -> Diagnosis:
     r"""Compare `model` with `data`, rank every candidate effect, add the significant ones one at a time, and
     say where what is left lives.
@@ -44,6 +44,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     - `max_typical_multiple`: a candidate whose score implies a size beyond this many times its typical
       size is not confirmed (the reason says so).
     - `probes`: the generic shapes scored beside the candidates (`gyrojax.PROBES`).
+    - `start`: the starts of every fit (`gyrojax.MultiStart`, as for `identify`; default one start).
     - `fit`: a `gyrojax.Fit` of this data (from `identify`, or `gyrojax.load_fit`) to use as the baseline
       instead of fitting it again; its model replaces `model`, and its parameters are the refits' start.
     - `progress`: `True` (default) reports each step on standard error (fits, compiles, what was confirmed),
@@ -75,7 +76,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
 
     def fit_with(selected, evaluate_only=False):
         held = tuple(c for c in candidates if c not in selected)
-        return identify(full, weights["data"], free=free, hold=held, start=MultiStart(starts=starts),
+        return identify(full, weights["data"], free=free, hold=held, start=start,
                         evaluate_only=evaluate_only, estimate_noise=weights["estimate_noise"], progress=False)
 
     if fit is None:
