@@ -42,6 +42,13 @@ def _steady(gyro, blocks, tier, sf_temperature=None):
     call of the tier: the settled points per block, and the scale factor (LSB per deg/s) or None."""
     requests = [(sweep_kind(sweep), jnp.ravel(b.inputs), jnp.ravel(b.temperatures),
                  None if b.times is None else jnp.ravel(b.times)) for sweep, b in blocks.items()]
+    return settle_with_scale_factor(gyro, requests, tier, sf_temperature)
+
+
+def settle_with_scale_factor(gyro, requests, tier, sf_temperature=None):
+    """`steady_points` of `requests` and, with `sf_temperature` (deg C), the zero-rate scale factor's two
+    points in the same call: the settled points per request, and the scale factor (LSB per deg/s) or None."""
+    requests = list(requests)
     if sf_temperature is not None:
         requests.append((RateTable(), jnp.asarray([-SF_STEP_DPS, SF_STEP_DPS]),
                          jnp.broadcast_to(jnp.asarray(sf_temperature, dtype=float), (2,)), None))

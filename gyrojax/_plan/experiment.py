@@ -18,13 +18,12 @@ import numpy as np
 from .._gyroscope import Gyroscope
 from .._noise import DAC_VOLTMETER_SIGMA_V, RateNoise
 from .._parameters import apply_u, read_values
-from .._residuals import SF_STEP_DPS
+from .._residuals import settle_with_scale_factor
 from .._simulate.tiers import Steady
 from .._sweeps.base import AbstractSweep
 from .._sweeps.protocol import Protocol
-from .._sweeps.rate_table import RateTable
 from .._sweeps.registry import SWEEP_KINDS
-from .._sweeps.steady import AbstractSettledSweep, AbstractSteadySweep, steady_points
+from .._sweeps.steady import AbstractSettledSweep, AbstractSteadySweep
 
 
 CHAMBER_STEP_K = 20.0
@@ -157,10 +156,8 @@ def predict(gyro: Gyroscope, experiments, sf_temperature=None, tier=Steady()):
     steady = [e for e in experiments if isinstance(e.sweep, AbstractSettledSweep)]
     requests = [(e.sweep, jnp.asarray(e.inputs), jnp.asarray(e.temperatures_c), jnp.asarray(e.times_s))
                 for e in steady]
-    if sf_temperature is not None:
-        requests.append((RateTable(), jnp.asarray([-SF_STEP_DPS, SF_STEP_DPS]),
-                         jnp.broadcast_to(jnp.asarray(sf_temperature, dtype=float), (2,)), None))
-    settled = steady_points(gyro, requests, tier) if requests else ()
+    settled, sf = (settle_with_scale_factor(gyro, requests, tier, sf_temperature)
+                   if requests or sf_temperature is not None else ((), None))
     by_name = {e.name: e.sweep.read(s)[0] for e, s in zip(steady, settled)}
     out = []
     for e in experiments:
@@ -169,10 +166,6 @@ def predict(gyro: Gyroscope, experiments, sf_temperature=None, tier=Steady()):
         else:
             out.append(e.sweep.predict(gyro, jnp.asarray(e.inputs), jnp.asarray(e.temperatures_c),
                                        jnp.asarray(e.times_s), tier)[0])
-    sf = None
-    if sf_temperature is not None:
-        step = settled[-1].rate
-        sf = (step[1] - step[0]) / (2.0 * SF_STEP_DPS)
     return tuple(out), sf
 
 
