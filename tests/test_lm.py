@@ -55,3 +55,29 @@ def test_same_path_as_optimistix_away_from_round_off():
                            max_steps=200)
     assert int(a.stats["num_steps"]) == int(b.stats["num_steps"])
     np.testing.assert_allclose(np.asarray(a.value), [1.0, 1.0], rtol=1e-9)
+
+
+def test_the_solve_reports_the_residuals_of_its_solution():
+    """identify's solve takes the residuals at the solution from the solver's state (no second evaluation of the
+    model in the compiled solve): they must be those of `sol.value`, also when the solve stops early on a
+    rejected step, and a solver that keeps only the loss (BFGS) evaluates them."""
+    from gyrojax._identify.lot import _final_residuals
+
+    def rosenbrock(y, _):
+        return jnp.stack([10 * (y[1] - y[0] ** 2), 1 - y[0]])
+
+    y0 = jnp.asarray([-1.2, 1.0])
+    solvers = (LevenbergMarquardt(1e-10, 1e-10, NORMAL), optx.GaussNewton(1e-10, 1e-10, linear_solver=NORMAL),
+               optx.BFGS(1e-10, 1e-10))
+    rejected = 0
+    for solver in solvers:
+        for max_steps in (1, 2, 3, 5, 8, 200):
+            sol = optx.least_squares(rosenbrock, solver, y0, max_steps=max_steps, throw=False)
+            kept = isinstance(getattr(sol.state, "f_info", None), optx.FunctionInfo.ResidualJac)
+            assert kept == (not isinstance(solver, optx.BFGS))
+            if kept:
+                rejected += int(sol.state.num_steps_since_acceptance > 0)
+            # equal up to the round-off of the same expression in another program (terms of ~10)
+            np.testing.assert_allclose(np.asarray(_final_residuals(sol, rosenbrock)),
+                                       np.asarray(rosenbrock(sol.value, None)), rtol=1e-14, atol=1e-13)
+    assert rejected > 0  # some solve above stopped on a rejected step
