@@ -199,7 +199,7 @@ def test_cli_plan_rejects_a_bad_budget(tmp_path, capsys):
 
 
 def _same_shapes(shift):
-    # one lot's experiments: the default ones' DAC words, VCF voltages and die temperatures follow its fitted device
+    # one lot's experiments: the default ones' DAC words and VCF voltages follow its fitted device
     return (gj.CandidateExperiment("rate_table", "rate_table", [-100.0 + shift, 0.0, 100.0], [25.0 + shift] * 3,
                                    [600.0, 720.0, 840.0], 10.0),
             gj.CandidateExperiment("dac", "dac", [-9000.0 - 100.0 * shift, 9000.0], [np.nan] * 2, [np.nan] * 2, 1.0))

@@ -197,9 +197,9 @@ def jacobians(model, entries, experiments, sf_temperature, tier=Steady()):
     """Derivatives of every point of `experiments`, and of the zero-rate scale factor at `sf_temperature`,
     with respect to the internal coordinates of `entries` at the model's values (one compiled call for the
     lot: a `Model` whose leaves have a leading device axis). The program depends on the experiments' sweep
-    kinds and point counts only, not on their inputs, temperatures and times (the DAC words and die
-    temperatures of the default experiments follow each lot's fitted device), so plans on lots of the same
-    shapes share it.
+    kinds and point counts only, not on their inputs, temperatures and times (the DAC words and VCF
+    voltages of the default experiments follow each lot's fitted device), so plans on lots of the same shapes
+    share it.
 
     **Returns:** `((jacobian per experiment (device, point, param), scale-factor gradient (device, param)),
     (outputs per experiment (device, point), scale factor (device,)))`.
