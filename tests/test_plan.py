@@ -3,13 +3,17 @@ scale-factor standard error against the fit's own covariance and the command's J
 
 import json
 
+import equinox as eqx
+import jax
 import numpy as np
 import pytest
 from _virtual_rate_sweep import AbstractRateTableWithVirtualRate
 from scipy.stats import chi2 as scipy_chi2, ncx2
 
 import gyrojax as gj
-from gyrojax._plan.experiment import NoiseLevel, weighted_rows, window_correlation
+from gyrojax._parameters import Model, batched, build_entries
+from gyrojax._plan import experiment as plan_experiment
+from gyrojax._plan.experiment import NoiseLevel, jacobians, predict, weighted_rows, window_correlation
 from gyrojax._plan.plan import _kept, _reduce, _residual_chi2, _run_info, _sf_variance
 from gyrojax._plan.power import power, required_noncentrality
 from gyrojax._stats import chi2_isf, ncx2_sf
@@ -192,6 +196,63 @@ def test_cli_plan_rejects_a_bad_budget(tmp_path, capsys):
     assert main(["plan", str(tmp_path / "x.csv"), "--budget-min", "-5"]) == 2
     assert "--budget-min expects minutes > 0" in capsys.readouterr().err
     assert main(["plan", str(tmp_path / "missing.csv")]) == 2
+
+
+def _same_shapes(shift):
+    # one lot's experiments: the default ones' DAC words and VCF voltages follow its fitted device
+    return (gj.CandidateExperiment("rate_table", "rate_table", [-100.0 + shift, 0.0, 100.0], [25.0 + shift] * 3,
+                                   [600.0, 720.0, 840.0], 10.0),
+            gj.CandidateExperiment("dac", "dac", [-9000.0 - 100.0 * shift, 9000.0], [np.nan] * 2, [np.nan] * 2, 1.0))
+
+
+def _lot_model():
+    model = batched(Model(gj.preset("paper-qmg")), 1)
+    return model, build_entries(model, ("k_vf", "vcf_gain"))
+
+
+def test_the_jacobians_program_is_keyed_by_shapes_not_by_the_experiments_numbers(monkeypatch):
+    # What the compiled Jacobians are keyed on (everything but the arrays) is the same for two lots' experiments.
+    class Called(Exception):
+        pass
+
+    seen = []
+
+    def record(*args):
+        seen.append(eqx.partition(args, eqx.is_array)[1])
+        raise Called
+
+    monkeypatch.setattr(plan_experiment, "_jacobians", record)
+    model, entries = _lot_model()
+    for shift in (0.0, 7.0):
+        with pytest.raises(Called):
+            jacobians(model, entries, _same_shapes(shift), [25.0 + shift])
+    (leaves_a, tree_a), (leaves_b, tree_b) = (jax.tree.flatten(x) for x in seen)
+    assert tree_a == tree_b and leaves_a == leaves_b
+
+
+@pytest.mark.slow
+def test_experiments_of_the_same_shapes_share_one_jacobian_program():
+    # A second lot of the same shapes traces nothing, and its predictions are its own points'.
+    model, entries = _lot_model()
+    traces = []
+
+    def listen(event, secs, **kw):
+        if event == "/jax/core/compile/jaxpr_trace_duration" and "_jacobians" in str(kw.get("fun_name")):
+            traces.append(secs)
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        jacobians(model, entries, _same_shapes(0.0), [25.0])
+        first = len(traces)
+        (jac, g), (pred, sf) = jacobians(model, entries, _same_shapes(7.0), [30.0])
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    assert first == 1 and len(traces) == 1
+    own, own_sf = predict(gj.preset("paper-qmg"), _same_shapes(7.0), 30.0)
+    assert pred[0][0] == pytest.approx(np.asarray(own[0]), rel=1e-9)
+    assert pred[1][0] == pytest.approx(np.asarray(own[1]), rel=1e-9)
+    assert sf[0] == pytest.approx(float(own_sf), rel=1e-9)
+    assert jac[0].shape == (1, 3, 2) and jac[1].shape == (1, 2, 2) and g.shape == (1, 2)
 
 
 @pytest.mark.slow

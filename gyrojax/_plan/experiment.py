@@ -153,31 +153,39 @@ def predict(gyro: Gyroscope, experiments, sf_temperature=None, tier=Steady()):
 
     **Returns:** `(outputs per experiment, scale factor or None)`.
     """
-    steady = [e for e in experiments if isinstance(e.sweep, AbstractSettledSweep)]
-    requests = [(e.sweep, jnp.asarray(e.inputs), jnp.asarray(e.temperatures_c), jnp.asarray(e.times_s))
-                for e in steady]
+    return _predict_points(gyro, tuple(e.sweep for e in experiments), _points(experiments), sf_temperature, tier)
+
+
+def _points(experiments) -> tuple:
+    """Each experiment's `(inputs, temperatures_c, times_s)` as arrays: the numbers a compiled prediction takes
+    as arguments, so that experiments of the same kinds and point counts share one program."""
+    return tuple((jnp.asarray(e.inputs), jnp.asarray(e.temperatures_c), jnp.asarray(e.times_s))
+                 for e in experiments)
+
+
+def _predict_points(gyro, sweeps, points, sf_temperature, tier):
+    """`predict` on the sweep kinds `sweeps` and their points `points` (one `(inputs, temperatures_c,
+    times_s)` per kind, as `_points` gives)."""
+    steady = [i for i, s in enumerate(sweeps) if isinstance(s, AbstractSettledSweep)]
+    requests = [(sweeps[i],) + tuple(points[i]) for i in steady]
     settled, sf = (settle_with_scale_factor(gyro, requests, tier, sf_temperature)
                    if requests or sf_temperature is not None else ((), None))
-    by_name = {e.name: e.sweep.read(s)[0] for e, s in zip(steady, settled)}
+    by_index = {i: sweeps[i].read(s)[0] for i, s in zip(steady, settled)}
     out = []
-    for e in experiments:
-        if e.name in by_name:
-            out.append(by_name[e.name])
-        else:
-            out.append(e.sweep.predict(gyro, jnp.asarray(e.inputs), jnp.asarray(e.temperatures_c),
-                                       jnp.asarray(e.times_s), tier)[0])
+    for i, (sweep, p) in enumerate(zip(sweeps, points)):
+        out.append(by_index[i] if i in by_index else sweep.predict(gyro, *p, tier)[0])
     return tuple(out), sf
 
 
 @eqx.filter_jit
-def _jacobians(model, entries, experiments, sf_temperature, tier):
+def _jacobians(model, entries, sweeps, points, sf_temperature, tier):
     def one(model_d, t_sf):
         start = read_values(model_d, entries)
         n = sum(e.size for e in entries)
 
         def outputs(u):
             gyro = apply_u(model_d, entries, start, u, jnp.zeros(0)).gyroscope()
-            preds, sf = predict(gyro, experiments, t_sf, tier)
+            preds, sf = _predict_points(gyro, sweeps, points, t_sf, tier)
             return (preds, sf), (preds, sf)
 
         return jax.jacfwd(outputs, has_aux=True)(jnp.zeros(n))
@@ -188,13 +196,16 @@ def _jacobians(model, entries, experiments, sf_temperature, tier):
 def jacobians(model, entries, experiments, sf_temperature, tier=Steady()):
     """Derivatives of every point of `experiments`, and of the zero-rate scale factor at `sf_temperature`,
     with respect to the internal coordinates of `entries` at the model's values (one compiled call for the
-    lot: a `Model` whose leaves have a leading device axis).
+    lot: a `Model` whose leaves have a leading device axis). The program depends on the experiments' sweep
+    kinds and point counts only, not on their inputs, temperatures and times (the DAC words and VCF
+    voltages of the default experiments follow each lot's fitted device), so plans on lots of the same shapes
+    share it.
 
     **Returns:** `((jacobian per experiment (device, point, param), scale-factor gradient (device, param)),
     (outputs per experiment (device, point), scale factor (device,)))`.
     """
-    (jac, g), (pred, sf) = _jacobians(model, tuple(entries), tuple(experiments),
-                                      jnp.asarray(sf_temperature, dtype=float), tier)
+    (jac, g), (pred, sf) = _jacobians(model, tuple(entries), tuple(e.sweep for e in experiments),
+                                      _points(experiments), jnp.asarray(sf_temperature, dtype=float), tier)
     return ((tuple(np.asarray(j) for j in jac), np.asarray(g)),
             (tuple(np.asarray(p) for p in pred), np.asarray(sf)))
 
