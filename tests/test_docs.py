@@ -33,5 +33,5 @@ def test_mkdocs_build_strict(tmp_path):
     api = (site / "api" / "identify" / "index.html").read_text(encoding="utf-8")
     assert 'id="gyrojax.identify"' in api
     for name in ("01_three_tiers", "02_identify_a_lot", "03_find_a_hidden_effect",
-                 "04_sensitivity_and_compensation"):
+                 "04_sensitivity_and_compensation", "05_plan_the_runs_that_reveal"):
         assert (site / "notebooks" / name / "index.html").is_file(), name
