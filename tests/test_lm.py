@@ -70,14 +70,14 @@ def test_the_solve_reports_the_residuals_of_its_solution():
     solvers = (LevenbergMarquardt(1e-10, 1e-10, NORMAL), optx.GaussNewton(1e-10, 1e-10, linear_solver=NORMAL),
                optx.BFGS(1e-10, 1e-10))
     rejected = 0
-    for solver in solvers:
-        for max_steps in (1, 2, 3, 5, 8, 200):
-            sol = optx.least_squares(rosenbrock, solver, y0, max_steps=max_steps, throw=False)
-            kept = isinstance(getattr(sol.state, "f_info", None), optx.FunctionInfo.ResidualJac)
-            assert kept == (not isinstance(solver, optx.BFGS))
-            if kept:
-                rejected += int(sol.state.num_steps_since_acceptance > 0)
-            # equal up to the round-off of the same expression in another program (terms of ~10)
-            np.testing.assert_allclose(np.asarray(_final_residuals(sol, rosenbrock)),
-                                       np.asarray(rosenbrock(sol.value, None)), rtol=1e-14, atol=1e-13)
+    # Levenberg-Marquardt's third step on Rosenbrock from (-1.2, 1) is rejected; each max_steps compiles anew.
+    for solver, max_steps in [(solvers[0], 3), (solvers[0], 200), (solvers[1], 200), (solvers[2], 200)]:
+        sol = optx.least_squares(rosenbrock, solver, y0, max_steps=max_steps, throw=False)
+        kept = isinstance(getattr(sol.state, "f_info", None), optx.FunctionInfo.ResidualJac)
+        assert kept == (not isinstance(solver, optx.BFGS))
+        if kept:
+            rejected += int(sol.state.num_steps_since_acceptance > 0)
+        # equal up to the round-off of the same expression in another program (terms of ~10)
+        np.testing.assert_allclose(np.asarray(_final_residuals(sol, rosenbrock)),
+                                   np.asarray(rosenbrock(sol.value, None)), rtol=1e-14, atol=1e-13)
     assert rejected > 0  # some solve above stopped on a rejected step
