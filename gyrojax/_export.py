@@ -229,6 +229,23 @@ def _describe_object(obj, out: list, active: set) -> None:
         raise _Unhashable(f"an object of type {type(obj).__module__}.{type(obj).__qualname__}")
 
 
+def _replaced() -> list[str]:
+    """gyrojax's module-level functions and classes that come from elsewhere than the versioned packages and
+    the standard library: a function swapped in at run time (a test's monkeypatch) changes traced programs
+    without changing any file of gyrojax."""
+    out = []
+    for module_name, module in list(sys.modules.items()):
+        if _package_root(module_name) != "gyrojax" or module is None:
+            continue
+        for attr, value in list(vars(module).items()):
+            if isinstance(value, (types.FunctionType, type)):
+                root = _package_root(getattr(value, "__module__", None) or "?")
+                if root not in _VERSIONED and root not in sys.stdlib_module_names:
+                    line = getattr(getattr(value, "__code__", None), "co_firstlineno", "")
+                    out.append(f"{module_name}.{attr}={_name(value)}:{line}")
+    return sorted(out)
+
+
 def _trace_context() -> str:
     """JAX's configuration that changes traced programs, without the (empty, top-level) axis environment."""
     parts = []
@@ -248,17 +265,18 @@ def program_key(name: str, args: tuple) -> str:
     """The key of program `name` called with `args` (a hex SHA-256); raises `_Unhashable` when some part of it
     cannot be described deterministically."""
     devices = jax.devices()
-    out = [name, repr(_versions()), _trace_context(), jax.default_backend(),
+    out = [name, repr(_versions()), _trace_context(), *_replaced(), jax.default_backend(),
            repr(sorted({d.device_kind for d in devices})), str(len(devices))]
     _describe(args, out, set())
     return hashlib.sha256("\n".join(out).encode()).hexdigest()
 
 
 def _folder() -> str | None:
+    """The compilation cache folder, or None when it is off."""
     cache = jax.config.jax_compilation_cache_dir
     if not cache or not jax.config.jax_enable_compilation_cache:
         return None
-    return os.path.join(cache, FOLDER)
+    return cache
 
 
 def _single_device(leaves) -> bool:
@@ -319,15 +337,18 @@ def _serialize(exported: export.Exported, key: str) -> bytes:
             "module_kept_var_idx": [int(i) for i in exported.module_kept_var_idx],
             "uses_global_constants": bool(exported.uses_global_constants)}
     text = json.dumps(meta, sort_keys=True).encode()
-    return (_MAGIC + key.encode() + b"\n" + str(len(text)).encode() + b"\n" + text
-            + bytes(exported.mlir_module_serialized))
+    body = str(len(text)).encode() + b"\n" + text + bytes(exported.mlir_module_serialized)
+    return _MAGIC + key.encode() + b"\n" + hashlib.sha256(body).hexdigest().encode() + b"\n" + body
 
 
 def _deserialize(data: bytes, key: str) -> export.Exported:
     header = _MAGIC + key.encode() + b"\n"
     if not data.startswith(header):
         raise ValueError("wrong header")
-    size, rest = data[len(header):].split(b"\n", 1)
+    digest, body = data[len(header):].split(b"\n", 1)
+    if hashlib.sha256(body).hexdigest().encode() != digest:
+        raise ValueError("damaged (its digest differs)")
+    size, rest = body.split(b"\n", 1)
     meta, module = json.loads(rest[:int(size)]), rest[int(size):]
     in_avals, out_avals = _avals_from(meta["in_avals"]), _avals_from(meta["out_avals"])
     n, m = len(in_avals), len(out_avals)
@@ -387,23 +408,24 @@ def _export(fn, static, treedef, leaves, path: str, key: str) -> Callable | None
     return jax.jit(exported.call)
 
 
-def _exported_call(name: str, fn, args) -> Callable | None:
-    """The jitted call of `fn`'s exported program for `args` (loaded or made now), or None: the plain path."""
+def _exported_call(name: str, fn, args) -> tuple[Callable | None, str | None]:
+    """The jitted call of `fn`'s exported program for `args` (loaded or made now) and its key, or None: the
+    plain path."""
     folder = _folder()
     if folder is None:
-        return None
+        return None, None
     dynamic, static = eqx.partition(args, eqx.is_array)
     leaves, treedef = jax.tree.flatten(dynamic)
     if not _single_device(leaves):
-        return None
+        return None, None
     try:
         key = program_key(name, args)
     except _Unhashable as e:
         _log.debug("gyrojax export: %s has no key (%s)", name, e)
-        return None
+        return None, None
     if key in _loaded:
-        return _loaded[key]
-    path = os.path.join(folder, f"{name}-{key}.jaxexport")
+        return _loaded[key], key
+    path = _path(name, key)
     call = None
     if not os.path.exists(path + ".refused"):
         try:
@@ -413,7 +435,11 @@ def _exported_call(name: str, fn, args) -> Callable | None:
         if call is None:
             call = _export(fn, static, treedef, leaves, path, key)
     _loaded[key] = call
-    return call
+    return call, key
+
+
+def _path(name: str, key: str) -> str:
+    return os.path.join(_folder() or "", FOLDER, f"{name}-{key}.jaxexport")
 
 
 def cached_program(name: str, fn: Callable) -> Callable:
@@ -432,7 +458,7 @@ def cached_program(name: str, fn: Callable) -> Callable:
 
     @functools.wraps(fn)
     def run(*args):
-        call = _exported_call(name, fn, args)
+        call, key = _exported_call(name, fn, args)
         if call is None:
             return plain(*args)
         leaves = jax.tree.leaves(eqx.filter(args, eqx.is_array))
@@ -440,6 +466,11 @@ def cached_program(name: str, fn: Callable) -> Callable:
             return call(*leaves)
         except Exception as e:  # noqa: BLE001 - the plain path gives the same results
             _log.debug("gyrojax export: %s failed to run (%s: %s); plain path", name, type(e).__name__, e)
+            _loaded[key] = None
+            try:  # no later process should try it again
+                os.remove(_path(name, key))
+            except OSError:
+                pass
             return plain(*args)
 
     return run

@@ -1,0 +1,144 @@
+"""Programs exported beside the compilation cache (gyrojax/_export.py), checked in fresh processes: a second
+process loads what the first exported and traces nothing; a changed user module, a corrupt file, a host
+callback or a disabled cache take the plain path with the same results."""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+
+PLUGIN = textwrap.dedent("""
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    class Gain(eqx.Module):
+        k: jax.Array
+        order: int = eqx.field(static=True)
+
+        def apply(self, x):
+            return self.k * x ** self.order + OFFSET
+
+    OFFSET = 1.0
+""")
+
+# Runs a cached program on a Gain from plugin.py; prints its outputs and the names of the traces as JSON.
+PROGRAM = textwrap.dedent("""
+    import json, sys
+    import jax
+    traces = []
+    jax.monitoring.register_event_duration_secs_listener(
+        lambda e, d, fun_name="?", **k: traces.append(fun_name) if e.endswith("jaxpr_trace_duration") else None)
+    import gyrojax as gj
+    import jax.numpy as jnp
+    from gyrojax._export import cached_program
+    from plugin import Gain
+
+    def response(gain, x, scale):
+        y = jnp.cumsum(gain.apply(x)) * scale
+        if CALLBACK:
+            jax.debug.callback(lambda v: None, y)
+        return {"y": y, "stats": (jnp.sum(y), jnp.max(y))}
+
+    CALLBACK = "callback" in sys.argv
+    out = cached_program("response", response)(Gain(jnp.asarray(1.5), 2), jnp.linspace(0.0, 1.0, 7), 3.0)
+    print("RESULT " + json.dumps({"y": [float(v) for v in out["y"]], "sum": float(out["stats"][0]),
+                                  "traces": traces, "cache": gj.compilation_cache()}))
+""")
+
+
+def _run(folder, cache, *args):
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS",
+                        "JAX_ENABLE_COMPILATION_CACHE", "GYROJAX_CACHE_DIR")}
+    env["XDG_CACHE_HOME"] = str(folder / "xdg")  # the default folder, never the user's own
+    env["GYROJAX_CACHE_DIR"] = str(cache)
+    env["PYTHONPATH"] = os.pathsep.join([os.getcwd(), str(folder)] + env.get("PYTHONPATH", "").split(os.pathsep))
+    proc = subprocess.run([sys.executable, str(folder / "program.py"), *args], env=env, capture_output=True,
+                          text=True, timeout=600, cwd=folder)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")][-1]
+    return json.loads(line[len("RESULT "):])
+
+
+@pytest.fixture
+def program(tmp_path):
+    (tmp_path / "plugin.py").write_text(PLUGIN)
+    (tmp_path / "program.py").write_text(PROGRAM)
+    return tmp_path
+
+
+def _artifacts(cache):
+    folder = cache / "gyrojax_export"
+    return sorted(p.name for p in folder.iterdir()) if folder.exists() else []
+
+
+def _expected(offset):
+    x = np.linspace(0.0, 1.0, 7)
+    return np.cumsum(1.5 * x**2 + offset) * 3.0
+
+
+def test_a_second_process_loads_the_program_without_tracing_it(program):
+    cache = program / "cache"
+    first = _run(program, cache)
+    assert "flat" in first["traces"]  # the export traces the program once
+    files = _artifacts(cache)
+    assert len(files) == 1 and files[0].startswith("response-") and files[0].endswith(".jaxexport")
+    second = _run(program, cache)
+    assert "flat" not in second["traces"] and "response" not in second["traces"]
+    assert second["y"] == first["y"] and second["sum"] == first["sum"]
+    np.testing.assert_allclose(second["y"], _expected(1.0), rtol=1e-14)
+    assert _artifacts(cache) == files
+
+
+def test_an_edited_user_module_is_traced_again(program):
+    """The class of an argument comes from a user's file: editing the file (here a module constant its method
+    reads, invisible in the argument itself) gives another key, so the old program is not used."""
+    cache = program / "cache"
+    before = _run(program, cache)
+    (program / "plugin.py").write_text(PLUGIN.replace("OFFSET = 1.0", "OFFSET = 2.0"))
+    after = _run(program, cache)
+    assert "flat" in after["traces"]
+    np.testing.assert_allclose(before["y"], _expected(1.0), rtol=1e-14)
+    np.testing.assert_allclose(after["y"], _expected(2.0), rtol=1e-14)
+    assert len(_artifacts(cache)) == 2
+
+
+def test_a_corrupt_artifact_falls_back_and_is_written_again(program):
+    cache = program / "cache"
+    first = _run(program, cache)
+    (name,) = _artifacts(cache)
+    path = cache / "gyrojax_export" / name
+    good = path.read_bytes()
+    path.write_bytes(good[: len(good) // 2] + b"\0garbage\0" + good[len(good) // 2 + 9:])
+    second = _run(program, cache)
+    assert "flat" in second["traces"]  # traced again: the file was not used
+    assert second["y"] == first["y"] and second["sum"] == first["sum"]
+    assert path.read_bytes() == good  # the same program, written again
+
+
+def test_a_host_callback_takes_the_plain_path(program):
+    cache = program / "cache"
+    first = _run(program, cache, "callback")
+    files = _artifacts(cache)
+    assert len(files) == 1 and files[0].endswith(".jaxexport.refused")
+    assert "callback" in (cache / "gyrojax_export" / files[0]).read_text().lower()
+    np.testing.assert_allclose(first["y"], _expected(1.0), rtol=1e-14)
+    second = _run(program, cache, "callback")  # the marker: not traced for export again
+    assert "flat" not in second["traces"] and "response" in second["traces"]
+    assert second["y"] == first["y"]
+
+
+def test_a_disabled_cache_writes_nothing(program):
+    out = _run(program, "off")
+    assert out["cache"] is None
+    np.testing.assert_allclose(out["y"], _expected(1.0), rtol=1e-14)
+    assert "flat" not in out["traces"]
+    written = [os.path.join(d, f) for d, _, fs in os.walk(program) for f in fs]
+    assert not any("gyrojax_export" in p or p.endswith("-cache") for p in written), written
+    assert not (program / "xdg").exists()
