@@ -386,6 +386,8 @@ def _export(fn, static, treedef, leaves, path: str, key: str) -> Callable | None
     def flat(*xs):
         return fn(*eqx.combine(jax.tree.unflatten(treedef, xs), static))
 
+    flat.__name__ = flat.__qualname__ = f"export_{os.path.basename(path).split('-')[0]}"
+
     try:
         os.makedirs(os.path.dirname(path), mode=0o700, exist_ok=True)
     except OSError as e:

@@ -86,11 +86,11 @@ def _expected(offset):
 def test_a_second_process_loads_the_program_without_tracing_it(program):
     cache = program / "cache"
     first = _run(program, cache)
-    assert "flat" in first["traces"]  # the export traces the program once
+    assert "export_response" in first["traces"]  # the export traces the program once
     files = _artifacts(cache)
     assert len(files) == 1 and files[0].startswith("response-") and files[0].endswith(".jaxexport")
     second = _run(program, cache)
-    assert "flat" not in second["traces"] and "response" not in second["traces"]
+    assert not {"export_response", "response"} & set(second["traces"])
     assert second["y"] == first["y"] and second["sum"] == first["sum"]
     np.testing.assert_allclose(second["y"], _expected(1.0), rtol=1e-14)
     assert _artifacts(cache) == files
@@ -103,7 +103,7 @@ def test_an_edited_user_module_is_traced_again(program):
     before = _run(program, cache)
     (program / "plugin.py").write_text(PLUGIN.replace("OFFSET = 1.0", "OFFSET = 2.0"))
     after = _run(program, cache)
-    assert "flat" in after["traces"]
+    assert "export_response" in after["traces"]
     np.testing.assert_allclose(before["y"], _expected(1.0), rtol=1e-14)
     np.testing.assert_allclose(after["y"], _expected(2.0), rtol=1e-14)
     assert len(_artifacts(cache)) == 2
@@ -117,7 +117,7 @@ def test_a_corrupt_artifact_falls_back_and_is_written_again(program):
     good = path.read_bytes()
     path.write_bytes(good[: len(good) // 2] + b"\0garbage\0" + good[len(good) // 2 + 9:])
     second = _run(program, cache)
-    assert "flat" in second["traces"]  # traced again: the file was not used
+    assert "export_response" in second["traces"]  # traced again: the file was not used
     assert second["y"] == first["y"] and second["sum"] == first["sum"]
     assert path.read_bytes() == good  # the same program, written again
 
@@ -130,7 +130,7 @@ def test_a_host_callback_takes_the_plain_path(program):
     assert "callback" in (cache / "gyrojax_export" / files[0]).read_text().lower()
     np.testing.assert_allclose(first["y"], _expected(1.0), rtol=1e-14)
     second = _run(program, cache, "callback")  # the marker: not traced for export again
-    assert "flat" not in second["traces"] and "response" in second["traces"]
+    assert "export_response" not in second["traces"] and "response" in second["traces"]
     assert second["y"] == first["y"]
 
 
@@ -138,7 +138,65 @@ def test_a_disabled_cache_writes_nothing(program):
     out = _run(program, "off")
     assert out["cache"] is None
     np.testing.assert_allclose(out["y"], _expected(1.0), rtol=1e-14)
-    assert "flat" not in out["traces"]
+    assert "export_response" not in out["traces"]
     written = [os.path.join(d, f) for d, _, fs in os.walk(program) for f in fs]
     assert not any("gyrojax_export" in p or p.endswith("-cache") for p in written), written
     assert not (program / "xdg").exists()
+
+
+# One device, the rate table only: identify's evaluation pass and vmapped solve, the two exported programs.
+FIT = textwrap.dedent("""
+    import json, os, sys
+    import jax
+    traces = []
+    jax.monitoring.register_event_duration_secs_listener(
+        lambda e, d, fun_name="?", **k: traces.append(fun_name) if e.endswith("jaxpr_trace_duration") else None)
+    import numpy as np
+    import gyrojax as gj
+    from gyrojax import _export
+    from gyrojax._parameters import DEFAULT_FREE
+
+    table_path, out_path = sys.argv[1], sys.argv[2]
+    if not os.path.exists(table_path):
+        gj.write_table(gj.simulate_table(gj.paper_qmg(), devices=1, runs=1, sweeps=("rate_table",), seed=3,
+                                         progress=False), table_path)
+    table = gj.read_table(table_path)
+
+    class NewProgram(BaseException):
+        pass
+
+    def refuse(fn, static, treedef, leaves, path, key):
+        raise NewProgram(os.path.basename(path).split("-")[0])
+
+    if "loaded-only" in sys.argv:  # any program not already stored stops the fit before it is traced
+        _export._export = refuse
+    del traces[:]
+    fit = gj.identify("paper-qmg", table, progress=False)
+    np.savez(out_path, *[np.asarray(x) for x in jax.tree.leaves(fit)])
+    result = {"traces": traces, "new": {}}
+    if "loaded-only" in sys.argv:
+        for label, free in (("fewer free", ("k_vf", "angular_gain")), ("more free", DEFAULT_FREE + ("angular_gain",))):
+            try:
+                gj.identify("paper-qmg", table, free=free, progress=False)
+            except NewProgram as e:
+                result["new"][label] = str(e)
+    print("RESULT " + json.dumps(result))
+""")
+
+
+@pytest.mark.slow
+def test_a_second_process_fits_without_tracing_the_fit(tmp_path):
+    """The exported evaluation pass and solve: a second process with the same lot structure traces neither and
+    gives identical numbers (every array of the Fit); other free parameters are other programs."""
+    (tmp_path / "program.py").write_text(FIT)
+    cache, table = tmp_path / "cache", str(tmp_path / "lot.csv")
+    first = _run(tmp_path, cache, table, str(tmp_path / "first.npz"))
+    assert {"export_evaluate", "export_solve_independent"} <= set(first["traces"])
+    assert sorted(n.split("-")[0] for n in _artifacts(cache)) == ["evaluate", "solve_independent"]
+    second = _run(tmp_path, cache, table, str(tmp_path / "second.npz"), "loaded-only")
+    assert not {"export_evaluate", "export_solve_independent", "_evaluate", "_solve_each"} & set(second["traces"])
+    a, b = np.load(tmp_path / "first.npz"), np.load(tmp_path / "second.npz")
+    assert len(a.files) == len(b.files) > 50
+    for k in a.files:
+        np.testing.assert_array_equal(a[k], b[k])
+    assert second["new"] == {"fewer free": "evaluate", "more free": "evaluate"}
