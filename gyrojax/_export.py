@@ -366,6 +366,15 @@ def _deserialize(data: bytes, key: str) -> export.Exported:
         _get_vjp=None)
 
 
+def _jitted_call(exported: export.Exported) -> Callable:
+    def call(*xs):
+        return exported.call(*xs)
+
+    # Named after the program, for JAX's logs and monitoring events.
+    call.__name__ = call.__qualname__ = f"exported_{exported.fun_name.removeprefix('export_')}"
+    return jax.jit(call)
+
+
 def _load(path: str, key: str, leaves) -> Callable | None:
     """The jitted call of the program stored at `path`, or None if there is none usable."""
     try:
@@ -377,7 +386,7 @@ def _load(path: str, key: str, leaves) -> Callable | None:
     if exported.nr_devices != 1 or [(a.shape, a.dtype) for a in exported.in_avals] != [
             (a.shape, a.dtype) for a in _avals(leaves)]:
         raise ValueError("inputs differ from the key's")
-    return jax.jit(exported.call)
+    return _jitted_call(exported)
 
 
 def _export(fn, static, treedef, leaves, path: str, key: str) -> Callable | None:
@@ -407,7 +416,7 @@ def _export(fn, static, treedef, leaves, path: str, key: str) -> Callable | None
         atomic_write_bytes(path, data)
     except OSError as e:
         _log.debug("gyrojax export: %s not written (%s)", path, e)
-    return jax.jit(exported.call)
+    return _jitted_call(exported)
 
 
 def _exported_call(name: str, fn, args) -> tuple[Callable | None, str | None]:

@@ -36,6 +36,7 @@ PROGRAM = textwrap.dedent("""
         lambda e, d, fun_name="?", **k: traces.append(fun_name) if e.endswith("jaxpr_trace_duration") else None)
     import gyrojax as gj
     import jax.numpy as jnp
+    import numpy as np
     from gyrojax._export import cached_program
     from plugin import Gain
 
@@ -46,18 +47,24 @@ PROGRAM = textwrap.dedent("""
         return {"y": y, "stats": (jnp.sum(y), jnp.max(y))}
 
     CALLBACK = "callback" in sys.argv
-    out = cached_program("response", response)(Gain(jnp.asarray(1.5), 2), jnp.linspace(0.0, 1.0, 7), 3.0)
+    k = jnp.asarray(1.5)
+    if "sharded" in sys.argv:  # the gain placed on two CPU devices
+        mesh = jax.sharding.Mesh(np.asarray(jax.devices()[:2]), ("lot",))
+        k = jax.device_put(k, jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec()))
+    out = cached_program("response", response)(Gain(k, 2), jnp.linspace(0.0, 1.0, 7), 3.0)
     print("RESULT " + json.dumps({"y": [float(v) for v in out["y"]], "sum": float(out["stats"][0]),
                                   "traces": traces, "cache": gj.compilation_cache()}))
 """)
 
 
-def _run(folder, cache, *args):
+def _run(folder, cache, *args, devices=1):
     env = {k: v for k, v in os.environ.items()
            if k not in ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS",
                         "JAX_ENABLE_COMPILATION_CACHE", "GYROJAX_CACHE_DIR")}
     env["XDG_CACHE_HOME"] = str(folder / "xdg")  # the default folder, never the user's own
     env["GYROJAX_CACHE_DIR"] = str(cache)
+    if devices > 1:
+        env["XLA_FLAGS"] = f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={devices}".strip()
     env["PYTHONPATH"] = os.pathsep.join([os.getcwd(), str(folder)] + env.get("PYTHONPATH", "").split(os.pathsep))
     proc = subprocess.run([sys.executable, str(folder / "program.py"), *args], env=env, capture_output=True,
                           text=True, timeout=600, cwd=folder)
@@ -200,3 +207,11 @@ def test_a_second_process_fits_without_tracing_the_fit(tmp_path):
     for k in a.files:
         np.testing.assert_array_equal(a[k], b[k])
     assert second["new"] == {"fewer free": "evaluate", "more free": "evaluate"}
+
+
+def test_a_program_on_several_devices_takes_the_plain_path(program):
+    cache = program / "cache"
+    out = _run(program, cache, "sharded", devices=2)
+    assert "response" in out["traces"] and "export_response" not in out["traces"]
+    np.testing.assert_allclose(out["y"], _expected(1.0), rtol=1e-14)
+    assert _artifacts(cache) == []
