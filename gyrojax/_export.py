@@ -39,6 +39,7 @@ import json
 import logging
 import os
 import sys
+import sysconfig
 import types
 from collections.abc import Callable
 
@@ -238,12 +239,27 @@ def _replaced() -> list[str]:
         if _package_root(module_name) != "gyrojax" or module is None:
             continue
         for attr, value in list(vars(module).items()):
-            if isinstance(value, (types.FunctionType, type)):
-                root = _package_root(getattr(value, "__module__", None) or "?")
-                if root not in _VERSIONED and root not in sys.stdlib_module_names:
-                    line = getattr(getattr(value, "__code__", None), "co_firstlineno", "")
-                    out.append(f"{module_name}.{attr}={_name(value)}:{line}")
+            if isinstance(value, (types.FunctionType, type)) and not _installed(value):
+                line = getattr(getattr(value, "__code__", None), "co_firstlineno", "")
+                out.append(f"{module_name}.{attr}={_name(value)}:{line}")
     return sorted(out)
+
+
+@functools.cache
+def _install_folders() -> tuple[str, ...]:
+    paths = sysconfig.get_paths()
+    return tuple(os.path.join(os.path.realpath(paths[k]), "") for k in ("purelib", "platlib", "stdlib"))
+
+
+def _installed(value) -> bool:
+    """Whether `value` comes from the versioned packages, the standard library or an installed package (what
+    gyrojax's modules import: `jaxtyping.Float`, ...), rather than from a user's file."""
+    module_name = getattr(value, "__module__", None) or "?"
+    root = _package_root(module_name)
+    if root in _VERSIONED or root in sys.stdlib_module_names:
+        return True
+    path = getattr(sys.modules.get(module_name), "__file__", None)
+    return bool(path) and os.path.realpath(path).startswith(_install_folders())
 
 
 def _trace_context() -> str:
