@@ -172,11 +172,13 @@ FIT = textwrap.dedent("""
     class NewProgram(BaseException):
         pass
 
-    def refuse(fn, static, treedef, leaves, path, key):
-        raise NewProgram(os.path.basename(path).split("-")[0])
+    def refuse(fun, **options):
+        raise NewProgram(fun.__name__.removeprefix("export_"))
 
-    if "loaded-only" in sys.argv:  # any program not already stored stops the fit before it is traced
-        _export._export = refuse
+    # Any program not already stored stops the fit before it is traced. (jax's function, not one of gyrojax's:
+    # a gyrojax function replaced at run time is part of the key.)
+    if "loaded-only" in sys.argv:
+        _export.export.export = refuse
     del traces[:]
     fit = gj.identify("paper-qmg", table, progress=False)
     np.savez(out_path, *[np.asarray(x) for x in jax.tree.leaves(fit)])
