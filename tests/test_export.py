@@ -47,6 +47,13 @@ PROGRAM = textwrap.dedent("""
         return {"y": y, "stats": (jnp.sum(y), jnp.max(y))}
 
     CALLBACK = "callback" in sys.argv
+    if "patched" in sys.argv:  # a gyrojax function replaced at run time, as a test's monkeypatch does
+        import gyrojax._residuals
+
+        def stand_in(*args):
+            return 0.0
+
+        gyrojax._residuals.run_biases = stand_in
     k = jnp.asarray(1.5)
     if "sharded" in sys.argv:  # the gain placed on two CPU devices
         mesh = jax.sharding.Mesh(np.asarray(jax.devices()[:2]), ("lot",))
@@ -113,6 +120,15 @@ def test_an_edited_user_module_is_traced_again(program):
     assert "export_response" in after["traces"]
     np.testing.assert_allclose(before["y"], _expected(1.0), rtol=1e-14)
     np.testing.assert_allclose(after["y"], _expected(2.0), rtol=1e-14)
+    assert len(_artifacts(cache)) == 2
+
+
+def test_a_replaced_gyrojax_function_is_another_program(program):
+    cache = program / "cache"
+    _run(program, cache)
+    patched = _run(program, cache, "patched")
+    assert "export_response" in patched["traces"]
+    np.testing.assert_allclose(patched["y"], _expected(1.0), rtol=1e-14)
     assert len(_artifacts(cache)) == 2
 
 
