@@ -148,7 +148,7 @@ def _describe(obj, out: list, active: set) -> None:
     if eqx.is_array(obj):
         aval = jax.typeof(obj) if isinstance(obj, jax.Array) else None
         weak = bool(getattr(aval, "weak_type", False))
-        out.append(f"array:{type(obj).__name__}:{tuple(np.shape(obj))}:{np.result_type(obj)}:{weak}")
+        out.append(f"array:{type(obj).__name__}:{tuple(np.shape(obj))}:{np.dtype(obj.dtype)}:{weak}")
         return
     if id(obj) in active:
         raise _Unhashable("a reference cycle")
@@ -300,7 +300,7 @@ def _single_device(leaves) -> bool:
 
 
 def _avals(leaves):
-    return [jax.ShapeDtypeStruct(np.shape(x), np.result_type(x),
+    return [jax.ShapeDtypeStruct(np.shape(x), np.dtype(x.dtype),
                                  weak_type=isinstance(x, jax.Array) and jax.typeof(x).weak_type) for x in leaves]
 
 
