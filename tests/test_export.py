@@ -47,6 +47,11 @@ PROGRAM = textwrap.dedent("""
         return {"y": y, "stats": (jnp.sum(y), jnp.max(y))}
 
     CALLBACK = "callback" in sys.argv
+    if "edited" in sys.argv:  # plugin.py saved again after it was imported: the code on disk may differ
+        import time
+        time.sleep(0.01)
+        with open("plugin.py", "a") as f:
+            f.write("# saved again")
     if "patched" in sys.argv:  # a gyrojax function replaced at run time, as a test's monkeypatch does
         import gyrojax._residuals
 
@@ -130,6 +135,14 @@ def test_a_replaced_gyrojax_function_is_another_program(program):
     assert "export_response" in patched["traces"]
     np.testing.assert_allclose(patched["y"], _expected(1.0), rtol=1e-14)
     assert len(_artifacts(cache)) == 2
+
+
+def test_a_user_module_saved_after_the_import_takes_the_plain_path(program):
+    cache = program / "cache"
+    out = _run(program, cache, "edited")
+    assert "response" in out["traces"] and "export_response" not in out["traces"]
+    np.testing.assert_allclose(out["y"], _expected(1.0), rtol=1e-14)
+    assert _artifacts(cache) == []
 
 
 def test_a_corrupt_artifact_falls_back_and_is_written_again(program):
