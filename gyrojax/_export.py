@@ -444,7 +444,11 @@ def _export(fn, static, treedef, leaves, path: str, key: str) -> Callable | None
     """Trace `fn`, store it at `path` and return the jitted call of the stored form; None if it cannot be
     exported (a marker is written then, so that later processes do not trace it twice)."""
     def flat(*xs):
-        return fn(*eqx.combine(jax.tree.unflatten(treedef, xs), static))
+        out = fn(*eqx.combine(jax.tree.unflatten(treedef, xs), static))
+        # filter_jit returns a Python value as it is, jax.jit as an array: such a program stays plain.
+        if not all(isinstance(x, jax.Array) for x in jax.tree.leaves(out)):
+            raise TypeError("an output that is not an array")
+        return out
 
     flat.__name__ = flat.__qualname__ = f"export_{os.path.basename(path).split('-')[0]}"
 
