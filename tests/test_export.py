@@ -44,7 +44,8 @@ PROGRAM = textwrap.dedent("""
         y = jnp.cumsum(gain.apply(x)) * scale
         if CALLBACK:
             jax.debug.callback(lambda v: None, y)
-        return {"y": y, "stats": (jnp.sum(y), jnp.max(y))}
+        out = {"y": y, "stats": (jnp.sum(y), jnp.max(y))}
+        return {**out, "points": 7} if "python-output" in sys.argv else out
 
     CALLBACK = "callback" in sys.argv
     if "edited" in sys.argv:  # plugin.py saved again after it was imported: the code on disk may differ
@@ -65,7 +66,8 @@ PROGRAM = textwrap.dedent("""
         k = jax.device_put(k, jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec()))
     out = cached_program("response", response)(Gain(k, 2), jnp.linspace(0.0, 1.0, 7), 3.0)
     print("RESULT " + json.dumps({"y": [float(v) for v in out["y"]], "sum": float(out["stats"][0]),
-                                  "traces": traces, "cache": gj.compilation_cache()}))
+                                  "points": repr(out.get("points")), "traces": traces,
+                                  "cache": gj.compilation_cache()}))
 """)
 
 
@@ -168,6 +170,16 @@ def test_a_host_callback_takes_the_plain_path(program):
     second = _run(program, cache, "callback")  # the marker: not traced for export again
     assert "export_response" not in second["traces"] and "response" in second["traces"]
     assert second["y"] == first["y"]
+
+
+def test_a_python_output_takes_the_plain_path(program):
+    """equinox.filter_jit returns a Python value as it is; an exported program would return an array."""
+    cache = program / "cache"
+    out = _run(program, cache, "python-output")
+    assert out["points"] == "7"
+    files = _artifacts(cache)
+    assert len(files) == 1 and files[0].endswith(".refused")
+    assert "not an array" in (cache / "gyrojax_export" / files[0]).read_text()
 
 
 def test_a_disabled_cache_writes_nothing(program):
