@@ -3,8 +3,12 @@
 A first `identify`, `simulate_table` or `diagnose` spends most of its time tracing and XLA-compiling programs.
 The persistent cache keeps the compiled executables on disk, keyed by the program, the backend, the XLA flags and
 the JAX version, so a later process with the same shapes loads them instead of compiling again; tracing still
-happens in every process. Measured on the demo lot (2-core CPU, `benchmarks/bench_compile.py`): the first
-`identify` 47 s without the cache, 21 s with it (17 s of them tracing); `diagnose` 115 s and 25 s.
+happens in every process, except for the programs `_export.py` keeps in the cache folder's `gyrojax_export`
+sub-folder (identify's evaluation pass and vmapped solve), which a later process loads without tracing.
+Measured on the demo lot (2-core CPU, `benchmarks/bench_compile.py`): `diagnose` 115 s without the cache, 25 s
+with it; the first `identify` of a process 47 s without the cache and 21 s with it when every program is traced
+(17 s of them tracing), 5.2 s with identify's exported programs loaded (against 28.7 s traced, in one run of
+2026-11-26 at load 4.5-6).
 
 Programs that call back into Python (an `equinox.error_if` left in the compiled code, as diffrax's checks of
 traced times are in the averaged and full tiers) are never written by JAX: those tiers compile in every
@@ -142,7 +146,8 @@ def compilation_cache(path=_UNSET) -> str | None:
     `~/.cache/gyrojax/jax` on Linux; the environment variable `GYROJAX_CACHE_DIR` moves it, `off` disables
     it; a cache JAX was already given is left alone). A process that runs the same shapes as an earlier one
     loads the compiled programs instead of compiling them: the first `identify` of the demo lot took 21 s
-    instead of 47 s on a 2-core CPU. Tracing is not cached, and is most of what is left.
+    instead of 47 s on a 2-core CPU. Tracing is not cached, and is most of what is left, except for identify's
+    two largest programs, which are exported into the same folder (`gyrojax_export`) and loaded untraced.
 
     **Arguments:**
 

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .._export import cached_program
 from .._residuals import run_biases
 from .._solution import RESULTS, result_code
 from .problem import nonfinite_explained
@@ -48,10 +49,8 @@ def map_devices(f, chunk, *trees):
     return jax.tree.map(lambda x: x.reshape((n,) + x.shape[2:]), out)
 
 
-@eqx.filter_jit
-def evaluate(problem_all, u_full, u_lot, chunk):
-    """One compiled pass (used at the start and at the solution): residuals, the Jacobian with respect to
-    every per-device and lot entry, the zero-rate scale factor and its gradient, predictions and biases."""
+def _evaluate(problem_all, u_full, u_lot, chunk):
+    # The fields of an Evaluation, as a tuple: what jax.export can store (see cached_program).
     def one(problem, u):
         def outputs(uu, ul):
             r, failed, preds, _, sf = problem.evaluate(uu, ul)
@@ -61,9 +60,18 @@ def evaluate(problem_all, u_full, u_lot, chunk):
         ((j, j_lot), (g, g_lot)), (r, sf, failed, preds) = jax.jacfwd(outputs, argnums=(0, 1), has_aux=True)(
             u, u_lot)
         biases = {sweep: run_biases(sweep, problem.data.blocks[sweep], pred) for sweep, pred in preds.items()}
-        return Evaluation(r, j, j_lot, sf, g, g_lot, preds, biases, failed)
+        return r, j, j_lot, sf, g, g_lot, preds, biases, failed
 
     return map_devices(one, chunk, problem_all, u_full)
+
+
+_evaluate_program = cached_program("evaluate", _evaluate)
+
+
+def evaluate(problem_all, u_full, u_lot, chunk) -> Evaluation:
+    """One compiled pass (used at the start and at the solution): residuals, the Jacobian with respect to
+    every per-device and lot entry, the zero-rate scale factor and its gradient, predictions and biases."""
+    return Evaluation(*_evaluate_program(problem_all, u_full, u_lot, chunk))
 
 
 def _final_residuals(sol, fn):
@@ -86,9 +94,11 @@ def _solve_device(problem, y0, u_lot, solver, max_steps):
     return sol.value, result_code(RESULTS.promote(sol.result)), sol.stats["num_steps"], jnp.sum(r**2)
 
 
-@eqx.filter_jit
-def _solve_independent(problem_batch, u0, u_lot, solver, max_steps, chunk):
+def _solve_each(problem_batch, u0, u_lot, solver, max_steps, chunk):
     return map_devices(lambda p, y0: _solve_device(p, y0, u_lot, solver, max_steps), chunk, problem_batch, u0)
+
+
+_solve_independent = cached_program("solve_independent", _solve_each)
 
 
 _solve_one = eqx.filter_jit(_solve_device)
