@@ -474,23 +474,23 @@ def _export(fn, static, treedef, leaves, path: str, key: str) -> Callable | None
     return _jitted_call(exported)
 
 
-def _exported_call(name: str, fn, args) -> tuple[Callable | None, str | None]:
-    """The jitted call of `fn`'s exported program for `args` (loaded or made now) and its key, or None: the
-    plain path."""
+def _exported_call(name: str, fn, args) -> tuple[Callable | None, str | None, list]:
+    """The jitted call of `fn`'s exported program for `args` (loaded or made now), its key and the array
+    leaves it takes; the call None: the plain path."""
     folder = _folder()
     if folder is None:
-        return None, None
+        return None, None, []
     dynamic, static = eqx.partition(args, eqx.is_array)
     leaves, treedef = jax.tree.flatten(dynamic)
     if not _single_device(leaves):
-        return None, None
+        return None, None, leaves
     try:
         key = program_key(name, args)
     except _Unhashable as e:
         _log.debug("gyrojax export: %s has no key (%s)", name, e)
-        return None, None
+        return None, None, leaves
     if key in _loaded:
-        return _loaded[key], key
+        return _loaded[key], key, leaves
     path = _path(name, key)
     call = None
     if not os.path.exists(path + ".refused"):
@@ -501,7 +501,7 @@ def _exported_call(name: str, fn, args) -> tuple[Callable | None, str | None]:
         if call is None:
             call = _export(fn, static, treedef, leaves, path, key)
     _loaded[key] = call
-    return call, key
+    return call, key, leaves
 
 
 def _path(name: str, key: str) -> str:
@@ -524,10 +524,9 @@ def cached_program(name: str, fn: Callable) -> Callable:
 
     @functools.wraps(fn)
     def run(*args):
-        call, key = _exported_call(name, fn, args)
+        call, key, leaves = _exported_call(name, fn, args)
         if call is None:
             return plain(*args)
-        leaves = jax.tree.leaves(eqx.filter(args, eqx.is_array))
         try:
             return call(*leaves)
         except Exception as e:  # noqa: BLE001 - the plain path gives the same results
