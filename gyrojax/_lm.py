@@ -7,6 +7,10 @@ rejection quarters the step, until the step underflows to exactly zero and the t
 A lot of 16 devices measured 5 steps for most devices and up to 34 for some, and a vmapped lot runs until
 its slowest device has finished. Here a step whose loss change is within `roundoff * (1 + loss)` of the
 required fall is accepted; Cauchy termination (optimistix's, unchanged) then ends the solve.
+
+The same solver is Gauss-Newton when its `undamped` flag (an array, so a traced value, not a compiled
+constant) is set: no damping (lambda = 1/inf = 0, the normal equations J^T J) and every step accepted. A solve
+retried with Gauss-Newton after Levenberg-Marquardt then reuses the compiled program of the first.
 """
 
 from collections.abc import Callable
@@ -28,6 +32,7 @@ class RoundoffTrustRegion(optx.AbstractSearch):
 
     roundoff: float = 1e-10
     classical: optx.ClassicalTrustRegion = optx.ClassicalTrustRegion()
+    undamped: jax.Array = eqx.field(default_factory=lambda: jnp.asarray(False), converter=jnp.asarray)
 
     def init(self, y, f_info_struct):
         return _RadiusState(step_size=jnp.array(1.0))
@@ -43,7 +48,9 @@ class RoundoffTrustRegion(optx.AbstractSearch):
         good = (change < tr.high_cutoff * predicted) & (predicted < 0) & ~first_step
         mul = jnp.where(accept, jnp.where(good, tr.high_constant, 1.0), tr.low_constant)
         step_size = mul * state.step_size
-        return step_size, accept, optx.RESULTS.successful, _RadiusState(step_size)
+        # Gauss-Newton: the full step (an infinite radius is a damping of exactly 0), always taken.
+        full = jnp.where(self.undamped, jnp.inf, step_size)
+        return full, accept | self.undamped, optx.RESULTS.successful, _RadiusState(step_size)
 
 
 def _quiet(**kwargs):
@@ -52,7 +59,9 @@ def _quiet(**kwargs):
 
 class LevenbergMarquardt(optx.AbstractGaussNewton):
     """optimistix's Levenberg-Marquardt (damped Newton descent, classical trust-region update) with the
-    round-off-aware acceptance of `RoundoffTrustRegion`."""
+    round-off-aware acceptance of `RoundoffTrustRegion`; with `undamped=True`, Gauss-Newton (optimistix's
+    `GaussNewton` path: full Newton steps on the normal equations, each accepted) in the same compiled
+    program."""
 
     rtol: float
     atol: float
@@ -61,9 +70,10 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     search: RoundoffTrustRegion
     verbose: Callable
 
-    def __init__(self, rtol: float, atol: float, linear_solver: lx.AbstractLinearSolver, roundoff: float = 1e-10):
+    def __init__(self, rtol: float, atol: float, linear_solver: lx.AbstractLinearSolver, roundoff: float = 1e-10,
+                 undamped: bool = False):
         self.rtol, self.atol = rtol, atol
         self.norm = optx.max_norm
         self.descent = optx.DampedNewtonDescent(linear_solver=linear_solver)
-        self.search = RoundoffTrustRegion(roundoff=roundoff)
+        self.search = RoundoffTrustRegion(roundoff=roundoff, undamped=jnp.asarray(undamped))
         self.verbose = _quiet

@@ -81,3 +81,37 @@ def test_the_solve_reports_the_residuals_of_its_solution():
         np.testing.assert_allclose(np.asarray(_final_residuals(sol, rosenbrock)),
                                    np.asarray(rosenbrock(sol.value, None)), rtol=1e-14, atol=1e-13)
     assert rejected > 0  # some solve above stopped on a rejected step
+
+
+def test_the_undamped_flag_is_gauss_newton_in_the_same_compiled_solve():
+    """`undamped=True` takes optimistix's Gauss-Newton path (same steps, same solution), and it is an array
+    leaf: a Gauss-Newton retry after a Levenberg-Marquardt solve runs the same compiled program."""
+    import equinox as eqx
+
+    def rosenbrock(y, _):
+        return jnp.stack([10 * (y[1] - y[0] ** 2), 1 - y[0]])
+
+    traces = []
+
+    @eqx.filter_jit
+    def solve(solver, y0):
+        traces.append(1)
+        sol = optx.least_squares(rosenbrock, solver, y0, max_steps=200, throw=False)
+        return sol.value, sol.stats["num_steps"], sol.result
+
+    y0 = jnp.asarray([-1.2, 1.0])
+    lm = solve(LevenbergMarquardt(1e-10, 1e-10, NORMAL), y0)
+    gn = solve(LevenbergMarquardt(1e-10, 1e-10, NORMAL, undamped=True), y0)
+    assert len(traces) == 1
+    ref = optx.least_squares(rosenbrock, optx.GaussNewton(1e-10, 1e-10, linear_solver=NORMAL), y0, max_steps=200)
+    assert int(gn[1]) == int(ref.stats["num_steps"]) != int(lm[1])
+    np.testing.assert_allclose(np.asarray(gn[0]), np.asarray(ref.value), rtol=1e-12)
+    assert gn[2] == optx.RESULTS.successful
+    # On the scaled linear problem a Gauss-Newton step is the solution: one step, then the Cauchy test.
+    for y_start in STARTS[:3]:
+        a = optx.least_squares(_noisy_linear, LevenbergMarquardt(1e-8, 1e-8, NORMAL, undamped=True),
+                               jnp.asarray(y_start), max_steps=50)
+        b = optx.least_squares(_noisy_linear, optx.GaussNewton(1e-8, 1e-8, linear_solver=NORMAL),
+                               jnp.asarray(y_start), max_steps=50)
+        assert int(a.stats["num_steps"]) == int(b.stats["num_steps"])
+        np.testing.assert_allclose(np.asarray(a.value), np.asarray(b.value), rtol=1e-9)

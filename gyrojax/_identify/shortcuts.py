@@ -25,7 +25,8 @@ def solver_from(solver, rtol, atol):
     if solver == "levenberg-marquardt":
         return LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=linear_solver)
     if solver == "gauss-newton":
-        return optx.GaussNewton(rtol=rtol, atol=atol, linear_solver=linear_solver)
+        # optimistix's GaussNewton step, as a flag of the Levenberg-Marquardt solver: one compiled solve for both.
+        return LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=linear_solver, undamped=True)
     if solver == "bfgs":
         return optx.BFGS(rtol=rtol, atol=atol)
     raise ValueError(f"solver must be one of {SOLVERS} or an optimistix solver, got {solver!r}.")
