@@ -323,12 +323,11 @@ def _typical(fit: Fit, name: str, cols) -> np.ndarray:
     return theta
 
 
-def _baseline(data, model, fit, candidates, free, say):
+def _baseline(data, model, fit, candidates, free, reads, say):
     """The baseline fit with every candidate effect in the model at zero and held (as the diagnosis fits it),
-    and a held column for each parameter an experiment kind reads (`READS`) that the baseline does not free,
-    reusing a given fit's Jacobian when it has those columns. Returns (fit, candidates, the read parameters
-    added as held columns)."""
-    reads = tuple(dict.fromkeys(p for names in READS.values() for p in names))
+    and a held column for each parameter of `reads` (what the experiments read) that the baseline does not
+    free, reusing a given fit's Jacobian when it has those columns. Returns (fit, candidates, the read
+    parameters added as held columns)."""
     if fit is not None:
         if data is not None:
             data = data if isinstance(data, FitData) else fit_data(data)
@@ -455,7 +454,11 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     if data is not None and not isinstance(data, (Table, FitData)):
         raise TypeError(f"data must be a gyrojax.Table or FitData, got {type(data).__name__}.")
     say = as_progress(progress, "gyrojax.plan")
-    fit, candidates, added = _baseline(data, model, fit, candidates, free, say)
+    experiments = None if experiments is None else tuple(experiments)
+    # what the experiments read beyond the baseline (default experiments: whatever a kind may read)
+    reads = tuple(dict.fromkeys(p for names in READS.values() for p in names)) if experiments is None else \
+        tuple(dict.fromkeys(p for e in experiments if isinstance(e, CandidateExperiment) for p in e.reads))
+    fit, candidates, added = _baseline(data, model, fit, candidates, free, reads, say)
     one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, fit.model.device)
     defaults = experiments is None
     if defaults:
