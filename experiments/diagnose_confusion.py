@@ -25,9 +25,10 @@ Each row: hidden -> selected (in order), the ambiguity groups reported, the cand
 **With the planner (`--plan`).** Each case is then taken one step further, as a lab would: `gyrojax.plan` runs on
 the diagnosis's baseline fit of the standard sweeps (every candidate at zero; default experiments, at most
 `--max-repeats` runs of each), and the experiments it recommends for every candidate it finds untestable (the
-union over candidates, the most runs any one asks for) are simulated for the same devices (the lot of the
-standard sweeps, `gyrojax.campaign_lot`, one device at a time with its own seed: an independent noise draw)
-and appended to the table as further runs; `diagnose` then runs again on the standard + recommended data.
+union over candidates, the most runs any one asks for: `Plan.runs`) are simulated for the same devices (the
+lot of the standard sweeps, one device at a time with its own seed, an independent noise draw:
+`Plan.simulate`) and appended to the table as further runs; `diagnose` then runs again on the standard +
+recommended data, freeing what the added runs read (`Plan.free`: `omega_x` with the drive frequency).
 A row of the second table adds what was recommended (and for which candidates), the hidden effect's
 planned expected chi2 (its own recommended set, typical size: the noncentrality of its test) against what
 the second diagnosis's score test sees at its baseline (`typical_chi2`, the same quantity at the joint
@@ -39,7 +40,6 @@ Markdown), so a long run can be read while it goes on.
 """
 
 import argparse
-import dataclasses
 import inspect
 import os
 import sys
@@ -47,9 +47,7 @@ import time
 import traceback
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
-import numpy as np
 
 import gyrojax as gj
 
@@ -174,61 +172,7 @@ def case_and_data(preset, hidden, *, devices, runs, seed, progress=None):
     return row, table, d
 
 
-PLAN_NOISE_SEED = 1000  # the recommended runs of device i are simulated with seed + PLAN_NOISE_SEED + i
-
-
-def recommended_runs(p) -> dict:
-    """The union of the experiments `p` (a `gyrojax.Plan`) recommends for its untestable candidates: per
-    experiment name, (the experiment, the most runs any candidate asks for, the candidates asking)."""
-    out = {}
-    for c in p.candidates:
-        if c.testable:
-            continue
-        for r in c.recommended:
-            e, runs, who = out.get(r.experiment.name, (r.experiment, 0, []))
-            out[r.experiment.name] = (e, max(runs, r.runs), who + [c.effect])
-    return out
-
-
-def simulate_recommended(gyro, recs, *, devices, runs, seed):
-    """The recommended runs of the lot `simulate_table(gyro, devices=devices, seed=seed)` would draw, each device
-    simulated on its own with an independent noise seed, labelled as that table's devices and numbered after
-    its `runs` runs. An experiment at a warmer chamber (`<kind>_hot`) is a one-plateau run at its chamber
-    temperature. Returns the columns (dict of arrays), or None when nothing is recommended."""
-    if not recs:
-        return None
-    lot = gj.campaign_lot(gyro, devices=devices, seed=seed)
-    prefix = gyro.name
-    parts = []
-    for name, (e, k, _) in recs.items():
-        settings = dict(e.settings)
-        protocol = e.protocol
-        if name.endswith("_hot"):
-            protocol = dataclasses.replace(protocol, chamber_plateaus_c=(float(settings["chamber_c"]),))
-        for i in range(devices):
-            one = jax.tree.map(lambda x, i=i: x[i] if eqx.is_array(x) else x, lot)
-            t = gj.simulate_table(one, devices=1, runs=k, sweeps=(e.kind,), protocol=protocol,
-                                  seed=seed + PLAN_NOISE_SEED + i, progress=False)
-            cols = dict(t.columns)
-            cols["device"] = np.full(len(t), f"{prefix}-{i:03d}")
-            cols["run"] = np.asarray(cols["run"]) + runs + (1 + max(r for _, r, _ in recs.values()) if
-                                                               name.endswith("_hot") else 0)
-            parts.append(cols)
-    return parts
-
-
-def join(table, parts):
-    """`table` with the columns of `parts` appended (a column missing from a part is NaN there)."""
-    allc = list(table.column_names) + [c for p in parts for c in p if c not in table.column_names]
-    allc = list(dict.fromkeys(allc))
-    cols = {}
-    for c in allc:
-        pieces = []
-        for p in [table.columns] + parts:
-            n = len(next(iter(p.values())))
-            pieces.append(np.asarray(p[c]) if c in p else np.full(n, np.nan))
-        cols[c] = np.concatenate(pieces)
-    return gj.Table.from_columns(cols)
+PLAN_NOISE_SEED = 1000  # the recommended runs of device i are simulated with seed + PLAN_NOISE_SEED + i (Plan.simulate)
 
 
 def run_plan_case(preset, hidden, first, d, *, devices, runs, seed, max_repeats, progress=None):
@@ -240,13 +184,12 @@ def run_plan_case(preset, hidden, first, d, *, devices, runs, seed, max_repeats,
     t0 = time.perf_counter()
     p = gj.plan(fit=d.baseline, max_repeats=max_repeats, scale_factor=False, progress=progress)
     t1 = time.perf_counter()
-    recs = recommended_runs(p)
-    parts = simulate_recommended(g, recs, devices=devices, runs=runs, seed=seed)
+    recs = p.runs()
+    both = p.simulate(g, first, devices=devices, runs=runs, seed=seed, noise_seed=PLAN_NOISE_SEED) if recs else None
     t2 = time.perf_counter()
-    # The drive frequency reads the drive resonance to 1 ppm, far inside the lot's spread of omega_x, which the
-    # standard sweeps do not see (DEFAULT_FREE holds it): the second diagnosis frees it with these data.
-    free = BASE_FREE + (("omega_x",) if any(e.kind == "drive_frequency" for e, _, _ in recs.values()) else ())
-    d2 = gj.diagnose(join(first, parts), base_device(preset), free=free, progress=progress) if parts else d
+    # what the added runs read beyond the baseline (omega_x from the drive frequency) is freed, as planned
+    free = p.free(BASE_FREE)
+    d2 = gj.diagnose(both, base_device(preset), free=free, progress=progress) if recs else d
     t3 = time.perf_counter()
     report = d2.to_json()
     scores = {s.effect: s for s in d2.ranking}
@@ -269,7 +212,8 @@ def run_plan_case(preset, hidden, first, d, *, devices, runs, seed, max_repeats,
             "seen_df": None if s2 is None else int(s2.df),
         }
     row = {"preset": preset, "hidden": list(hidden), "free": list(free),
-           "recommended": {n: {"runs": k, "minutes": k * e.minutes, "for": who} for n, (e, k, who) in recs.items()},
+           "recommended": {n: {"runs": k, "minutes": k * e.minutes, "for": list(who)}
+                           for n, (e, k, who) in recs.items()},
            "unreachable": [c.effect for c in p.candidates if not c.testable and not c.recommended],
            "selected": list(d2.selected), "ambiguous": [list(x) for x in d2.ambiguous],
            "untestable": list(d2.untestable), "rejected": report["rejected"], "ranking": report["ranking"],

@@ -11,10 +11,10 @@ from _virtual_rate_sweep import AbstractRateTableWithVirtualRate
 from scipy.stats import chi2 as scipy_chi2, ncx2
 
 import gyrojax as gj
-from gyrojax._parameters import Model, batched, build_entries
+from gyrojax._parameters import Model, batched, build_entries, zero_effect
 from gyrojax._plan import experiment as plan_experiment
 from gyrojax._plan.experiment import NoiseLevel, jacobians, predict, weighted_rows, window_correlation
-from gyrojax._plan.plan import _kept, _reduce, _residual_chi2, _run_info, _sf_variance
+from gyrojax._plan.plan import Recommendation, _kept, _nuisances, _reduce, _residual_chi2, _run_info, _sf_variance
 from gyrojax._plan.power import power, required_noncentrality
 from gyrojax._stats import chi2_isf, ncx2_sf
 from gyrojax.cli import main
@@ -341,3 +341,107 @@ def test_a_hidden_quadrature_phase_is_found_with_the_recommended_run():
     assert 0.7 <= d2.final.chi2_red_total <= 1.4
     seen = next(s for s in d2.ranking if s.effect == "quadrature_phase")
     assert 0.5 <= seen.typical_chi2 / c.recommended_chi2 <= 2.0, (seen.typical_chi2, c.recommended_chi2)
+
+
+@pytest.mark.slow
+def test_a_drive_frequency_run_frees_omega_x_and_leaves_duffing_its_shape():
+    # One drive-frequency run: a typical duffing_drive pulls the frequency by 3/8 kappa a^2, whose mean over the
+    # set-points is an omega_x shift. The diagnosis of those data frees omega_x (Plan.free), so the planner's
+    # expected chi2 is what is left after omega_x too: the direct projection, a fraction of the held value.
+    g = gj.preset("paper-qmg")
+    exp = next(e for e in gj.default_experiments(g) if e.kind == "drive_frequency")
+    assert exp.reads == ("omega_x",)
+    assert next(e for e in gj.default_experiments(g) if e.kind == "rate_table").reads == ()
+    model = batched(Model(g, (zero_effect("duffing_drive"),)), 1)
+    entries = build_entries(model, ("k_vf", "omega_x"))
+    assert [e.label for e in entries] == ["k_vf", "omega_x", "duffing_drive.kappa"]
+    (jac, _), (pred, sf) = jacobians(model, entries, (exp,), [25.0])
+    rows = weighted_rows(exp, jac[0][0], exp.sigmas(NoiseLevel(abs(float(sf[0])), 1.0, 1e-4), pred[0][0]))
+    data = np.diag([40.0, 0.0, 0.0])  # the data given fix k_vf, see neither omega_x nor the pull
+    blocks = [np.concatenate([data, _reduce(rows)])]
+    theta = np.atleast_1d(np.asarray(gj.EFFECTS["duffing_drive"].typical(1.0).kappa) / np.asarray(entries[2].scale))
+    assert _nuisances(blocks, (0,), [0], [0], [[1]], 1.0) == [0]  # nothing added: the baseline's free ones
+    held = _nuisances(blocks, (1,), [0], [0], [[]], 1.0)
+    freed = _nuisances(blocks, (1,), [0], [0], [[1]], 1.0)
+    assert held == [0] and freed == [0, 1]
+    lam_held = _residual_chi2(blocks[0], held, [2], theta)
+    lam_freed = _residual_chi2(blocks[0], freed, [2], theta)
+    x, y = np.concatenate([data, rows])[:, :2], np.concatenate([data, rows])[:, 2] * theta[0]
+    r = y - x @ np.linalg.lstsq(x, y, rcond=None)[0]
+    assert lam_freed == pytest.approx(float(r @ r), rel=1e-6)
+    assert lam_held == pytest.approx(float(y @ y), rel=1e-6)  # k_vf does not move the drive frequency
+    assert 1.0 < lam_freed < 0.5 * lam_held, (lam_freed, lam_held)
+
+
+def _plan_of(recommended):
+    """A Plan whose candidates ask for `recommended`: {effect: ((experiment, runs), ...)} (None: testable)."""
+    cands = tuple(gj.CandidatePlan(effect, 1, 0.0, 0.0, recs is None, (), (),
+                                   tuple(Recommendation(e, k, 50.0, 0.99) for e, k in (recs or ())), 0.0, 0.0, "")
+                  for effect, recs in recommended.items())
+    return gj.Plan(cands, None, (), None, 0.01, 0.9, 3, ("d0",))
+
+
+def test_the_plans_runs_are_the_union_and_free_what_they_read():
+    g = gj.preset("paper-qmg")
+    by = {e.name: e for e in gj.default_experiments(g)}
+    p = _plan_of({"agc_finite_gain": ((by["drive_amplitude"], 1),), "vref_drift": None,
+                  "duffing_drive": ((by["drive_frequency"], 2), (by["drive_amplitude"], 3))})
+    runs = p.runs()
+    assert list(runs) == ["drive_amplitude", "drive_frequency"]
+    assert runs["drive_amplitude"][1:] == (3, ("agc_finite_gain", "duffing_drive"))
+    assert runs["drive_frequency"][1:] == (2, ("duffing_drive",))
+    assert p.free(("k_vf", "omega_y")) == ("k_vf", "omega_y", "omega_x")
+    assert p.free(("omega_x", "k_vf")) == ("omega_x", "k_vf")
+    only_agc = _plan_of({"agc_finite_gain": ((by["drive_amplitude"], 1),)})
+    assert only_agc.free(("k_vf",)) == ("k_vf",)
+
+
+def test_a_reading_experiment_adds_its_columns_to_the_joint_fit_only_with_its_runs():
+    # Column 2 (omega_x) is seen by experiment 1's rows only; the rule frees it only in sets with runs of it.
+    rng = np.random.default_rng(5)
+    blocks = [np.concatenate([np.diag([30.0, 20.0, 0.0, 0.0]), rng.normal(size=(6, 4)) * 5.0])]
+    reading = [[], [2]]
+    assert _nuisances(blocks, (0, 0), [0], [0, 1], reading, 1.0) == [0]
+    assert _nuisances(blocks, (2, 0), [0], [0, 1], reading, 1.0) == [0, 1]
+    assert _nuisances(blocks, (0, 1), [0], [0, 1], reading, 1.0) == [0, 1, 2]
+    blocks[0][:, 2] = 1e-3  # too weak to fix: identification's rule holds it
+    assert _nuisances(blocks, (0, 1), [0], [0, 1], reading, 1.0) == [0, 1]
+
+
+def test_the_plans_runs_are_simulated_for_the_same_lot_and_appended(monkeypatch):
+    # Which devices, seeds, protocols and run numbers `Plan.simulate` asks the simulator for (stubbed: a point per
+    # run), and the table it returns.
+    from gyrojax._plan import simulate as plan_simulate
+
+    calls = []
+
+    def fake(one, *, devices, runs, sweeps, protocol, seed, progress):
+        calls.append((float(one.resonator.omega_x), devices, runs, sweeps, float(one.temperature(0.0)), seed))
+        return gj.Table.from_columns({"device": ["x"] * runs, "run": np.arange(1, runs + 1),
+                                      "sweep": list(sweeps) * runs, "input": np.zeros(runs),
+                                      "output": np.full(runs, float(seed))})
+
+    monkeypatch.setattr(plan_simulate, "simulate_table", fake)
+    g = gj.preset("paper-qmg")
+    by = {e.name: e for e in gj.default_experiments(g)}
+    p = _plan_of({"agc_finite_gain": ((by["drive_amplitude"], 2),), "zro_tempco": ((by["rate_table_hot"], 1),)})
+    given = gj.Table.from_columns({"device": ["paper-qmg-000"], "run": [1], "sweep": ["rate_table"],
+                                   "input": [10.0], "output": [3.0], "temperature_c": [25.0]})
+    t = p.simulate(g, given, devices=2, runs=2, seed=7, noise_seed=100)
+    lot = gj.campaign_lot(g, devices=2, seed=7)
+    wx = [float(x) for x in np.asarray(lot.resonator.omega_x)]
+    hot = float(dict(by["rate_table_hot"].settings)["chamber_c"])
+    own = float(g.temperature(0.0))
+    assert hot == own + 20.0
+    assert [c[1:] for c in calls] == [(1, 2, ("drive_amplitude",), own, 107), (1, 2, ("drive_amplitude",), own, 108),
+                                      (1, 1, ("rate_table",), hot, 107), (1, 1, ("rate_table",), hot, 108)]
+    assert [c[0] for c in calls] == pytest.approx(wx * 2, rel=1e-12) and wx[0] != wx[1]
+    assert len(t) == 1 + 2 * 2 + 2 * 1
+    assert list(t["device"]) == ["paper-qmg-000"] + ["paper-qmg-000"] * 2 + ["paper-qmg-001"] * 2 + [
+        "paper-qmg-000", "paper-qmg-001"]
+    # after the given 2 runs; the hot run after those and the most runs of any experiment (2), plus one
+    assert list(t["run"]) == [1, 3, 4, 3, 4, 6, 6]
+    assert list(t["output"][1:]) == [107.0, 107.0, 108.0, 108.0, 107.0, 108.0]
+    assert t["temperature_c"][0] == 25.0 and np.all(np.isnan(t["temperature_c"][1:]))
+    with pytest.raises(ValueError, match="recommends no runs"):
+        _plan_of({"vref_drift": None}).simulate(g)

@@ -36,6 +36,13 @@ CHAMBER_SOAK_S = 1800.0
 table's fixture settles within tens of minutes; not printed by the seeds)."""
 
 
+READS = {"drive_frequency": ("omega_x",)}
+"""Physical parameters a sweep kind reads that a baseline of the standard sweeps holds, by kind: a fit of data
+with runs of the kind frees them (`CandidateExperiment.reads`, `Plan.free`). The drive frequency (the PLL's
+reading) gives the drive resonance to ~1 ppm, far inside a lot's spread of `omega_x`, which the rate table,
+VCF and DAC sweeps do not see; held, the spread would be taken for the `duffing_drive` frequency pull."""
+
+
 def _floats(values):
     return tuple(float(v) for v in np.ravel(np.asarray(values, dtype=float)))
 
@@ -104,6 +111,12 @@ class CandidateExperiment(eqx.Module):
     @property
     def points(self) -> int:
         return len(self.inputs)
+
+    @property
+    def reads(self) -> tuple:
+        """Physical parameters (names of `gyrojax.PARAMETERS`) its runs determine that a baseline of the
+        standard sweeps holds (`READS`): a fit of data with these runs frees them."""
+        return READS.get(self.kind, ())
 
     def to_json(self) -> dict:
         return {"sweep": self.name, "kind": self.kind, "settings": dict(self.settings), "minutes": self.minutes,

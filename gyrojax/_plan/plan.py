@@ -40,6 +40,7 @@ from .._parameters import DEFAULT_FREE, Model, as_model, zero_effect
 from .._progress import as_progress
 from .._sweeps.protocol import Protocol
 from .experiment import (
+    READS,
     CandidateExperiment,
     default_experiments,
     jacobians,
@@ -48,6 +49,7 @@ from .experiment import (
     window_correlation,
 )
 from .power import power, required_noncentrality
+from .simulate import simulate_runs
 
 
 SF_HELD_TOL = 0.1
@@ -171,6 +173,38 @@ class Plan(eqx.Module):
                 return c
         raise ValueError(f"no candidate {name!r} in this plan; it has {', '.join(c.effect for c in self.candidates)}.")
 
+    def runs(self) -> dict:
+        """The runs to add: the union of the experiments recommended for the untestable candidates, per
+        experiment name `(experiment, runs, candidates)`: the most runs any candidate asks for, and the
+        candidates asking (in the plan's order)."""
+        out = {}
+        for c in self.candidates:
+            if c.testable:
+                continue
+            for r in c.recommended:
+                e, k, who = out.get(r.experiment.name, (r.experiment, 0, ()))
+                out[r.experiment.name] = (e, max(k, r.runs), who + (c.effect,))
+        return out
+
+    def free(self, free=DEFAULT_FREE) -> tuple:
+        """The `free` argument of `gyrojax.diagnose` (or `identify`) for the data given plus `runs()`: `free`
+        and the parameters those runs read (`CandidateExperiment.reads`), as the plan's expected chi2 assumes."""
+        read = (p for e, _, _ in self.runs().values() for p in e.reads)
+        return tuple(dict.fromkeys(tuple(free) + tuple(read)))
+
+    def simulate(self, gyro, table=None, *, devices: int = 1, runs: int = 1, seed: int = 0,
+                 noise_seed: int = 1000) -> Table:
+        """A simulation study's next step: `runs()` simulated for the lot that `gyrojax.simulate_table(gyro,
+        devices=devices, runs=runs, seed=seed)` drew (`gyrojax.campaign_lot`), each device on its own with
+        noise seed `seed + noise_seed + i` (a draw independent of the data's), labelled as that table's
+        devices and numbered after its `runs` runs. An experiment at a warmer chamber (`<kind>_hot`) runs
+        with the die's ambient (a `ConstantTemperature`) at its chamber's temperature. Returns `table` (the
+        data given) with these runs appended (a column missing on either side is NaN there), or the runs
+        alone when `table` is None; diagnose it with `free=self.free(...)`. Raises a `ValueError` when
+        nothing is recommended."""
+        return simulate_runs(self.runs(), gyro, table, devices=devices, runs_given=runs, seed=seed,
+                             noise_seed=noise_seed)
+
     def to_json(self) -> dict:
         """The plan as JSON (numbers that are not finite, e.g. an undetermined stderr, are null)."""
         return _finite({"candidates": {c.effect: c.to_json() for c in self.candidates},
@@ -254,6 +288,16 @@ def _kept(blocks, cols, threshold):
     return [cols[j] for j in keep]
 
 
+def _nuisances(blocks, counts, base_free, pool, reading, threshold):
+    """The columns a joint fit of the data given and `counts` runs of each experiment would free: the
+    baseline's free ones without added runs; else identification's rule (`_kept`) over `pool` and the
+    columns `reading[j]` of the parameters experiment j reads, for each experiment with runs."""
+    if not any(counts):
+        return list(base_free)
+    read = {i for j, k in enumerate(counts) if k for i in reading[j]}
+    return _kept(blocks, sorted(set(pool) | read), threshold)
+
+
 def _residual_chi2(a, nuisance, effect, theta):
     """|(1 - P_b) A_e theta|^2 for one device's factor `a`: what the effect leaves after the nuisance
     columns (scaled to unit norm for the least squares) took their share."""
@@ -279,9 +323,11 @@ def _typical(fit: Fit, name: str, cols) -> np.ndarray:
     return theta
 
 
-def _baseline(data, model, fit, candidates, free, say):
+def _baseline(data, model, fit, candidates, free, reads, say):
     """The baseline fit with every candidate effect in the model at zero and held (as the diagnosis fits it),
-    reusing a given fit's Jacobian when it has the candidates' columns. Returns (fit, candidates)."""
+    and a held column for each parameter of `reads` (what the experiments read) that the baseline does not
+    free, reusing a given fit's Jacobian when it has those columns. Returns (fit, candidates, the read
+    parameters added as held columns)."""
     if fit is not None:
         if data is not None:
             data = data if isinstance(data, FitData) else fit_data(data)
@@ -301,19 +347,22 @@ def _baseline(data, model, fit, candidates, free, say):
     if fit is not None:
         have = set(fit.names)
         missing = [c for c in candidates if not any(n.startswith(c + ".") for n in have)]
-        if not missing:
-            return fit, candidates
         free = tuple(e.label for e in fit.entries if e.effect_index is None)
-        say("evaluating the given fit with every candidate effect at zero (its Jacobian lacks "
-            f"{', '.join(missing)})")
+        added = tuple(p for p in reads if p not in free)
+        if not missing and not added:
+            return fit, candidates, ()
+        say("evaluating the given fit with every candidate effect at zero" + (f" and {', '.join(added)} held"
+            if added else "") + f" (its Jacobian lacks {', '.join(missing + list(added))})")
+    else:
+        added = tuple(p for p in reads if p not in free)
     full = Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates))
     if fit is None:
         say(f"fitting the baseline: {len(data.devices)} device(s), {data.num_points()} points, every one of "
             f"{len(candidates)} candidate effects held at zero")
         say.compiling(("identify", full_key(full, data)), "the lot's fit with every candidate")
-    fit = identify(full, data if fit is None else fit.data, free=free, hold=candidates,
+    fit = identify(full, data if fit is None else fit.data, free=tuple(free) + added, hold=candidates + added,
                    evaluate_only=fit is not None, estimate_noise=None if fit is None else False, progress=False)
-    return fit, candidates
+    return fit, candidates, added
 
 
 def _sf_temperature(data: FitData) -> np.ndarray:
@@ -405,7 +454,11 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     if data is not None and not isinstance(data, (Table, FitData)):
         raise TypeError(f"data must be a gyrojax.Table or FitData, got {type(data).__name__}.")
     say = as_progress(progress, "gyrojax.plan")
-    fit, candidates = _baseline(data, model, fit, candidates, free, say)
+    experiments = None if experiments is None else tuple(experiments)
+    # what the experiments read beyond the baseline (default experiments: whatever a kind may read)
+    reads = tuple(dict.fromkeys(p for names in READS.values() for p in names)) if experiments is None else \
+        tuple(dict.fromkeys(p for e in experiments if isinstance(e, CandidateExperiment) for p in e.reads))
+    fit, candidates, added = _baseline(data, model, fit, candidates, free, reads, say)
     one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, fit.model.device)
     defaults = experiments is None
     if defaults:
@@ -440,7 +493,12 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     phys = [i for i, e in enumerate(_columns(fit)) if e is None]
     cand_cols = {c: [i for i, nm in enumerate(fit.names) if nm.startswith(c + ".")] for c in candidates}
     held_cands = {i for cols in cand_cols.values() for i in cols}
-    pool = sorted(set(phys) | {i for i in np.nonzero(free_mask)[0] if i not in held_cands})
+    # A parameter only an experiment kind reads (omega_x, by the drive frequency) is a nuisance of the sets
+    # with runs of that kind only: as the diagnosis of those data frees it (`Plan.free`).
+    by_label = _label_columns(fit)
+    added_cols = {i for p in added for i in by_label.get(p, [])}
+    pool = sorted((set(phys) | {i for i in np.nonzero(free_mask)[0] if i not in held_cands}) - added_cols)
+    reading = [[i for p in e.reads if p in added for i in by_label.get(p, [])] for e in experiments]
     base_free = [int(i) for i in np.nonzero(free_mask)[0]]
     r0 = [_reduce(jac0[d]) for d in range(n_dev)]
     rk = [[_reduce(weighted_rows(e, jac_e[k][d], e.sigmas(noise[d], pred_e[k][d]))) for d in range(n_dev)]
@@ -481,7 +539,7 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
         def lam(counts, c=c, cols=cols, amb_cols=amb_cols):
             blocks = [np.concatenate([r0[d]] + [math.sqrt(k) * rk[j][d] for j, k in enumerate(counts) if k])
                       for d in range(n_dev)]
-            nuis = base_free if not any(counts) else _kept(blocks, pool, identifiability_threshold)
+            nuis = _nuisances(blocks, counts, base_free, pool, reading, identifiability_threshold)
             nuis = [i for i in nuis if i not in cols] + amb_cols
             return sum(_residual_chi2(blocks[d], nuis, cols, thetas[c]) for d in range(n_dev))
 
@@ -542,6 +600,15 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
                                                       protocol, identifiability_threshold, say)
     return Plan(tuple(plans), design, experiments, fit, float(alpha), float(target_power), max_repeats, fit.devices,
                 search)
+
+
+def _label_columns(fit: Fit) -> dict:
+    """Per entry label of the fit, its columns."""
+    out, i = {}, 0
+    for e in fit.entries:
+        out[e.label] = list(range(i, i + e.size))
+        i += e.size
+    return out
 
 
 def _columns(fit: Fit):
