@@ -75,5 +75,5 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
         self.rtol, self.atol = rtol, atol
         self.norm = optx.max_norm
         self.descent = optx.DampedNewtonDescent(linear_solver=linear_solver)
-        self.search = RoundoffTrustRegion(roundoff=roundoff, undamped=jnp.asarray(undamped))
+        self.search = RoundoffTrustRegion(roundoff=roundoff, undamped=undamped)
         self.verbose = _quiet

@@ -345,16 +345,15 @@ def _baseline(data, model, fit, candidates, free, reads, say):
         base = as_model(model)
     candidates = candidate_effects(base, candidates, "plan")
     if fit is not None:
+        free = tuple(e.label for e in fit.entries if e.effect_index is None)
+    added = tuple(p for p in reads if p not in free)
+    if fit is not None:
         have = set(fit.names)
         missing = [c for c in candidates if not any(n.startswith(c + ".") for n in have)]
-        free = tuple(e.label for e in fit.entries if e.effect_index is None)
-        added = tuple(p for p in reads if p not in free)
         if not missing and not added:
             return fit, candidates, ()
         say("evaluating the given fit with every candidate effect at zero" + (f" and {', '.join(added)} held"
             if added else "") + f" (its Jacobian lacks {', '.join(missing + list(added))})")
-    else:
-        added = tuple(p for p in reads if p not in free)
     full = Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates))
     if fit is None:
         say(f"fitting the baseline: {len(data.devices)} device(s), {data.num_points()} points, every one of "
@@ -495,10 +494,10 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     held_cands = {i for cols in cand_cols.values() for i in cols}
     # A parameter only an experiment kind reads (omega_x, by the drive frequency) is a nuisance of the sets
     # with runs of that kind only: as the diagnosis of those data frees it (`Plan.free`).
-    by_label = _label_columns(fit)
-    added_cols = {i for p in added for i in by_label.get(p, [])}
+    by_label = {p: [i for i, nm in enumerate(fit.names) if nm == p or nm.startswith(p + "[")] for p in added}
+    added_cols = {i for cols in by_label.values() for i in cols}
     pool = sorted((set(phys) | {i for i in np.nonzero(free_mask)[0] if i not in held_cands}) - added_cols)
-    reading = [[i for p in e.reads if p in added for i in by_label.get(p, [])] for e in experiments]
+    reading = [[i for p in e.reads if p in added for i in by_label[p]] for e in experiments]
     base_free = [int(i) for i in np.nonzero(free_mask)[0]]
     r0 = [_reduce(jac0[d]) for d in range(n_dev)]
     rk = [[_reduce(weighted_rows(e, jac_e[k][d], e.sigmas(noise[d], pred_e[k][d]))) for d in range(n_dev)]
@@ -600,15 +599,6 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
                                                       protocol, identifiability_threshold, say)
     return Plan(tuple(plans), design, experiments, fit, float(alpha), float(target_power), max_repeats, fit.devices,
                 search)
-
-
-def _label_columns(fit: Fit) -> dict:
-    """Per entry label of the fit, its columns."""
-    out, i = {}, 0
-    for e in fit.entries:
-        out[e.label] = list(range(i, i + e.size))
-        i += e.size
-    return out
 
 
 def _columns(fit: Fit):
