@@ -28,7 +28,6 @@ size, so a run cut short keeps the sizes it finished.
 """
 
 import argparse
-import dataclasses
 import os
 import platform
 import resource
@@ -56,7 +55,7 @@ def _problems(fit, preset):
     n = len(fit.devices)
     model = batched(as_model(preset), n)
     start = eqx.filter_vmap(lambda m: read_values(m, fit.entries))(model)
-    data = dataclasses.replace(fit.data, devices=(), runs=(), source="")
+    data = fit.data.unlabelled()
     n_dev = len(fit.names)
     mask = jnp.broadcast_to(jnp.asarray(np.asarray(fit.free, dtype=float)), (n, n_dev))
     empty = jnp.zeros((n, 0))

@@ -41,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
+from ._compile import jit
 from ._effects.base import AbstractEffect
 from ._effects.registry import EFFECTS, effect as _named_effect
 from ._gyroscope import Gyroscope
@@ -227,7 +228,7 @@ def _split(model, effects, device):
     return as_arrays(base), tuple(as_arrays(e) for e in chosen)
 
 
-@eqx.filter_jit
+@jit
 def _curves(base, effects, on, x_dps, rates, full_scale):
     """Residual curves (ppm of full scale) and max / RMS figures for each row of switches `on`."""
 
@@ -251,7 +252,7 @@ def _joint_max_ppm(params, base, effects, x_dps, rates, full_scale, where):
     return fit_scale_factor(x_dps, out, full_scale=full_scale).nonlinearity_max_ppm
 
 
-_joint_grad = eqx.filter_jit(eqx.filter_grad(_joint_max_ppm))
+_joint_grad = jit(eqx.filter_grad(_joint_max_ppm))
 
 
 def nonlinearity_budget(model, effects: Sequence | None = None, *,

@@ -57,6 +57,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
+from .._compile import jit
 from .base import AbstractCompensation, AbstractCompensator, check_side, require_side
 from .points import RatePoints
 
@@ -388,7 +389,7 @@ def _lsq(a, b):
     return jax.scipy.linalg.solve_triangular(r, q.T @ b)
 
 
-@eqx.filter_jit
+@jit(quick=True)
 def _fit_arrays(cfg: ModelCompensator, n_runs: int, with_tcf: bool, free: tuple[bool, ...],
                 data: dict[str, Array]) -> dict[str, Array]:
     """The whole identification as one traceable function of the data (jitted; differentiable in `data`).

@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compile import jit
 from .._gyroscope import Gyroscope
 from .._noise import DAC_VOLTMETER_SIGMA_V, RateNoise
 from .._parameters import apply_u, read_values
@@ -190,7 +191,7 @@ def _predict_points(gyro, sweeps, points, sf_temperature, tier):
     return tuple(out), sf
 
 
-@eqx.filter_jit
+@jit(quick=True)
 def _jacobians(model, entries, sweeps, points, sf_temperature, tier):
     def one(model_d, t_sf):
         start = read_values(model_d, entries)

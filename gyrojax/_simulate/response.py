@@ -7,6 +7,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, ArrayLike, Complex, Float
 
+from .._compile import jit
 from .._gyroscope import Gyroscope
 from .._linsolve import solve
 from .._stimulus import Stimulus
@@ -65,7 +66,7 @@ def linearise(gyro: Gyroscope, stimulus: Stimulus = Stimulus(), *, input: str = 
     return _linearise(gyro, stimulus, input)
 
 
-@eqx.filter_jit
+@jit
 def _linearise(gyro, stimulus, input):
     """Linearise the averaged model at the steady state under `stimulus`, with respect to a small extra
     table rate (`input="rate"`, per rad/s) or virtual-Coriolis drive (`input="vcf"`, per V^2 of
@@ -113,6 +114,6 @@ def bandwidth(gyro: Gyroscope, stimulus: Stimulus = Stimulus(), *, input: str = 
     return linearise(gyro, stimulus, input=input).bandwidth(f_max_hz)
 
 
-@eqx.filter_jit
+@jit
 def _gain_hz(ss: StateSpace, f_hz):
     return jnp.abs(ss.response(2 * jnp.pi * f_hz))

@@ -32,6 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compile import jit
 from .._gyroscope import Gyroscope
 from .._simulate._model import SlowState, controls, dac_voltage, expj, phase_grid
 from .._simulate.tiers import Steady
@@ -91,7 +92,7 @@ def branch_ratio_points(gyro: Gyroscope, rates_dps, temperatures, times=None, ti
     return v_plus / v_minus, settled
 
 
-@eqx.filter_jit
+@jit
 def _lot_branch_ratio(lot, rates, temperatures, times, tier):
     r, t = per_run(rates, temperatures), per_run(times, temperatures)
 

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Real
 
+from .._compile import jit
 from .._gyroscope import Gyroscope
 from .._units import DEG
 from .base import AbstractSweep
@@ -110,11 +111,11 @@ def dac_points(gyro: Gyroscope, words: Real[ArrayLike, " word"]) -> Float[Array,
     return dac_sweep(gyro, words)
 
 
-@eqx.filter_jit
+@jit
 def _lot_dac(lot, words):
     return eqx.filter_vmap(dac_points)(lot, words)
 
 
-@eqx.filter_jit
+@jit
 def _lot_ideal_sf(lot):
     return eqx.filter_vmap(lambda g: g.ideal_scale_factor())(lot)

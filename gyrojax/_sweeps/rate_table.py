@@ -2,12 +2,12 @@
 
 from typing import TYPE_CHECKING
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .._compile import jit
 from .._gyroscope import Gyroscope
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._stimulus import Stimulus
@@ -68,7 +68,7 @@ def rate_table_points(gyro: Gyroscope, rates_dps: Float[ArrayLike, " point"], te
     return settled_points(gyro, [(RateTable(), rates_dps, temperatures, times)], tier)[0]
 
 
-@eqx.filter_jit
+@jit
 def _rate_sweep(gyro, rates, times, tier):
     def one(rate, time):
         return gyro, Stimulus(rate=rate, time=time)

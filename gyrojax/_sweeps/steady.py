@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compile import jit
 from .._gyroscope import Gyroscope
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._solution import RESULTS, result_code
@@ -187,7 +188,7 @@ def steady_points(gyro: Gyroscope, requests, tier: AbstractTier = Steady()) -> t
 
 
 
-settled_points = eqx.filter_jit(steady_points)
+settled_points = jit(steady_points)
 """`steady_points` compiled once per structure and shape, for the public point functions called outside a
 traced program (eagerly, each call of a settle's while loop would compile it again)."""
 
@@ -196,7 +197,7 @@ def per_run(x, temperatures):
     return jnp.broadcast_to(jnp.asarray(x, dtype=float), temperatures.shape[1:])
 
 
-@eqx.filter_jit
+@jit
 def lot_steady(lot, requests, tier):
     """`steady_points` for every device (axis 0) and run (axis 1), several settled sweeps in one call (one
     compiled settle): `requests` is a tuple of `(sweep, inputs, temperatures, times)` with temperatures

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .._compile import jit
 from .._gyroscope import Gyroscope
 from .._simulate.response import linearise
 from .._stimulus import Stimulus
@@ -141,7 +142,7 @@ def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz: Float[ArrayLike, " point
     return amp[:, 0], phase[:, 0]
 
 
-@eqx.filter_jit
+@jit
 def _lot_vcf_dynamic(lot, frequencies_hz, temperatures, amplitude_v):
     """`vcf_dynamic_points` for every device, run and point, each point at its own temperature; frequencies
     (point,) or (run, point)."""
