@@ -58,7 +58,7 @@ def baseline_jacobian(reading, gyro: Gyroscope, free) -> jnp.ndarray:
     if not names:
         return jnp.zeros((jnp.size(reading(gyro)), 0))
 
-    @jit(quick=True)
+    @jit
     def jac(gyro):
         return jax.jacfwd(lambda u: jnp.ravel(reading(_perturbed(gyro, names, u))))(jnp.zeros(len(names)))
 
@@ -79,7 +79,7 @@ def absorption(reading, gyro: Gyroscope, with_effect: Gyroscope, sigma, *, free=
 
     **Returns:** an `Absorption`.
     """
-    compiled = jit(quick=True)(reading)
+    compiled = jit(reading)
     y0 = np.ravel(np.asarray(compiled(gyro), dtype=float))
     sigma = np.broadcast_to(np.asarray(sigma, dtype=float), y0.shape)
     d = (np.ravel(np.asarray(compiled(with_effect), dtype=float)) - y0) / sigma

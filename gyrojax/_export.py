@@ -60,7 +60,7 @@ import jax
 import numpy as np
 from jax import export
 
-from ._compile import compiler_options, jit
+from ._compile import compiler_options, jit, top_level
 from ._io import atomic_write_bytes
 from ._version import __version__
 
@@ -418,16 +418,16 @@ def _deserialize(data: bytes, key: str) -> export.Exported:
         _get_vjp=None)
 
 
-def _jitted_call(exported: export.Exported, quick: bool) -> Callable:
+def _jitted_call(exported: export.Exported) -> Callable:
     def call(*xs):
         return exported.call(*xs)
 
     # Named after the program, for JAX's logs and monitoring events.
     call.__name__ = call.__qualname__ = f"exported_{exported.fun_name.removeprefix('export_')}"
-    return jax.jit(call, compiler_options=compiler_options(quick))
+    return jax.jit(call, compiler_options=compiler_options())
 
 
-def _load(path: str, key: str, leaves, quick: bool) -> Callable | None:
+def _load(path: str, key: str, leaves) -> Callable | None:
     """The jitted call of the program stored at `path`, or None if there is none usable."""
     try:
         with open(path, "rb") as f:
@@ -438,10 +438,10 @@ def _load(path: str, key: str, leaves, quick: bool) -> Callable | None:
     if exported.nr_devices != 1 or [(a.shape, a.dtype) for a in exported.in_avals] != [
             (a.shape, a.dtype) for a in _avals(leaves)]:
         raise ValueError("inputs differ from the key's")
-    return _jitted_call(exported, quick)
+    return _jitted_call(exported)
 
 
-def _export(fn, static, treedef, leaves, path: str, key: str, quick: bool) -> Callable | None:
+def _export(fn, static, treedef, leaves, path: str, key: str) -> Callable | None:
     """Trace `fn`, store it at `path` and return the jitted call of the stored form; None if it cannot be
     exported (a marker is written then, so that later processes do not trace it twice)."""
     def flat(*xs):
@@ -472,10 +472,10 @@ def _export(fn, static, treedef, leaves, path: str, key: str, quick: bool) -> Ca
         atomic_write_bytes(path, data)
     except OSError as e:
         _log.debug("gyrojax export: %s not written (%s)", path, e)
-    return _jitted_call(exported, quick)
+    return _jitted_call(exported)
 
 
-def _exported_call(name: str, fn, args, quick: bool) -> tuple[Callable | None, str | None, list]:
+def _exported_call(name: str, fn, args) -> tuple[Callable | None, str | None, list]:
     """The jitted call of `fn`'s exported program for `args` (loaded or made now), its key and the array
     leaves it takes; the call None: the plain path."""
     folder = _folder()
@@ -496,11 +496,11 @@ def _exported_call(name: str, fn, args, quick: bool) -> tuple[Callable | None, s
     call = None
     if not os.path.exists(path + ".refused"):
         try:
-            call = _load(path, key, leaves, quick)
+            call = _load(path, key, leaves)
         except Exception as e:  # noqa: BLE001 - a corrupt or foreign file: made again below
             _log.debug("gyrojax export: %s unreadable (%s: %s)", path, type(e).__name__, e)
         if call is None:
-            call = _export(fn, static, treedef, leaves, path, key, quick)
+            call = _export(fn, static, treedef, leaves, path, key)
     _loaded[key] = call
     return call, key, leaves
 
@@ -509,25 +509,26 @@ def _path(name: str, key: str) -> str:
     return os.path.join(_folder() or "", FOLDER, f"{name}-{key}.jaxexport")
 
 
-def cached_program(name: str, fn: Callable, *, quick: bool = False) -> Callable:
+def cached_program(name: str, fn: Callable) -> Callable:
     """`gyrojax._compile.jit(fn)` (`equinox.filter_jit` with gyrojax's XLA options), whose traced program is
     kept beside the compilation cache (see the module's docstring) so that a later process with the same
-    structure does not trace it again.
+    structure does not trace it again. Called inside another trace, it is `fn` traced into that program.
 
     **Arguments:**
 
     - `name`: the program's name, part of its key and of its file's name.
     - `fn`: the function; its outputs must be arrays in tuples, lists and dicts (what `jax.export` can store),
       otherwise it always takes the plain path.
-    - `quick`: compile it with `gyrojax._compile`'s quick options (a program that runs briefly, a fit).
 
     **Returns:** a function with `fn`'s signature (positional arguments only).
     """
-    plain = jit(fn, quick=quick)
+    plain = jit(fn)
 
     @functools.wraps(fn)
     def run(*args):
-        call, key, leaves = _exported_call(name, fn, args, quick)
+        if not top_level():
+            return plain(*args)
+        call, key, leaves = _exported_call(name, fn, args)
         if call is None:
             return plain(*args)
         try:

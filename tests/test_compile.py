@@ -12,11 +12,8 @@ from gyrojax import _compile
 def test_options_on_cpu_and_the_users_flag_wins(monkeypatch):
     monkeypatch.delenv("XLA_FLAGS", raising=False)
     assert _compile.compiler_options() == {"xla_cpu_use_fusion_emitters": False}
-    assert _compile.compiler_options(quick=True) == {"xla_cpu_use_fusion_emitters": False,
-                                                     "xla_backend_optimization_level": 0}
     monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_use_fusion_emitters=true")
     assert _compile.compiler_options() is None
-    assert _compile.compiler_options(quick=True) == {"xla_backend_optimization_level": 0}
 
 
 def test_top_level_calls_get_the_options_nested_calls_do_not(monkeypatch):
@@ -29,13 +26,13 @@ def test_top_level_calls_get_the_options_nested_calls_do_not(monkeypatch):
 
     monkeypatch.setattr(_compile.eqx, "filter_jit", recording_jit)
 
-    @_compile.jit(quick=True)
+    @_compile.jit
     def square_sum(x):
         return jnp.sum(x**2)
 
     x = jnp.arange(3.0)
     assert float(square_sum(x)) == 5.0
-    assert seen == [{"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 0}]
+    assert seen == [{"xla_cpu_use_fusion_emitters": False}]
     # Inside another jit (JAX raises for compiler options on a nested jit) and under grad: no options.
     assert float(jax.jit(lambda y: square_sum(y) + 1.0)(x)) == 6.0
     np.testing.assert_allclose(jax.grad(square_sum)(x), 2 * np.arange(3.0))
@@ -52,8 +49,3 @@ def test_a_gyrojax_program_inside_a_users_jit():
     direct = gj.rate_sweep(gyro, rates).rate
     inside = jax.jit(lambda r: gj.rate_sweep(gyro, r).rate)(rates)
     np.testing.assert_allclose(inside, direct, rtol=1e-12)
-
-
-def test_a_users_optimisation_level_is_kept(monkeypatch):
-    monkeypatch.setenv("XLA_FLAGS", "--xla_backend_optimization_level=1")
-    assert _compile.compiler_options(quick=True) == {"xla_cpu_use_fusion_emitters": False}

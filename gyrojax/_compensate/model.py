@@ -389,7 +389,7 @@ def _lsq(a, b):
     return jax.scipy.linalg.solve_triangular(r, q.T @ b)
 
 
-@jit(quick=True)
+@jit
 def _fit_arrays(cfg: ModelCompensator, n_runs: int, with_tcf: bool, free: tuple[bool, ...],
                 data: dict[str, Array]) -> dict[str, Array]:
     """The whole identification as one traceable function of the data (jitted; differentiable in `data`).

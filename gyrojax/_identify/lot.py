@@ -66,7 +66,7 @@ def _evaluate(problem_all, u_full, u_lot, chunk):
     return map_devices(one, chunk, problem_all, u_full)
 
 
-_evaluate_program = cached_program("evaluate", _evaluate, quick=True)
+_evaluate_program = cached_program("evaluate", _evaluate)
 
 
 def evaluate(problem_all, u_full, u_lot, chunk) -> Evaluation:
@@ -99,10 +99,10 @@ def _solve_each(problem_batch, u0, u_lot, solver, max_steps, chunk):
     return map_devices(lambda p, y0: _solve_device(p, y0, u_lot, solver, max_steps), chunk, problem_batch, u0)
 
 
-_solve_independent = cached_program("solve_independent", _solve_each, quick=True)
+_solve_independent = cached_program("solve_independent", _solve_each)
 
 
-_solve_one = jit(quick=True)(_solve_device)
+_solve_one = jit(_solve_device)
 
 
 def _solve_loop(problem_batch, u0, u_lot, solver, max_steps, chunk=None):
@@ -114,7 +114,7 @@ def _solve_loop(problem_batch, u0, u_lot, solver, max_steps, chunk=None):
     return tuple(jnp.stack([o[i] for o in outs]) for i in range(4))
 
 
-@jit(quick=True)
+@jit
 def _solve_joint(problem_batch, u0, u_lot0, solver, max_steps):
     def fn(y, _):
         u_free, u_lot = y

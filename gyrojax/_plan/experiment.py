@@ -191,7 +191,7 @@ def _predict_points(gyro, sweeps, points, sf_temperature, tier):
     return tuple(out), sf
 
 
-@jit(quick=True)
+@jit
 def _jacobians(model, entries, sweeps, points, sf_temperature, tier):
     def one(model_d, t_sf):
         start = read_values(model_d, entries)
