@@ -2,9 +2,10 @@
 
 gyrojax's programs are large (a fit of the demo lot: ~80 programs, the biggest ~14,000 StableHLO operations)
 and run for a second or less, so on a CPU most of a first call is XLA compiling them. XLA:CPU's older loop
-emitters (`xla_cpu_use_fusion_emitters = False`) instead of its MLIR fusion emitters halve that and run as fast
-or faster: first `identify` of the demo lot, empty cache, 2 cores, XLA compile 39.6 -> 14.8-20.9 s; the fit of
-256 devices 5.44 against 5.46 s; the full-waveform tier 10.4 -> 7.6 ms per point.
+emitters (`xla_cpu_use_fusion_emitters = False`) instead of its MLIR fusion emitters compile them in a third to
+a half less time and run as fast or faster: first `identify` of the demo lot, empty cache, 2 cores, XLA compile
+39.6 -> 26.4 s (wall 62.2 -> 50.3 s); the fit of 256 devices 5.46 against 5.44 s; the full-waveform tier
+10.4 -> 7.6 ms per point.
 
 Measured and not taken: LLVM's optimisation level 0 (`xla_backend_optimization_level = 0`) compiles the fit
 faster still (identify 20.9 -> 12.5 s) but runs the fit of 256 devices 3x slower (16.3 s) and the full tier
