@@ -38,6 +38,7 @@ def _points(gyro, setpoints, tier=gj.Steady()):
     return gj.setpoint_points(gyro, gj.DriveAmplitude(), setpoints, NAN, None, tier)
 
 
+@pytest.mark.slow  # 33-44 s cold (fast tier, 2026-11-26)
 def test_drive_amplitude_backbone_and_sag(qmg):
     """The PLL frequency follows the Duffing backbone w_x sqrt(1 + 3/4 duffing_x a^2) and the AGC's standing
     error is the same fraction of every set-point, beta = 2 w m g_x leak / (K_dx |G_d| (kp leak + ki)); with
@@ -126,6 +127,7 @@ def test_zero_rate_scales_with_the_setpoint(qmg):
     np.testing.assert_allclose((out - base) / _sf(qmg), [0.5 * zro, zro], rtol=1e-6)
 
 
+@pytest.mark.slow  # 33-44 s cold (fast tier, 2026-11-26)
 def test_simulate_and_csv_round_trip(qmg, tmp_path):
     """Every revealing kind through simulate_table (noise-free: the readings are the measurement model's) and the
     CSV; a device without a VCF electrode is refused by name before anything is simulated."""

@@ -63,6 +63,7 @@ def test_a_rate_term_reads_exactly_like_a_rate():
     np.testing.assert_allclose(np.asarray(averaged.rate), shifted, rtol=1e-7)
 
 
+@pytest.mark.slow  # 33-44 s cold (fast tier, 2026-11-26)
 def test_an_output_term_reaches_the_rate_outputs_only():
     """A readout offset of 100 LSB/h, one hour after power-on: +100 LSB on rate-table and static-VCF points;
     the DAC sweep (read at the DAC) does not see it."""
