@@ -56,7 +56,7 @@ def jit(fn: Callable) -> Callable:
         options = compiler_options() if top_level() else None
         key = None if options is None else tuple(sorted(options.items()))
         if key not in compiled:
-            compiled[key] = eqx.filter_jit(fn, compiler_options=options) if options else eqx.filter_jit(fn)
+            compiled[key] = eqx.filter_jit(fn, compiler_options=options)  # None: XLA's defaults
         return compiled[key](*args, **kwargs)
 
     return run
