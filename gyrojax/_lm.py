@@ -10,7 +10,9 @@ required fall is accepted; Cauchy termination (optimistix's, unchanged) then end
 
 The same solver is Gauss-Newton when its `undamped` flag (an array, so a traced value, not a compiled
 constant) is set: no damping (lambda = 1/inf = 0, the normal equations J^T J) and every step accepted. A solve
-retried with Gauss-Newton after Levenberg-Marquardt then reuses the compiled program of the first.
+retried with Gauss-Newton after Levenberg-Marquardt then reuses the compiled program of the first. Its
+`step_limit` (also traced) stops it after that many steps: with 1, the solve only evaluates at its start (the
+first step is always accepted), which is how `identify` evaluates without a program of its own.
 """
 
 from collections.abc import Callable
@@ -19,7 +21,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import lineax as lx
+import numpy as np
 import optimistix as optx
+
+from ._linsolve import PivotedLU
 
 
 class _RadiusState(eqx.Module):
@@ -61,7 +66,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     """optimistix's Levenberg-Marquardt (damped Newton descent, classical trust-region update) with the
     round-off-aware acceptance of `RoundoffTrustRegion`; with `undamped=True`, Gauss-Newton (optimistix's
     `GaussNewton` path: full Newton steps on the normal equations, each accepted) in the same compiled
-    program."""
+    program. `step_limit` (default: none) stops the solve after that many steps, as converged."""
 
     rtol: float
     atol: float
@@ -69,11 +74,20 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     descent: optx.DampedNewtonDescent
     search: RoundoffTrustRegion
     verbose: Callable
+    step_limit: jax.Array
 
-    def __init__(self, rtol: float, atol: float, linear_solver: lx.AbstractLinearSolver, roundoff: float = 1e-10,
-                 undamped: bool = False):
+    def __init__(self, rtol: float, atol: float, linear_solver: lx.AbstractLinearSolver | None = None,
+                 roundoff: float = 1e-10, undamped: bool = False, step_limit: int | None = None):
+        if linear_solver is None:
+            # Normal equations through an XLA-only LU, not lineax's LAPACK QR: see gyrojax/_linsolve.py.
+            linear_solver = lx.Normal(PivotedLU(zero_pivot_gives_zero=True))
         self.rtol, self.atol = rtol, atol
         self.norm = optx.max_norm
         self.descent = optx.DampedNewtonDescent(linear_solver=linear_solver)
         self.search = RoundoffTrustRegion(roundoff=roundoff, undamped=undamped)
         self.verbose = _quiet
+        self.step_limit = jnp.asarray(np.iinfo(np.int32).max if step_limit is None else step_limit)
+
+    def terminate(self, fn, y, args, options, state, tags):
+        stop, result = super().terminate(fn, y, args, options, state, tags)
+        return stop | (state.num_steps >= self.step_limit), result

@@ -236,20 +236,21 @@ FIT = textwrap.dedent("""
 
 @pytest.mark.slow
 def test_a_second_process_fits_without_tracing_the_fit(tmp_path):
-    """The exported evaluation pass and solve: a second process with the same lot structure traces neither and
-    gives identical numbers (every array of the Fit); other free parameters are other programs."""
+    """The exported solve (which also evaluates at the start): a second process with the same lot structure does
+    not trace it and gives identical numbers (every array of the Fit); other free parameters are another
+    program."""
     (tmp_path / "program.py").write_text(FIT)
     cache, table = tmp_path / "cache", str(tmp_path / "lot.csv")
     first = _run(tmp_path, cache, table, str(tmp_path / "first.npz"))
-    assert {"export_evaluate", "export_solve_independent"} <= set(first["traces"])
-    assert sorted(n.split("-")[0] for n in _artifacts(cache)) == ["evaluate", "solve_independent"]
+    assert "export_solve_independent" in first["traces"]
+    assert sorted(n.split("-")[0] for n in _artifacts(cache)) == ["solve_independent"]
     second = _run(tmp_path, cache, table, str(tmp_path / "second.npz"), "loaded-only")
-    assert not {"export_evaluate", "export_solve_independent", "_evaluate", "_solve_each"} & set(second["traces"])
+    assert not {"export_solve_independent", "_solve_each"} & set(second["traces"])
     a, b = np.load(tmp_path / "first.npz"), np.load(tmp_path / "second.npz")
     assert len(a.files) == len(b.files) > 50
     for k in a.files:
         np.testing.assert_array_equal(a[k], b[k])
-    assert second["new"] == {"fewer free": "evaluate", "more free": "evaluate"}
+    assert second["new"] == {"fewer free": "solve_independent", "more free": "solve_independent"}
 
 
 def test_a_program_on_several_devices_takes_the_plain_path(program):

@@ -510,7 +510,8 @@ def test_a_recovery_policy_is_a_small_object_on_the_solution_so_far():
     """DecrementCertificate on a hand-made solution (no compile): the device stopped at max_steps whose
     residuals a Gauss-Newton step cannot lower is certified, with the reason in its note; the one a step still
     improves stays stopped."""
-    from gyrojax._identify.lot import Evaluation, Lot
+    from gyrojax._identify.evaluation import Evaluation
+    from gyrojax._identify.lot import Lot
     from gyrojax._identify.recovery import DecrementCertificate, Solution, Solving
     from gyrojax._solution import RESULTS, result_code
 
@@ -522,7 +523,7 @@ def test_a_recovery_policy_is_a_small_object_on_the_solution_so_far():
     stopped = result_code(RESULTS.nonlinear_max_steps_reached)
     solution = Solution(np.zeros((2, 3)), np.zeros(0), np.full(2, stopped), np.full(2, 200), np.sum(r**2, axis=-1),
                         np.zeros((2, 3)), final, ("", ""))
-    solving = Solving(None, None, Lot(gj.VmapSolve(chunk=None, shard=False), 2), None, "levenberg-marquardt", 200,
+    solving = Solving(None, Lot(gj.VmapSolve(chunk=None, shard=False), 2), None, "levenberg-marquardt", 200,
                       0, (0, 1, 2), ("k_vf", "angular_gain", "vcf_gain"), 1.0)
     out = DecrementCertificate(1e-6)(solving, solution)
     assert out.code[0] == result_code(RESULTS.successful) and out.code[1] == stopped

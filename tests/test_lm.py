@@ -4,6 +4,7 @@ import jax.numpy as jnp
 import lineax as lx
 import numpy as np
 import optimistix as optx
+import pytest
 
 from gyrojax._linsolve import PivotedLU
 from gyrojax._lm import LevenbergMarquardt
@@ -57,14 +58,16 @@ def test_same_path_as_optimistix_away_from_round_off():
     np.testing.assert_allclose(np.asarray(a.value), [1.0, 1.0], rtol=1e-9)
 
 
-def test_the_solve_reports_the_residuals_of_its_solution():
-    """identify's solve takes the residuals at the solution from the solver's state (no second evaluation of the
-    model in the compiled solve): they must be those of `sol.value`, also when the solve stops early on a
-    rejected step, and a solver that keeps only the loss (BFGS) evaluates them."""
-    from gyrojax._identify.lot import _final_residuals
+def test_the_solve_reports_the_evaluation_at_its_solution():
+    """identify's solve takes the evaluation at the solution (residuals, Jacobian, predictions: the residual
+    function's aux) from the solver's state (no second copy of the model in the compiled solve): it must be
+    that of `sol.value`, also when the solve stops early on a rejected step, and a solver that keeps only the
+    loss (BFGS) evaluates it."""
+    from gyrojax._identify.evaluation import final_evaluation
 
     def rosenbrock(y, _):
-        return jnp.stack([10 * (y[1] - y[0] ** 2), 1 - y[0]])
+        r = jnp.stack([10 * (y[1] - y[0] ** 2), 1 - y[0]])
+        return r, {"residuals": r, "at": y}
 
     y0 = jnp.asarray([-1.2, 1.0])
     solvers = (LevenbergMarquardt(1e-10, 1e-10, NORMAL), optx.GaussNewton(1e-10, 1e-10, linear_solver=NORMAL),
@@ -72,15 +75,47 @@ def test_the_solve_reports_the_residuals_of_its_solution():
     rejected = 0
     # Levenberg-Marquardt's third step on Rosenbrock from (-1.2, 1) is rejected; each max_steps compiles anew.
     for solver, max_steps in [(solvers[0], 3), (solvers[0], 200), (solvers[1], 200), (solvers[2], 200)]:
-        sol = optx.least_squares(rosenbrock, solver, y0, max_steps=max_steps, throw=False)
+        sol = optx.least_squares(rosenbrock, solver, y0, has_aux=True, max_steps=max_steps, throw=False)
         kept = isinstance(getattr(sol.state, "f_info", None), optx.FunctionInfo.ResidualJac)
         assert kept == (not isinstance(solver, optx.BFGS))
         if kept:
             rejected += int(sol.state.num_steps_since_acceptance > 0)
+        got, want = final_evaluation(sol, rosenbrock), rosenbrock(sol.value, None)[1]
+        np.testing.assert_array_equal(np.asarray(got["at"]), np.asarray(sol.value))
         # equal up to the round-off of the same expression in another program (terms of ~10)
-        np.testing.assert_allclose(np.asarray(_final_residuals(sol, rosenbrock)),
-                                   np.asarray(rosenbrock(sol.value, None)), rtol=1e-14, atol=1e-13)
+        np.testing.assert_allclose(np.asarray(got["residuals"]), np.asarray(want["residuals"]), rtol=1e-14,
+                                   atol=1e-13)
     assert rejected > 0  # some solve above stopped on a rejected step
+
+
+def test_a_step_limit_of_one_evaluates_at_the_start():
+    """`evaluation_step`: the solver stopped after its first (always accepted) step returns the start and the
+    evaluation there, as converged; the limit is a traced value (the same compiled solve as the full one)."""
+    import equinox as eqx
+
+    from gyrojax._identify.evaluation import evaluation_step, final_evaluation
+
+    def rosenbrock(y, _):
+        r = jnp.stack([10 * (y[1] - y[0] ** 2), 1 - y[0]])
+        return r, r
+
+    y0 = jnp.asarray([-1.2, 1.0])
+    traces = []
+
+    @eqx.filter_jit
+    def solve(solver):
+        traces.append(1)
+        return optx.least_squares(rosenbrock, solver, y0, has_aux=True, max_steps=50, throw=False)
+
+    full = solve(LevenbergMarquardt(1e-10, 1e-10, NORMAL))
+    assert int(full.stats["num_steps"]) > 5 and float(full.value[0]) == pytest.approx(1.0, abs=1e-8)
+    for solver in (LevenbergMarquardt(1e-10, 1e-10, NORMAL), optx.BFGS(1e-10, 1e-10)):
+        sol = solve(evaluation_step(solver))
+        assert int(sol.stats["num_steps"]) == 1 and sol.result == optx.RESULTS.successful
+        np.testing.assert_array_equal(np.asarray(sol.value), np.asarray(y0))
+        np.testing.assert_allclose(np.asarray(final_evaluation(sol, rosenbrock)),
+                                   np.asarray(rosenbrock(y0, None)[0]), rtol=1e-15)
+    assert len(traces) == 2  # one program for the full solve and its evaluation, one for BFGS's evaluation
 
 
 def test_the_undamped_flag_is_gauss_newton_in_the_same_compiled_solve():

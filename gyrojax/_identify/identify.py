@@ -168,16 +168,17 @@ def _fit_once(model, data, *, free, shared, priors, hold, tier, solver, solver_n
     problem_all, layout = make_problem(model, data, free=free, shared=shared, hold=hold, priors=priors, tier=tier)
     n_dev, n_lot = len(layout.names_dev), len(layout.names_lot)
     lot = Lot(lot_solve_from(lot_solve, joint=bool(n_lot)), n)
-    # One compiled evaluation, at the start and at the solution: the Jacobian over every per-device entry.
-    at_start = lot.evaluate(problem_all, np.zeros((n, n_dev)), np.zeros(n_lot), "at the start")
+    # The evaluation at the start (the Jacobian over every per-device entry) is the solve's own program,
+    # stopped after its first step: one compiled copy of the model per fit.
+    at_start = lot.evaluate(problem_all, np.zeros((n, n_dev)), np.zeros(n_lot), solver, max_steps, "at the start")
     check_signs(data, {s: np.asarray(v) for s, v in at_start.predictions.items()}, problem_all.model.device.name)
     # Identifiability at the start: hold what the data cannot see.
     candidates = list(layout.candidates)
     keep, held_reports = hold_unidentifiable(np.asarray(at_start.jac)[:, :, candidates],
                                              [layout.names_dev[i] for i in candidates], threshold)
     free_index = tuple(candidates[k] for k in keep)
-    solving = Solving(with_free(problem_all, free_index), problem_all, lot, solver, solver_name, max_steps, n_lot,
-                      free_index, layout.names_dev, threshold)
+    solving = Solving(with_free(problem_all, free_index), lot, solver, solver_name, max_steps, n_lot, free_index,
+                      layout.names_dev, threshold)
     if first is None:
         ok = np.full(n, result_code(RESULTS.successful))
         solution = Solution(np.zeros((n, n_dev)), np.zeros(n_lot), ok, np.zeros(n, dtype=int), None,

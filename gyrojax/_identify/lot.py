@@ -3,6 +3,7 @@ Jacobians and the scale factor; the solves), the padding that chunks or shards t
 the strategies that choose among them (`VmapSolve`, `LoopSolve`, `JointSolve`)."""
 
 import abc
+import dataclasses
 from typing import ClassVar
 
 import equinox as eqx
@@ -13,23 +14,9 @@ import optimistix as optx
 
 from .._compile import jit
 from .._export import cached_program
-from .._residuals import run_biases
 from .._solution import RESULTS, result_code
+from .evaluation import Evaluation, evaluated, evaluation_step, final_evaluation
 from .problem import nonfinite_explained
-
-
-class Evaluation(eqx.Module):
-    """Residuals, Jacobians and derived quantities of every device at one point of parameter space."""
-
-    residuals: jax.Array  # (device, residual)
-    jac: jax.Array  # (device, residual, n_dev) with respect to every per-device entry
-    jac_lot: jax.Array  # (device, residual, n_lot)
-    scale_factor: jax.Array  # (device,) LSB per deg/s at zero rate
-    sf_grad: jax.Array  # (device, n_dev)
-    sf_grad_lot: jax.Array  # (device, n_lot)
-    predictions: dict
-    biases: dict
-    failed: jax.Array  # (device,)
 
 
 def map_devices(f, chunk, *trees):
@@ -50,49 +37,20 @@ def map_devices(f, chunk, *trees):
     return jax.tree.map(lambda x: x.reshape((n,) + x.shape[2:]), out)
 
 
-def _evaluate(problem_all, u_full, u_lot, chunk):
-    # The fields of an Evaluation, as a tuple: what jax.export can store (see cached_program).
-    def one(problem, u):
-        def outputs(uu, ul):
-            r, failed, preds, _, sf = problem.evaluate(uu, ul)
-            # The values as aux: jacfwd evaluates the sweeps once, for the Jacobian and the predictions.
-            return (r, sf), (r, sf, failed, preds)
-
-        ((j, j_lot), (g, g_lot)), (r, sf, failed, preds) = jax.jacfwd(outputs, argnums=(0, 1), has_aux=True)(
-            u, u_lot)
-        biases = {sweep: run_biases(sweep, problem.data.blocks[sweep], pred) for sweep, pred in preds.items()}
-        return r, j, j_lot, sf, g, g_lot, preds, biases, failed
-
-    return map_devices(one, chunk, problem_all, u_full)
-
-
-_evaluate_program = cached_program("evaluate", _evaluate)
-
-
-def evaluate(problem_all, u_full, u_lot, chunk) -> Evaluation:
-    """One compiled pass (used at the start and at the solution): residuals, the Jacobian with respect to
-    every per-device and lot entry, the zero-rate scale factor and its gradient, predictions and biases."""
-    return Evaluation(*_evaluate_program(problem_all, u_full, u_lot, chunk))
-
-
-def _final_residuals(sol, fn):
-    """The residuals at a least-squares solution. A Gauss-Newton-type solver (Levenberg-Marquardt, Gauss-Newton)
-    keeps those of its last accepted step, which is the solution: evaluating `fn` again would put a second copy
-    of the model into the compiled solve (a third of its operations on the demo lot). BFGS keeps only the loss."""
-    f_info = getattr(sol.state, "f_info", None)
-    if isinstance(f_info, optx.FunctionInfo.ResidualJac):
-        return f_info.residual
-    return fn(sol.value, None)
-
-
 def _solve_device(problem, y0, u_lot, solver, max_steps):
-    """One device's fit: (solution, result code, steps, chi2)."""
+    """One device's fit: (solution, result code, steps, chi2, the evaluation there as a tuple of its fields:
+    what jax.export can store, see cached_program)."""
     def fn(y, _):
-        return problem.residuals(y, u_lot)
+        return evaluated(problem, y, u_lot)
 
-    sol = optx.least_squares(fn, solver, y0, max_steps=max_steps, throw=False)
-    r = _final_residuals(sol, fn)
-    return sol.value, result_code(RESULTS.promote(sol.result)), sol.stats["num_steps"], jnp.sum(r**2)
+    sol = optx.least_squares(fn, solver, y0, has_aux=True, max_steps=max_steps, throw=False)
+    ev = final_evaluation(sol, fn)
+    return (sol.value, result_code(RESULTS.promote(sol.result)), sol.stats["num_steps"], jnp.sum(ev.residuals**2),
+            _fields(ev))
+
+
+def _fields(ev: Evaluation) -> tuple:
+    return tuple(getattr(ev, f.name) for f in dataclasses.fields(ev))
 
 
 def _solve_each(problem_batch, u0, u_lot, solver, max_steps, chunk):
@@ -111,20 +69,20 @@ def _solve_loop(problem_batch, u0, u_lot, solver, max_steps, chunk=None):
     for d in range(u0.shape[0]):
         problem = jax.tree.map(lambda x: x[d] if eqx.is_array(x) else x, problem_batch)
         outs.append(_solve_one(problem, u0[d], u_lot, solver, max_steps))
-    return tuple(jnp.stack([o[i] for o in outs]) for i in range(4))
+    return jax.tree.map(lambda *x: jnp.stack(x), *outs)
 
 
 @jit
 def _solve_joint(problem_batch, u0, u_lot0, solver, max_steps):
     def fn(y, _):
         u_free, u_lot = y
-        return eqx.filter_vmap(lambda p, x: p.residuals(x, u_lot))(problem_batch, u_free)
+        return eqx.filter_vmap(lambda p, x: evaluated(p, x, u_lot))(problem_batch, u_free)
 
-    sol = optx.least_squares(fn, solver, (u0, u_lot0), max_steps=max_steps, throw=False)
-    r = _final_residuals(sol, fn)
+    sol = optx.least_squares(fn, solver, (u0, u_lot0), has_aux=True, max_steps=max_steps, throw=False)
+    ev = final_evaluation(sol, fn)
     n = u0.shape[0]
     return (sol.value[0], sol.value[1], jnp.broadcast_to(result_code(RESULTS.promote(sol.result)), (n,)),
-            jnp.broadcast_to(sol.stats["num_steps"], (n,)), jnp.sum(r**2, axis=-1))
+            jnp.broadcast_to(sol.stats["num_steps"], (n,)), jnp.sum(ev.residuals**2, axis=-1), ev)
 
 
 class LotSpread(eqx.Module):
@@ -178,13 +136,14 @@ class AbstractLotSolve(eqx.Module):
     joint: eqx.AbstractClassVar[bool]
 
     @abc.abstractmethod
-    def spreads(self, n: int) -> tuple[LotSpread, LotSpread]:
-        """How a lot of `n` devices is padded and placed: (for the evaluation passes, for the solves)."""
+    def spread(self, n: int) -> LotSpread:
+        """How a lot of `n` devices is padded and placed for the solves."""
 
     @abc.abstractmethod
     def solve(self, problem, spread: LotSpread, u0, u_lot0, solver, max_steps):
         """Solve every device of the padded `problem` from `u0` (device, n_dev) and `u_lot0` (n_lot,) with the
-        optimistix `solver`: `(u, u_lot, result code, steps, chi2)`, unpadded, per device."""
+        optimistix `solver`: `(u, u_lot, result code, steps, chi2, Evaluation at the solution)`, unpadded, per
+        device."""
 
 
 class VmapSolve(AbstractLotSolve):
@@ -208,7 +167,7 @@ class VmapSolve(AbstractLotSolve):
                                                  or self.chunk < 1):
             raise ValueError(f"VmapSolve: chunk must be 'auto', None or an integer >= 1, got {self.chunk!r}.")
 
-    def spreads(self, n):
+    def spread(self, n):
         shards, chunk = _shards(self.shard), self.chunk
         if chunk == "auto":
             # Measured: 256 CPU devices ran 3-4x faster per device in chunks of 16 than of 128; 4096 devices on
@@ -216,14 +175,13 @@ class VmapSolve(AbstractLotSolve):
             chunk = (16 if jax.default_backend() == "cpu" else 1024) if shards == 1 else None
         if chunk is not None and shards > 1:
             raise ValueError("VmapSolve: a chunk applies on one JAX device; drop chunk or shard.")
-        spread = LotSpread(n, shards, chunk)
-        return spread, spread
+        return LotSpread(n, shards, chunk)
 
     def solve(self, problem, spread, u0, u_lot0, solver, max_steps):
-        (u0_s,) = spread.pad(jnp.asarray(u0))
-        u, code, steps, chi2 = spread.unpad(_solve_independent(problem, u0_s, jnp.zeros(0), solver, max_steps,
-                                                               spread.chunk))
-        return u, jnp.zeros(0), code, steps, chi2
+        u0_s, = spread.pad(jnp.asarray(u0))
+        u, code, steps, chi2, ev = spread.unpad(_solve_independent(problem, u0_s, jnp.zeros(0), solver, max_steps,
+                                                                   spread.chunk))
+        return u, jnp.zeros(0), code, steps, chi2, Evaluation(*ev)
 
 
 class LoopSolve(AbstractLotSolve):
@@ -232,27 +190,25 @@ class LoopSolve(AbstractLotSolve):
 
     joint: ClassVar[bool] = False
 
-    def spreads(self, n):
-        spread = LotSpread(n, 1)
-        return spread, spread
+    def spread(self, n):
+        return LotSpread(n, 1)
 
     def solve(self, problem, spread, u0, u_lot0, solver, max_steps):
-        u, code, steps, chi2 = _solve_loop(problem, jnp.asarray(u0), jnp.zeros(0), solver, max_steps)
-        return u, jnp.zeros(0), code, steps, chi2
+        u, code, steps, chi2, ev = _solve_loop(problem, jnp.asarray(u0), jnp.zeros(0), solver, max_steps)
+        return u, jnp.zeros(0), code, steps, chi2, Evaluation(*ev)
 
 
 class JointSolve(AbstractLotSolve):
     """One fit of the whole lot: the per-device parameters and the shared ones (`identify(shared=...)`)
-    together. `shard` as for `VmapSolve`; the solve is sharded only when the lot divides evenly (padding
-    would add fake devices to the sum), the evaluation passes always."""
+    together. `shard` as for `VmapSolve`; sharded only when the lot divides evenly (padding would add fake
+    devices to the sum)."""
 
     shard: bool | None = eqx.field(static=True, default=None)
     joint: ClassVar[bool] = True
 
-    def spreads(self, n):
+    def spread(self, n):
         shards = _shards(self.shard)
-        spread = LotSpread(n, shards)
-        return spread, (spread if n % shards == 0 else LotSpread(n, 1))
+        return LotSpread(n, shards if n % shards == 0 else 1)
 
     def solve(self, problem, spread, u0, u_lot0, solver, max_steps):
         (u0_s,) = spread.pad(jnp.asarray(u0))
@@ -263,26 +219,25 @@ class Lot(eqx.Module):
     """A lot strategy applied to a lot of a given size: its compiled passes with the padding done."""
 
     strategy: AbstractLotSolve
-    spread: LotSpread  # the evaluation passes
-    solve_spread: LotSpread
+    spread: LotSpread
 
     def __init__(self, strategy: AbstractLotSolve, n: int):
         self.strategy = strategy
-        self.spread, self.solve_spread = strategy.spreads(n)
+        self.spread = strategy.spread(n)
 
     @property
     def joint(self) -> bool:
         return self.strategy.joint
 
-    def evaluate(self, problem, u_full, u_lot, stage: str) -> Evaluation:
-        """Residuals, Jacobians and the scale factor of every device of `problem` at `u_full`, `u_lot`."""
-        problem_s, u_s = self.spread.pad(problem, jnp.asarray(u_full))
-        with nonfinite_explained(stage):
-            return self.spread.unpad(evaluate(problem_s, u_s, jnp.asarray(u_lot), self.spread.chunk))
-
     def solve(self, problem, u0, u_lot0, solver, max_steps, stage: str):
-        """The strategy's solve of `problem` from `u0`, `u_lot0`: numpy `(u, u_lot, code, steps, chi2)`."""
-        (problem_s,) = self.solve_spread.pad(problem)
+        """The strategy's solve of `problem` from `u0`, `u_lot0`: numpy `(u, u_lot, code, steps, chi2)` and the
+        `Evaluation` at the solution."""
+        (problem_s,) = self.spread.pad(problem)
         with nonfinite_explained(stage):
-            out = self.strategy.solve(problem_s, self.solve_spread, u0, u_lot0, solver, max_steps)
-        return tuple(np.asarray(x) for x in out)
+            *out, ev = self.strategy.solve(problem_s, self.spread, u0, u_lot0, solver, max_steps)
+        return tuple(np.asarray(x) for x in out) + (ev,)
+
+    def evaluate(self, problem, u, u_lot, solver, max_steps, stage: str) -> Evaluation:
+        """Residuals, Jacobians and the scale factor of every device of `problem` at `u`, `u_lot`: the solve's
+        own compiled program, stopped after the first step (`evaluation_step`)."""
+        return self.solve(problem, u, u_lot, evaluation_step(solver), max_steps, stage)[-1]

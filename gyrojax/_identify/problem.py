@@ -1,6 +1,6 @@
 """The problem of one device: its parameters in internal coordinates (0 = start; held ones masked), the priors,
-and the standardised residuals of every sweep with their custom JVP; `make_problem` builds it from a model, the
-data and the choice of free, shared, held and prior parameters."""
+and the standardised residuals of every sweep; `make_problem` builds it from a model, the data and the choice
+of free, shared, held and prior parameters."""
 
 import contextlib
 
@@ -54,50 +54,25 @@ class Problem(eqx.Module):
     prior_sigma: jax.Array
     sf_temperature: jax.Array  # deg C: where the scale factor is reported (`sf_temperature`)
 
-    def evaluate(self, u_free, u_lot):
-        """Standardised residuals (data, then priors), the count of points that did not settle, the
-        predictions per sweep, the device and its zero-rate scale factor (LSB per deg/s)."""
-        return _evaluate_problem(self, u_free, u_lot)
-
     def residuals(self, u_free, u_lot):
-        """Standardised residuals (data, then priors), differentiable (a dense forward-mode Jacobian)."""
-        return _residuals(self, u_free, u_lot)
+        """Standardised residuals (data, then priors) at `u_free`, held entries masked to their start (the
+        value only: `identify`'s solvers run `evaluation.evaluated`, which also carries the Jacobian)."""
+        return evaluate_at(self, u_free * self.free_mask, u_lot)[0]
 
 
 # Its own jit: optimistix and the Jacobians trace the residual function several times inside one outer
 # trace; a jitted body is traced once per signature and reused (measured: tracing 55 s of a 132 s fit).
 @eqx.filter_jit
-def _evaluate_problem(problem, u_free, u_lot):
-    u = u_free * problem.free_mask
+def evaluate_at(problem, u, u_lot):
+    """One device's standardised residuals (data, then priors), the count of points that did not settle, the
+    predictions per sweep, the device and its zero-rate scale factor (LSB per deg/s) at the model's coordinates
+    `u` (every per-device entry; the solver's are masked by `free_mask` before this)."""
     gyro = apply_u(problem.model, problem.entries, problem.start, u, u_lot).gyroscope()
     # The scale factor's two points settle with the data's (one program): the solve carries them too, at
     # the cost of two points per device, so that the fit and its evaluation share every compiled settle.
     r, failed, preds, sf = device_residuals(gyro, problem.data, problem.tier, problem.sf_temperature)
     prior = (u[problem.prior_index] - problem.prior_mean) / problem.prior_sigma
     return jnp.concatenate([r, prior]), failed, preds, gyro, sf
-
-
-@jax.custom_jvp
-def _residuals(problem, u_free, u_lot):
-    return problem.evaluate(u_free, u_lot)[0]
-
-
-@_residuals.defjvp
-def _residuals_jvp(primals, tangents):
-    # The JVP as a materialised Jacobian times the tangent. Optimistix linearises the residual function and,
-    # on its first (discarded) step, evaluates the linearisation with zeroed constants; through the steady
-    # state's implicit differentiation that would feed NaNs to a linear solve that raises. A dense Jacobian
-    # has no such solve, and is what Levenberg-Marquardt builds anyway. The problem's own tangents (data,
-    # start values) are not parameters and are ignored.
-    problem, u_free, u_lot = primals
-    _, t_free, t_lot = tangents
-
-    def value_twice(a, b):  # the value as aux: jacfwd evaluates it once, with the Jacobian
-        r = problem.evaluate(a, b)[0]
-        return r, r
-
-    (j_free, j_lot), r = jax.jacfwd(value_twice, argnums=(0, 1), has_aux=True)(u_free, u_lot)
-    return r, j_free @ t_free + j_lot @ t_lot
 
 
 def sf_temperature(data):

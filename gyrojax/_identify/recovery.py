@@ -9,23 +9,23 @@ import abc
 import dataclasses
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._solution import RESULTS, result_code
 from .covariance import gauss_newton_decrement
+from .evaluation import Evaluation
 from .identifiability import weak_directions
-from .lot import Evaluation, Lot
+from .lot import Lot
 from .problem import Problem
 from .shortcuts import solver_from
 
 
 class Solving(eqx.Module):
-    """What the policies solve with: the problem (`problem`, held parameters masked; `problem_all`, every
-    per-device entry free, for the evaluation passes), the lot strategy and the solver."""
+    """What the policies solve with: the problem (held parameters masked), the lot strategy and the solver."""
 
     problem: Problem
-    problem_all: Problem
     lot: Lot
     solver: eqx.Module  # an optimistix least-squares solver
     solver_name: object  # as given to identify: a name of SOLVERS, or the solver
@@ -35,15 +35,13 @@ class Solving(eqx.Module):
     names_dev: tuple[str, ...] = eqx.field(static=True)
     threshold: float
 
-    def at(self, u_free, u_lot) -> tuple[np.ndarray, Evaluation]:
-        """The full internal vector (held entries at 0) of `u_free` and the evaluation there."""
-        n, n_dev = np.shape(u_free)[0], self.problem.n_dev
-        u_full = np.zeros((n, n_dev))
-        u_full[:, list(self.free_index)] = np.asarray(u_free)[:, list(self.free_index)]
-        return u_full, self.lot.evaluate(self.problem_all, u_full, u_lot, "at the solution")
+    def full(self, u_free) -> np.ndarray:
+        """The full internal vector of the solver's `u_free`: held entries at 0 (their start)."""
+        return np.asarray(u_free) * np.asarray(self.problem.free_mask)
 
     def solve(self, u0, u_lot0, stage: str, *, problem: Problem | None = None, solver=None):
-        """The lot strategy's solve from `u0`, `u_lot0`: numpy `(u, u_lot, code, steps, chi2)` per device."""
+        """The lot strategy's solve from `u0`, `u_lot0`: numpy `(u, u_lot, code, steps, chi2)` per device and
+        the `Evaluation` at the solution."""
         return self.lot.solve(self.problem if problem is None else problem, u0, u_lot0,
                               self.solver if solver is None else solver, self.max_steps, stage)
 
@@ -60,6 +58,17 @@ class Solution(eqx.Module):
     u_full: np.ndarray
     final: Evaluation
     notes: tuple[str, ...] = eqx.field(static=True)
+
+
+def _pick(better, new, old):
+    """Per device (leading axis of every leaf), `new` where `better`, else `old`."""
+    better = np.asarray(better)
+
+    def where(a, b):
+        cond = better.reshape(better.shape + (1,) * (np.ndim(b) - 1))
+        return np.where(cond, a, b) if isinstance(b, np.ndarray) else jnp.where(cond, a, b)
+
+    return jax.tree.map(where, new, old)
 
 
 def _better(new, old):
@@ -104,13 +113,12 @@ class MultiStart(eqx.Module):
                 if np.nansum(res[4]) < np.nansum(best[4]):
                     best = res
             else:
-                better = _better(res[4], best[4])
                 # Per device: the lower chi2 wins (u_lot, index 1, is empty here).
-                best = tuple(b if i == 1 else np.where(better.reshape((n,) + (1,) * (b.ndim - 1)), a, b)
-                             for i, (a, b) in enumerate(zip(res, best)))
-        u_free, u_lot, code, steps, chi2 = best
-        u_full, final = solving.at(u_free, u_lot)
-        return Solution(u_free, u_lot, code, steps, chi2, u_full, final, ("",) * n)
+                u_lot = best[1]
+                best = _pick(_better(res[4], best[4]), res, best)
+                best = best[:1] + (u_lot,) + best[2:]
+        u_free, u_lot, code, steps, chi2, final = best
+        return Solution(u_free, u_lot, code, steps, chi2, solving.full(u_free), final, ("",) * n)
 
 
 class AbstractRecovery(eqx.Module):
@@ -166,8 +174,9 @@ class RetryWithSolver(AbstractRecovery):
             return solution
         n, n_dev = solution.u_free.shape
         u_lot0 = np.zeros(solving.n_lot if solving.lot.joint else 0)
-        v, v_lot, code2, steps2, chi2_2 = solving.solve(np.zeros((n, n_dev)), u_lot0, f"during the {self.solver} retry",
-                                                        solver=solver_from(self.solver, self.rtol, self.atol))
+        v, v_lot, code2, steps2, chi2_2, final2 = solving.solve(
+            np.zeros((n, n_dev)), u_lot0, f"during the {self.solver} retry",
+            solver=solver_from(self.solver, self.rtol, self.atol))
         u_lot, chi2 = solution.u_lot, solution.chi2
         if solving.lot.joint:
             total, total_2 = (np.sum(np.nan_to_num(c, nan=np.inf)) for c in (chi2, chi2_2))
@@ -180,10 +189,10 @@ class RetryWithSolver(AbstractRecovery):
         u_free = np.where(better[:, None], v, solution.u_free)
         notes = tuple(f"re-solved from the start with {self.solver} after {solving.solver_name} did not converge"
                       if b else note for note, b in zip(solution.notes, better))
-        u_full, final = solving.at(u_free, u_lot) if better.any() else (solution.u_full, solution.final)
+        final = _pick(better, final2, solution.final)
         return Solution(u_free, u_lot, np.where(better, code2, solution.code),
                         np.where(better, solution.steps + steps2, solution.steps), np.where(better, chi2_2, chi2),
-                        u_full, final, notes)
+                        solving.full(u_free), final, notes)
 
 
 class RestartRunoffs(AbstractRecovery):
@@ -208,13 +217,13 @@ class RestartRunoffs(AbstractRecovery):
             if idx:
                 u_hold[d] = 0.0  # from the start again
         held = eqx.tree_at(lambda p: p.free_mask, solving.problem, jnp.asarray(held_mask))
-        v1, _, steps1, _, _ = solving.solve(u_hold, np.zeros(0), stage, problem=held)
-        v2, _, code2, steps2, chi2_2 = solving.solve(v1, np.zeros(0), stage)
+        v1, _, steps1, _, _, _ = solving.solve(u_hold, np.zeros(0), stage, problem=held)
+        v2, _, code2, steps2, chi2_2, final2 = solving.solve(v1, np.zeros(0), stage)
         better = np.array([bool(idx) for idx in runoff]) & _better(chi2_2, solution.chi2)
         if not better.any():
             return solution
         u_free = np.where(better[:, None], v2, solution.u_free)
-        u_full, final = solving.at(u_free, solution.u_lot)
+        final = _pick(better, final2, solution.final)
         names = [", ".join(solving.names_dev[i] for i in idx) for idx in runoff]
         notes = tuple("; ".join(filter(None, (note, f"restarted with {nm} held, then released, after the first "
                                                     "solve ran off along it" if b else "")))
@@ -222,7 +231,7 @@ class RestartRunoffs(AbstractRecovery):
         # chi2 stays the first solve's, as before this policy: the Fit recomputes it from `final`.
         return Solution(u_free, solution.u_lot, np.where(better, code2, solution.code),
                         np.where(better, solution.steps + steps1 + steps2, solution.steps), solution.chi2,
-                        u_full, final, notes)
+                        solving.full(u_free), final, notes)
 
 
 RECOVERY = (DecrementCertificate(), RetryWithSolver(), RestartRunoffs())

@@ -1,10 +1,8 @@
 """The strings `identify` accepts for its strategy objects, mapped in this one place: solver names
 (`solver="levenberg-marquardt"`) and the lot strategies (`lot_solve="vmap"`)."""
 
-import lineax as lx
 import optimistix as optx
 
-from .._linsolve import PivotedLU
 from .._lm import LevenbergMarquardt
 from .lot import AbstractLotSolve, JointSolve, LoopSolve, VmapSolve
 
@@ -20,13 +18,11 @@ def solver_from(solver, rtol, atol):
     """The optimistix solver a name of `SOLVERS` stands for (with `rtol`, `atol`); a solver object as it is."""
     if not isinstance(solver, str):
         return solver
-    # Normal equations through an XLA-only LU, not lineax's LAPACK QR: see gyrojax/_linsolve.py.
-    linear_solver = lx.Normal(PivotedLU(zero_pivot_gives_zero=True))
     if solver == "levenberg-marquardt":
-        return LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=linear_solver)
+        return LevenbergMarquardt(rtol=rtol, atol=atol)
     if solver == "gauss-newton":
         # optimistix's GaussNewton step, as a flag of the Levenberg-Marquardt solver: one compiled solve for both.
-        return LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=linear_solver, undamped=True)
+        return LevenbergMarquardt(rtol=rtol, atol=atol, undamped=True)
     if solver == "bfgs":
         return optx.BFGS(rtol=rtol, atol=atol)
     raise ValueError(f"solver must be one of {SOLVERS} or an optimistix solver, got {solver!r}.")
