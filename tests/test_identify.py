@@ -226,12 +226,17 @@ def test_a_lot_of_the_same_shapes_reuses_the_traced_fit(rate_only, monkeypatch):
     """The compiled fit sees arrays and shapes only: a second lot with the same shapes but other device names,
     run ids and source, or without output_sigma, is fitted without tracing anything again, and gives the same
     numbers under its own labels. Python functions called inside the compiled fit count its traces: one device's
-    residuals (its own jit, keyed by one device's shapes) and the run biases (in the lot's evaluation pass)."""
+    residuals and run biases (their own jits, keyed by one device's shapes) and the evaluation at the solve's
+    end (traced with the lot's solve)."""
+    from gyrojax._identify.evaluation import final_evaluation
+
     traced = []
     monkeypatch.setattr("gyrojax._identify.problem.device_residuals",
                         lambda *a, **k: traced.append("residuals") or device_residuals(*a, **k))
-    monkeypatch.setattr("gyrojax._identify.lot.run_biases",
+    monkeypatch.setattr("gyrojax._identify.evaluation.run_biases",
                         lambda *a, **k: traced.append("biases") or run_biases(*a, **k))
+    monkeypatch.setattr("gyrojax._identify.lot.final_evaluation",
+                        lambda *a, **k: traced.append("solve") or final_evaluation(*a, **k))
     options = dict(free=("k_vf", "angular_gain"), priors=VAGUE)
     a = gj.identify("paper-qmg", rate_only, **options)  # traced here or by an earlier test
     cols = dict(rate_only.columns)
@@ -248,10 +253,10 @@ def test_a_lot_of_the_same_shapes_reuses_the_traced_fit(rate_only, monkeypatch):
     for name in ("values", "stderr", "chi2", "scale_factor"):
         np.testing.assert_array_equal(np.asarray(getattr(b, name)), np.asarray(getattr(a, name)))
     assert not c.data.weighted and float(np.asarray(c.chi2)[0]) != float(np.asarray(a.chi2)[0])
-    # The counter does see a trace: a lot of two devices is another shape (of the lot's pass, not of one device).
+    # The counter does see a trace: a lot of two devices is another shape (of the lot's solve, not of one device).
     two = rate_only.select(np.flatnonzero(rate_only["device"] != a.devices[-1]))
     gj.identify("paper-qmg", two, evaluate_only=True, **options)
-    assert "biases" in traced
+    assert traced == ["solve"]
 
 
 @pytest.mark.slow

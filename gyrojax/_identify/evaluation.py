@@ -77,6 +77,15 @@ def _evaluated_jvp(primals, tangents):
     return (ev.residuals, ev), (t_r, zeros)
 
 
+def one_trace():
+    """The context to trace a solve of `evaluated` in. JAX keys its cache of traced inner jits on the abstract
+    mesh of the context; optimistix traces the residual function first as it is (closure conversion) and
+    then its JVP rule under linearisation, which runs under an empty `AbstractMesh` where a plain trace has
+    none: without this the evaluation, most of a fit's program, is traced twice (measured on the demo lot:
+    2-3 s of a 10 s trace)."""
+    return jax.sharding.use_abstract_mesh(jax.sharding.AbstractMesh((), ()))
+
+
 def final_evaluation(sol, fn) -> Evaluation:
     """The evaluation at a least-squares solution of `fn` (`evaluated`'s form). A Gauss-Newton-type solver
     (Levenberg-Marquardt, Gauss-Newton) keeps the aux of its last accepted step, which is the solution:

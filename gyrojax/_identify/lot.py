@@ -15,7 +15,7 @@ import optimistix as optx
 from .._compile import jit
 from .._export import cached_program
 from .._solution import RESULTS, result_code
-from .evaluation import Evaluation, evaluated, evaluation_step, final_evaluation
+from .evaluation import Evaluation, evaluated, evaluation_step, final_evaluation, one_trace
 from .problem import nonfinite_explained
 
 
@@ -43,8 +43,9 @@ def _solve_device(problem, y0, u_lot, solver, max_steps):
     def fn(y, _):
         return evaluated(problem, y, u_lot)
 
-    sol = optx.least_squares(fn, solver, y0, has_aux=True, max_steps=max_steps, throw=False)
-    ev = final_evaluation(sol, fn)
+    with one_trace():
+        sol = optx.least_squares(fn, solver, y0, has_aux=True, max_steps=max_steps, throw=False)
+        ev = final_evaluation(sol, fn)
     return (sol.value, result_code(RESULTS.promote(sol.result)), sol.stats["num_steps"], jnp.sum(ev.residuals**2),
             _fields(ev))
 
@@ -78,8 +79,9 @@ def _solve_joint(problem_batch, u0, u_lot0, solver, max_steps):
         u_free, u_lot = y
         return eqx.filter_vmap(lambda p, x: evaluated(p, x, u_lot))(problem_batch, u_free)
 
-    sol = optx.least_squares(fn, solver, (u0, u_lot0), has_aux=True, max_steps=max_steps, throw=False)
-    ev = final_evaluation(sol, fn)
+    with one_trace():
+        sol = optx.least_squares(fn, solver, (u0, u_lot0), has_aux=True, max_steps=max_steps, throw=False)
+        ev = final_evaluation(sol, fn)
     n = u0.shape[0]
     return (sol.value[0], sol.value[1], jnp.broadcast_to(result_code(RESULTS.promote(sol.result)), (n,)),
             jnp.broadcast_to(sol.stats["num_steps"], (n,)), jnp.sum(ev.residuals**2, axis=-1), ev)
