@@ -12,6 +12,7 @@ chi2, covariance and score tests are those of the full model with the biases fre
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._data.arrays import SweepArrays
 from ._fitdata import FitData
@@ -100,17 +101,17 @@ def device_residuals(gyro: Gyroscope, data: FitData, tier=Steady(), sf_temperatu
 
 
 def num_biases(data: FitData):
-    """Run biases per device (real runs of biased sweeps), shape (device,)."""
-    total = 0
+    """Run biases per device (real runs of biased sweeps), shape (device,) (numpy: counted on the host)."""
+    total = np.zeros(len(data.devices), dtype=int)
     for sweep in data.sweeps:
         if sweep_kind(sweep).biased:
-            total = total + jnp.sum(jnp.any(data.blocks[sweep].mask, axis=-1), axis=-1)
-    return jnp.asarray(total)
+            total = total + np.sum(np.any(np.asarray(data.blocks[sweep].mask), axis=-1), axis=-1)
+    return total
 
 
 def num_points(data: FitData):
-    """Real points per device, shape (device,)."""
-    return sum(jnp.sum(b.mask, axis=(-2, -1)) for b in data.blocks.values())
+    """Real points per device, shape (device,) (numpy)."""
+    return sum(np.sum(np.asarray(b.mask), axis=(-2, -1)) for b in data.blocks.values())
 
 
 def unbatch(tree):

@@ -2,6 +2,7 @@
 status (did the solve converge, do the data determine the scale factor and its noise, does the chi2 test
 reject the model, are the fitted values plausible) and the warnings that say why."""
 
+import functools as ft
 import math
 
 import equinox as eqx
@@ -9,6 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._compile import jit
 from .._fitdata import FitData
 from .._parameters import apply_u
 from .._residuals import block_residuals, num_biases, num_points
@@ -63,12 +65,8 @@ def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index
     values, stderr = _physical(problem_all.start, entries, u_full, cov_full, f, shared=False)
     lot_values, lot_stderr = _physical(problem_all.start, entries, u_lot[None], cov_lot[None],
                                        np.arange(n_lot), shared=True)
-    fitted = eqx.filter_vmap(lambda p, u: apply_u(p.model, p.entries, p.start, u, jnp.asarray(u_lot)))(
-        problem_all, jnp.asarray(u_full))
-    residuals = {}
-    for sweep in data.sweeps:
-        block = data.blocks[sweep]
-        residuals[sweep] = jax.vmap(lambda bl, p, s=sweep: block_residuals(s, bl, p))(block, final.predictions[sweep])
+    fitted, residuals = _fitted_and_residuals(problem_all, jnp.asarray(u_full), jnp.asarray(u_lot), data.blocks,
+                                              final.predictions)
     g = np.asarray(final.sf_grad)[:, f]
     g_lot = np.asarray(final.sf_grad_lot)
     var = np.einsum("di,dij,dj->d", g, cov_dev, g)
@@ -145,6 +143,15 @@ def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index
                scale_factor_stderr_scaled=jnp.asarray(sf_stderr * scale),
                noise_dof=jnp.asarray(np.asarray(noise_dof, dtype=float)),
                p_value=jnp.asarray(np.asarray(p_value, dtype=float)), p_value_total=jnp.asarray(float(p_lot)))
+
+
+@jit  # one small program rather than one per operation (eager vmaps compile each)
+def _fitted_and_residuals(problem_all, u_full, u_lot, blocks, predictions):
+    """The fitted models (device batched) and the standardised residuals per sweep (device, run, point)."""
+    fitted = eqx.filter_vmap(lambda p, u: apply_u(p.model, p.entries, p.start, u, u_lot))(problem_all, u_full)
+    residuals = {sweep: jax.vmap(ft.partial(block_residuals, sweep))(blocks[sweep], pred)
+                 for sweep, pred in predictions.items()}
+    return fitted, residuals
 
 
 def _physical(start, entries, u, cov, free_index, *, shared):

@@ -79,10 +79,11 @@ def sf_temperature(data):
     """Temperature at which the fit's scale factor is reported: the mean of the points of rate-input sweeps
     (a rate table; else of all recorded points, else the reference 25 C)."""
     blocks = [b for s, b in data.blocks.items() if sweep_kind(s).rate_input] or list(data.blocks.values())
-    total = sum(jnp.sum(jnp.where(b.mask & jnp.isfinite(b.temperatures), b.temperatures, 0.0), axis=(1, 2))
-                for b in blocks)
-    count = sum(jnp.sum(b.mask & jnp.isfinite(b.temperatures), axis=(1, 2)) for b in blocks).astype(float)
-    return jnp.where(count > 0, total / jnp.maximum(count, 1.0), 25.0)
+    # numpy: a few host operations, not a compiled program per operation
+    used = [np.asarray(b.mask) & np.isfinite(np.asarray(b.temperatures)) for b in blocks]
+    total = sum(np.sum(np.where(m, np.asarray(b.temperatures), 0.0), axis=(1, 2)) for m, b in zip(used, blocks))
+    count = sum(np.sum(m, axis=(1, 2)) for m in used).astype(float)
+    return np.where(count > 0, total / np.maximum(count, 1.0), 25.0)
 
 
 class Layout(eqx.Module):
