@@ -13,7 +13,7 @@ import gyrojax as gj
 from gyrojax._absorb import absorption
 from gyrojax._sweeps.drive_amplitude import AMPLITUDE_SIGMA_PPM
 from gyrojax._sweeps.drive_frequency import FREQUENCY_SIGMA_PPM
-from gyrojax._sweeps.steady import steady_points
+from gyrojax._sweeps.steady import settled_points
 
 
 DEG = gj.units.DEG
@@ -81,7 +81,7 @@ def test_quadrature_injection_reads_tan_phi(qmg):
     sf = _sf(qmg)
 
     def settle(gyro):
-        return steady_points(gyro, [(kind, volts, NAN, None)])[0]
+        return settled_points(gyro, [(kind, volts, NAN, None)])[0]
 
     zero = settle(gj.add_effect(qmg, gj.QuadraturePhase.typical(0.0)))
     assert np.max(np.abs(np.asarray(zero.rate))) < 1e-9 * sf

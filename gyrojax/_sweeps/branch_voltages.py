@@ -39,7 +39,7 @@ from .._simulate.tiers import Steady
 from .._solution import RESULTS
 from .base import AbstractSweep, at_temperature
 from .rate_table import RateTable
-from .steady import per_run, raise_unsettled, steady_points
+from .steady import per_run, raise_unsettled, settled_points
 
 
 if TYPE_CHECKING:
@@ -80,16 +80,21 @@ def branch_ratio_points(gyro: Gyroscope, rates_dps, temperatures, times=None, ti
                          "is open loop.")
     rates = jnp.atleast_1d(jnp.asarray(rates_dps, dtype=float))
     temps = jnp.broadcast_to(jnp.asarray(temperatures, dtype=float), rates.shape)
-    (settled,) = steady_points(gyro, [(RateTable(), rates, temps, times)], tier)
+    (settled,) = settled_points(gyro, [(RateTable(), rates, temps, times)], tier)
     if not isinstance(settled.state, SlowState):
         raise ValueError(f"branch voltages need the steady or averaged tier, got {type(tier).__name__}.")
 
-    def one(loops, temp):
-        g = at_temperature(gyro, temp)
-        return branch_amplitudes(g, loops, g.temperature(0.0))
+    return _ratio(gyro, settled.state.loops, temps), settled
 
-    v_plus, v_minus = jax.vmap(one)(settled.state.loops, temps)
-    return v_plus / v_minus, settled
+
+@jit  # one program, not one per operation, when called outside a traced one
+def _ratio(gyro, loops, temps):
+    def one(loops_i, temp):
+        g = at_temperature(gyro, temp)
+        return branch_amplitudes(g, loops_i, g.temperature(0.0))
+
+    v_plus, v_minus = jax.vmap(one)(loops, temps)
+    return v_plus / v_minus
 
 
 @jit

@@ -60,7 +60,7 @@ class AbstractSettledSweep(AbstractSweep):
         evaluated (not settled, not finite)."""
 
     def predict(self, gyro, inputs, temperatures, times, tier=Steady()):
-        (points,) = steady_points(gyro, [(self, inputs, temperatures, times)], tier)
+        (points,) = settled_points(gyro, [(self, inputs, temperatures, times)], tier)
         return self.read(points)
 
 
