@@ -6,6 +6,8 @@ import math
 import numpy as np
 from jax.scipy.special import betainc, gammaincc
 
+from .._stats import chi2_sf
+
 
 def chi2_p_value(chi2, dof, noise_dof):
     """p-value of a chi2 over `dof` degrees of freedom. With known sigmas (`noise_dof` inf) the chi2 test;
@@ -22,7 +24,9 @@ def chi2_p_value(chi2, dof, noise_dof):
         c, d, v = float(chi2[i]), float(dof[i]), float(nu[i])
         if d <= 0 or math.isnan(c):
             continue
-        if math.isinf(v):
+        if math.isinf(v) and d.is_integer():  # plain numpy (no compiled program), exact recurrence
+            out[i] = chi2_sf(c, int(d))
+        elif math.isinf(v):
             out[i] = float(gammaincc(d / 2.0, max(c, 0.0) / 2.0))
         elif v > 0:  # the F distribution's survival: I_{v / (v + d x)}(v / 2, d / 2), x = c / d
             out[i] = float(betainc(v / 2.0, d / 2.0, v / (v + max(c, 0.0))))

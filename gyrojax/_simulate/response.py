@@ -29,15 +29,7 @@ class StateSpace(eqx.Module):
 
     def response(self, frequencies: Float[ArrayLike, "*shape"]) -> Complex[Array, "*shape"]:
         """H(j w) = C (j w I - A)^{-1} B + D at angular frequencies `frequencies` (rad/s)."""
-        w = jnp.asarray(frequencies, dtype=float)
-        eye = jnp.eye(self.a.shape[0])
-
-        def one(wi):
-            lhs = jax.lax.complex(-self.a, wi * eye)
-            rhs = self.b.astype(jnp.complex128)
-            return self.c.astype(jnp.complex128) @ solve(lhs, rhs) + self.d.astype(jnp.complex128)
-
-        return jax.vmap(one)(jnp.ravel(w)).reshape(w.shape)
+        return _response(self, jnp.asarray(frequencies, dtype=float))
 
     def bandwidth(self, f_max_hz: float = 5000.0) -> float:
         """-3 dB bandwidth (Hz) relative to the DC response.
@@ -112,6 +104,18 @@ def bandwidth(gyro: Gyroscope, stimulus: Stimulus = Stimulus(), *, input: str = 
               f_max_hz: float = 5000.0) -> float:
     """-3 dB bandwidth (Hz) of the rate output relative to its DC response (see `StateSpace.bandwidth`)."""
     return linearise(gyro, stimulus, input=input).bandwidth(f_max_hz)
+
+
+@jit  # one program, not one per operation of the solves, when called outside a traced one
+def _response(ss: StateSpace, w):
+    eye = jnp.eye(ss.a.shape[0])
+
+    def one(wi):
+        lhs = jax.lax.complex(-ss.a, wi * eye)
+        rhs = ss.b.astype(jnp.complex128)
+        return ss.c.astype(jnp.complex128) @ solve(lhs, rhs) + ss.d.astype(jnp.complex128)
+
+    return jax.vmap(one)(jnp.ravel(w)).reshape(w.shape)
 
 
 @jit
