@@ -4,7 +4,8 @@ A first `identify`, `simulate_table` or `diagnose` spends most of its time traci
 The persistent cache keeps the compiled executables on disk, keyed by the program, the backend, the XLA flags and
 the JAX version, so a later process with the same shapes loads them instead of compiling again; tracing still
 happens in every process, except for the programs `_export.py` keeps in the cache folder's `gyrojax_export`
-sub-folder (identify's evaluation pass and vmapped solve), which a later process loads without tracing.
+sub-folder (identify's vmapped solve, which also evaluates at the start), which a later process loads
+without tracing.
 Measured on the demo lot (2-core CPU, `benchmarks/bench_compile.py`): `diagnose` 115 s without the cache, 25 s
 with it; the first `identify` of a process 47 s without the cache and 21 s with it when every program is traced
 (17 s of them tracing), 5.2 s with identify's exported programs loaded (against 28.7 s traced, in one run of
@@ -147,7 +148,7 @@ def compilation_cache(path=_UNSET) -> str | None:
     it; a cache JAX was already given is left alone). A process that runs the same shapes as an earlier one
     loads the compiled programs instead of compiling them: the first `identify` of the demo lot took 21 s
     instead of 47 s on a 2-core CPU. Tracing is not cached, and is most of what is left, except for identify's
-    two largest programs, which are exported into the same folder (`gyrojax_export`) and loaded untraced.
+    largest program, which is exported into the same folder (`gyrojax_export`) and loaded untraced.
 
     **Arguments:**
 

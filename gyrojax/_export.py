@@ -2,8 +2,8 @@
 cache and loaded by any later process that calls it with the same structure.
 
 The persistent compilation cache (`_cache.py`) makes XLA's compile of a known program nearly free, but every
-process still traces it, and for a fit's largest programs (the vmapped solve, the Jacobian pass) tracing is
-most of a warm first `identify`. `cached_program(name, fn)` wraps `fn` like `equinox.filter_jit` (arrays are
+process still traces it, and for a fit's largest program (the vmapped solve, which also evaluates at the
+start) tracing is most of a warm first `identify`. `cached_program(name, fn)` wraps `fn` like `equinox.filter_jit` (arrays are
 traced, every other leaf is static) and, when the compilation cache is on, exports the traced program
 (`jax.export`: StableHLO) to `<cache folder>/gyrojax_export/<name>-<key>.jaxexport`. A later process whose call
 has the same key rebuilds the `jax.export.Exported` and runs it through `jax.jit(exported.call)`: no tracing of

@@ -2,9 +2,11 @@
 returns a `Fit`. One concept per file:
 
 - `identify.py`: the entry point, which composes the pieces below.
-- `problem.py`: the problem of one device (parameters, masks, priors, residuals with their custom JVP) and the
-  compiled evaluation of residuals, Jacobians and the scale factor.
-- `lot.py`: how a lot's devices are solved (vmapped in chunks, sharded, one after another, or jointly).
+- `problem.py`: the problem of one device (parameters, masks, priors) and its residuals.
+- `evaluation.py`: `Evaluation` (residuals, Jacobian over every entry, the scale factor and its gradient) and the
+  residual function the solvers run, which carries it as aux.
+- `lot.py`: how a lot's devices are solved (vmapped in chunks, sharded, one after another, or jointly), in one
+  compiled program per fit that also evaluates at the start (stopped after one step).
 - `recovery.py`: what is tried when a solve ends badly (multi-start, a retry with another solver, the restart of
   a run-off fit, the decrement certificate).
 - `identifiability.py`: what the data cannot fix (hold rules, weak directions, the scale factor's determinacy).
