@@ -1,17 +1,16 @@
 """Skip tracing in a later process: a program exported with `jax.export`, kept beside the persistent compilation
 cache and loaded by any later process that calls it with the same structure.
 
-The persistent compilation cache (`_cache.py`) makes XLA's compile of a known program nearly free, but every
-process still traces it, and for a fit's largest program (the vmapped solve, which also evaluates at the
-start) tracing is most of a warm first `identify`. `cached_program(name, fn)` wraps `fn` like `equinox.filter_jit` (arrays are
-traced, every other leaf is static) and, when the compilation cache is on, exports the traced program
-(`jax.export`: StableHLO) to `<cache folder>/gyrojax_export/<name>-<key>.jaxexport`. A later process whose call
-has the same key rebuilds the `jax.export.Exported` and runs it through `jax.jit(exported.call)`: no tracing of
-`fn`; the compile of the embedded module hits the persistent cache. The file holds the module's bytes, its
-inputs' and outputs' shapes and dtypes, the outputs' tree and a SHA-256 of all of them, in a format of
-gyrojax's own (`jax.export`'s `serialize` needs the `flatbuffers` package, which gyrojax does not require);
-only single-device programs without effects or shardings are stored, and outputs must be arrays in tuples,
-lists and dicts.
+The persistent compilation cache (`_cache.py`) makes XLA's compile of a known program nearly free, but every process
+still traces it, and for a fit's largest program (the vmapped solve, which also evaluates at the start) tracing is
+most of a warm first `identify`. `cached_program(name, fn)` wraps `fn` like `equinox.filter_jit` (arrays are traced,
+every other leaf is static) and, when the compilation cache is on, exports the traced program (`jax.export`:
+StableHLO) to `<cache folder>/gyrojax_export/<name>-<key>.jaxexport`. A later process whose call has the same key
+rebuilds the `jax.export.Exported` and runs it through `jax.jit(exported.call)`: no tracing of `fn`; the compile of
+the embedded module hits the persistent cache. The file holds the module's bytes, its inputs' and outputs' shapes
+and dtypes, the outputs' tree and a SHA-256 of all of them, in a format of gyrojax's own (`jax.export`'s `serialize`
+needs the `flatbuffers` package, which gyrojax does not require); only single-device programs without effects or
+shardings are stored, and outputs must be arrays in tuples, lists and dicts.
 
 **Measured** (`benchmarks/bench_compile.py --entries identify`, 2-core CPU, load 4.5-6, 2026-11-26): the
 first `identify` of the demo lot in a process with a warm cache 5.2 s with the exported programs against
