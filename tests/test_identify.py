@@ -145,6 +145,21 @@ def test_a_prior_pulls_and_fixes_the_combination(rate_only):
     np.testing.assert_allclose(np.asarray(f.scale_factor), np.asarray(base.scale_factor), rtol=1e-6)
 
 
+@pytest.mark.slow
+def test_more_starts_keep_each_devices_best_solve_and_its_evaluation(rate_only):
+    """MultiStart(starts=3): per device the lowest chi2 of three solves (never above the single start's), and
+    the evaluation the Fit reports is that of the solve it kept (the fitted model evaluated again gives the same
+    residuals)."""
+    options = dict(free=("k_vf", "angular_gain"), priors=VAGUE)
+    one = gj.identify("paper-qmg", rate_only, **options)
+    three = gj.identify("paper-qmg", rate_only, start=gj.MultiStart(starts=3, spread=0.05), **options)
+    assert three.all_converged
+    assert np.all(np.asarray(three.chi2) <= np.asarray(one.chi2) * (1 + 1e-9))
+    again = gj.identify(three.model, rate_only, evaluate_only=True, **options)
+    np.testing.assert_allclose(np.asarray(again.residual_vector), np.asarray(three.residual_vector), rtol=0,
+                               atol=1e-6)
+
+
 # BFGS stopped at 5 steps: the retry test below reuses this compiled solve.
 NOT_CONVERGED = dict(free=("k_vf", "angular_gain"), priors=VAGUE, solver="bfgs", max_steps=5)
 NO_RETRY = (gj.DecrementCertificate(), gj.RestartRunoffs())  # the default recovery without the retry

@@ -113,10 +113,10 @@ class MultiStart(eqx.Module):
                 if np.nansum(res[4]) < np.nansum(best[4]):
                     best = res
             else:
-                # Per device: the lower chi2 wins (u_lot, index 1, is empty here).
-                u_lot = best[1]
-                best = _pick(_better(res[4], best[4]), res, best)
-                best = best[:1] + (u_lot,) + best[2:]
+                # Per device: the lower chi2 wins (u_lot, index 1, is empty here: no device axis to pick on).
+                (u, _, *rest), (u_b, u_lot, *rest_b) = res, best
+                u, *rest = _pick(_better(res[4], best[4]), (u, *rest), (u_b, *rest_b))
+                best = (u, u_lot, *rest)
         u_free, u_lot, code, steps, chi2, final = best
         return Solution(u_free, u_lot, code, steps, chi2, solving.full(u_free), final, ("",) * n)
 
