@@ -35,6 +35,7 @@ from .._diagnose import baseline_model, candidate_effects, full_key
 from .._effects.registry import EFFECTS
 from .._fitdata import FitData, fit_data
 from .._identify import Fit, identify
+from .._identify.problem import sf_temperature
 from .._noise import RateNoise
 from .._parameters import DEFAULT_FREE, Model, as_model, zero_effect
 from .._progress import as_progress
@@ -364,16 +365,6 @@ def _baseline(data, model, fit, candidates, free, reads, say):
     return fit, candidates, added
 
 
-def _sf_temperature(data: FitData) -> np.ndarray:
-    """Where identification reports the scale factor: the mean die temperature of the rate-table points (else
-    of every recorded point, else 25 deg C), per device."""
-    blocks = [data.blocks["rate_table"]] if "rate_table" in data.blocks else list(data.blocks.values())
-    total = sum(np.sum(np.where(np.asarray(b.mask) & np.isfinite(np.asarray(b.temperatures)),
-                                np.asarray(b.temperatures), 0.0), axis=(1, 2)) for b in blocks)
-    count = sum(np.sum(np.asarray(b.mask) & np.isfinite(np.asarray(b.temperatures)), axis=(1, 2)) for b in blocks)
-    return np.where(count > 0, total / np.maximum(count, 1), 25.0)
-
-
 def _data_rows(fit: Fit) -> int:
     return int(sum(int(np.prod(fit.data.blocks[s].inputs.shape[1:])) for s in fit.data.sweeps))
 
@@ -483,7 +474,7 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     all_exps = experiments + tuple(e for e in design_exps if e.name not in names)
     say(f"Jacobians of {len(all_exps)} experiments' points ({sum(e.points for e in all_exps)} points per device) "
         f"at the baseline, {len(fit.devices)} device(s)")
-    t_sf = _sf_temperature(fit.data)
+    t_sf = sf_temperature(fit.data)  # where identification reports the scale factor
     (jac_e, g), (pred_e, sf) = jacobians(fit.model, fit.entries, all_exps, t_sf)
     noise = noise_levels(fit.data, sf, protocol)
     n_dev = len(fit.devices)
