@@ -66,7 +66,8 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     """optimistix's Levenberg-Marquardt (damped Newton descent, classical trust-region update) with the
     round-off-aware acceptance of `RoundoffTrustRegion`; with `undamped=True`, Gauss-Newton (optimistix's
     `GaussNewton` path: full Newton steps on the normal equations, each accepted) in the same compiled
-    program. `step_limit` (default: none) stops the solve after that many steps, as converged."""
+    program. Its `step_limit` field (none by default) stops the solve after that many steps, reported as converged:
+    only for evaluating at the start (`evaluation_step`), never for a fit."""
 
     rtol: float
     atol: float
@@ -77,7 +78,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     step_limit: jax.Array
 
     def __init__(self, rtol: float, atol: float, linear_solver: lx.AbstractLinearSolver | None = None,
-                 roundoff: float = 1e-10, undamped: bool = False, step_limit: int | None = None):
+                 roundoff: float = 1e-10, undamped: bool = False):
         if linear_solver is None:
             # Normal equations through an XLA-only LU, not lineax's LAPACK QR: see gyrojax/_linsolve.py.
             linear_solver = lx.Normal(PivotedLU(zero_pivot_gives_zero=True))
@@ -86,7 +87,8 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
         self.descent = optx.DampedNewtonDescent(linear_solver=linear_solver)
         self.search = RoundoffTrustRegion(roundoff=roundoff, undamped=undamped)
         self.verbose = _quiet
-        self.step_limit = jnp.asarray(np.iinfo(np.int32).max if step_limit is None else step_limit)
+        # No limit; `_identify/evaluation.py::evaluation_step` sets 1 (a traced value: the same program).
+        self.step_limit = jnp.asarray(np.iinfo(np.int32).max)
 
     def terminate(self, fn, y, args, options, state, tags):
         stop, result = super().terminate(fn, y, args, options, state, tags)
