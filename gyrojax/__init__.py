@@ -87,6 +87,7 @@ from ._compare import Comparison as Comparison, compare as compare  # noqa: E402
 from ._diagnose import (  # noqa: E402
     Diagnosis as Diagnosis,
     Discrepancy as Discrepancy,
+    LookAlike as LookAlike,
     Rejection as Rejection,
     diagnose as diagnose,
 )

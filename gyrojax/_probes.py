@@ -346,28 +346,45 @@ class Projected:
     information: float
 
 
+# Directions of the projected columns kept by the score test: information above this share of the columns' own
+# (before projection). Not a significance level: it separates a column that lies in the span up to round-off and
+# the Jacobian's curvature (a library effect's own generic shape: ~1e-14 of its information left) from one that
+# differs from the span on some rows the data barely measure (a cubic after the DAC against the DAC's INL, on a
+# DAC sweep to a third of full scale: ~3e-4 left). Relative, so that a probe's unit does not decide it.
+RELATIVE_RANK_TOL = 1e-10
+
+
 def project_out(cols, against):
-    """`cols` (rows, k) with the span of `against` (rows, m) removed."""
+    """`cols` (rows, k) with the span of `against` (rows, m) removed. The span is taken from the SVD, keeping
+    singular values above 1e-12 of the largest: a column at round-off (an effect term the data do not see) adds
+    no direction, and cannot take part of the real columns' span with it (as an unpivoted QR's arbitrary
+    direction there would)."""
     if against.shape[1] == 0:
         return cols
-    q, r = np.linalg.qr(against)
-    keep = np.abs(np.diag(r)) > 1e-12 * max(np.max(np.abs(np.diag(r))), 1e-300)
-    q = q[:, keep]
-    return cols - q @ (q.T @ cols)
+    u, s, _ = np.linalg.svd(against, full_matrices=False)
+    u = u[:, s > 1e-12 * max(float(s[0]), 1e-300)]
+    return cols - u @ (u.T @ cols)
 
 
-def score_columns(base, cols, residuals, *, rank_tol: float = 1e-4) -> Projected:
+def score_columns(base, cols, residuals, *, rank_tol: float = 0.0,
+                  relative_rank_tol: float = RELATIVE_RANK_TOL) -> Projected:
     """Score test of the columns `cols` (device, residual, k) against residuals (device, residual) after
-    projecting out `base` (device, residual, m): the chi2 they would remove, and their fingerprint."""
+    projecting out `base` (device, residual, m): the chi2 they would remove, and their fingerprint.
+
+    A direction of the projected columns counts (one degree of freedom) when its information exceeds both
+    `rank_tol` (absolute: for candidate effects, whose columns are per typical size, the chi2 a typical size
+    would change) and `relative_rank_tol` times the columns' own largest information before projection."""
     stat, df, info = 0.0, 0, 0.0
     n, rows, k = cols.shape
     fingerprint = np.zeros((n, rows))
     coef = np.zeros((n, k))
     for d in range(n):
+        own = np.linalg.eigvalsh(cols[d].T @ cols[d]) if k else np.zeros(0)
+        floor = max(rank_tol, relative_rank_tol * max(float(own[-1]), 0.0) if k else 0.0)
         je = project_out(cols[d], base[d])
         evals, evecs = np.linalg.eigh(je.T @ je)
         info += max(float(evals[-1]), 0.0) if evals.size else 0.0
-        keep = evals > rank_tol
+        keep = evals > floor
         if not keep.any():
             continue
         inv = (evecs[:, keep] / evals[keep]) @ evecs[:, keep].T

@@ -30,7 +30,7 @@ from .candidates import (
     is_lot as is_lot,
 )
 from .diagnose import diagnose as diagnose
-from .discrepancy import Discrepancy as Discrepancy, score_probes as score_probes
+from .discrepancy import Discrepancy as Discrepancy, LookAlike as LookAlike, score_probes as score_probes
 from .guards import MAX_TYPICAL_MULTIPLE as MAX_TYPICAL_MULTIPLE, Rejection as Rejection
 from .report import write_report as write_report
 from .score import CandidateScore as CandidateScore, score_candidates as score_candidates

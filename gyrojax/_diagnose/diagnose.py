@@ -15,7 +15,7 @@ from .._progress import as_progress
 from .._stats import chi2_sf
 from .candidates import baseline_model, candidate_effects, full_key
 from .columns import effect_columns
-from .discrepancy import score_probes, with_library
+from .discrepancy import look_alikes, score_probes, with_library
 from .guards import MAX_TYPICAL_MULTIPLE, Rejection, contradictions, probe_guard, verdict_of
 from .score import cosine, score_candidates, separating_sweep
 from .solution import Diagnosis, Step
@@ -167,13 +167,14 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         if group:
             ambiguous.append((best.effect,) + group)
         selected.append(best.effect)
+        alike = look_alikes(fit, best.effect, discrepancy, designs, alpha)
         fit = new
         fits.append(fit)
         cols = effect_columns(fit, best.effect)
         multiple = float(np.max(np.abs(np.asarray(fit.u)[:, cols])))
         steps.append(Step(best.effect, best.statistic, best.p_value, lr, df_total, p_lr, delta_bic,
                           fit.chi2_red_total, nonlinearity_residual_ppm(fit), scores, group, separated, multiple,
-                          best.implied_multiple))
+                          best.implied_multiple, look_alikes=alike))
         discrepancy, designs = score_probes(fit, probes, alpha=alpha)
     if ranking0 is None:
         ranking0 = ()

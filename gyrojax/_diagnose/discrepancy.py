@@ -2,12 +2,13 @@
 data, and which library effect has each significant shape."""
 
 import dataclasses
+import math
 
 import numpy as np
 
 from .._fitdata import FitData
 from .._identify import Fit
-from .._probes import PROBES, design, score_columns
+from .._probes import PROBES, design, project_out, score_columns
 from .columns import base_columns, effect_columns, excess_chi2, row_blocks
 
 
@@ -113,6 +114,65 @@ def score_probes(fit: Fit, probes=PROBES, *, alpha: float = 0.01):
     final = tuple(dataclasses.replace(d, same_shape_as=tuple(same[d.probe]), within=within.get(d.probe, ""))
                   for d in out)
     return final, designs
+
+
+@dataclasses.dataclass(frozen=True)
+class LookAlike:
+    """A significant shape that a confirmed effect takes whole on this data, though the two differ: by
+    `separation_sigma` of the noise at the size the shape implies, on `sweeps` (sweep, share of the difference),
+    so that the data cannot say which it is. `information_factor`: how many times its information the separating
+    sweep would need to tell them apart at 3 sigma."""
+
+    probe: str
+    shape: str
+    sweeps: tuple
+    separation_sigma: float
+    information_factor: float
+
+    @property
+    def description(self) -> str:
+        where = self.sweeps[0][0] if self.sweeps else "no sweep"
+        return (f"{self.shape} ({self.probe}): on this data the two differ by {self.separation_sigma:.2g} sigma, "
+                f"{100 * self.sweeps[0][1]:.0f} % of it on the {where} sweep, which would separate them with "
+                f"~{self.information_factor:.2g}x its information (lower noise, more points, or a wider span of "
+                "its input)" if self.sweeps else f"{self.shape} ({self.probe})")
+
+    def to_json(self) -> dict:
+        return {"probe": self.probe, "shape": self.shape, "sweeps": [list(x) for x in self.sweeps],
+                "separation_sigma": self.separation_sigma, "information_factor": self.information_factor,
+                "description": self.description}
+
+
+# The separation (in sigma of the noise, at the size the shape implies) from which the data tell a shape from an
+# effect: below it, a confirmed effect that takes the shape's whole misfit could as well be that shape.
+SEPARATION_SIGMA = 3.0
+
+
+def look_alikes(fit: Fit, effect: str, discrepancy, designs, alpha: float) -> tuple:
+    """The significant shapes at `fit` that `effect` takes whole (nothing significant is left of them beyond
+    it) but that differ from it on some rows of this data, by less than `SEPARATION_SIGMA` at their size: what
+    the data cannot tell from `effect`. A shape within `effect`'s span (its own generic form) is not one."""
+    base = base_columns(fit)
+    res = np.asarray(fit.residual_vector)
+    je = np.asarray(fit.jacobian)[:, :, effect_columns(fit, effect)]
+    cut = alpha / max(len(discrepancy), 1)
+    out = []
+    for d in discrepancy:
+        if not d.significant or d.within:
+            continue
+        gp = designs[d.probe]
+        against = np.concatenate([base, je], axis=-1)
+        left = score_columns(against, gp, res)
+        if left.df == 0 or left.p_value < cut:
+            continue  # the effect's own shape here, or a shape the effect cannot take
+        alone = score_columns(base, gp, res)
+        diff = np.stack([project_out(gp[k], against[k]) @ alone.coefficients[k] for k in range(gp.shape[0])])
+        separation = float(np.sum(diff**2))
+        if separation >= SEPARATION_SIGMA**2:
+            continue  # the data could tell them apart, and chose the effect
+        out.append(LookAlike(d.probe, d.shape, _sweep_shares(diff, fit.data), math.sqrt(separation),
+                             SEPARATION_SIGMA**2 / max(separation, 1e-300)))
+    return tuple(out)
 
 
 def with_library(fit, discrepancy, designs, scores, rejected, max_multiple, alpha):

@@ -9,7 +9,7 @@ from .._identify import Fit
 from .._probes import score_columns
 from .._stats import chi2_isf
 from .columns import base_columns, effect_columns, excess_chi2
-from .score import CandidateScore
+from .score import TYPICAL_RANK_TOL, CandidateScore
 
 
 # ASSUMPTION: beyond 100 times its typical size an effect is not physical any more (a 16-bit DAC's INL at
@@ -39,7 +39,7 @@ def probe_guard(fit, candidate: CandidateScore, discrepancy, designs, candidate_
     worst = None
     for d in (d for d in discrepancy if d.significant):
         gp = designs[d.probe]
-        beyond_probe = score_columns(np.concatenate([base, gp], axis=-1), je, res)
+        beyond_probe = score_columns(np.concatenate([base, gp], axis=-1), je, res, rank_tol=TYPICAL_RANK_TOL)
         beyond_candidate = score_columns(np.concatenate([base, je], axis=-1), gp, res)
         if beyond_probe.p_value >= candidate_cut and beyond_candidate.p_value < probe_cut:
             if worst is None or beyond_candidate.statistic > worst[1].statistic:

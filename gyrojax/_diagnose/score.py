@@ -54,7 +54,12 @@ class CandidateScore:
         return what + (f". Revealed by: {reveal}" if reveal else "")
 
 
-def score_candidates(fit: Fit, candidates, *, rank_tol: float = 1e-4) -> tuple[CandidateScore, ...]:
+# A candidate direction counts in the score test when a typical size of it changes the chi2 by more than this
+# (its columns are per typical size): below, the data do not see it.
+TYPICAL_RANK_TOL = 1e-4
+
+
+def score_candidates(fit: Fit, candidates, *, rank_tol: float = TYPICAL_RANK_TOL) -> tuple[CandidateScore, ...]:
     """Score test of each candidate (effect name held at zero in `fit.model`) against the fitted model."""
     jac = np.asarray(fit.jacobian)
     res = np.asarray(fit.residual_vector)

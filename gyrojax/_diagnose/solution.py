@@ -37,6 +37,7 @@ class Step:
     typical_multiple: float = float("nan")
     implied_multiple: float = float("nan")  # at the score stage, before the refit
     contradicted_by: tuple = ()  # sweeps whose misfit the step made significantly worse (none when accepted)
+    look_alikes: tuple = ()  # LookAlike: shapes the data cannot tell from this effect (`look_alikes`)
 
 
 VERDICTS = ("explained", "partly explained", "unexplained")
@@ -85,9 +86,11 @@ class Diagnosis:
         final = self.comparisons[-1] if self.comparisons else None
         tail = (f" (chi2 {final.chi2:.4g} over {final.points} points, p = {final.p_value:.2g})"
                 if final is not None else "")
+        alike = "".join(f"; but this data cannot tell {s.effect} from {a.description}"
+                        for s in self.steps for a in s.look_alikes)
         if self.verdict == "explained":
             what = (f"{', '.join(self.selected)} explain" if self.steps else "the baseline explains")
-            return f"verdict: explained: {what} the data at the noise level{tail}"
+            return f"verdict: explained: {what} the data at the noise level{tail}{alike}"
         left = self.remaining
         where = (f"; what is left: {left[0].description}" if left else
                  "; no generic shape (bias or gain in temperature, time, run; cubics; bow; K+/K-) explains what "
@@ -96,7 +99,7 @@ class Diagnosis:
             base = max(self.baseline.chi2_total - self.baseline.dof_total, 1e-300)
             gone = (self.baseline.chi2_total - self.final.chi2_total) / base
             return (f"verdict: partly explained: {', '.join(self.selected)} take {100 * min(gone, 1.0):.0f} % of "
-                    f"the baseline's excess misfit, but the model still fails{tail}{where}")
+                    f"the baseline's excess misfit, but the model still fails{tail}{where}{alike}")
         return f"verdict: unexplained: no library effect is confirmed and the model fails{tail}{where}"
 
     def summary(self, comparisons: bool = True) -> str:
@@ -129,6 +132,7 @@ class Diagnosis:
                          f"{s.delta_bic:.1f} -> chi2_red {s.chi2_red_after:.3f}, nonlinearity residual "
                          f"{s.nonlinearity_ppm_after:.2f} ppm{amb}; fitted at {s.typical_multiple:.3g}x its "
                          "typical size")
+            lines += [f"  ~ this data cannot tell {s.effect} from {a.description}" for a in s.look_alikes]
             if s.typical_multiple > IMPLAUSIBLE_MULTIPLE:
                 lines.append(f"  ! {s.effect} explains the data only at {s.typical_multiple:.3g}x its typical size "
                              "(beyond the library's plausible range): another effect, perhaps not among the "
@@ -165,7 +169,8 @@ class Diagnosis:
                        "nonlinearity_ppm_after": s.nonlinearity_ppm_after,
                        "ambiguous_with": list(s.ambiguous_with), "separated_by": s.separated_by,
                        "typical_multiple": s.typical_multiple, "implied_multiple": _finite(s.implied_multiple),
-                       "contradicted_by": list(s.contradicted_by)}
+                       "contradicted_by": list(s.contradicted_by),
+                       "look_alikes": [a.to_json() for a in s.look_alikes]}
                       for s in self.steps],
             "selected": list(self.selected),
             "ambiguous": [list(g) for g in self.ambiguous],
