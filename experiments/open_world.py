@@ -19,7 +19,8 @@ Cases (`--cases`): `zro` (a zero-rate output linear in the die temperature, 2e-3
 rows), `amp` (a cubic compression of the feedback amplifier after the DAC: rate and VCF words raised by
 3e-4 (w/W)^3 W, the DAC sweep untouched: ~3.7 sigma apart from a DAC INL on this DAC sweep, which reaches a
 third of full scale), `amp_small` (the same at 1e-4, ~1.2 sigma apart: the data cannot refuse the DAC INL, and
-the diagnosis must name the cubic after the DAC as its look-alike; outside only), `time` (a zero-rate output growing 0.05 (deg/s)/h after power-on),
+the diagnosis must name the cubic after the DAC as its look-alike; outside only), `time` (a zero-rate output
+growing 0.05 (deg/s)/h after power-on),
 `sign` (a gain 20 ppm higher for positive inputs: K+ != K-, which no library effect and no slot term here
 models; only located). Results go to DIR/open_world.json and .md after every case.
 """
@@ -106,8 +107,9 @@ def markdown(rows, settings) -> str:
     lines = ["# Effects outside the library: out-of-library confusion table", "",
              f"paper-qmg lot of {settings['devices']} devices x {settings['runs']} runs, seed {settings['seed']}, "
              "rate table + static VCF + DAC, noise on; outputs post-processed by hand with the hidden effect.", "",
-             "| hidden | candidates | selected | wrongly confirmed | look-alike named | verdict | where the misfit lives "
-             "(top) | chi2_red before -> after | size z (per device) |", "|---|---|---|---|---|---|---|---|---|"]
+             "| hidden | candidates | selected | wrongly confirmed | look-alike named | verdict | "
+             "where the misfit lives (top) | chi2_red before -> after | size z (per device) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         top = r.get("top")
         where = (f"{top['coordinate']}: {top['shape']}, {100 * top['share']:.0f} %, "
