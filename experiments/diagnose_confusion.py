@@ -161,6 +161,7 @@ def case_and_data(preset, hidden, *, devices, runs, seed, progress=None):
     report = d.to_json()
     row = {"preset": preset, "hidden": list(hidden), "selected": list(d.selected),
            "ambiguous": [list(g) for g in d.ambiguous], "untestable": list(d.untestable),
+           "look_alikes": {s.effect: [a.probe for a in s.look_alikes] for s in d.steps if s.look_alikes},
            "rejected": report["rejected"], "ranking": report["ranking"],
            "baseline_chi2_red": d.baseline.chi2_red_total, "final_chi2_red": d.final.chi2_red_total,
            "baseline_nonlinearity_ppm": d.baseline_nonlinearity_ppm,

@@ -50,6 +50,8 @@ def test_hidden_dac_inl_is_found_and_the_error_falls(hidden_dac_inl):
     assert d.ranking[0].df == 2 * DEMO_LOT["devices"]
     # a typical-size INL leaves a chi2 of the order of the one measured (the hidden one is typical-size)
     assert d.ranking[0].typical_chi2 > 1e4
+    # at this size the DAC sweep tells the INL from a cubic after the DAC: no look-alike is named
+    assert step.look_alikes == ()
 
 
 def test_the_comparison_says_where_the_baseline_fails_and_that_nothing_is_left(hidden_dac_inl):
@@ -217,6 +219,12 @@ def test_each_hidden_effect_is_found_or_absorbed(hidden_dac_inl, preset, hidden)
             assert row["absorption"][h].endswith("Revealed by: " + gj.EFFECTS[h].revealed_by)
     if not hidden:
         assert row["selected"] == []
+    if hidden == ("feedback_compression",):
+        # a typical-size compression is ~1.1 sigma from a cubic of the DAC itself on the demo's DAC sweep (to a
+        # third of full scale): confirmed, with that look-alike named
+        assert row["look_alikes"] == {"feedback_compression": ["cubic_of_dac"]}
+    elif hidden:
+        assert row["look_alikes"] == {}, row["look_alikes"]
 
 
 def test_a_saved_baseline_fit_is_not_fitted_again(hidden_dac_inl, tmp_path):

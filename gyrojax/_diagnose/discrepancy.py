@@ -146,12 +146,17 @@ class LookAlike:
 # The separation (in sigma of the noise, at the size the shape implies) from which the data tell a shape from an
 # effect: below it, a confirmed effect that takes the shape's whole misfit could as well be that shape.
 SEPARATION_SIGMA = 3.0
+# A shape that differs from the effect by less than this share of its own information (0.1 % of its norm) is the
+# effect's own form on this data, whatever the noise: bias_vs_temperature against zro_tempco keeps 4e-10 of it
+# (through the fitted scale factor), the cubic after the DAC against dac_inl 2e-3 on the demo's DAC sweep.
+OWN_FORM_SHARE = 1e-6
 
 
 def look_alikes(fit: Fit, effect: str, discrepancy, designs, alpha: float) -> tuple:
     """The significant shapes at `fit` that `effect` takes whole (nothing significant is left of them beyond
     it) but that differ from it on some rows of this data, by less than `SEPARATION_SIGMA` at their size: what
-    the data cannot tell from `effect`. A shape within `effect`'s span (its own generic form) is not one."""
+    the data cannot tell from `effect`. A shape within `effect`'s span, or differing from it by less than
+    `OWN_FORM_SHARE` of its information (its own generic form), is not one."""
     base = base_columns(fit)
     res = np.asarray(fit.residual_vector)
     je = np.asarray(fit.jacobian)[:, :, effect_columns(fit, effect)]
@@ -170,6 +175,8 @@ def look_alikes(fit: Fit, effect: str, discrepancy, designs, alpha: float) -> tu
         separation = float(np.sum(diff**2))
         if separation >= SEPARATION_SIGMA**2:
             continue  # the data could tell them apart, and chose the effect
+        if separation <= OWN_FORM_SHARE * float(np.sum(alone.fingerprint**2)):
+            continue  # the effect's own form here
         out.append(LookAlike(d.probe, d.shape, _sweep_shares(diff, fit.data), math.sqrt(separation),
                              SEPARATION_SIGMA**2 / max(separation, 1e-300)))
     return tuple(out)
