@@ -69,3 +69,61 @@ def test_a_column_at_round_off_in_the_base_takes_no_real_direction_with_it():
     left = project_out(outside, against)
     assert np.linalg.norm(left) == pytest.approx(np.linalg.norm(project_out(step, real)), rel=1e-9)
     assert 0.5 * np.linalg.norm(step) < np.linalg.norm(left) <= np.linalg.norm(step)
+
+
+def _linear_fit(rng, c, devices=3, rows=(40, 20)):
+    """A linear stand-in for a fit: a base column and an effect column over two sweeps, "a" and "b", and a probe
+    equal to the effect on sweep "a" only (as a cubic after the DAC is a DAC INL without the DAC sweep, which
+    sees the INL weakly: the effect's rows there are a tenth of the others). The residuals hold the probe at
+    size `c` plus unit noise, with the base taken out."""
+    import types
+
+    n = sum(rows)
+    base = rng.normal(size=(devices, n, 1))
+    effect = rng.normal(size=(devices, n, 1))
+    effect[:, rows[0]:] *= 0.1
+    probe = effect.copy()
+    probe[:, rows[0]:] = 0.0
+    raw = c * probe[..., 0] + rng.normal(size=(devices, n))
+    res = np.stack([raw[d] - base[d] @ np.linalg.lstsq(base[d], raw[d], rcond=None)[0] for d in range(devices)])
+    blocks = {s: types.SimpleNamespace(inputs=np.zeros((devices, 1, r))) for s, r in zip("ab", rows)}
+    fit = types.SimpleNamespace(jacobian=np.concatenate([base, effect], axis=-1), residual_vector=res,
+                                free=np.array([True, False]), names=("k", "inl.c"),
+                                data=types.SimpleNamespace(sweeps=("a", "b"), blocks=blocks))
+    return fit, probe
+
+
+def _shape(name):
+    from gyrojax._diagnose.discrepancy import Discrepancy
+
+    return Discrepancy(name, "input", f"the shape {name}", (), 0.0, 1, 1.0, 0.0, True, 0.0, 0.0, "", None)
+
+
+def test_a_look_alike_is_named_with_its_separation_and_the_sweep_that_holds_it():
+    """`look_alikes` against least squares by hand: the separation is |c P g| over the devices (P removing the
+    base and the effect, c the probe's own coefficient), it lives on the sweep the probe does not reach, and
+    the information factor is 9 / separation^2. A probe the data tell apart (> 3 sigma) or the effect's own
+    form is not named."""
+    from gyrojax._diagnose.discrepancy import look_alikes
+    from gyrojax._probes import project_out
+
+    rng = np.random.default_rng(5)
+    fit, probe = _linear_fit(rng, c=1.0)
+    jac, res = fit.jacobian, fit.residual_vector
+    (alike,) = look_alikes(fit, "inl", [_shape("after")], {"after": probe}, alpha=0.01)
+    sep2 = 0.0
+    for d in range(3):
+        c = score_columns(jac[:, :, :1], probe, res).coefficients[d]
+        gap = project_out(probe[d], jac[d]) @ c
+        sep2 += gap @ gap
+    assert alike.separation_sigma == pytest.approx(np.sqrt(sep2), rel=1e-9)
+    assert 0.0 < alike.separation_sigma < 3.0
+    assert alike.sweeps[0][0] == "b" and alike.sweeps[0][1] > 0.5
+    assert alike.information_factor == pytest.approx(9.0 / sep2, rel=1e-9)
+    assert "differ by" in alike.description and "b sweep" in alike.description
+    # a large probe: the data tell the two apart, and nothing is named
+    fit, probe = _linear_fit(np.random.default_rng(5), c=30.0)
+    assert look_alikes(fit, "inl", [_shape("after")], {"after": probe}, alpha=0.01) == ()
+    # the effect's own form (the probe on both sweeps) is not a look-alike
+    own = fit.jacobian[:, :, 1:]
+    assert look_alikes(fit, "inl", [_shape("own")], {"own": own}, alpha=0.01) == ()
