@@ -379,8 +379,8 @@ def score_columns(base, cols, residuals, *, rank_tol: float = 0.0,
     fingerprint = np.zeros((n, rows))
     coef = np.zeros((n, k))
     for d in range(n):
-        own = np.linalg.eigvalsh(cols[d].T @ cols[d]) if k else np.zeros(0)
-        floor = max(rank_tol, relative_rank_tol * max(float(own[-1]), 0.0) if k else 0.0)
+        own = float(np.linalg.norm(cols[d], 2)) ** 2 if k else 0.0  # the columns' largest information
+        floor = max(rank_tol, relative_rank_tol * own)
         je = project_out(cols[d], base[d])
         evals, evecs = np.linalg.eigh(je.T @ je)
         info += max(float(evals[-1]), 0.0) if evals.size else 0.0

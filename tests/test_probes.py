@@ -93,10 +93,12 @@ def _linear_fit(rng, c, devices=3, rows=(40, 20)):
     return fit, probe
 
 
-def _shape(name):
+def _shape(name, fit, probe):
+    """The probe as `score_probes` reports it at `fit`: significant, with its fingerprint beyond the base."""
     from gyrojax._diagnose.discrepancy import Discrepancy
 
-    return Discrepancy(name, "input", f"the shape {name}", (), 0.0, 1, 1.0, 0.0, True, 0.0, 0.0, "", None)
+    fingerprint = score_columns(fit.jacobian[:, :, :1], probe, fit.residual_vector).fingerprint
+    return Discrepancy(name, "input", f"the shape {name}", (), 0.0, 1, 1.0, 0.0, True, 0.0, 0.0, "", fingerprint)
 
 
 def test_a_look_alike_is_named_with_its_separation_and_the_sweep_that_holds_it():
@@ -110,7 +112,7 @@ def test_a_look_alike_is_named_with_its_separation_and_the_sweep_that_holds_it()
     rng = np.random.default_rng(5)
     fit, probe = _linear_fit(rng, c=1.0)
     jac, res = fit.jacobian, fit.residual_vector
-    (alike,) = look_alikes(fit, "inl", [_shape("after")], {"after": probe}, alpha=0.01)
+    (alike,) = look_alikes(fit, "inl", [_shape("after", fit, probe)], {"after": probe}, alpha=0.01)
     sep2 = 0.0
     for d in range(3):
         c = score_columns(jac[:, :, :1], probe, res).coefficients[d]
@@ -123,7 +125,7 @@ def test_a_look_alike_is_named_with_its_separation_and_the_sweep_that_holds_it()
     assert "differ by" in alike.description and "b sweep" in alike.description
     # a large probe: the data tell the two apart, and nothing is named
     fit, probe = _linear_fit(np.random.default_rng(5), c=30.0)
-    assert look_alikes(fit, "inl", [_shape("after")], {"after": probe}, alpha=0.01) == ()
+    assert look_alikes(fit, "inl", [_shape("after", fit, probe)], {"after": probe}, alpha=0.01) == ()
     # the effect's own form (the probe on both sweeps) is not a look-alike
     own = fit.jacobian[:, :, 1:]
-    assert look_alikes(fit, "inl", [_shape("own")], {"own": own}, alpha=0.01) == ()
+    assert look_alikes(fit, "inl", [_shape("own", fit, own)], {"own": own}, alpha=0.01) == ()

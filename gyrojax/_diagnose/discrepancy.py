@@ -131,11 +131,13 @@ class LookAlike:
 
     @property
     def description(self) -> str:
-        where = self.sweeps[0][0] if self.sweeps else "no sweep"
+        if not self.sweeps:
+            return f"{self.shape} ({self.probe})"
+        sweep, share = self.sweeps[0]
         return (f"{self.shape} ({self.probe}): on this data the two differ by {self.separation_sigma:.2g} sigma, "
-                f"{100 * self.sweeps[0][1]:.0f} % of it on the {where} sweep, which would separate them with "
+                f"{100 * share:.0f} % of it on the {sweep} sweep, which would separate them with "
                 f"~{self.information_factor:.2g}x its information (lower noise, more points, or a wider span of "
-                "its input)" if self.sweeps else f"{self.shape} ({self.probe})")
+                "its input)")
 
     def to_json(self) -> dict:
         return {"probe": self.probe, "shape": self.shape, "sweeps": [list(x) for x in self.sweeps],
@@ -153,29 +155,29 @@ OWN_FORM_SHARE = 1e-6
 
 
 def look_alikes(fit: Fit, effect: str, discrepancy, designs, alpha: float) -> tuple:
-    """The significant shapes at `fit` that `effect` takes whole (nothing significant is left of them beyond
-    it) but that differ from it on some rows of this data, by less than `SEPARATION_SIGMA` at their size: what
-    the data cannot tell from `effect`. A shape within `effect`'s span, or differing from it by less than
-    `OWN_FORM_SHARE` of its information (its own generic form), is not one."""
-    base = base_columns(fit)
-    res = np.asarray(fit.residual_vector)
+    """The significant shapes at `fit` (`discrepancy`, from `score_probes` at this fit) that `effect` takes whole
+    (nothing significant is left of them beyond it) but that differ from it on some rows of this data, by less
+    than `SEPARATION_SIGMA` at their size: what the data cannot tell from `effect`. A shape within `effect`'s
+    span, or differing from it by less than `OWN_FORM_SHARE` of its information (its own generic form), is not
+    one."""
     je = np.asarray(fit.jacobian)[:, :, effect_columns(fit, effect)]
+    against = np.concatenate([base_columns(fit), je], axis=-1)
+    res = np.asarray(fit.residual_vector)
     cut = alpha / max(len(discrepancy), 1)
     out = []
     for d in discrepancy:
         if not d.significant or d.within:
             continue
-        gp = designs[d.probe]
-        against = np.concatenate([base, je], axis=-1)
-        left = score_columns(against, gp, res)
+        left = score_columns(against, designs[d.probe], res)
         if left.df == 0 or left.p_value < cut:
             continue  # the effect's own shape here, or a shape the effect cannot take
-        alone = score_columns(base, gp, res)
-        diff = np.stack([project_out(gp[k], against[k]) @ alone.coefficients[k] for k in range(gp.shape[0])])
+        # The shape at its size beyond the baseline is its fingerprint (score_probes at this fit); what of it the
+        # effect cannot take is the difference the data would have to see.
+        diff = np.stack([project_out(f[:, None], a)[:, 0] for f, a in zip(d.fingerprint, against)])
         separation = float(np.sum(diff**2))
         if separation >= SEPARATION_SIGMA**2:
             continue  # the data could tell them apart, and chose the effect
-        if separation <= OWN_FORM_SHARE * float(np.sum(alone.fingerprint**2)):
+        if separation <= OWN_FORM_SHARE * float(np.sum(d.fingerprint**2)):
             continue  # the effect's own form here
         out.append(LookAlike(d.probe, d.shape, _sweep_shares(diff, fit.data), math.sqrt(separation),
                              SEPARATION_SIGMA**2 / max(separation, 1e-300)))
