@@ -12,7 +12,8 @@ The same solver is Gauss-Newton when its `undamped` flag (an array, so a traced 
 constant) is set: no damping (lambda = 1/inf = 0, the normal equations J^T J) and every step accepted. A solve
 retried with Gauss-Newton after Levenberg-Marquardt then reuses the compiled program of the first. Its
 `step_limit` (also traced) stops it after that many steps: with 1, the solve only evaluates at its start (the
-first step is always accepted), which is how `identify` evaluates without a program of its own.
+first step is always accepted), which is how `identify` evaluates without a program of its own. Given a
+`RunoffBound` as the solve's `args`, it stops, as diverged, once a coordinate passes its bound.
 """
 
 from collections.abc import Callable
@@ -58,6 +59,13 @@ class RoundoffTrustRegion(optx.AbstractSearch):
         return full, accept | self.undamped, optx.RESULTS.successful, _RadiusState(step_size)
 
 
+class RunoffBound(eqx.Module):
+    """The solve's `args`: where an internal coordinate has run off (`LevenbergMarquardt` stops there, with
+    `nonlinear_divergence`), per entry of the solve's vector (`inf`: never)."""
+
+    bound: jax.Array
+
+
 def _quiet(**kwargs):
     return None
 
@@ -92,4 +100,10 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
 
     def terminate(self, fn, y, args, options, state, tags):
         stop, result = super().terminate(fn, y, args, options, state, tags)
-        return stop | (state.num_steps >= self.step_limit), result
+        stop = stop | (state.num_steps >= self.step_limit)
+        if isinstance(args, RunoffBound):
+            # A run-off: no further step can bring back what a data set does not fix; stop, as diverged.
+            ran_off = jnp.any(jnp.abs(y) > args.bound)
+            result = optx.RESULTS.where(ran_off & ~stop, optx.RESULTS.nonlinear_divergence, result)
+            stop = stop | ran_off
+        return stop, result

@@ -7,7 +7,7 @@ import optimistix as optx
 import pytest
 
 from gyrojax._linsolve import PivotedLU
-from gyrojax._lm import LevenbergMarquardt
+from gyrojax._lm import LevenbergMarquardt, RunoffBound
 
 
 RNG = np.random.default_rng(0)
@@ -150,3 +150,22 @@ def test_the_undamped_flag_is_gauss_newton_in_the_same_compiled_solve():
                                jnp.asarray(y_start), max_steps=50)
         assert int(a.stats["num_steps"]) == int(b.stats["num_steps"])
         np.testing.assert_allclose(np.asarray(a.value), np.asarray(b.value), rtol=1e-9)
+
+
+def test_a_coordinate_past_its_runoff_bound_stops_the_solve_as_diverged():
+    # The minimum of (exp(-y0), y1 - 1) lies at y0 = infinity: without a bound the solve creeps on to max_steps;
+    # with one it stops at the first step past it, as diverged, and a coordinate without a bound is unaffected.
+    def runs_off(y, _):
+        return jnp.stack([jnp.exp(-y[0]), y[1] - 1.0])
+
+    y0 = jnp.asarray([0.0, 0.0])
+    solver = LevenbergMarquardt(1e-12, 1e-12, NORMAL)
+    free = optx.least_squares(runs_off, solver, y0, max_steps=100, throw=False)
+    assert int(free.stats["num_steps"]) == 100 and float(free.value[0]) > 4.0
+    bounded = optx.least_squares(runs_off, solver, y0, RunoffBound(jnp.asarray([3.0, jnp.inf])), max_steps=100,
+                                 throw=False)
+    assert bounded.result == optx.RESULTS.nonlinear_divergence
+    assert 3.0 < float(bounded.value[0]) < 3.5 and int(bounded.stats["num_steps"]) < 80
+    untouched = optx.least_squares(runs_off, solver, y0, RunoffBound(jnp.asarray([jnp.inf, 2.0])), max_steps=100,
+                                   throw=False)
+    assert int(untouched.stats["num_steps"]) == 100

@@ -14,6 +14,7 @@ import optimistix as optx
 
 from .._compile import jit
 from .._export import cached_program
+from .._lm import RunoffBound
 from .._solution import RESULTS, result_code
 from .evaluation import Evaluation, evaluated, evaluation_step, final_evaluation, one_trace
 from .problem import nonfinite_explained
@@ -37,6 +38,20 @@ def map_devices(f, chunk, *trees):
     return jax.tree.map(lambda x: x.reshape((n,) + x.shape[2:]), out)
 
 
+# A positive parameter e^20 (5e8) times its start has run off: no measurement moves a design value that far, and
+# the open-loop Q_y that runs off while omega_y is still wrong (vcf-2018) passes e^20 in its first few steps,
+# then creeps on for the rest of max_steps. `RestartRunoffs` takes such a device up from its start.
+RUNOFF_LOG = 20.0
+
+
+def runoff_bound(entries) -> RunoffBound:
+    """Where each per-device internal coordinate has run off: `RUNOFF_LOG` for log-transformed parameters,
+    never for linear ones (an effect's typical size is a guide, not a limit)."""
+    return RunoffBound(jnp.asarray(np.concatenate(
+        [np.full(e.size, RUNOFF_LOG if e.transform == "log" else np.inf) for e in entries if not e.shared]
+        or [np.zeros(0)])))
+
+
 def _solve_device(problem, y0, u_lot, solver, max_steps):
     """One device's fit: (solution, result code, steps, chi2, the evaluation there as a tuple of its fields:
     what jax.export can store, see cached_program)."""
@@ -44,7 +59,8 @@ def _solve_device(problem, y0, u_lot, solver, max_steps):
         return evaluated(problem, y, u_lot)
 
     with one_trace():
-        sol = optx.least_squares(fn, solver, y0, has_aux=True, max_steps=max_steps, throw=False)
+        sol = optx.least_squares(fn, solver, y0, runoff_bound(problem.entries), has_aux=True,
+                                 max_steps=max_steps, throw=False)
         ev = final_evaluation(sol, fn)
     return (sol.value, result_code(RESULTS.promote(sol.result)), sol.stats["num_steps"], jnp.sum(ev.residuals**2),
             _fields(ev))
