@@ -252,6 +252,8 @@ def test_a_lot_of_the_same_shapes_reuses_the_traced_fit(rate_only, monkeypatch):
                         lambda *a, **k: traced.append("biases") or run_biases(*a, **k))
     monkeypatch.setattr("gyrojax._identify.lot.final_evaluation",
                         lambda *a, **k: traced.append("solve") or final_evaluation(*a, **k))
+    # In-process reuse only: a program exported to the cache folder by an earlier run would load untraced.
+    monkeypatch.setattr("gyrojax._export._folder", lambda: None)
     options = dict(free=("k_vf", "angular_gain"), priors=VAGUE)
     a = gj.identify("paper-qmg", rate_only, **options)  # traced here or by an earlier test
     cols = dict(rate_only.columns)
@@ -272,6 +274,20 @@ def test_a_lot_of_the_same_shapes_reuses_the_traced_fit(rate_only, monkeypatch):
     two = rate_only.select(np.flatnonzero(rate_only["device"] != a.devices[-1]))
     gj.identify("paper-qmg", two, evaluate_only=True, **options)
     assert traced == ["solve"]
+    # A lot of four is padded, like the three, to four devices (VmapSolve's bucket): the same compiled fit, and
+    # each device's numbers are its own (the fourth is a copy of the first under another name).
+    first = np.asarray(rate_only["device"]) == a.devices[0]
+    extra = {k: np.asarray(v)[first] for k, v in rate_only.columns.items()}
+    extra["device"] = np.full(int(first.sum()), "copy-of-000")
+    four = gj.Table({k: np.concatenate([np.asarray(v), extra[k]]) for k, v in rate_only.columns.items()},
+                    source="four devices")
+    traced.clear()
+    d = gj.identify("paper-qmg", four, **options)
+    assert traced == [] and d.devices == a.devices + ("copy-of-000",)
+    for name in ("values", "stderr", "chi2"):
+        got, want = np.asarray(getattr(d, name)), np.asarray(getattr(a, name))
+        np.testing.assert_array_equal(got[:3], want)
+        np.testing.assert_array_equal(got[3], want[0])
 
 
 @pytest.mark.slow

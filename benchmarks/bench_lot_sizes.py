@@ -1,0 +1,107 @@
+#!/usr/bin/env python
+"""Lots of nearby sizes in one session: identify on sub-lots of 3, 4, 2 and 5 devices, one after another, with
+`VmapSolve`'s bucket (the default: a lot of up to 16 devices padded to the next power of two) and without it
+(a script, not a test).
+
+    python benchmarks/bench_lot_sizes.py [--sizes 3 4 2 5] [--repeats 3] [--json PATH]
+
+The data: one simulated paper-qmg campaign of max(sizes) devices (the demo's sweeps: rate table, static VCF and
+DAC, 2 runs, seed 7, noise on); each call fits the table's first `n` devices with `identify`'s defaults, as a
+notebook does when it refits a lot without a device or fits the next lot. Each setting runs in a fresh process
+with an empty compilation cache of its own, so every lot size either reuses a compiled fit of that process or
+traces and compiles one. Printed per setting: each call's wall time, then the first size fitted again
+`--repeats` times (the run alone, warm: what the padding devices cost), and the largest difference between the
+two settings' fitted values. `--json` is written atomically.
+"""
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+
+
+def _worker(bucket, sizes, repeats, out):
+    import numpy as np
+
+    import gyrojax as gj
+    from gyrojax._demo import DEMO_LOT
+
+    table = gj.simulate_table(gj.paper_qmg(), **{**DEMO_LOT, "devices": max(sizes)}, progress=False)
+    names = sorted(set(np.asarray(table["device"]).tolist()))
+    lot_solve = gj.VmapSolve(bucket=bucket)
+
+    def fit(n):
+        sub = table.select(np.flatnonzero(np.isin(np.asarray(table["device"]), names[:n])))
+        t = time.perf_counter()
+        f = gj.identify("paper-qmg", sub, lot_solve=lot_solve, progress=False)
+        return time.perf_counter() - t, f
+
+    calls, values = [], {}
+    for n in sizes:
+        secs, f = fit(n)
+        calls.append({"devices": n, "seconds": secs, "status": list(f.status)})
+        values[n] = np.asarray(f.values).tolist()
+    warm = [fit(sizes[0])[0] for _ in range(repeats)]
+    with open(out, "w") as fh:
+        json.dump({"bucket": bucket, "calls": calls, "warm_s": warm, "values": values}, fh)
+
+
+def _run(bucket, args):
+    with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "r.json")
+        env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_COMPILATION_CACHE")}
+        env["GYROJAX_CACHE_DIR"] = cache
+        subprocess.run([sys.executable, __file__, "--worker", str(int(bucket)), "--repeats", str(args.repeats),
+                        "--result", out, "--sizes", *map(str, args.sizes)], env=env, check=True)
+        with open(out) as f:
+            return json.load(f)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[3, 4, 2, 5])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--json")
+    ap.add_argument("--worker", help=argparse.SUPPRESS)
+    ap.add_argument("--result", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if any(n < 1 for n in args.sizes) or args.repeats < 1:
+        ap.error("--sizes must be device counts >= 1 and --repeats >= 1")
+    if args.worker is not None:
+        _worker(args.worker == "1", args.sizes, args.repeats, args.result)
+        return
+    import numpy as np
+
+    import gyrojax as gj
+
+    print(f"gyrojax {gj.__version__}, python {platform.python_version()}, {platform.machine()}, "
+          f"{os.cpu_count()} CPUs, load average {os.getloadavg()}")
+    print(f"paper-qmg, the demo's sweeps, sub-lots of {args.sizes} devices, one process per setting")
+    results = {}
+    for name, bucket in (("bucket (default)", True), ("no bucket", False)):
+        r = _run(bucket, args)
+        results[name] = r
+        calls = ", ".join(f"{c['devices']}: {c['seconds']:.1f} s" for c in r["calls"])
+        warm = ", ".join(f"{s:.2f}" for s in r["warm_s"])
+        print(f"{name:>16}: {calls}; {args.sizes[0]} devices again, warm: {warm} s", flush=True)
+    a, b = (results[k] for k in results)
+    worst = max(float(np.max(np.abs(np.asarray(a["values"][k]) - np.asarray(b["values"][k]))
+                             / np.maximum(np.abs(np.asarray(b["values"][k])), 1e-300)))
+                for k in a["values"])
+    total = [sum(c["seconds"] for c in r["calls"]) for r in (a, b)]
+    print(f"all calls: {total[0]:.1f} s against {total[1]:.1f} s; largest relative difference between the two "
+          f"settings' fitted values: {worst:.2g}")
+    if args.json:
+        tmp = args.json + ".tmp"
+        with open(tmp, "w") as f:
+            json.dump({"results": results, "worst_relative": worst, "sizes": args.sizes,
+                       "load_average": os.getloadavg()}, f, indent=1)
+        os.replace(tmp, args.json)
+
+
+if __name__ == "__main__":
+    main()
