@@ -3,11 +3,12 @@
 `VmapSolve`'s bucket (the default: a lot of up to 16 devices padded to the next power of two) and without it
 (a script, not a test).
 
-    python benchmarks/bench_lot_sizes.py [--sizes 3 4 2 5] [--repeats 3] [--json PATH]
+    python benchmarks/bench_lot_sizes.py [--entry identify|diagnose] [--sizes 3 4 2 5] [--repeats 3] [--json PATH]
 
 The data: one simulated paper-qmg campaign of max(sizes) devices (the demo's sweeps: rate table, static VCF and
-DAC, 2 runs, seed 7, noise on); each call fits the table's first `n` devices with `identify`'s defaults, as a
-notebook does when it refits a lot without a device or fits the next lot. Each setting runs in a fresh process
+DAC, 2 runs, seed 7, noise on; for `diagnose`, with a typical DAC INL hidden, as in the demo); each call fits
+(or diagnoses) the table's first `n` devices with the entry's defaults, as a notebook does when it refits a lot
+without a device or fits the next lot. Each setting runs in a fresh process
 with an empty compilation cache of its own, so every lot size either reuses a compiled fit of that process or
 traces and compiles one. Printed per setting: each call's wall time, then the first size fitted again
 `--repeats` times (the run alone, warm: what the padding devices cost), and the largest difference between the
@@ -24,20 +25,27 @@ import tempfile
 import time
 
 
-def _worker(bucket, sizes, repeats, out):
+def _worker(entry, bucket, sizes, repeats, out):
     import numpy as np
 
     import gyrojax as gj
     from gyrojax._demo import DEMO_LOT
 
-    table = gj.simulate_table(gj.paper_qmg(), **{**DEMO_LOT, "devices": max(sizes)}, progress=False)
+    gyro = gj.add_effect(gj.paper_qmg(), "dac_inl") if entry == "diagnose" else gj.paper_qmg()
+    table = gj.simulate_table(gyro, **{**DEMO_LOT, "devices": max(sizes)}, progress=False)
     names = sorted(set(np.asarray(table["device"]).tolist()))
-    lot_solve = gj.VmapSolve(bucket=bucket)
+    if not bucket:  # as VmapSolve(bucket=False), for diagnose's fits too (a fresh process: nothing compiled yet)
+        from gyrojax._identify import lot
+
+        lot.BUCKET_MAX = 0
 
     def fit(n):
         sub = table.select(np.flatnonzero(np.isin(np.asarray(table["device"]), names[:n])))
         t = time.perf_counter()
-        f = gj.identify("paper-qmg", sub, lot_solve=lot_solve, progress=False)
+        if entry == "diagnose":
+            f = gj.diagnose(sub, "paper-qmg", progress=False).final
+        else:
+            f = gj.identify("paper-qmg", sub, progress=False)
         return time.perf_counter() - t, f
 
     calls, values = [], {}
@@ -55,14 +63,16 @@ def _run(bucket, args):
         out = os.path.join(tmp, "r.json")
         env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_COMPILATION_CACHE")}
         env["GYROJAX_CACHE_DIR"] = cache
-        subprocess.run([sys.executable, __file__, "--worker", str(int(bucket)), "--repeats", str(args.repeats),
-                        "--result", out, "--sizes", *map(str, args.sizes)], env=env, check=True)
+        subprocess.run([sys.executable, __file__, "--entry", args.entry, "--worker", str(int(bucket)),
+                        "--repeats", str(args.repeats), "--result", out, "--sizes", *map(str, args.sizes)],
+                       env=env, check=True)
         with open(out) as f:
             return json.load(f)
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--entry", choices=("identify", "diagnose"), default="identify")
     ap.add_argument("--sizes", type=int, nargs="+", default=[3, 4, 2, 5])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json")
@@ -72,7 +82,7 @@ def main():
     if any(n < 1 for n in args.sizes) or args.repeats < 1:
         ap.error("--sizes must be device counts >= 1 and --repeats >= 1")
     if args.worker is not None:
-        _worker(args.worker == "1", args.sizes, args.repeats, args.result)
+        _worker(args.entry, args.worker == "1", args.sizes, args.repeats, args.result)
         return
     import numpy as np
 
@@ -80,7 +90,7 @@ def main():
 
     print(f"gyrojax {gj.__version__}, python {platform.python_version()}, {platform.machine()}, "
           f"{os.cpu_count()} CPUs, load average {os.getloadavg()}")
-    print(f"paper-qmg, the demo's sweeps, sub-lots of {args.sizes} devices, one process per setting")
+    print(f"{args.entry}: paper-qmg, the demo's sweeps, sub-lots of {args.sizes} devices, one process per setting")
     results = {}
     for name, bucket in (("bucket (default)", True), ("no bucket", False)):
         r = _run(bucket, args)
@@ -98,7 +108,7 @@ def main():
     if args.json:
         tmp = args.json + ".tmp"
         with open(tmp, "w") as f:
-            json.dump({"results": results, "worst_relative": worst, "sizes": args.sizes,
+            json.dump({"entry": args.entry, "results": results, "worst_relative": worst, "sizes": args.sizes,
                        "load_average": os.getloadavg()}, f, indent=1)
         os.replace(tmp, args.json)
 

@@ -146,10 +146,27 @@ def as_model(model) -> Model:
 
 
 def batched(model: Model, n: int) -> Model:
-    """`model` with a leading axis of `n` devices on every leaf (a lot's device is kept as it is)."""
-    def lead(x):
+    """`model` with a leading axis of `n` devices on every leaf (a lot's device is kept as it is).
+
+    An effect's leaf carries the device axis when it has one dimension more than the same leaf of one device
+    (the effect's `typical` instance): a DAC INL's 4 coefficients on a lot of 4 devices are one device's, to be
+    broadcast, not one coefficient per device."""
+    def lead(x, one_ndim, name):
         x = jnp.asarray(x, dtype=x.dtype if hasattr(x, "dtype") else float)
-        return x if (x.ndim >= 1 and x.shape[0] == n) else jnp.broadcast_to(x, (n,) + x.shape)
+        if one_ndim is None:  # an effect whose structure differs from its typical one: a leading n is the lot's
+            per_device = x.ndim >= 1 and x.shape[0] == n
+        else:
+            per_device = x.ndim == one_ndim + 1
+            if per_device and x.shape[0] != n:
+                raise ValueError(f"effect {name!r}: a parameter of shape {x.shape} has a device axis of "
+                                 f"{x.shape[0]}, the lot has {n} device(s).")
+        return x if per_device else jnp.broadcast_to(x, (n,) + x.shape)
+
+    def lot_effect(e):
+        leaves, tree = jax.tree.flatten(e)
+        one, one_tree = jax.tree.flatten(type(e).typical(1.0))
+        ndims = [jnp.ndim(r) for r in one] if one_tree == tree else [None] * len(leaves)
+        return jax.tree.unflatten(tree, [lead(x, d, e.name) for x, d in zip(leaves, ndims)])
 
     # Effects are per device: broadcast their leaves; the device is batched already (a lot) or broadcast.
     dev_leaves = jax.tree.leaves(model.device)
@@ -157,8 +174,7 @@ def batched(model: Model, n: int) -> Model:
                                    if eqx.is_array(x))
     device = model.device if lot else jax.tree.map(lambda x: jnp.broadcast_to(x, (n,) + jnp.shape(x))
                                                     if eqx.is_array(x) else x, model.device)
-    effects = tuple(jax.tree.map(lead, e) for e in model.effects)
-    return Model(device, effects)
+    return Model(device, tuple(lot_effect(e) for e in model.effects))
 
 
 def effect_leaves(eff: AbstractEffect) -> tuple[str, ...]:

@@ -255,6 +255,27 @@ def test_nested_at_zero_steady_outputs_are_identical(base_name):
             assert np.array_equal(out, ref), name
 
 
+def test_a_lot_as_large_as_an_effects_coefficients_gets_them_per_device():
+    """A DAC INL has 4 coefficients: on a lot of 4 devices (as of 3 or 5) every device starts from all four,
+    not device k from the k-th (a leading axis of the lot's size is not the device axis unless the leaf has one
+    dimension more than one device's); an effect already per device is kept, and one of another lot refused."""
+    from gyrojax._parameters import Model, batched
+
+    inl = gj.DacInl.typical(1.0)
+    for n in (3, 4, 5):
+        lot = batched(Model(gj.paper_qmg(), (inl, gj.ThermalDrift.typical(1.0))), n)
+        coefficients = np.asarray(lot.effects[0].coefficients)
+        assert coefficients.shape == (n, 4)
+        np.testing.assert_array_equal(coefficients, np.broadcast_to(np.asarray(inl.coefficients), (n, 4)))
+        assert np.shape(lot.effects[1].tcf) == (n,)
+        again = batched(lot, n)
+        np.testing.assert_array_equal(np.asarray(again.effects[0].coefficients), coefficients)
+    per_device = gj.DacInl(jnp.arange(12.0).reshape(3, 4))
+    with pytest.raises(ValueError, match=r"effect 'dac_inl': a parameter of shape \(3, 4\) has a device axis of 3, "
+                                         r"the lot has 4 device"):
+        batched(Model(gj.paper_qmg(), (per_device,)), 4)
+
+
 # --- first-order fingerprints --------------------------------------------------------------------------
 
 @pytest.mark.parametrize("name", list(gj.EFFECTS))
