@@ -12,8 +12,11 @@ The same solver is Gauss-Newton when its `undamped` flag (an array, so a traced 
 constant) is set: no damping (lambda = 1/inf = 0, the normal equations J^T J) and every step accepted. A solve
 retried with Gauss-Newton after Levenberg-Marquardt then reuses the compiled program of the first. Its
 `step_limit` (also traced) stops it after that many steps: with 1, the solve only evaluates at its start (the
-first step is always accepted), which is how `identify` evaluates without a program of its own. Given a
-`RunoffBound` as the solve's `args`, it stops, as diverged, once a coordinate passes its bound.
+first step is always accepted), which is how `identify` evaluates without a program of its own. Its
+`max_steps` (traced too; `with_max_steps`) ends a solve that has not converged after that many steps with
+optimistix's `nonlinear_max_steps_reached`, as optimistix's own `max_steps` would, but without a program per
+value: a fit retried with more steps reuses the compiled solve. Given a `RunoffBound` as the solve's `args`, it
+stops, as diverged, once a coordinate passes its bound.
 """
 
 from collections.abc import Callable
@@ -75,7 +78,8 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     round-off-aware acceptance of `RoundoffTrustRegion`; with `undamped=True`, Gauss-Newton (optimistix's
     `GaussNewton` path: full Newton steps on the normal equations, each accepted) in the same compiled
     program. Its `step_limit` field (none by default) stops the solve after that many steps, reported as converged:
-    only for evaluating at the start (`evaluation_step`), never for a fit."""
+    only for evaluating at the start (`evaluation_step`), never for a fit. Its `max_steps` field (none by
+    default; see `with_max_steps`) ends an unconverged solve after that many steps as `nonlinear_max_steps_reached`."""
 
     rtol: float
     atol: float
@@ -84,6 +88,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     search: RoundoffTrustRegion
     verbose: Callable
     step_limit: jax.Array
+    max_steps: jax.Array
 
     def __init__(self, rtol: float, atol: float, linear_solver: lx.AbstractLinearSolver | None = None,
                  roundoff: float = 1e-10, undamped: bool = False):
@@ -97,6 +102,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
         self.verbose = _quiet
         # No limit; `_identify/evaluation.py::evaluation_step` sets 1 (a traced value: the same program).
         self.step_limit = jnp.asarray(np.iinfo(np.int32).max)
+        self.max_steps = jnp.asarray(np.iinfo(np.int32).max)
 
     def terminate(self, fn, y, args, options, state, tags):
         stop, result = super().terminate(fn, y, args, options, state, tags)
@@ -106,4 +112,22 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
             ran_off = jnp.any(jnp.abs(y) > args.bound)
             result = optx.RESULTS.where(ran_off & ~stop, optx.RESULTS.nonlinear_divergence, result)
             stop = stop | ran_off
-        return stop, result
+        # Out of steps and not converged: what optimistix reports at its own max_steps.
+        out_of_steps = ~stop & (state.num_steps >= self.max_steps)
+        result = optx.RESULTS.where(out_of_steps & (result == optx.RESULTS.successful),
+                                    optx.RESULTS.nonlinear_max_steps_reached, result)
+        return stop | out_of_steps, result
+
+
+# The static step count handed to optimistix when the step budget is the solver's traced `max_steps`: every
+# budget up to it shares one compiled solve.
+STEP_CEILING = 100_000
+
+
+def with_max_steps(solver, max_steps: int):
+    """`(solver, static max_steps)` for `optimistix.least_squares`: for gyrojax's Levenberg-Marquardt, the budget
+    as its traced `max_steps` and `STEP_CEILING` as optimistix's (one compiled solve for every budget up to it);
+    any other solver, or a larger budget, as it is."""
+    if isinstance(solver, LevenbergMarquardt) and max_steps <= STEP_CEILING:
+        return eqx.tree_at(lambda s: s.max_steps, solver, jnp.asarray(max_steps)), STEP_CEILING
+    return solver, max_steps

@@ -288,6 +288,12 @@ def test_a_lot_of_the_same_shapes_reuses_the_traced_fit(rate_only, monkeypatch):
         got, want = np.asarray(getattr(d, name)), np.asarray(getattr(a, name))
         np.testing.assert_array_equal(got[:3], want)
         np.testing.assert_array_equal(got[3], want[0])
+    # The step budget is a traced value of the solve: a fit retried with another max_steps traces nothing, and
+    # one step short of converging (5 steps here) says so.
+    short = gj.identify("paper-qmg", rate_only, max_steps=1, **options)
+    assert traced == [] and np.all(np.asarray(a.num_steps) > 1)
+    assert short.status == ("not converged",) * 3 and np.all(np.asarray(short.num_steps) == 1)
+    assert all(m.startswith("The maximum number of steps was reached") for m in short.result_message)
 
 
 @pytest.mark.slow
@@ -300,6 +306,9 @@ def test_bad_names_are_refused(table):
         gj.identify("paper-qmg", table, start=gj.MultiStart(starts=0))
     with pytest.raises(TypeError, match="recovery must be a tuple of gyrojax.AbstractRecovery policies"):
         gj.identify("paper-qmg", table, recovery=gj.RestartRunoffs())
+    for bad in (0, 2.5, True):
+        with pytest.raises(ValueError, match=r"max_steps must be an integer >= 1, got " + repr(bad)):
+            gj.identify("paper-qmg", table, max_steps=bad)
 
 
 @pytest.mark.slow

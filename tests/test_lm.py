@@ -169,3 +169,39 @@ def test_a_coordinate_past_its_runoff_bound_stops_the_solve_as_diverged():
     untouched = optx.least_squares(runs_off, solver, y0, RunoffBound(jnp.asarray([jnp.inf, 2.0])), max_steps=100,
                                    throw=False)
     assert int(untouched.stats["num_steps"]) == 100
+
+
+def test_a_traced_step_budget_ends_the_solve_as_optimistix_max_steps_does():
+    """`with_max_steps`: the budget as the solver's traced `max_steps` ends an unconverged solve after exactly
+    that many steps with `nonlinear_max_steps_reached` and the same iterate as optimistix's static `max_steps`;
+    a solve that converges within it is untouched; every budget runs one compiled solve. Other solvers keep
+    optimistix's static budget."""
+    import equinox as eqx
+
+    from gyrojax._lm import STEP_CEILING, with_max_steps
+
+    def rosenbrock(y, _):
+        return jnp.stack([10 * (y[1] - y[0] ** 2), 1 - y[0]])
+
+    y0 = jnp.asarray([-1.2, 1.0])
+    traces = []
+
+    @eqx.filter_jit
+    def solve(solver, max_steps):
+        traces.append(1)
+        return optx.least_squares(rosenbrock, solver, y0, max_steps=max_steps, throw=False)
+
+    lm = LevenbergMarquardt(1e-10, 1e-10, NORMAL)
+    needs = int(solve(lm, 200).stats["num_steps"])  # 35 measured
+    assert 5 < needs < 200
+    for budget in (3, needs - 1, needs, 200):  # out of steps one short, converged on its last step
+        solver, static = with_max_steps(lm, budget)
+        assert static == STEP_CEILING
+        got, want = solve(solver, static), solve(lm, budget)
+        assert int(got.stats["num_steps"]) == int(want.stats["num_steps"]) == min(budget, needs)
+        assert got.result == want.result
+        assert (got.result == optx.RESULTS.nonlinear_max_steps_reached) == (budget < needs)
+        np.testing.assert_array_equal(np.asarray(got.value), np.asarray(want.value))
+    assert len(traces) == 4 + 1  # optimistix's budget: a program per value; the traced one: one for all
+    bfgs = optx.BFGS(1e-10, 1e-10)
+    assert with_max_steps(bfgs, 5) == (bfgs, 5) and with_max_steps(lm, STEP_CEILING + 1)[1] == STEP_CEILING + 1

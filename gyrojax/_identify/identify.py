@@ -115,6 +115,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), hold=(), priors=None,
         raise TypeError(f"data must be a gyrojax.Table or FitData, got {type(data).__name__}.")
     if not (isinstance(reject_alpha, (int, float)) and 0.0 < reject_alpha < 1.0):
         raise ValueError(f"reject_alpha must be a significance level in (0, 1), got {reject_alpha!r}.")
+    if not isinstance(max_steps, (int, np.integer)) or isinstance(max_steps, bool) or max_steps < 1:
+        raise ValueError(f"max_steps must be an integer >= 1, got {max_steps!r}.")
     if estimate_noise not in (None, True, False):
         raise ValueError(f"estimate_noise must be None, True or False, got {estimate_noise!r}.")
     if not isinstance(start, MultiStart):

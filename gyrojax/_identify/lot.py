@@ -14,7 +14,7 @@ import optimistix as optx
 
 from .._compile import jit
 from .._export import cached_program
-from .._lm import RunoffBound
+from .._lm import RunoffBound, with_max_steps
 from .._solution import RESULTS, result_code
 from .evaluation import Evaluation, evaluated, evaluation_step, final_evaluation, one_trace
 from .problem import nonfinite_explained
@@ -268,6 +268,8 @@ class Lot(eqx.Module):
         """The strategy's solve of `problem` from `u0`, `u_lot0`: numpy `(u, u_lot, code, steps, chi2)` and the
         `Evaluation` at the solution."""
         (problem_s,) = self.spread.pad(problem)
+        # The step budget as a traced value of gyrojax's LM: a fit retried with more steps reuses the program.
+        solver, max_steps = with_max_steps(solver, max_steps)
         with nonfinite_explained(stage):
             *out, ev = self.strategy.solve(problem_s, self.spread, u0, u_lot0, solver, max_steps)
         return tuple(np.asarray(x) for x in out) + (ev,)
