@@ -1,18 +1,19 @@
 #!/usr/bin/env python
-"""Lots of nearby sizes in one session: identify on sub-lots of 3, 4, 2 and 5 devices, one after another, with
-`VmapSolve`'s bucket (the default: a lot of up to 16 devices padded to the next power of two) and without it
-(a script, not a test).
+"""Lots of nearby sizes in one session: identify (or diagnose, or simulate_table) on lots of 3, 4, 2 and 5
+devices, one after another, with the lot padded to the next power of two (the default for a lot of up to 16
+devices) and without it (`gyrojax._lot.BUCKET_MAX = 0`, as `VmapSolve(bucket=False)`; a script, not a test).
 
-    python benchmarks/bench_lot_sizes.py [--entry identify|diagnose] [--sizes 3 4 2 5] [--repeats 3] [--json PATH]
+    python benchmarks/bench_lot_sizes.py [--entry identify|diagnose|simulate_table] [--sizes 3 4 2 5] [--repeats 3]
+                                         [--json PATH]
 
 The data: one simulated paper-qmg campaign of max(sizes) devices (the demo's sweeps: rate table, static VCF and
 DAC, 2 runs, seed 7, noise on; for `diagnose`, with a typical DAC INL hidden, as in the demo); each call fits
 (or diagnoses) the table's first `n` devices with the entry's defaults, as a notebook does when it refits a lot
-without a device or fits the next lot. Each setting runs in a fresh process
-with an empty compilation cache of its own, so every lot size either reuses a compiled fit of that process or
-traces and compiles one. Printed per setting: each call's wall time, then the first size fitted again
-`--repeats` times (the run alone, warm: what the padding devices cost), and the largest difference between the
-two settings' fitted values. `--json` is written atomically.
+without a device or fits the next lot; `simulate_table` simulates a campaign of `n` devices. Each setting runs
+in a fresh process with an empty compilation cache of its own, so every lot size either reuses a compiled
+program of that process or traces and compiles one. Printed per setting: each call's wall time, then the first
+size again `--repeats` times (the run alone, warm: what the padding devices cost), and the largest difference
+between the two settings' fitted values (or simulated outputs). `--json` is written atomically.
 """
 
 import argparse
@@ -32,28 +33,32 @@ def _worker(entry, bucket, sizes, repeats, out):
     from gyrojax._demo import DEMO_LOT
 
     gyro = gj.add_effect(gj.paper_qmg(), "dac_inl") if entry == "diagnose" else gj.paper_qmg()
-    table = gj.simulate_table(gyro, **{**DEMO_LOT, "devices": max(sizes)}, progress=False)
-    names = sorted(set(np.asarray(table["device"]).tolist()))
-    if not bucket:  # as VmapSolve(bucket=False), for diagnose's fits too (a fresh process: nothing compiled yet)
-        from gyrojax._identify import lot
+    if not bucket:  # as VmapSolve(bucket=False), for diagnose's fits and the settle too (nothing compiled yet)
+        from gyrojax import _lot
 
-        lot.BUCKET_MAX = 0
+        _lot.BUCKET_MAX = 0
+    if entry != "simulate_table":
+        table = gj.simulate_table(gyro, **{**DEMO_LOT, "devices": max(sizes)}, progress=False)
+        names = sorted(set(np.asarray(table["device"]).tolist()))
 
-    def fit(n):
-        sub = table.select(np.flatnonzero(np.isin(np.asarray(table["device"]), names[:n])))
+    def call(n):
         t = time.perf_counter()
+        if entry == "simulate_table":
+            out = gj.simulate_table(gyro, **{**DEMO_LOT, "devices": n}, progress=False)["output"]
+            return time.perf_counter() - t, ["ok"], out
+        sub = table.select(np.flatnonzero(np.isin(np.asarray(table["device"]), names[:n])))
         if entry == "diagnose":
             f = gj.diagnose(sub, "paper-qmg", progress=False).final
         else:
             f = gj.identify("paper-qmg", sub, progress=False)
-        return time.perf_counter() - t, f
+        return time.perf_counter() - t, list(f.status), f.values
 
     calls, values = [], {}
     for n in sizes:
-        secs, f = fit(n)
-        calls.append({"devices": n, "seconds": secs, "status": list(f.status)})
-        values[n] = np.asarray(f.values).tolist()
-    warm = [fit(sizes[0])[0] for _ in range(repeats)]
+        secs, status, v = call(n)
+        calls.append({"devices": n, "seconds": secs, "status": status})
+        values[n] = np.asarray(v).tolist()
+    warm = [call(sizes[0])[0] for _ in range(repeats)]
     with open(out, "w") as fh:
         json.dump({"bucket": bucket, "calls": calls, "warm_s": warm, "values": values}, fh)
 
@@ -72,7 +77,7 @@ def _run(bucket, args):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--entry", choices=("identify", "diagnose"), default="identify")
+    ap.add_argument("--entry", choices=("identify", "diagnose", "simulate_table"), default="identify")
     ap.add_argument("--sizes", type=int, nargs="+", default=[3, 4, 2, 5])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json")

@@ -3,10 +3,33 @@
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import PRNGKeyArray
 
 from ._checks import check_nonnegative
 from ._gyroscope import Gyroscope
+
+
+# Lots of up to this many devices are padded to the next power of two (1, 2, 4, 8, 16) by the compiled programs
+# that take a lot (a fit's vmapped solve, a campaign's settle): a lot of a nearby size then reuses the program (a
+# refit without one device, the next lot of a notebook) instead of tracing and compiling it again (~10-15 s on
+# 2 CPU cores for the demo's sweeps). Above it the CPU chunk of 16 rounds a fit's device axis to a multiple of 16.
+BUCKET_MAX = 16
+
+
+def bucket_size(n: int) -> int:
+    """The number of devices a lot of `n` is padded to: the next power of two up to `BUCKET_MAX`, else `n`."""
+    return 1 << (n - 1).bit_length() if 0 < n <= BUCKET_MAX else n
+
+
+def pad_devices(tree, size: int):
+    """Every array leaf of `tree` with its leading (device) axis padded to `size` with copies of its last device."""
+    def pad(x):
+        x = jnp.asarray(x)
+        extra = size - x.shape[0]
+        return jnp.concatenate([x, jnp.repeat(x[-1:], extra, axis=0)]) if extra else x
+
+    return jax.tree.map(lambda x: pad(x) if eqx.is_array(x) or isinstance(x, np.ndarray) else x, tree)
 
 
 def as_arrays(tree):

@@ -94,3 +94,32 @@ def test_an_unregistered_name_is_refused_by_the_data_layer(tmp_path):
     with pytest.raises(gj.DataError, match="data row 1 \\(line 2\\), column 'sweep': unknown sweep "
                                            "'rate_table_vcf_offset'"):
         gj.read_table(path)
+
+
+@pytest.mark.slow
+def test_a_lot_of_a_nearby_size_reuses_the_compiled_settle(monkeypatch):
+    """simulate_table pads a lot of up to 16 devices to the next power of two for its settle (copies of the last
+    device, dropped): 4 devices after 3 settle in the same compiled program, and the 3 devices' outputs are
+    those of the unpadded settle bit for bit."""
+    import jax
+
+    from gyrojax import _lot
+
+    traces = []
+
+    def listen(event, secs, fun_name="", **kw):
+        if event.endswith("jaxpr_trace_duration") and "_lot_steady" in str(fun_name):
+            traces.append(fun_name)
+
+    small = dict(runs=1, seed=5, protocol=gj.Protocol(rates_dps=(-100.0, -10.0, 10.0, 100.0)), progress=False)
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        three = gj.simulate_table(gj.paper_qmg(), devices=3, **small)
+        gj.simulate_table(gj.paper_qmg(), devices=4, **small)
+        assert len(traces) == 1
+        monkeypatch.setattr(_lot, "BUCKET_MAX", 0)
+        plain = gj.simulate_table(gj.paper_qmg(), devices=3, **small)
+        assert len(traces) == 2  # unpadded, 3 devices are another shape
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    np.testing.assert_array_equal(np.asarray(plain["output"]), np.asarray(three["output"]))

@@ -15,6 +15,7 @@ import optimistix as optx
 from .._compile import jit
 from .._export import cached_program
 from .._lm import RunoffBound, with_max_steps
+from .._lot import bucket_size
 from .._solution import RESULTS, result_code
 from .evaluation import Evaluation, evaluated, evaluation_step, final_evaluation, one_trace
 from .problem import nonfinite_explained
@@ -103,18 +104,11 @@ def _solve_joint(problem_batch, u0, u_lot0, solver, max_steps):
             jnp.broadcast_to(sol.stats["num_steps"], (n,)), jnp.sum(ev.residuals**2, axis=-1), ev)
 
 
-# Lots of up to this many devices are padded to the next power of two (1, 2, 4, 8, 16) when the strategy buckets:
-# a lot of a nearby size then reuses the compiled fit (a refit without one device, the next lot of a notebook)
-# instead of tracing and compiling it again (~15 s on 2 CPU cores for the demo's sweeps). Above it the CPU chunk
-# of 16 already rounds the axis to a multiple of 16.
-BUCKET_MAX = 16
-
-
 class LotSpread(eqx.Module):
     """Pads the device axis to a multiple of `shards` (placing it across a 1-D mesh of JAX devices) or of
-    `chunk` (for `map_devices`), and with `bucket` a lot of at most `BUCKET_MAX` devices to the next power of
-    two; unpads results. Padding devices are copies of the last one: solved, then dropped. With one shard, no
-    chunk and no bucket it does nothing."""
+    `chunk` (for `map_devices`), and with `bucket` to `gyrojax._lot.bucket_size` (a lot of at most 16 devices to
+    the next power of two); unpads results. Padding devices are copies of the last one: solved, then dropped.
+    With one shard, no chunk and no bucket it does nothing."""
 
     n: int = eqx.field(static=True)
     size: int = eqx.field(static=True)
@@ -125,7 +119,7 @@ class LotSpread(eqx.Module):
 
     def __init__(self, n: int, shards: int, chunk: int | None = None, bucket: bool = False):
         self.n, self.shards = n, shards
-        base = 1 << (n - 1).bit_length() if bucket and 0 < n <= BUCKET_MAX else n
+        base = bucket_size(n) if bucket else n
         self.chunk = chunk if chunk is not None and chunk < base else None
         self.multiple = shards * (self.chunk or 1)
         self.size = -(-base // self.multiple) * self.multiple

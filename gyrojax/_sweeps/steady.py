@@ -17,8 +17,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile import jit
+from .._compile import jit, top_level
 from .._gyroscope import Gyroscope
+from .._lot import bucket_size, pad_devices
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._solution import RESULTS, result_code
 from .._stimulus import Stimulus
@@ -197,12 +198,25 @@ def per_run(x, temperatures):
     return jnp.broadcast_to(jnp.asarray(x, dtype=float), temperatures.shape[1:])
 
 
-@jit
 def lot_steady(lot, requests, tier):
     """`steady_points` for every device (axis 0) and run (axis 1), several settled sweeps in one call (one
     compiled settle): `requests` is a tuple of `(sweep, inputs, temperatures, times)` with temperatures
     (device, run, point) and inputs and times (point,) or (run, point) (times NaN: not recorded). Returns what
-    each request's kind keeps (a `Settled` or a `SetpointReading`), (device, run, point)."""
+    each request's kind keeps (a `Settled` or a `SetpointReading`), (device, run, point).
+
+    Called outside a trace, the lot is padded to `gyrojax._lot.bucket_size` devices (copies of its last device,
+    settled, then dropped), so that a lot of a nearby size reuses the compiled settle."""
+    n = np.shape(requests[0][2])[0]
+    size = bucket_size(n) if top_level() else n
+    if size == n:
+        return _lot_steady(lot, requests, tier)
+    padded = tuple((sweep, x, pad_devices(temps, size), t) for sweep, x, temps, t in requests)
+    out = _lot_steady(pad_devices(lot, size), padded, tier)
+    return jax.tree.map(lambda x: x[:n] if eqx.is_array(x) else x, out)
+
+
+@jit
+def _lot_steady(lot, requests, tier):
     temps = tuple(r[2] for r in requests)
     inputs = tuple(per_run(r[1], t) for r, t in zip(requests, temps))
     times = tuple(per_run(r[3], t) for r, t in zip(requests, temps))
