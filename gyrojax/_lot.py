@@ -3,7 +3,6 @@
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import PRNGKeyArray
 
 from ._checks import check_nonnegative
@@ -29,7 +28,7 @@ def pad_devices(tree, size: int):
         extra = size - x.shape[0]
         return jnp.concatenate([x, jnp.repeat(x[-1:], extra, axis=0)]) if extra else x
 
-    return jax.tree.map(lambda x: pad(x) if eqx.is_array(x) or isinstance(x, np.ndarray) else x, tree)
+    return jax.tree.map(lambda x: pad(x) if eqx.is_array(x) else x, tree)
 
 
 def as_arrays(tree):

@@ -15,7 +15,7 @@ import optimistix as optx
 from .._compile import jit
 from .._export import cached_program
 from .._lm import RunoffBound, with_max_steps
-from .._lot import bucket_size
+from .._lot import bucket_size, pad_devices
 from .._solution import RESULTS, result_code
 from .evaluation import Evaluation, evaluated, evaluation_step, final_evaluation, one_trace
 from .problem import nonfinite_explained
@@ -129,19 +129,13 @@ class LotSpread(eqx.Module):
             self.sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("lot"))
 
     def pad(self, *trees):
-        extra = self.size - self.n
-        if not extra and self.shards == 1:
+        if self.size == self.n and self.shards == 1:
             return trees
-
-        def put(x):
-            if not eqx.is_array(x):
-                return x
-            x = jnp.asarray(x)
-            if extra:  # copies of the last device: solved, then dropped
-                x = jnp.concatenate([x, jnp.repeat(x[-1:], extra, axis=0)])
-            return jax.device_put(x, self.sharding) if self.shards > 1 else x
-
-        return tuple(jax.tree.map(put, t) for t in trees)
+        trees = tuple(pad_devices(t, self.size) for t in trees)
+        if self.shards == 1:
+            return trees
+        return tuple(jax.tree.map(lambda x: jax.device_put(x, self.sharding) if eqx.is_array(x) else x, t)
+                     for t in trees)
 
     def unpad(self, tree):
         if self.size == self.n:
