@@ -20,10 +20,9 @@ import argparse
 import json
 import os
 import platform
-import subprocess
-import sys
-import tempfile
 import time
+
+from _fresh import run_fresh
 
 
 def _worker(entry, bucket, sizes, repeats, out):
@@ -64,15 +63,8 @@ def _worker(entry, bucket, sizes, repeats, out):
 
 
 def _run(bucket, args):
-    with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as tmp:
-        out = os.path.join(tmp, "r.json")
-        env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_COMPILATION_CACHE")}
-        env["GYROJAX_CACHE_DIR"] = cache
-        subprocess.run([sys.executable, __file__, "--entry", args.entry, "--worker", str(int(bucket)),
-                        "--repeats", str(args.repeats), "--result", out, "--sizes", *map(str, args.sizes)],
-                       env=env, check=True)
-        with open(out) as f:
-            return json.load(f)
+    return run_fresh(__file__, ["--entry", args.entry, "--worker", str(int(bucket)), "--repeats", str(args.repeats),
+                                "--sizes", *map(str, args.sizes)])
 
 
 def main():

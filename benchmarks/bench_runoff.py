@@ -24,10 +24,9 @@ import json
 import math
 import os
 import platform
-import subprocess
-import sys
-import tempfile
 import time
+
+from _fresh import run_fresh
 
 
 SWEEPS = ("rate_table", "vcf_static", "vcf_dynamic")
@@ -59,14 +58,8 @@ def _worker(bound, devices, runs, seed, out):
 
 
 def _run(bound, args):
-    with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as tmp:
-        out = os.path.join(tmp, "r.json")
-        env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_COMPILATION_CACHE")}
-        env["GYROJAX_CACHE_DIR"] = cache
-        subprocess.run([sys.executable, __file__, "--worker", str(bound), "--devices", str(args.devices), "--runs",
-                        str(args.runs), "--seed", str(args.seed), "--result", out], env=env, check=True)
-        with open(out) as f:
-            return json.load(f)
+    return run_fresh(__file__, ["--worker", str(bound), "--devices", str(args.devices), "--runs", str(args.runs),
+                                "--seed", str(args.seed)])
 
 
 def main():

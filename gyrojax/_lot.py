@@ -31,6 +31,11 @@ def pad_devices(tree, size: int):
     return jax.tree.map(lambda x: pad(x) if eqx.is_array(x) else x, tree)
 
 
+def unpad_devices(tree, n: int):
+    """Every array leaf of `tree` cut to its first `n` devices (what `pad_devices` added dropped)."""
+    return jax.tree.map(lambda x: x[:n] if eqx.is_array(x) else x, tree)
+
+
 def as_arrays(tree):
     """Every Python-number leaf as a float64 array, so that it is differentiable and batchable."""
     def convert(x):

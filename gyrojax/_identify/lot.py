@@ -15,7 +15,7 @@ import optimistix as optx
 from .._compile import jit
 from .._export import cached_program
 from .._lm import RunoffBound, with_max_steps
-from .._lot import bucket_size, pad_devices
+from .._lot import bucket_size, pad_devices, unpad_devices
 from .._solution import RESULTS, result_code
 from .evaluation import Evaluation, evaluated, evaluation_step, final_evaluation, one_trace
 from .problem import nonfinite_explained
@@ -140,7 +140,7 @@ class LotSpread(eqx.Module):
     def unpad(self, tree):
         if self.size == self.n:
             return tree
-        return jax.tree.map(lambda x: x[: self.n] if eqx.is_array(x) else x, tree)
+        return unpad_devices(tree, self.n)
 
 
 def _shards(shard) -> int:

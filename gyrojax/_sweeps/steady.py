@@ -19,7 +19,7 @@ import numpy as np
 
 from .._compile import jit, top_level
 from .._gyroscope import Gyroscope
-from .._lot import bucket_size, pad_devices
+from .._lot import bucket_size, pad_devices, unpad_devices
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._solution import RESULTS, result_code
 from .._stimulus import Stimulus
@@ -212,7 +212,7 @@ def lot_steady(lot, requests, tier):
         return _lot_steady(lot, requests, tier)
     padded = tuple((sweep, x, pad_devices(temps, size), t) for sweep, x, temps, t in requests)
     out = _lot_steady(pad_devices(lot, size), padded, tier)
-    return jax.tree.map(lambda x: x[:n] if eqx.is_array(x) else x, out)
+    return unpad_devices(out, n)
 
 
 @jit
