@@ -89,7 +89,8 @@ class Diagnosis:
         alike = "".join(f"; but this data cannot tell {s.effect} from {a.description}"
                         for s in self.steps for a in s.look_alikes)
         if self.verdict == "explained":
-            what = (f"{', '.join(self.selected)} explain" if self.steps else "the baseline explains")
+            verb = "explains" if len(self.selected) == 1 else "explain"
+            what = (f"{', '.join(self.selected)} {verb}" if self.steps else "the baseline explains")
             return f"verdict: explained: {what} the data at the noise level{tail}{alike}"
         left = self.remaining
         where = (f"; what is left: {left[0].description}" if left else
