@@ -6,20 +6,27 @@ A fit file is one binary file:
 
 The header holds everything static (preset and effect names, parameter names, devices, entries, messages,
 unidentifiable directions, each device's status and warnings, the data's runs, source and recorded fields,
-the gyrojax version), a description of every leaf (kind, shape, dtype) and a SHA-256 of the leaves; the leaves
-are `eqx.tree_serialise_leaves` of the `Fit`. Loading rebuilds the skeleton from the preset (`gyrojax.preset`)
-and the effects (`zero_effect`), lays the described leaves into it and deserialises: values are bit-for-bit
-those saved.
+the gyrojax version), a description of every leaf (kind, shape, dtype), a SHA-256 of the leaves and a SHA-256 of
+the header itself (`header_digest`); the leaves are `eqx.tree_serialise_leaves` of the `Fit`. Loading rebuilds
+the skeleton from the preset (`gyrojax.preset`) and the effects (`zero_effect`), lays the described leaves into
+it and deserialises: values are bit-for-bit those saved.
 
-Format versions: 2 adds each device's status and warnings (and the arrays that go with them); version 1 files
-are still read, with every device's status `"unknown"`. A file whose devices are not all `"ok"` loads with a
-`UserWarning` naming them: a failed fit is saved like a good one, but never read back silently.
+Loading reads only a regular file (`_reading.open_regular`), and within bounds: a header of at most
+`MAX_HEADER_BYTES`, no larger than the file; arrays whose described sizes the file holds, and no more than
+that (each stored array's own shape is checked against its description before it is read). Nothing of a size
+the header claims is allocated before the file is known to hold it.
+
+Format versions: 3 adds the header's checksum; 2 adds each device's status and warnings (and the arrays that go
+with them); version 1 files are still read, with every device's status `"unknown"`, and version 2 files with a
+warning that their header is not covered. A file whose devices are not all `"ok"` loads with a `UserWarning`
+naming them: a failed fit is saved like a good one, but never read back silently.
 """
 
 import dataclasses
 import hashlib
 import io
 import json
+import math
 import os
 import struct
 import warnings
@@ -34,17 +41,28 @@ from ._fitdata import FIT_COLUMNS, FitData
 from ._identify import Fit, Unidentifiable, chi2_p_value
 from ._io import atomic_write_bytes
 from ._parameters import Entry, Model, batched, zero_effect
+from ._reading import open_regular, read_exactly
 from ._version import __version__
 
 
 MAGIC = b"GYROJAX-FIT\n"
-FORMAT_VERSION = 2
-READABLE_VERSIONS = (1, 2)
+FORMAT_VERSION = 3
+READABLE_VERSIONS = (1, 2, 3)
+EXPECTED = "give a fit file written by gyrojax.save_fit or `gyrojax identify --save`"
+
+MAX_HEADER_BYTES = 64 * 2**20
+"""The largest header a fit file may have: one of a lot of a thousand devices is a few MB."""
+
+_NPY_HEADER_MAX = 4096
+"""The most bytes numpy's `.npy` header of one stored array takes (a multiple of 64; about 128 for a fit's)."""
 
 # The array fields of a sweep's arrays that version 1 files stored (later ones were added to the class since).
 _V1_BLOCK_FIELDS = ("inputs", "outputs", "sigmas", "temperatures", "mask")
 _V1_NOTE = ("this fit file (format version 1) predates the status checks: its scale factor was not checked for "
             "being determined by the data, for misfit or for plausibility")
+_V2_NOTE = ("this fit file (format version 2) predates the header's checksum: an edit of its statuses, names or "
+            "data labels cannot be detected. Save the fit again (gyrojax.save_fit) or fit the data again to have it "
+            "covered")
 
 
 def _unbatched_device(model: Model):
@@ -203,33 +221,127 @@ def save_fit(fit: Fit, path) -> None:
     payload = buf.getvalue()
     header = _header(fit, preset_name) | {"leaves": [_leaf_spec(x) for x in jax.tree.leaves(fit)],
                                           "sha256": hashlib.sha256(payload).hexdigest()}
+    header["header_sha256"] = header_digest(header)
     head = json.dumps(header, allow_nan=False).encode()
     atomic_write_bytes(path, MAGIC + struct.pack("<Q", len(head)) + head + payload)
 
 
-def load_fit(path) -> Fit:
-    """Read a fit written by `save_fit`. Raises a `ValueError` naming the file if it is not a gyrojax fit
-    file, is truncated or corrupt, or was written by an incompatible format version. Warns (`UserWarning`,
-    naming the file and the devices) when some device's status is not `"ok"`, and for a version 1 file, whose
-    results predate the status checks."""
-    path = os.fspath(path)
-    with open(path, "rb") as f:
-        raw = f.read()
-    if not raw.startswith(MAGIC):
-        raise ValueError(f"{path}: not a gyrojax fit file (it does not start with {MAGIC!r}); write one with "
-                         "gyrojax.save_fit or `gyrojax identify --save`.")
+def _described_bytes(specs) -> tuple[int, int, str]:
+    """The bytes of array data the header's leaf descriptions claim, the number of serialised leaves, and the
+    largest array's description; raises `ValueError` for a description that is not a numeric array's."""
+    total, count, largest, largest_bytes = 0, 0, "none", -1
+    if not isinstance(specs, list):
+        raise ValueError("the header's leaf descriptions are not a list")
+    for i, spec in enumerate(specs):
+        kind = spec.get("kind") if isinstance(spec, dict) else None
+        if kind == "scalar":
+            total, count = total + 16, count + 1  # saved as a 0-d array of at most 16 bytes
+        elif kind in ("jax", "numpy"):
+            shape = spec.get("shape")
+            if not isinstance(shape, list) or not all(type(n) is int and n >= 0 for n in shape):
+                raise ValueError(f"array {i}: shape {shape!r} is not a list of sizes")
+            try:
+                dtype = np.dtype(spec.get("dtype"))
+            except TypeError:
+                raise ValueError(f"array {i}: dtype {spec.get('dtype')!r} is not a dtype") from None
+            if dtype.kind not in "biufc":
+                raise ValueError(f"array {i}: dtype {dtype} is not numeric")
+            nbytes = math.prod(shape) * dtype.itemsize
+            if nbytes > largest_bytes:
+                largest, largest_bytes = f"array {i} of shape {shape} and dtype {dtype}, {nbytes} bytes", nbytes
+            total, count = total + nbytes, count + 1
+        elif kind != "other":
+            raise ValueError(f"leaf {i}: unknown description {spec!r}")
+    return total, count, largest
+
+
+def _check_payload_size(header: dict, size: int, path: str) -> None:
+    """Refuse a file whose header describes more array data than the file holds (before anything of that size
+    is allocated), or whose arrays are larger than the header describes."""
     try:
-        (length,) = struct.unpack("<Q", raw[len(MAGIC):len(MAGIC) + 8])
-        start = len(MAGIC) + 8
-        header = json.loads(raw[start:start + length].decode())
-        payload = raw[start + length:]
-        if header.get("format") != "gyrojax-fit":
-            raise ValueError("the header does not describe a gyrojax fit")
-    except (struct.error, UnicodeDecodeError, json.JSONDecodeError, ValueError, AttributeError) as e:
-        raise ValueError(f"{path}: corrupt gyrojax fit file: unreadable header ({e}).") from None
-    if header.get("format_version") not in READABLE_VERSIONS:
-        raise ValueError(f"{path}: fit file format version {header.get('format_version')!r}; this gyrojax reads "
-                         f"versions {', '.join(map(str, READABLE_VERSIONS))}.")
+        described, count, largest = _described_bytes(header.get("leaves"))
+    except (ValueError, AttributeError) as e:
+        raise ValueError(f"{path}: corrupt gyrojax fit file: {e}.") from None
+    if described > size:
+        raise ValueError(f"{path}: corrupt gyrojax fit file: its header describes {described} bytes of arrays (the "
+                         f"largest: {largest}) but the file holds {size} bytes after its header.")
+    if size > described + count * _NPY_HEADER_MAX:
+        raise ValueError(f"{path}: corrupt gyrojax fit file: it holds {size} bytes of arrays after its header, more "
+                         f"than the {described} bytes of {count} arrays (with at most {_NPY_HEADER_MAX} bytes of "
+                         "header each) that its header describes.")
+
+
+def _checked_leaf(f, like):
+    """Deserialise one leaf as equinox does, after checking that the stored array has the shape and dtype the
+    header described (so that no stored array is larger than the file's checked size allows)."""
+    if isinstance(like, (jax.Array, np.ndarray)):
+        start = f.tell()
+        version = np.lib.format.read_magic(f)
+        read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, _, dtype = read(f)
+        if tuple(shape) != tuple(np.shape(like)) or np.dtype(dtype) != np.dtype(like.dtype):
+            raise ValueError(f"a stored array of shape {list(shape)} and dtype {dtype} where the header describes "
+                             f"{list(np.shape(like))} and {like.dtype}")
+        f.seek(start)
+    return eqx.default_deserialise_filter_spec(f, like)
+
+
+def header_digest(header: dict) -> str:
+    """The SHA-256 of a fit file's header (its `header_sha256` left out) in a canonical JSON form; the header
+    holds the SHA-256 of the arrays, so this covers the whole file."""
+    body = {k: v for k, v in header.items() if k != "header_sha256"}
+    return hashlib.sha256(json.dumps(body, sort_keys=True, allow_nan=False, separators=(",", ":")).encode()).hexdigest()
+
+
+def _read(path: str) -> tuple[dict, bytes]:
+    """The header and the arrays' bytes of the fit file at `path`, read within the bounds its size and header
+    give; raises `ValueError` naming the file for anything else."""
+    with open_regular(path, EXPECTED) as f:
+        size = os.fstat(f.fileno()).st_size
+        lead = f.read(len(MAGIC) + 8)
+        if not lead.startswith(MAGIC):
+            raise ValueError(f"{path}: not a gyrojax fit file (it does not start with {MAGIC!r}); write one with "
+                             "gyrojax.save_fit or `gyrojax identify --save`.")
+        try:
+            (length,) = struct.unpack("<Q", lead[len(MAGIC):])
+            rest = size - len(lead)
+            if length > min(rest, MAX_HEADER_BYTES):
+                raise ValueError(f"its header claims {length} bytes; the file holds {rest} after the header's length "
+                                 f"and a header has at most {MAX_HEADER_BYTES}")
+            header = json.loads(read_exactly(f, length, path).decode())
+            if not isinstance(header, dict) or header.get("format") != "gyrojax-fit":
+                raise ValueError("the header does not describe a gyrojax fit")
+        except (struct.error, UnicodeDecodeError, json.JSONDecodeError, ValueError, AttributeError) as e:
+            raise ValueError(f"{path}: corrupt gyrojax fit file: unreadable header ({e}).") from None
+        if header.get("format_version") not in READABLE_VERSIONS:
+            raise ValueError(f"{path}: fit file format version {header.get('format_version')!r}; this gyrojax reads "
+                             f"versions {', '.join(map(str, READABLE_VERSIONS))}.")
+        _check_payload_size(header, size - len(lead) - length, path)
+        payload = read_exactly(f, size - len(lead) - length, path)
+        if f.read(1):
+            raise ValueError(f"{path}: the file grew while it was read; read it again when it is complete.")
+    return header, payload
+
+
+def load_fit(path) -> Fit:
+    """Read a fit written by `save_fit`. Raises a `ValueError` naming the file if it is not a regular file (a
+    folder, a FIFO, a device), is not a gyrojax fit file, is truncated, corrupt or edited (its header and its
+    arrays are covered by checksums), describes arrays that the file does not hold, or was written by an
+    incompatible format version. Warns (`UserWarning`, naming the file and the devices) when some device's
+    status is not `"ok"`, and for files of format versions 1 (whose results predate the status checks) and 2
+    (whose header no checksum covers)."""
+    path = os.fspath(path)
+    header, payload = _read(path)
+    version = header["format_version"]
+    if version >= 3:
+        try:
+            digest = header_digest(header)
+        except ValueError as e:  # a NaN or infinity written into the header by hand
+            raise ValueError(f"{path}: corrupt gyrojax fit file: unreadable header ({e}).") from None
+        if digest != header.get("header_sha256"):
+            raise ValueError(f"{path}: corrupt gyrojax fit file: its header does not match the header's checksum "
+                             "(edited or damaged). A fit file is not edited by hand: its statuses, names and data "
+                             "are what the fit found; fit the data again.")
     if hashlib.sha256(payload).hexdigest() != header.get("sha256"):
         raise ValueError(f"{path}: corrupt gyrojax fit file: the stored arrays do not match the header's "
                          "checksum (truncated or modified).")
@@ -241,11 +353,13 @@ def load_fit(path) -> Fit:
         if len(specs) != len(leaves):
             raise ValueError(f"the header describes {len(specs)} arrays, the rebuilt fit has {len(leaves)}")
         like = jax.tree.unflatten(treedef, [_placeholder(s, x) for s, x in zip(specs, leaves)])
-        fit = eqx.tree_deserialise_leaves(io.BytesIO(payload), like)
+        fit = eqx.tree_deserialise_leaves(io.BytesIO(payload), like, filter_spec=_checked_leaf)
     except (KeyError, TypeError, ValueError, RuntimeError) as e:
         raise ValueError(f"{path}: cannot rebuild the fit (preset {header.get('preset')!r}, effects "
                          f"{header.get('effects')!r}): {e}.") from None
-    if header["format_version"] == 1:
+    if version == 2:
+        warnings.warn(f"{path}: {_V2_NOTE}.", UserWarning, stacklevel=2)
+    if version == 1:
         fit = _from_v1(fit)
         warnings.warn(f"{path}: {_V1_NOTE}; its {len(fit.devices)} device(s) have status 'unknown'. Fit the data "
                       "again to have them checked.", UserWarning, stacklevel=2)

@@ -12,9 +12,16 @@ from typing import Any
 import numpy as np
 
 from .._io import atomic_open, atomic_path
+from .._reading import NotARegularFile, check_regular, open_regular
 from .._sweeps.registry import sweep_kind
 from .cells import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, DataError, show
 from .table import Table
+
+
+MAX_LINE_CHARS = 64 * 2**20
+"""The longest line a CSV table may have (a header or data row of tidy columns is well under a kilobyte)."""
+
+_EXPECTED = "give a .csv or .parquet file"
 
 
 def table_format(path: str | os.PathLike, what: str) -> str:
@@ -38,15 +45,19 @@ def read_table(path: str | os.PathLike) -> Table:
     A validated [`gyrojax.Table`][].
 
     Raises [`gyrojax.DataError`][] (a `ValueError`) naming the file, the data row (1-based, header not counted;
-    for CSV also the file line) and the column for: an empty file, a missing required column, an unknown sweep
+    for CSV also the file line) and the column for: a path that is not a regular file (a folder, a FIFO, a
+    device such as `/dev/zero`, also behind a symbolic link: refused before it is opened), a CSV line longer
+    than `MAX_LINE_CHARS`, an empty file, a missing required column, an unknown sweep
     name, an empty required cell, NaN or infinity, a non-numeric cell, a malformed DAC word, duplicate
     (device, run, sweep, input) points, and rate-table inputs that look like rad/s. Raises `ValueError` for an
     unknown suffix. Nothing is dropped silently (blank CSV lines hold nothing and are skipped).
     """
     suffix = table_format(path, "read_table")
     source = os.fspath(path)
-    if os.path.isdir(source):
-        raise DataError(f"{source} is a directory; give a .csv or .parquet file.", source=source)
+    try:  # before any open: a FIFO would block it, /dev/zero never end
+        check_regular(source, _EXPECTED)
+    except NotARegularFile as e:
+        raise DataError(str(e), source=source) from None
     if suffix == ".csv":
         columns, lines = _read_csv(source)
         return Table._from_file(columns, source, lines)
@@ -54,26 +65,65 @@ def read_table(path: str | os.PathLike) -> Table:
     return Table._from_file(columns, source, None)
 
 
+def _utf8_error(source: str) -> DataError:
+    """The error for the first byte of `source` that is not UTF-8 (its line and offset), found by a second
+    streamed pass once decoding failed."""
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    newlines = 0
+    with open_regular(source, _EXPECTED) as f:
+        head = f.read(len(codecs.BOM_UTF8))
+        fed = len(head) if head == codecs.BOM_UTF8 else 0  # bytes given to the decoder so far, plus the BOM
+        chunk, final = (b"" if fed else head), False
+        while True:
+            pending = len(decoder.getstate()[0])  # bytes of an unfinished character held from the last chunk
+            try:
+                decoder.decode(chunk, final=final)
+            except UnicodeDecodeError as e:
+                at = fed - pending + e.start
+                newlines += e.object[:e.start].count(b"\n")
+                return DataError(f"{source}: line {newlines + 1}: not UTF-8 text (byte {at}: {e.reason}); save the "
+                                 "CSV as UTF-8.", source=source)
+            if final:
+                return DataError(f"{source}: not UTF-8 text; save the CSV as UTF-8.", source=source)
+            newlines += chunk.count(b"\n")
+            fed += len(chunk)
+            chunk = f.read(1 << 16)
+            final = not chunk
+
+
 def _read_csv(source: str) -> tuple[dict[str, list], list[int]]:
-    with open(source, "rb") as f:
-        data = f.read()
-    bom = data.startswith(codecs.BOM_UTF8)
-    try:
-        text = data[3 if bom else 0:].decode("utf-8")
-    except UnicodeDecodeError as e:
-        at = e.start + (3 if bom else 0)
-        line = data[:at].count(b"\n") + 1
-        raise DataError(f"{source}: line {line}: not UTF-8 text (byte {at}: {e.reason}); save the CSV as UTF-8.",
-                        source=source) from None
-    reader = csv.reader(io.StringIO(text, newline=""))
+    """The columns (text cells) and each data row's first line, read line by line: the file is never held
+    whole as one string."""
+    last = ""
+
+    def physical_lines(text):
+        nonlocal last
+        while True:
+            line = text.readline(MAX_LINE_CHARS + 1)
+            if not line:
+                return
+            if len(line) > MAX_LINE_CHARS:
+                raise DataError(f"{source}: a line (after line {reader.line_num}) is longer than {MAX_LINE_CHARS} "
+                                "characters; a tidy table's lines are short: is this a CSV table?", source=source)
+            last = line
+            yield line
+
     records: list[tuple[int, list[str]]] = []  # (first line, fields)
     previous = 0
-    try:
-        for row in reader:
-            records.append((previous + 1, row))
-            previous = reader.line_num
-    except csv.Error as e:
-        raise DataError(f"{source}: line {reader.line_num}: not a readable CSV line: {e}.", source=source) from None
+    with open_regular(source, _EXPECTED) as raw:
+        # utf-8-sig: a byte order mark at the start is dropped; newline="": the csv module sees line ends as
+        # they are, and splits lines at \n, \r\n or \r.
+        text = io.TextIOWrapper(raw, encoding="utf-8-sig", newline="")
+        reader = csv.reader(physical_lines(text))
+        try:
+            for row in reader:
+                records.append((previous + 1, row))
+                previous = reader.line_num
+        except csv.Error as e:
+            raise DataError(f"{source}: line {reader.line_num}: not a readable CSV line: {e}.",
+                            source=source) from None
+        except UnicodeDecodeError:
+            raise _utf8_error(source) from None
 
     def blank(row):
         return not any(cell.strip() for cell in row)
@@ -101,8 +151,7 @@ def _read_csv(source: str) -> tuple[dict[str, list], list[int]]:
     data_records = [(line, row) for line, row in records[first + 1:] if not (blank(row) and len(row) <= 1)]
     # A file cut short inside its last record would read as complete, with a wrong last number: refuse a last
     # line that holds text but no newline (a blank last line holds no data).
-    tail = text[max(text.rfind("\n"), text.rfind("\r")) + 1:]
-    if tail.strip():
+    if last.strip() and not last.endswith(("\n", "\r")):
         where = (f"data row {len(data_records)} (line {data_records[-1][0]})" if data_records
                  else "the header (line 1)")
         raise DataError(f"{source}: {where} does not end with a newline, so the file may have been cut short "
@@ -125,7 +174,8 @@ def _read_parquet(source: str) -> dict[str, Any]:
     import pyarrow.parquet as pq
 
     try:
-        table = pq.read_table(source)
+        with open_regular(source, _EXPECTED) as f:
+            table = pq.read_table(f)
     except (pa.ArrowInvalid, OSError) as e:
         if os.path.exists(source) and os.path.getsize(source) == 0:
             raise DataError(f"{source}: empty file.", source=source) from None
