@@ -1,0 +1,407 @@
+"""Settled-point lots with one hidden effect, generated outside gyrojax's models: plain NumPy, own closed forms.
+
+The discovery benchmark's generator (`experiments/discovery_benchmark.py`). Per device d, run r, point i:
+
+    rate_table:  y = SF_d (1 + TCF (T - 25 C)) Omega + b_drs + noise    (Omega in deg/s, y in LSB)
+    vcf_static:  y = G_d V + b_drs + noise                              (V in volts, y in LSB)
+    dac:         v = g_d w + voltmeter noise                            (w a DAC word, v in volts)
+
+The rate output is the rebalance word, proportional to the Coriolis force 2 m A omega_d Omega: the AGC holds the
+drive amplitude A, so the scale factor follows the drive frequency and its silicon TCF. The virtual-Coriolis force
+K V_fc V_ac (seed 003 Eq. 7) does not involve the drive motion, so the VCF gain G_d has no TCF; the voltages stand
+for the rates through Omega_eq = K V_fc V_ac / (2 m A omega_d), so a design with twice the drive frequency has
+half the equivalent rate per volt. The DAC is measured alone on the bench: no bias, no temperature, no time
+(seed 000 Table 2). Each (device, run, sweep) is its own power-on with its own turn-on bias b_drs.
+
+Temperature: each run is a chamber cycle T(t) = 25 C + dT_r sin(pi t / t_end), warming then cooling, so that
+temperature and time since power-on are not confounded. The drive-frequency reading is
+f = F0_d (1 + TCF (T - 25 C)) + reading noise.
+
+A hidden effect (`HIDDEN`) is a function added to these outputs, linear in its size; its size at each SNR level
+is the one whose chi2 beyond what the baseline's free gains and biases can take up (a linear projection,
+`visible_chi2`) is 30, 300 or 3000 over the lot. Nothing here calls a gyrojax model: gyrojax only packages the
+finished columns into a `Table` (`Table.from_columns`), as it would read a file from a test lab.
+"""
+
+import dataclasses
+from collections.abc import Callable
+
+import numpy as np
+
+from gyrojax import Table
+
+
+RATES_DPS = np.array([-200.0, -100.0, -50.0, -20.0, -10.0, -5.0, -2.0, -1.0, -0.5, -0.2, -0.1,
+                      0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0])  # seed 000 §5, sweep order
+OMEGA_FS_DPS = 200.0  # the protocol's largest rate
+WARMUP_S = 60.0  # seed 000 §5: 1 min of settling before the first point
+DWELL_S = 120.0  # seed 000 §5: 2 min per point
+OUTPUT_RATE_HZ = 100.0  # seed 000 §5: sampled at 100 Hz; n_samples = 12000 per point
+TCF_PER_K = -30e-6  # silicon resonance TCF: Young's modulus -60 ppm/K and f ~ sqrt(E)
+AMBIENT_C = 25.0  # the TCF and every temperature coefficient are referred to 25 C
+
+VCF_CARRIER_V = 1.0  # seed 003 §3: V_fc = 1 V
+VCF_AMPLITUDES_V = RATES_DPS / 100.0  # ASSUMPTION: the electrode is sized so that 2 V stands for 200 deg/s
+VCF_GAIN_SPREAD_REL = 0.01  # ASSUMPTION: 1 % electrode-gap tolerance on the virtual-Coriolis gain
+DAC_V_PER_WORD = 1.637 / 2745157.0  # seed 000 Table 2: word 0x29E345 (2745157) reads 1.637 V
+DAC_GAIN_SPREAD_REL = 1e-3  # ASSUMPTION: 0.1 % reference and resistor tolerance
+VOLTMETER_SIGMA_V = 2e-5  # ASSUMPTION: a 6.5-digit AC voltmeter's reading noise on a 2 V range
+
+NOISE_DENSITY_DPS_RTHZ = 0.005  # ASSUMPTION: white rate noise 0.005 deg/s/rtHz (ARW 0.3 deg/rt h)
+TURN_ON_BIAS_SIGMA_DPS = 0.05  # ASSUMPTION: 0.05 deg/s run-to-run turn-on bias, 1 sigma
+DEVICE_BIAS_SIGMA_DPS = 0.5  # ASSUMPTION: 0.5 deg/s device-to-device untrimmed bias, 1 sigma
+SF_SPREAD_REL = 0.02  # ASSUMPTION: 2 % device-to-device scale-factor spread (mass, gap, gain tolerances)
+F0_SPREAD_REL = 0.005  # ASSUMPTION: 0.5 % resonance spread from lithography
+FREQ_READING_SIGMA_HZ = 1e-4  # ASSUMPTION: the PLL word averaged over a 2-min dwell resolves ~0.1 mHz
+CYCLE_K = (6.0, 3.0)  # ASSUMPTION: chamber cycle amplitude of run 0, run 1 (the last repeats for more runs)
+
+
+@dataclasses.dataclass(frozen=True)
+class Design:
+    """A device design: nominal scale factor (LSB per deg/s), drive frequency (Hz) and VCF equivalent rate per
+    volt (deg/s per V at V_fc = 1 V)."""
+
+    name: str
+    sf_lsb_per_dps: float
+    f0_hz: float
+    vcf_dps_per_v: float
+
+
+DESIGNS = {
+    # paper-qmg-like: 200 deg/s fills a third of a 24-bit word (seed 000 Table 2: 2745157 at 200 deg/s)
+    "a": Design("a", 13700.0, 4634.0, 100.0),
+    # far apart: twice the drive frequency (stiffer springs) and 0.6x the scale factor; Omega_eq ~ 1/omega_d
+    "b": Design("b", 0.6 * 13700.0, 2.0 * 4634.0, 50.0),
+}
+
+SWEEPS = ("rate_table", "vcf_static", "dac")
+TARGET_CHI2 = {"low": 30.0, "mid": 300.0, "high": 3000.0}
+
+
+@dataclasses.dataclass
+class Lot:
+    """Everything the generator knows about a lot, one entry per row: the clean parts of the output and the
+    coordinates the hidden effects act on."""
+
+    design: Design
+    columns: dict  # device, run, sweep, input, output, output_sigma, temperature_c, time_s, drive_freq_hz, n_samples
+    dev: np.ndarray  # device index per row
+    sf: np.ndarray  # the row's local gain: LSB per deg/s (rate), LSB per V (vcf), V per word (dac)
+    full_scale: np.ndarray  # the row's output at full-scale input (LSB or V), per device
+    dtdt: np.ndarray  # dT/dt, K/s (0 for the DAC)
+    phase: np.ndarray  # the drive-frequency deviation from the device's own F0, relative
+    clean: np.ndarray  # the noise-free output without bias or hidden effect
+
+
+def _rows(design, n_devices, n_runs, rng):
+    """The clean lot (no noise, no hidden effect): per-row arrays."""
+    n = RATES_DPS.size
+    t = WARMUP_S + DWELL_S * (np.arange(n) + 0.5)  # the middle of each dwell
+    t_end = WARMUP_S + DWELL_S * n
+    out = {k: [] for k in ("device", "run", "sweep", "input", "clean", "bias", "sigma", "temperature_c", "time_s",
+                           "drive_freq_hz", "n_samples", "dev", "sf", "full_scale", "dtdt", "phase")}
+    sigma_dps = NOISE_DENSITY_DPS_RTHZ * np.sqrt(OUTPUT_RATE_HZ / 2.0) / np.sqrt(DWELL_S * OUTPUT_RATE_HZ)
+
+    def add(**kw):
+        for k, v in kw.items():
+            out[k].append(np.broadcast_to(np.asarray(v), (n,)).copy() if k not in ("device", "sweep")
+                          else np.array([v] * n))
+
+    for d in range(n_devices):
+        sf = design.sf_lsb_per_dps * (1.0 + SF_SPREAD_REL * rng.normal())
+        g_vcf = sf * design.vcf_dps_per_v * (1.0 + VCF_GAIN_SPREAD_REL * rng.normal())
+        g_dac = DAC_V_PER_WORD * (1.0 + DAC_GAIN_SPREAD_REL * rng.normal())
+        f0 = design.f0_hz * (1.0 + F0_SPREAD_REL * rng.normal())
+        bias_dev = DEVICE_BIAS_SIGMA_DPS * rng.normal()
+        name = f"disc-{design.name}-{d:02d}"
+        for r in range(n_runs):
+            amp = CYCLE_K[min(r, len(CYCLE_K) - 1)]
+            temp = AMBIENT_C + amp * np.sin(np.pi * t / t_end)
+            dtdt = amp * np.pi / t_end * np.cos(np.pi * t / t_end)
+            rel = TCF_PER_K * (temp - AMBIENT_C)
+            for sweep, x, gain in (("rate_table", RATES_DPS, sf * (1.0 + rel)), ("vcf_static", VCF_AMPLITUDES_V, g_vcf)):
+                f = f0 * (1.0 + rel) + FREQ_READING_SIGMA_HZ * rng.normal(size=n)
+                b = sf * (bias_dev + TURN_ON_BIAS_SIGMA_DPS * rng.normal())
+                add(device=name, run=r, sweep=sweep, input=x, clean=gain * x, bias=b, sigma=sf * sigma_dps,
+                    temperature_c=temp, time_s=t, drive_freq_hz=f, n_samples=DWELL_S * OUTPUT_RATE_HZ, dev=d,
+                    sf=gain, full_scale=np.abs(gain * x).max(), dtdt=dtdt, phase=f / f0 - 1.0)
+            # the DAC bench sweep: seed 000 Table 2's words for the protocol's rates, word = -SF x rate
+            words = np.round(-RATES_DPS * design.sf_lsb_per_dps)
+            add(device=name, run=r, sweep="dac", input=words, clean=g_dac * words, bias=0.0, sigma=VOLTMETER_SIGMA_V,
+                temperature_c=np.nan, time_s=np.nan, drive_freq_hz=np.nan, n_samples=np.nan, dev=d, sf=g_dac,
+                full_scale=np.abs(g_dac * words).max(), dtdt=0.0, phase=0.0)
+    return {k: np.concatenate(v) for k, v in out.items()}
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Hidden effects. Each returns the change of the output per row at unit size (zero on the rows it leaves alone);
+# `lot` holds the clean rows. Sizes are in the unit the `unit` field names.
+
+def _mask(lot, *sweeps):
+    return np.isin(lot.columns["sweep"], sweeps)
+
+
+def _x(lot):
+    return np.asarray(lot.columns["input"], dtype=float)
+
+
+def _s(lot):
+    """The input relative to its sweep's full scale (rate, VCF and DAC all reach +-1)."""
+    x = _x(lot)
+    out = np.zeros_like(x)
+    for sw in SWEEPS:
+        m = _mask(lot, sw)
+        out[m] = x[m] / np.abs(x[m]).max()
+    return out
+
+
+def _dT(lot):
+    return np.nan_to_num(lot.columns["temperature_c"] - AMBIENT_C)
+
+
+def _t(lot):
+    return np.nan_to_num(lot.columns["time_s"])
+
+
+def _device_spread(lot, seed_offset, rel):
+    """A per-device multiplier 1 + rel N(0, 1), drawn from the lot's own devices (reproducible per lot)."""
+    n = int(lot.dev.max()) + 1
+    k = np.random.default_rng(1000 + seed_offset + 7 * n).normal(size=n)
+    return (1.0 + rel * k)[lot.dev]
+
+
+def _device_sign(lot, seed_offset):
+    n = int(lot.dev.max()) + 1
+    k = np.random.default_rng(2000 + seed_offset + 7 * n).normal(size=n)
+    return k[lot.dev]
+
+
+def _inl(lot, a3, a5):
+    """An odd S-curve of the DAC's transfer: the DAC reads w + W (a3 s^3 + a5 s^5); the rebalance word that makes
+    a given force is then smaller by the same amount (to first order), so rate and VCF rows move the other way."""
+    s = _s(lot)
+    shape = a3 * s**3 + a5 * s**5
+    dac = _mask(lot, "dac")
+    return np.where(dac, lot.full_scale * shape, -lot.full_scale * shape * _mask(lot, "rate_table", "vcf_static"))
+
+
+def _compression(lot, per_device=1.0):
+    s = _s(lot)
+    return -per_device * lot.full_scale * s**3 * _mask(lot, "rate_table", "vcf_static")
+
+
+def _zro(lot, per_device=1.0):
+    # a zero-rate output in deg/s per K, read through the device's rate scale factor
+    sf_rate = lot.full_scale / OMEGA_FS_DPS
+    return per_device * sf_rate * _dT(lot) * _mask(lot, "rate_table", "vcf_static")
+
+
+@dataclasses.dataclass(frozen=True)
+class Hidden:
+    """A hidden effect and its expected answer.
+
+    - `sweeps`: the sweep kinds whose outputs it changes; `coordinate`: the recorded column it varies with
+      (`input`, `temperature_c`, `time_s`, `drive_freq_hz`, `run`, `device`, or `model` for a pure gain);
+      `library`: the gyrojax effect it is, or None; `formula`: canonical terms that express it (None: no simple
+      term does); `unit`: the unit of its size; `fn(lot)`: the output change per row at unit size."""
+
+    name: str
+    sweeps: frozenset
+    coordinate: str
+    library: str | None
+    formula: frozenset | None
+    unit: str
+    fn: Callable
+    description: str
+
+
+def _h(name, sweeps, coordinate, library, formula, unit, description):
+    def wrap(fn):
+        return Hidden(name, frozenset(sweeps), coordinate, library, None if formula is None else frozenset(formula),
+                      unit, fn, description)
+    return wrap
+
+
+RV = ("rate_table", "vcf_static")
+GAIN_T = ("lin(temperature_c)*model", "lin(temperature_c)*lin(input)")
+HIDDEN_LIST = [
+    # --- twelve cases of the five library effects that leave a fingerprint on settled rate/VCF/DAC data ----------
+    _h("dac_inl_s_curve", SWEEPS, "input", "dac_inl", ("cube(input)",), "fraction of full scale at full scale",
+       "DAC INL odd S-curve a3 s^3 + a5 s^5 (a5 = -0.6 a3), on the DAC bench and the rebalance words")(
+        lambda lot: _inl(lot, 1.0, -0.6)),
+    _h("dac_inl_cubic", SWEEPS, "input", "dac_inl", ("cube(input)",), "fraction of full scale at full scale",
+       "DAC INL pure cubic, expansive")(lambda lot: _inl(lot, -1.0, 0.0)),
+    _h("dac_inl_spread", SWEEPS, "input", "dac_inl", ("cube(input)",), "fraction of full scale at full scale",
+       "DAC INL cubic, 40 % part-to-part spread")(
+        lambda lot: _inl(lot, 1.0, 0.0) * _device_spread(lot, 1, 0.4)),
+    _h("feedback_compression", RV, "input", "feedback_compression", ("cube(input)",),
+       "fraction of full scale at full scale", "feedback amplifier cubic compression y -> y - c W s^3")(
+        lambda lot: _compression(lot)),
+    _h("feedback_expansion", RV, "input", "feedback_compression", ("cube(input)",),
+       "fraction of full scale at full scale", "feedback amplifier cubic expansion (negative compression)")(
+        lambda lot: -_compression(lot)),
+    _h("feedback_compression_spread", RV, "input", "feedback_compression", ("cube(input)",),
+       "fraction of full scale at full scale", "feedback compression with 40 % part-to-part spread")(
+        lambda lot: _compression(lot, _device_spread(lot, 2, 0.4))),
+    _h("zro_tempco", RV, "temperature_c", "zro_tempco", ("lin(temperature_c)",), "deg/s per K",
+       "zero-rate output linear in the die temperature, same on every device")(lambda lot: _zro(lot)),
+    _h("zro_tempco_spread", RV, "temperature_c", "zro_tempco", ("lin(temperature_c)",), "deg/s per K",
+       "zero-rate output tempco of random sign and size per device")(lambda lot: _zro(lot, _device_sign(lot, 3))),
+    _h("vref_drift", RV, "temperature_c", "vref_drift", GAIN_T, "1/K",
+       "feedback reference drift: rate and VCF gain (1 + a (T - 25))")(
+        lambda lot: lot.clean * _dT(lot) * _mask(lot, *RV)),
+    _h("vref_drift_spread", RV, "temperature_c", "vref_drift", GAIN_T, "1/K",
+       "feedback reference drift, 50 % part-to-part spread")(
+        lambda lot: lot.clean * _dT(lot) * _mask(lot, *RV) * _device_spread(lot, 4, 0.5)),
+    _h("thermal_drift", ("rate_table",), "temperature_c", "thermal_drift", GAIN_T, "1/K",
+       "extra drive-resonance TCF: the rate scale factor (and the drive-frequency reading) follow it")(
+        lambda lot: lot.clean * _dT(lot) * _mask(lot, "rate_table")),
+    _h("thermal_drift_spread", ("rate_table",), "temperature_c", "thermal_drift", GAIN_T, "1/K",
+       "extra drive-resonance TCF of 50 % part-to-part spread")(
+        lambda lot: lot.clean * _dT(lot) * _mask(lot, "rate_table") * _device_spread(lot, 5, 0.5)),
+    # --- outside the library ----------------------------------------------------------------------------------
+    _h("vcf_gain_tempco", ("vcf_static",), "temperature_c", None, GAIN_T, "1/K",
+       "virtual-Coriolis gain (1 + c (T - 25)) on the VCF rows only (electrode gap thermal expansion)")(
+        lambda lot: lot.clean * _dT(lot) * _mask(lot, "vcf_static")),
+    _h("gain_hysteresis", RV, "temperature_c", None, None, "relative gain",
+       "thermal hysteresis: the gain is 1 + c warming and 1 - c cooling (package stress lags the die)")(
+        lambda lot: lot.clean * np.sign(lot.dtdt) * _mask(lot, *RV)),
+    _h("bias_dTdt", RV, "temperature_c", None, None, "deg/s per (K/min)",
+       "a zero-rate output proportional to dT/dt (a thermal gradient across the die)")(
+        lambda lot: lot.full_scale / OMEGA_FS_DPS * 60.0 * lot.dtdt * _mask(lot, *RV)),
+    _h("rate_saturation", ("rate_table",), "input", None, None, "relative gain above 100 deg/s",
+       "table-rate saturation: the output loses c of each deg/s above 100 deg/s")(
+        lambda lot: -lot.sf * np.sign(_x(lot)) * np.clip(np.abs(_x(lot)) - 100.0, 0, None)
+        * _mask(lot, "rate_table")),
+    _h("temp_x_abs_input", RV, "temperature_c", None, ("lin(temperature_c)*abs(input)",), "fraction of FS per K",
+       "an even gain that grows with temperature: c (T - 25) |s| W")(
+        lambda lot: lot.full_scale * _dT(lot) * np.abs(_s(lot)) * _mask(lot, *RV)),
+    _h("dac_periodic", ("dac",), "input", None, ("periodic(input)",), "fraction of full scale",
+       "a code-dependent error of the DAC's amplitude register, periodic in the word (period 2^18 codes)")(
+        lambda lot: lot.full_scale * np.sin(2 * np.pi * _x(lot) / 2.0**18) * _mask(lot, "dac")),
+    _h("dac_missing_code", ("dac",), "input", None, ("step(input)",), "fraction of full scale",
+       "a missing-code step at the word 2^20: every word above reads c W higher")(
+        lambda lot: lot.full_scale * (_x(lot) >= 2.0**20) * _mask(lot, "dac")),
+    _h("bias_step", ("rate_table",), "time_s", None, ("step(time_s)",), "deg/s",
+       "a bias jump at t = 1500 s in run 0 of the first device's rate table (a charging event)")(
+        lambda lot: lot.full_scale / OMEGA_FS_DPS * (_t(lot) > 1500.0)
+        * _mask(lot, "rate_table") * (lot.dev == 0) * (lot.columns["run"] == 0)),
+    _h("bias_relaxation", RV, "time_s", None, ("relax(time_s)",), "deg/s",
+       "a bias relaxing exp(-t / 600 s) after power-on (dielectric charging)")(
+        lambda lot: lot.full_scale / OMEGA_FS_DPS * np.exp(-_t(lot) / 600.0) * _mask(lot, *RV)),
+    _h("even_gain_vcf", ("vcf_static",), "input", None, ("abs(input)",), "fraction of full scale",
+       "an even |V| term on the VCF rows (electrode asymmetry, V_ac^2-like)")(
+        lambda lot: lot.full_scale * np.abs(_s(lot)) * _mask(lot, "vcf_static")),
+    _h("sign_gain_rate", ("rate_table",), "input", None, ("abs(input)", "sign(input)*lin(input)"),
+       "relative gain", "a gain 1 + c for positive table rates only (K+ != K-)")(
+        lambda lot: lot.clean * (_x(lot) > 0) * _mask(lot, "rate_table")),
+    _h("per_run_gain", RV, "run", None, ("lin(run)*model",), "relative gain",
+       "a gain that changes from power-on to power-on: 1 + c (run - mean) on each device")(
+        lambda lot: lot.clean * (lot.columns["run"] - 0.5) * _mask(lot, *RV) * _device_sign(lot, 6)),
+    _h("drive_freq_gain", ("rate_table",), "drive_freq_hz", None, ("lin(drive_freq_hz)*model",), "1/ppm",
+       "a rate gain proportional to the drive-frequency reading's deviation (ppm) from the device's own F0")(
+        lambda lot: lot.clean * lot.phase * 1e6 * _mask(lot, "rate_table")),
+    _h("time_quadratic", RV, "time_s", None, ("sq(time_s)",), "deg/s at t = 1 h",
+       "a bias growing as (t / 1 h)^2 since power-on")(
+        lambda lot: lot.full_scale / OMEGA_FS_DPS * (_t(lot) / 3600.0) ** 2 * _mask(lot, *RV)),
+]
+HIDDEN = {h.name: h for h in HIDDEN_LIST}
+
+
+def visible_chi2(lot: Lot, delta: np.ndarray, sigma: np.ndarray) -> tuple[float, dict]:
+    """The chi2 of an output change `delta` beyond what the baseline's free parameters take up, by a linear
+    projection: per (device, run, sweep) a bias (rate and VCF), per device a gain on each sweep (the rate gain
+    follows the TCF: it is `lot.clean`). Returns the total and the share of each sweep."""
+    c = lot.columns
+    shares = {}
+    for sw in SWEEPS:
+        shares[sw] = 0.0
+        for d in np.unique(lot.dev):
+            m = (c["sweep"] == sw) & (lot.dev == d)
+            if not m.any():
+                continue
+            cols = [lot.clean[m]]
+            if sw != "dac":
+                cols += [(c["run"][m] == r).astype(float) for r in np.unique(c["run"][m])]
+            a = np.stack(cols, axis=1) / sigma[m, None]
+            z = delta[m] / sigma[m]
+            coef = np.linalg.lstsq(a, z, rcond=None)[0]
+            shares[sw] += float(np.sum((z - a @ coef) ** 2))
+    total = sum(shares.values())
+    return total, {k: (v / total if total > 0 else 0.0) for k, v in shares.items()}
+
+
+def discovery_lot(hidden: str | None = None, *, snr: str = "mid", design: str = "a", n_devices: int = 6,
+                  n_runs: int = 2, seed: int = 0) -> tuple[Table, dict]:
+    """A lot with at most one hidden effect.
+
+    **Arguments:**
+
+    - `hidden`: a name of `HIDDEN`, or None for a null lot.
+    - `snr`: `low`, `mid` or `high`: the effect's visible chi2 is 30, 300 or 3000 (`TARGET_CHI2`).
+    - `design`: `a` (paper-qmg-like) or `b` (2x drive frequency, 0.6x scale factor) (`DESIGNS`).
+    - `n_devices`, `n_runs`: lot size (each device runs every sweep `n_runs` times).
+    - `seed`: NumPy seed of the devices and the noise.
+
+    **Returns:** the `gyrojax.Table` and a dict of what was hidden: name, size, unit, visible chi2 and its share per
+    sweep (`visible_sweeps`: those with a share >= 0.2), and the expected answer.
+    """
+    if design not in DESIGNS:
+        raise ValueError(f"design must be one of {sorted(DESIGNS)}, got {design!r}.")
+    if snr not in TARGET_CHI2:
+        raise ValueError(f"snr must be one of {sorted(TARGET_CHI2)}, got {snr!r}.")
+    if hidden is not None and hidden not in HIDDEN:
+        raise ValueError(f"unknown hidden effect {hidden!r}; expected one of {', '.join(HIDDEN)} or None.")
+    if n_devices < 1 or n_runs < 1:
+        raise ValueError(f"n_devices and n_runs must be >= 1, got {n_devices}, {n_runs}.")
+    rng = np.random.default_rng(seed)
+    rows = _rows(DESIGNS[design], n_devices, n_runs, rng)
+    columns = {k: rows[k] for k in ("device", "run", "sweep", "input", "temperature_c", "time_s", "drive_freq_hz",
+                                    "n_samples")}
+    columns["output_sigma"] = rows["sigma"]
+    lot = Lot(DESIGNS[design], columns, rows["dev"], rows["sf"], rows["full_scale"], rows["dtdt"], rows["phase"],
+              rows["clean"])
+    info = {"hidden": hidden, "snr": snr, "design": design, "seed": seed, "devices": n_devices, "runs": n_runs}
+    delta = np.zeros_like(rows["clean"])
+    if hidden is not None:
+        h = HIDDEN[hidden]
+        unit_delta = h.fn(lot)
+        chi2_unit, shares = visible_chi2(lot, unit_delta, rows["sigma"])
+        size = float(np.sqrt(TARGET_CHI2[snr] / chi2_unit))
+        delta = size * unit_delta
+        info.update(size=size, unit=h.unit, visible_chi2=TARGET_CHI2[snr], sweep_shares=shares,
+                    visible_sweeps=sorted(s for s, v in shares.items() if v >= 0.2),
+                    sweeps=sorted(h.sweeps), coordinate=h.coordinate, library=h.library,
+                    formula=None if h.formula is None else sorted(h.formula), description=h.description)
+        if hidden.startswith("thermal_drift"):
+            # the extra TCF moves the drive resonance too: the frequency reading follows it
+            rate = columns["sweep"] == "rate_table"
+            ratio = np.where(rate & (rows["clean"] != 0), delta / np.where(rows["clean"] == 0, 1, rows["clean"]), 0)
+            columns["drive_freq_hz"] = np.where(rate, columns["drive_freq_hz"] * (1.0 + ratio),
+                                                columns["drive_freq_hz"])
+    noise = rows["sigma"] * rng.normal(size=rows["sigma"].size)
+    columns["output"] = rows["clean"] + rows["bias"] + delta + noise
+    table = Table.from_columns({k: np.asarray(v) for k, v in columns.items()},
+                               source=f"<discovery lot {hidden or 'null'} {snr} design {design} seed {seed}>")
+    return table, info
+
+
+def truth_chi2(table: Table, n_devices: int, n_runs: int, seed: int, design: str = "a") -> tuple[float, int]:
+    """The chi2 of a null lot's outputs against the generator's own noise-free truth (biases included), and the
+    number of points: the documented noise level makes it ~ n."""
+    rng = np.random.default_rng(seed)
+    rows = _rows(DESIGNS[design], n_devices, n_runs, rng)
+    y = np.asarray(table.columns["output"], dtype=float)
+    z = (y - rows["clean"] - rows["bias"]) / rows["sigma"]
+    return float(np.sum(z**2)), int(z.size)
+
+
+if __name__ == "__main__":
+    import sys
+
+    from gyrojax import write_table
+
+    name = sys.argv[2] if len(sys.argv) > 2 else None
+    tab, meta = discovery_lot(name)
+    write_table(tab, sys.argv[1])
+    print(f"wrote {sys.argv[1]}: {meta}")
