@@ -8,6 +8,7 @@ import numpy as np
 
 from .._effects.registry import EFFECTS
 from .._fitdata import FitData
+from .._fitmatch import check_fit_data
 from .._identify import Fit
 from .._parameters import Model
 
@@ -23,14 +24,7 @@ def baseline_model(fit: Fit, data: FitData) -> Model:
     """The fitted model of `fit` as the diagnosis's baseline, after checking that it was fitted to `data`."""
     if not isinstance(fit, Fit):
         raise TypeError(f"fit must be a gyrojax.Fit (from identify or load_fit), got {type(fit).__name__}.")
-    if tuple(fit.devices) != tuple(data.devices):
-        raise ValueError(f"fit: it was fitted to devices {list(fit.devices)}, the data have {list(data.devices)}; "
-                         "give the fit of this data (or no fit, to fit the baseline here).")
-    theirs = {s: int(np.asarray(fit.data.blocks[s].mask).sum()) for s in fit.data.sweeps}
-    ours = {s: int(np.asarray(data.blocks[s].mask).sum()) for s in data.sweeps}
-    if theirs != ours:
-        raise ValueError(f"fit: it was fitted to {theirs} points per sweep, the data have {ours}; give the fit of "
-                         "this data (or no fit, to fit the baseline here).")
+    check_fit_data(fit, data)
     # Effects held at exactly zero (a previous diagnosis's candidates) were never fitted: candidates again.
     kept = tuple(e for e in fit.model.effects
                  if any(np.any(np.asarray(x) != 0) for x in jax.tree.leaves(e)))
