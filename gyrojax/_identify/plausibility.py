@@ -68,11 +68,15 @@ def check_signs(data: FitData, predictions, model_name: str):
     """Raise a ValueError naming each device and run whose outputs run against the input with the opposite
     sign of the start model's predictions, both slopes at more than `_FLIP_SIGMAS` standard errors of the
     data's slope from zero: a sign convention of the data (output, or
-    input) flipped against the model's, which no positive gain or factor of the model can fit."""
+    input) flipped against the model's, which no positive gain or factor of the model can fit. Only sweeps of a
+    kind whose slope's sign a convention sets (`AbstractSweep.sign_definite`) are checked."""
     bad = []
     for s in data.sweeps:
-        # a straight-line sweep's output runs with its input with the sign the model predicts
-        if not sweep_kind(s).straight_line or s not in predictions:
+        # A straight-line sweep's output runs with its input with the sign the model predicts where a convention
+        # sets that sign; where an effect's sign sets it (the drive frequency against the set-point: a cubic
+        # spring hardens or softens), a library effect at its typical size turns the model's slope over.
+        kind = sweep_kind(s)
+        if not (kind.straight_line and kind.sign_definite) or s not in predictions:
             continue
         block = data.blocks[s]
         x, y, m, sig = (np.asarray(a) for a in (block.inputs, block.outputs, block.mask, block.sigmas))

@@ -18,6 +18,10 @@ if TYPE_CHECKING:
     from .protocol import Protocol
 
 
+LINE_METRICS = ("scale_factor", "bias", "nonlinearity", "asymmetry", "repeatability")
+"""The metrics of a straight-line fit, as `AbstractSweep.applicable_metrics` names them."""
+
+
 class AbstractSweep(eqx.Module):
     """One kind of experiment: the `sweep` value of the tidy data format (docs/data_format.md).
 
@@ -47,6 +51,14 @@ class AbstractSweep(eqx.Module):
     - `rate_noise`: the simulator's noise is rate noise (deg/s) converted to LSB with each device's
       rate-table scale factor.
     - `fit_against_rate`: the metrics also fit `output` against the `rate_dps` column when it is given.
+    - `sign_definite`: the output's slope against the input has a sign that a convention sets (the rate
+      table's direction, the output's polarity), not the device's small effects: identification refuses data
+      whose slope runs clearly against the model's, and `metrics` and `compensate` refuse a run whose outputs
+      do not change with the input (a dead output). False for a kind whose slope is an effect's to set (the
+      drive frequency against the set-point: a cubic spring of either sign).
+
+    **Metrics.** `applicable_metrics()` names the metrics of `gyrojax.metrics_report` that measure something on
+    this kind, `metric_not_applicable(name)` says why another does not.
     """
 
     name: ClassVar[str]
@@ -64,6 +76,7 @@ class AbstractSweep(eqx.Module):
     rate_output: ClassVar[bool] = False
     rate_noise: ClassVar[bool] = False
     fit_against_rate: ClassVar[bool] = False
+    sign_definite: ClassVar[bool] = True
 
     @property
     def input_label(self) -> str:
@@ -78,6 +91,23 @@ class AbstractSweep(eqx.Module):
         unit = f"({self.input_unit})" if "/" in self.input_unit else self.input_unit
         out = f"({self.output_unit})" if "/" in self.output_unit else self.output_unit
         return f"{out}/{unit}"
+
+    def applicable_metrics(self) -> tuple[str, ...]:
+        """The metrics of `gyrojax.metrics_report` that are measurements on this kind, from `LINE_METRICS` and
+        "bandwidth". Default: every straight-line metric for a straight-line kind, else the bandwidth."""
+        return LINE_METRICS if self.straight_line else ("bandwidth",)
+
+    def metric_not_applicable(self, metric: str) -> str:
+        """Why `metric` (not in `applicable_metrics()`) is not a measurement on this kind, in words."""
+        if not self.straight_line:
+            return f"a {self.name} sweep gives a bandwidth, not a straight-line fit"
+        if metric == "bandwidth":
+            return f"a {self.name} sweep gives a straight-line fit, not a bandwidth"
+        if "scale_factor" not in self.applicable_metrics():
+            return (f"the output of a {self.name} sweep is not proportional to its input by design: a "
+                    "straight-line slope of it is no scale factor")
+        return (f"the output of a {self.name} sweep is not proportional to its input by design (its slope is a "
+                "small effect, not a gain), so figures relative to the slope are noise")
 
     # -- protocol ------------------------------------------------------------------------------------------------
 

@@ -123,6 +123,15 @@ class BranchRatio(AbstractSweep):
     biased = False
     straight_line = True
     rate_input = True
+    sign_definite = False  # the ratio's change with the rate is a small effect of either sign
+
+    def applicable_metrics(self) -> tuple[str, ...]:
+        return ("bias",)  # the ratio at zero rate: the branches' mismatch
+
+    def metric_not_applicable(self, metric: str) -> str:
+        return ("the branch ratio is 1 at every rate for matched branches and changes with the rate only by small "
+                "effects (which identify and diagnose fit): its slope is no scale factor, and figures relative to "
+                "the slope are noise; the bias (the ratio at zero rate) is the branches' mismatch")
 
     def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:
         return np.asarray(protocol.branch_rates_dps)

@@ -35,6 +35,15 @@ class DriveFrequency(AbstractSetpointSweep):
     input_meaning = "the AGC set-point, drive ADC LSB, at zero table rate (as for `drive_amplitude`)"
     output_meaning = "the PLL's drive frequency, Hz (a register of the drive loop)"
     biased = False
+    sign_definite = False  # a cubic drive spring of either sign bends the frequency up or down
+
+    def applicable_metrics(self) -> tuple[str, ...]:
+        return ()
+
+    def metric_not_applicable(self, metric: str) -> str:
+        return ("the drive frequency is the same at every set-point but for a cubic drive spring's bend "
+                "(duffing_drive, which identify and diagnose fit): a straight line through it measures no scale "
+                "factor, bias or nonlinearity of the gyro")
 
     def dwell_s(self, protocol: "Protocol") -> float:
         return protocol.drive_dwell_s

@@ -79,6 +79,10 @@ class QuadratureInjection(AbstractSteadySweep):
     input_meaning = ("the voltage V_ac on the virtual-Coriolis electrode, V, signed, with the carrier (V_fc = 1 V) "
                      "in phase with the drive displacement: a virtual quadrature, at zero table rate")
     output_meaning = "the gyro's rate output, LSB"
+    sign_definite = False  # the slope is the rate channel's phase error on the quadrature, of either sign
+
+    def applicable_metrics(self) -> tuple[str, ...]:
+        return ("scale_factor", "bias")  # the rate output per injected quadrature volt: the quadrature leakage
 
     def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:
         if protocol.quadrature_amplitudes_v is not None:

@@ -23,7 +23,7 @@ random streams in `gyrojax.simulate_table`, so registering one leaves the others
 _CLASS_ATTRIBUTES = {"name": str, "title": str, "input_quantity": str, "input_unit": str, "output_unit": str,
                      "input_meaning": str, "output_meaning": str, "biased": bool, "straight_line": bool,
                      "word_input": bool, "rate_input": bool, "timed": bool, "rate_noise": bool,
-                     "fit_against_rate": bool}
+                     "fit_against_rate": bool, "sign_definite": bool}
 
 
 def register_sweep(cls: type[AbstractSweep]) -> type[AbstractSweep]:

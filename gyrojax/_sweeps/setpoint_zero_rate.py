@@ -48,6 +48,10 @@ class SetpointZeroRate(AbstractSetpointSweep):
     output_meaning = "the gyro's rate output, LSB (as for `rate_table`)"
     biased = True
     rate_noise = True
+    sign_definite = False  # the slope is a damping coupling's or a phase error's, of either sign
+
+    def applicable_metrics(self) -> tuple[str, ...]:
+        return ("scale_factor", "bias")  # the zero-rate output per set-point LSB, and the run's turn-on bias
     # dwell_s: the protocol's rate-output dwell (AbstractSweep's default), not the drive registers' drive_dwell_s
 
     def reading(self, points: SetpointReading):
