@@ -30,6 +30,8 @@ import stat
 import tempfile
 from collections.abc import Iterator
 
+from ._stop import check as _check_stop
+
 
 FOLDER_MARKER = ".gyrojax-output"
 """The file [`atomic_directory`][] puts in every folder it writes: such a folder may be replaced by a later run."""
@@ -106,6 +108,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[str]:
         os.close(fd)
         os.chmod(tmp, mode)  # mkstemp makes 0600
         yield tmp
+        _check_stop()  # a stop asked for by a signal whose exception was lost: keep the old file
         fd = os.open(tmp, os.O_RDONLY)
         try:
             os.fsync(fd)
@@ -228,6 +231,7 @@ def atomic_directory(path: str | os.PathLike) -> Iterator[str]:
         with atomic_open(os.path.join(tmp, FOLDER_MARKER), "w", encoding="utf-8") as f:
             f.write("Written by gyrojax: a later gyrojax run may replace this folder as a whole.\n")
         yield tmp
+        _check_stop()  # a stop asked for by a signal whose exception was lost: keep the old folder
         why = _folder_refusal(target)  # checked again: something may have appeared meanwhile
         if why is not None:
             raise FileExistsError(errno.EEXIST, why, target)

@@ -11,6 +11,8 @@ through the persistent compilation cache) are fast. While XLA compiles a large p
 import sys
 import time
 
+from ._stop import check as _check_stop
+
 
 _SEEN: set = set()  # what was compiled in this process (by key): later calls with it are fast
 
@@ -41,11 +43,13 @@ class Progress:
         return self._out is not None
 
     def __call__(self, message: str) -> None:
+        _check_stop()  # a safe point for a stop asked for by a signal (gyrojax._stop), silent or not
         if self._out is not None:
             self._out(f"{self.name}: {message} (t = {time.perf_counter() - self.start:.0f} s)")
 
     def compiling(self, key, what: str) -> None:
         """Say that `what` compiles now if `key` was not compiled before in this process."""
+        _check_stop()
         if key in _SEEN:
             return
         first = not _SEEN

@@ -15,18 +15,25 @@ Exit codes:
   When devices differ, the worst status decides: not converged (1), not determined (4), unknown (5), model
   rejected (3). `diagnose` exits 0 whatever its verdict (explained, partly explained, unexplained: the
   diagnosis itself succeeded), 1 if its final fit did not converge.
-- 128 + N: stopped by signal N (130 for SIGINT, 143 for SIGTERM). The signal is turned into an exception, so
-  the file being written is discarded (its temporary file removed) and the previous version is kept; it is
-  acted on when the running computation returns to Python. A second signal during that cleanup is ignored.
+- 128 + N: stopped by signal N (130 for SIGINT, 143 for SIGTERM). The first signal is turned into an
+  exception, so the file being written is discarded (its temporary file removed) and the previous version is
+  kept; it is acted on when the running computation returns to Python. The stop is also recorded and checked
+  again between steps and before any output is moved into place (an exception raised by a signal handler is lost
+  when the signal lands in a garbage-collector hook), so a stopped command never writes its outputs. The first
+  signal restores the default handlers: a second signal kills the process at once (by that signal). Run as the
+  program, a stopped command ends with `os._exit` after its cleanup (XLA's teardown at interpreter exit, in the
+  middle of a compile, can crash).
 """
 
 import argparse
 import contextlib
+import os
 import signal
 import sys
 import threading
 import warnings
 
+from . import _stop
 from ._io import OutputPathError, atomic_directory, atomic_write_json, check_output_paths
 
 
@@ -40,31 +47,41 @@ determined by the data, 5 a fit file without status; 128+N stopped by signal N (
 written is discarded, the previous one kept)."""
 
 
-class _Interrupted(BaseException):
-    """SIGTERM or SIGINT, raised in the main thread so that `finally` and `except` cleanups run."""
-
-    def __init__(self, signum: int):
-        super().__init__(signum)
-        self.signum = signum
+_Interrupted = _stop.Interrupted
+_SIGNALS = (signal.SIGTERM, signal.SIGINT)
 
 
 @contextlib.contextmanager
 def _signals_raise():
-    """Turn SIGTERM and SIGINT into `_Interrupted` for the block (once), restoring the old handlers after."""
+    """Turn the first SIGTERM or SIGINT into `_Interrupted` for the block, restoring the old handlers after.
+
+    The first signal records the stop (`gyrojax._stop`, checked again at safe points: its exception may be lost),
+    raises, and restores the default handlers, so that a second signal kills the process whatever it is doing.
+    An `_Interrupted` that Python could not raise (a signal in a garbage-collector hook) is not reported as an
+    ignored exception: the safe points act on it.
+    """
     if threading.current_thread() is not threading.main_thread():
         yield  # signal handlers can only be set from the main thread
         return
-    fired = []
 
     def handler(signum, frame):
-        if not fired:  # a second signal must not cut the cleanup of the first short
-            fired.append(signum)
-            raise _Interrupted(signum)
+        for s in _SIGNALS:
+            signal.signal(s, signal.SIG_DFL)
+        _stop.request(signum)
+        raise _Interrupted(signum)
 
-    previous = {s: signal.signal(s, handler) for s in (signal.SIGTERM, signal.SIGINT)}
+    previous_hook = sys.unraisablehook
+
+    def unraisable(hook_args):
+        if not isinstance(hook_args.exc_value, _Interrupted):
+            previous_hook(hook_args)
+
+    previous = {s: signal.signal(s, handler) for s in _SIGNALS}
+    sys.unraisablehook = unraisable
     try:
         yield
     finally:
+        sys.unraisablehook = previous_hook
         for s, h in previous.items():
             signal.signal(s, h)
 
@@ -527,11 +544,24 @@ def main(argv=None):
     name = f"gyrojax {args.command}"
     try:
         with _signals_raise():
-            return args.func(args)
-    except _Interrupted as e:
-        print(f"{name}: stopped by {signal.Signals(e.signum).name}; the file being written (if any) was "
-              "discarded and its previous version kept", file=sys.stderr)
-        return EXIT_SIGNAL_BASE + e.signum
+            try:
+                code = args.func(args)
+                _stop.check()  # a stop whose exception was lost after the last safe point
+                return code
+            except BaseException as e:
+                # After a stop, whatever the exception (ours, or one a library made of it), the signal decides.
+                signum = e.signum if isinstance(e, _Interrupted) else _stop.requested()
+                if signum is None:
+                    raise
+                print(f"{name}: stopped by {signal.Signals(signum).name}; the file being written (if any) was "
+                      "discarded and its previous version kept", file=sys.stderr)
+                if argv is None:  # run as the program: no interpreter teardown in XLA's state after a stop
+                    sys.stdout.flush()
+                    sys.stderr.flush()
+                    os._exit(EXIT_SIGNAL_BASE + signum)
+                return EXIT_SIGNAL_BASE + signum
+            finally:
+                _stop.clear()
     except KeyboardInterrupt:  # outside the main thread, where no handler could be set
         print(f"{name}: interrupted", file=sys.stderr)
         return EXIT_SIGNAL_BASE + signal.SIGINT

@@ -1,11 +1,13 @@
 """The command line as a user runs it: a real process, its exit code and stderr (no traceback), and signals
-that arrive in the middle of a write. Only cheap commands (bad inputs, metrics): each process costs the import."""
+that arrive in the middle of a write or of a run. Cheap commands (bad inputs, metrics) but for one diagnose run
+stopped by signals (slow): each process costs the import."""
 
 import os
 import signal
 import subprocess
 import sys
 import textwrap
+import time
 
 import pytest
 
@@ -133,3 +135,81 @@ def test_sigterm_while_a_folder_is_built_keeps_the_old_folder(tmp_path):
     assert sorted(os.listdir(tmp_path)) == ["demo"]  # no temporary folder left
     assert sorted(os.listdir(tmp_path / "demo")) == sorted([FOLDER_MARKER, "report.md"])
     assert (tmp_path / "demo" / "report.md").read_text() == "the old, whole report"
+
+
+# A signal whose exception is lost: the handler runs inside a garbage-collector hook (as when SIGTERM lands in
+# JAX's _xla_gc_callback), where Python prints "Exception ignored" and drops what it raises.
+LOST_SIGNAL = textwrap.dedent("""
+    import gc, signal, sys
+    import gyrojax.cli as cli
+    from gyrojax import _metrics
+
+    real = _metrics.metrics_report
+
+    def lossy(table):
+        def hook(phase, info):
+            gc.callbacks.remove(hook)
+            signal.raise_signal(signal.SIGTERM)  # the handler runs here, inside the hook
+
+        gc.callbacks.append(hook)
+        gc.collect()
+        print("SURVIVED", flush=True)
+        return real(table)
+
+    _metrics.metrics_report = lossy
+    sys.exit(cli.main(sys.argv[1:]))
+""")
+
+
+@pytest.mark.parametrize("json_out", [False, True])
+def test_a_signal_lost_in_a_gc_hook_still_stops_the_command(tmp_path, json_out):
+    files(tmp_path)
+    (tmp_path / "m.json").write_text('{"old": true}\n')
+    argv = ["metrics", "good.csv"] + (["--json", "m.json"] if json_out else [])
+    proc = subprocess.run([sys.executable, "-c", LOST_SIGNAL, *argv], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=300)
+    assert "SURVIVED" in proc.stdout  # the handler's exception was lost: the command went on
+    assert proc.returncode == 143, proc.stderr
+    assert "gyrojax metrics: stopped by SIGTERM" in proc.stderr
+    assert "Exception ignored" not in proc.stderr and "Traceback" not in proc.stderr
+    assert (tmp_path / "m.json").read_text() == '{"old": true}\n'  # the output was not written
+    assert not [n for n in os.listdir(tmp_path) if n.endswith(".tmp")]
+
+
+def diagnose_data(path):
+    """A lot of 2 devices on the rate table and the DAC with a cubic in the outputs: a real diagnose run."""
+    rates = (-200, -100, -50, -20, -10, 0, 10, 20, 50, 100, 200)
+    rows = [HEADER]
+    for d, sf in (("A", 13771.0), ("B", 13702.0)):
+        rows += [f"{d},0,rate_table,{x},{sf * x + 2e-3 * x**3 + 4.0}" for x in rates]
+    path.write_text("\n".join(rows) + "\n")
+
+
+@pytest.mark.slow
+def test_two_sigterms_during_diagnose_stop_it_without_output(tmp_path):
+    """The issue's reproduction: SIGTERM during `diagnose --json`, then again; at several moments of the run
+    (the import, the data, the fit): always stopped with 143 (by the handler, or killed by the second
+    signal), never exit 0, never a JSON written. A single signal is acted on promptly with exactly 143."""
+    diagnose_data(tmp_path / "base.csv")
+    for delay, second in ((2.0, 1.0), (5.0, 1.0), (8.0, 0.3), (6.0, None)):
+        out = tmp_path / "s.json"
+        proc = subprocess.Popen([sys.executable, "-m", "gyrojax.cli", "diagnose", "base.csv", "--json", "s.json",
+                                 "--quiet"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            time.sleep(delay)
+            assert proc.poll() is None, "diagnose ended before the signal: the test's data are too small"
+            proc.send_signal(signal.SIGTERM)
+            if second is not None:
+                time.sleep(second)
+                if proc.poll() is None:
+                    proc.send_signal(signal.SIGTERM)
+            _, err = proc.communicate(timeout=120)
+        finally:
+            proc.kill()
+        if second is None:
+            assert proc.returncode == 143, err
+            assert "gyrojax diagnose: stopped by SIGTERM" in err and "Traceback" not in err
+        else:  # stopped by the handler (143), or killed by the second signal (-15: the shell's 143 too)
+            assert proc.returncode in (143, -signal.SIGTERM), (delay, err)
+        assert not out.exists(), delay
+        assert not [n for n in os.listdir(tmp_path) if n.endswith(".tmp")]
