@@ -119,7 +119,8 @@ def _rows(design, n_devices, n_runs, rng):
             temp = AMBIENT_C + amp * np.sin(np.pi * t / t_end)
             dtdt = amp * np.pi / t_end * np.cos(np.pi * t / t_end)
             rel = TCF_PER_K * (temp - AMBIENT_C)
-            for sweep, x, gain in (("rate_table", RATES_DPS, sf * (1.0 + rel)), ("vcf_static", VCF_AMPLITUDES_V, g_vcf)):
+            rate_gain = sf * (1.0 + rel)  # the Coriolis force follows omega_d; the VCF force does not
+            for sweep, x, gain in (("rate_table", RATES_DPS, rate_gain), ("vcf_static", VCF_AMPLITUDES_V, g_vcf)):
                 f = f0 * (1.0 + rel) + FREQ_READING_SIGMA_HZ * rng.normal(size=n)
                 b = sf * (bias_dev + TURN_ON_BIAS_SIGMA_DPS * rng.normal())
                 add(device=name, run=r, sweep=sweep, input=x, clean=gain * x, bias=b, sigma=sf * sigma_dps,

@@ -1,0 +1,512 @@
+"""The discovery benchmark: lots with one hidden effect (or none), run through discovery methods, scored.
+
+Run: python experiments/discovery_benchmark.py [--methods gyrojax,refit_ftest,pysindy] [--snr low,mid,high]
+     [--seeds 0-4] [--designs a,b] [--effects NAME,...|all] [--devices 6] [--runs 2] [--out DIR] [--quick]
+
+Lots come from `experiments/_discovery_lot.py` (plain NumPy, its own closed forms; 26 hidden effects, 12 of them
+cases of library effects). Each method is a plug-in (`Method`: `name`, `run(table) -> Outcome`):
+
+- `gyrojax`: `gyrojax.diagnose(table, preset)`, read through its JSON (`read_diagnosis`);
+- `refit_ftest`: forward selection over the library by refits and an F-test (p < 0.01), no localisation beyond
+  the sweep with the largest residual chi2, no formula;
+- `pysindy`: a sparse regression (`pysindy.STLSQ`) of the baseline fit's standardised residuals on a dictionary of
+  canonical terms (`TERMS`), per sweep (skipped with a message where pysindy is not installed:
+  `pip install -e ".[discovery]"`).
+
+Scores per method, by effect class (library / outside / null) and SNR (`score_rows`): library effects found,
+wrong confirmations, localisation right (the located sweep set equals the sweeps carrying >= 20 % of the hidden
+effect's visible chi2, and the coordinate is right; a library effect found counts as localised), formula
+recovered, null lots explained, median final chi2_red, median seconds per lot. DIR/discovery.json and
+DIR/discovery.md are rewritten (atomically) after every lot.
+"""
+
+import abc
+import argparse
+import dataclasses
+import datetime
+import json
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from _discovery_lot import DESIGNS, HIDDEN, TARGET_CHI2, discovery_lot  # noqa: E402
+
+
+LOCATED_SHARE = 0.2  # a sweep carrying at least this share of a misfit is one of the sweeps it is located on
+QUICK_EFFECTS = ("zro_tempco", "feedback_compression", "vcf_gain_tempco", "bias_step", "dac_periodic")
+
+
+@dataclasses.dataclass
+class Outcome:
+    """What a method says about one lot."""
+
+    confirmed: list  # library effects confirmed
+    verdict: str  # "explained", "partly explained" or "unexplained"
+    located: set  # sweeps of the top unexplained misfit (empty: none located)
+    coordinate: str | None  # recorded coordinate of the top unexplained misfit
+    formula: list  # canonical term names proposed for it ([] for none)
+    chi2_red: float  # the final fit's reduced chi2
+    seconds: float = math.nan
+    note: str = ""
+
+
+class Method(abc.ABC):
+    """A discovery method: `run(table)` returns an `Outcome`."""
+
+    name: str
+
+    @abc.abstractmethod
+    def run(self, table) -> Outcome: ...
+
+    def available(self) -> str | None:
+        """None where the method can run, else why not."""
+        return None
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# gyrojax.diagnose
+
+def _term_name(term) -> str | None:
+    if isinstance(term, str):
+        return term
+    if isinstance(term, dict):
+        name = term.get("name")
+        return name if isinstance(name, str) else None
+    return None
+
+
+def read_diagnosis(j: dict) -> dict:
+    """The `Outcome` fields of a `Diagnosis.to_json()` dict, read defensively: `selected`, `verdict`, `final.chi2_red`,
+    and from `discrepancy[0]` its `sweep_shares` ({sweep: share}, the sweeps with a share >= 0.2; else its `sweeps`
+    list), `coordinate`, and `formula.terms` (names, or dicts with a `name`), where present."""
+    top = (j.get("discrepancy") or [None])[0] or {}
+    shares = top.get("sweep_shares")
+    if isinstance(shares, dict) and shares:
+        located = {s for s, v in shares.items() if v is not None and float(v) >= LOCATED_SHARE}
+    elif isinstance(shares, (list, tuple)) and shares:  # [[sweep, share], ...]
+        located = {s for s, v in shares if v is not None and float(v) >= LOCATED_SHARE}
+    else:
+        located = set(s if isinstance(s, str) else s[0] for s in (top.get("sweeps") or ()))
+    formula = top.get("formula") if isinstance(top.get("formula"), dict) else j.get("formula")
+    terms = (formula or {}).get("terms") or [] if isinstance(formula, dict) else []
+    final = j.get("final") or {}
+    return {"confirmed": list(j.get("selected") or ()), "verdict": j.get("verdict", "unknown"),
+            "located": located, "coordinate": top.get("coordinate") if top else None,
+            "formula": [n for n in (_term_name(t) for t in terms) if n],
+            "chi2_red": float(final.get("chi2_red", math.nan))}
+
+
+class GyrojaxMethod(Method):
+    name = "gyrojax"
+
+    def __init__(self, preset: str = "paper-qmg"):
+        self.preset = preset
+
+    def run(self, table) -> Outcome:
+        import gyrojax as gj
+
+        t0 = time.perf_counter()
+        d = gj.diagnose(table, self.preset, progress=False)
+        seconds = time.perf_counter() - t0
+        return Outcome(**read_diagnosis(d.to_json()), seconds=seconds)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Shared: the baseline fit with every library candidate present at zero (as diagnose builds it)
+
+def _full_model(preset, data):
+    import gyrojax as gj
+    from gyrojax._diagnose.candidates import candidate_effects
+    from gyrojax._parameters import as_model, zero_effect
+
+    base = as_model(preset)
+    candidates = candidate_effects(base, None, "refit_ftest")
+    return gj.Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates)), candidates
+
+
+def _free_count(fit) -> int:
+    return int(np.sum(fit.free))
+
+
+def f_test_p(chi2_before: float, chi2_after: float, df: int, dof_after: int) -> float:
+    """p of the F-test of a refit that adds `df` parameters: (chi2 drop / df) / (chi2_after / dof_after)."""
+    from scipy.stats import f as f_dist
+
+    if df <= 0 or dof_after <= 0 or chi2_after <= 0:
+        return 1.0
+    stat = ((chi2_before - chi2_after) / df) / (chi2_after / dof_after)
+    return float(f_dist.sf(stat, df, dof_after)) if stat > 0 else 1.0
+
+
+def _sweep_excess(fit) -> dict:
+    """Per sweep, the residual chi2 beyond its number of points."""
+    out = {}
+    for s in fit.data.sweeps:
+        r = np.asarray(fit.residuals[s])
+        m = np.asarray(fit.data.blocks[s].mask)
+        out[s] = float(np.sum(np.where(m, r, 0.0) ** 2) - m.sum())
+    return out
+
+
+class RefitFTest(Method):
+    """Plain forward selection: refit with each library effect, keep the best if its F-test has p < alpha; repeat."""
+
+    name = "refit_ftest"
+
+    def __init__(self, preset: str = "paper-qmg", alpha: float = 0.01, max_effects: int = 4):
+        self.preset, self.alpha, self.max_effects = preset, alpha, max_effects
+
+    def run(self, table) -> Outcome:
+        import gyrojax as gj
+        from gyrojax._fitdata import fit_data
+        from gyrojax._parameters import DEFAULT_FREE
+
+        t0 = time.perf_counter()
+        data = fit_data(table)
+        full, candidates = _full_model(self.preset, data)
+
+        def fit_with(selected):
+            held = tuple(c for c in candidates if c not in selected)
+            return gj.identify(full, data, free=DEFAULT_FREE, hold=held, progress=False)
+
+        fit = fit_with(())
+        selected, remaining = [], list(candidates)
+        while remaining and len(selected) < self.max_effects:
+            best = None
+            for c in remaining:
+                new = fit_with(tuple(selected) + (c,))
+                if "not converged" in " ".join(new.status):
+                    continue
+                df = (_free_count(new) - _free_count(fit)) * len(data.devices)
+                p = f_test_p(fit.chi2_total, new.chi2_total, df, int(new.dof_total))
+                if best is None or p < best[1]:
+                    best = (c, p, new)
+            if best is None or best[1] >= self.alpha:
+                break
+            selected.append(best[0])
+            remaining.remove(best[0])
+            fit = best[2]
+        excess = _sweep_excess(fit)
+        top = max(excess, key=excess.get)
+        explained = float(fit.p_value_total) >= self.alpha
+        verdict = "explained" if explained else ("partly explained" if selected else "unexplained")
+        return Outcome(selected, verdict, set() if explained else {top}, None, [], float(fit.chi2_red_total),
+                       time.perf_counter() - t0)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# pysindy on the baseline's residuals
+
+RELAX_S = 600.0  # the relaxation time of the dictionary's relax(time_s) term
+PERIODS = (2.0**16, 2.0**17, 2.0**18, 2.0**19)  # periodic(input): code periods of a segmented DAC
+
+
+def _coords(fit, sweep):
+    """Per valid point of `sweep`: input, temperature, time, drive frequency, run index, device index, model."""
+    b = fit.data.blocks[sweep]
+    m = np.asarray(b.mask)
+    nd, nr, npt = m.shape
+    dev = np.broadcast_to(np.arange(nd)[:, None, None], m.shape)
+    run = np.broadcast_to(np.arange(nr)[None, :, None], m.shape)
+
+    def col(a):
+        return np.asarray(a, dtype=float)[m] if a is not None else np.full(int(m.sum()), np.nan)
+
+    return {"input": col(b.inputs), "temperature_c": col(b.temperatures), "time_s": col(b.times),
+            "drive_freq_hz": col(b.drive_freqs), "run": run[m].astype(float), "device": dev[m],
+            "model": col(fit.predictions[sweep]), "sigma": col(b.sigmas),
+            "residual": np.asarray(fit.residuals[sweep], dtype=float)[m], "biased": sweep != "dac"}
+
+
+def dictionary(c: dict) -> dict:
+    """Canonical term name -> feature column (output units) over one sweep's points (`_coords`)."""
+    x = c["input"] / np.max(np.abs(c["input"]))
+    model = c["model"] / np.max(np.abs(c["model"]))
+    terms = {"lin(input)": x, "sq(input)": x**2, "cube(input)": x**3, "abs(input)": np.abs(x),
+             "sign(input)": np.sign(x), "sign(input)*lin(input)": x * (x > 0)}
+    for q in (0.25, 0.5):
+        terms[f"step(input)@{q}"] = (x >= q).astype(float)
+    for p in PERIODS:
+        terms[f"periodic(input)@sin{int(p)}"] = np.sin(2 * np.pi * c["input"] / p)
+        terms[f"periodic(input)@cos{int(p)}"] = np.cos(2 * np.pi * c["input"] / p)
+    if np.all(np.isfinite(c["temperature_c"])):
+        dT = c["temperature_c"] - 25.0
+        terms.update({"lin(temperature_c)": dT, "sq(temperature_c)": dT**2, "lin(temperature_c)*model": dT * model,
+                      "lin(temperature_c)*abs(input)": dT * np.abs(x)})
+    if np.all(np.isfinite(c["time_s"])):
+        t = c["time_s"] / np.max(c["time_s"])
+        terms.update({"lin(time_s)": t, "sq(time_s)": t**2, "relax(time_s)": np.exp(-c["time_s"] / RELAX_S)})
+        for q in (0.25, 0.5, 0.75):
+            terms[f"step(time_s)@{q}"] = (t >= q).astype(float)
+    if np.all(np.isfinite(c["drive_freq_hz"])):
+        f = np.zeros_like(c["drive_freq_hz"])
+        for d in np.unique(c["device"]):
+            k = c["device"] == d
+            f[k] = c["drive_freq_hz"][k] / np.mean(c["drive_freq_hz"][k]) - 1.0
+        terms["lin(drive_freq_hz)*model"] = f * model
+    if np.unique(c["run"]).size > 1:
+        terms["lin(run)*model"] = (c["run"] - np.mean(c["run"])) * model
+    return terms
+
+
+def canonical(term: str) -> str:
+    """The canonical name of a dictionary column (its variant after '@' dropped)."""
+    return term.split("@")[0]
+
+
+def _project_out_baseline(c, cols):
+    """Columns of `cols` (n, k) with the baseline's own directions removed: per device a gain (the model), and for a
+    biased sweep per (device, run) a constant, all in standardised units."""
+    out = cols / c["sigma"][:, None]
+    for d in np.unique(c["device"]):
+        k = c["device"] == d
+        base = [c["model"][k] / c["sigma"][k]]
+        if c["biased"]:
+            base += [(c["run"][k] == r) / c["sigma"][k] for r in np.unique(c["run"][k])]
+        a = np.stack(base, axis=1)
+        out[k] -= a @ np.linalg.lstsq(a, out[k], rcond=None)[0]
+    return out
+
+
+def coordinate_of(term: str) -> str:
+    """The recorded coordinate a canonical term varies with: the first factor other than input or model."""
+    coords = [f[f.index("(") + 1:-1] if "(" in f else f for f in term.split("*")]
+    others = [x for x in coords if x not in ("input", "model")]
+    return others[0] if others else ("input" if "input" in coords else "model")
+
+
+class PySindy(Method):
+    """STLSQ on the baseline's standardised residuals, per sweep, over `dictionary`'s unit-norm columns: a
+    coefficient of the threshold explains a chi2 of threshold^2 (16 at the default)."""
+
+    name = "pysindy"
+
+    def __init__(self, preset: str = "paper-qmg", threshold: float = 4.0, alpha: float = 0.01):
+        self.preset, self.threshold, self.alpha = preset, threshold, alpha
+
+    def available(self):
+        try:
+            import pysindy  # noqa: F401
+        except ImportError:
+            return "pysindy is not installed (pip install -e '.[discovery]'): method pysindy skipped"
+        return None
+
+    def run(self, table) -> Outcome:
+        import pysindy as ps
+
+        import gyrojax as gj
+        from gyrojax._fitdata import fit_data
+        from gyrojax._parameters import DEFAULT_FREE
+
+        t0 = time.perf_counter()
+        data = fit_data(table)
+        full, candidates = _full_model(self.preset, data)
+        fit = gj.identify(full, data, free=DEFAULT_FREE, hold=candidates, progress=False)
+        explained, proposals = {}, {}
+        for s in fit.data.sweeps:
+            c = _coords(fit, s)
+            terms = dictionary(c)
+            names = list(terms)
+            x = _project_out_baseline(c, np.stack([terms[n] for n in names], axis=1))
+            norm = np.linalg.norm(x, axis=0)
+            keep = norm > 1e-9 * max(norm.max(), 1e-300)
+            x, names = x[:, keep] / norm[keep], [n for n, k in zip(names, keep) if k]
+            opt = ps.STLSQ(threshold=self.threshold, alpha=0.0)
+            opt.fit(x, c["residual"][:, None])
+            coef = np.ravel(opt.coef_)
+            nz = np.flatnonzero(coef)
+            explained[s] = float(np.sum((x[:, nz] @ coef[nz]) ** 2)) if nz.size else 0.0
+            # each term's own share: its coefficient squared (the columns have unit norm)
+            proposals[s] = sorted(((names[i], float(coef[i] ** 2)) for i in nz), key=lambda t: -t[1])
+        total = sum(explained.values())
+        chi2_left = fit.chi2_total - total
+        n_terms = sum(len(v) for v in proposals.values())
+        chi2_red = float(chi2_left / max(int(fit.dof_total) - n_terms, 1))
+        baseline_ok = float(fit.p_value_total) >= self.alpha
+        if total <= 0 or baseline_ok:
+            return Outcome([], "explained" if baseline_ok else "unexplained", set(), None, [],
+                           float(fit.chi2_red_total), time.perf_counter() - t0)
+        located = {s for s, v in explained.items() if v / total >= LOCATED_SHARE}
+        top_sweep = max(explained, key=explained.get)
+        formula = sorted({canonical(n) for s in located for n, _ in proposals[s]})
+        coordinate = coordinate_of(canonical(proposals[top_sweep][0][0]))
+        return Outcome([], "unexplained", located, coordinate, formula, chi2_red, time.perf_counter() - t0)
+
+
+METHODS = {"gyrojax": GyrojaxMethod, "refit_ftest": RefitFTest, "pysindy": PySindy}
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Scoring
+
+def effect_class(hidden: str | None) -> str:
+    if hidden is None:
+        return "null"
+    return "library" if HIDDEN[hidden].library is not None else "outside"
+
+
+def score(outcome: Outcome, info: dict) -> dict:
+    """One lot's scores: found (library effect confirmed; None unless library), wrong (a confirmation that is not
+    the hidden library effect), localised (None for null lots), formula (None unless the hidden effect has one),
+    explained (None unless null)."""
+    hidden = info.get("hidden")
+    cls = effect_class(hidden)
+    lib = HIDDEN[hidden].library if hidden else None
+    found = (lib in outcome.confirmed) if cls == "library" else None
+    wrong = any(c != lib for c in outcome.confirmed)
+    localised = None
+    if cls != "null":
+        expected = set(info["visible_sweeps"])
+        localised = bool(found) or (set(outcome.located) == expected and outcome.coordinate == info["coordinate"])
+    formula = None
+    if hidden and info.get("formula"):
+        formula = bool(set(info["formula"]) & set(outcome.formula))
+    explained = (outcome.verdict == "explained") if cls == "null" else None
+    return {"found": found, "wrong": wrong, "localised": localised, "formula": formula, "explained": explained}
+
+
+def _rate(values):
+    vals = [v for v in values if v is not None]
+    return (sum(bool(v) for v in vals), len(vals))
+
+
+def score_rows(records: list) -> list:
+    """Table rows per (method, class, snr): counts (k, n) of each score and medians of chi2_red and seconds."""
+    groups = {}
+    for r in records:
+        snr = "-" if r["class"] == "null" else r["snr"]
+        groups.setdefault((r["method"], r["class"], snr), []).append(r)
+    order = {"library": 0, "outside": 1, "null": 2}
+    rows = []
+    for (method, cls, snr), rs in sorted(groups.items(), key=lambda kv: (kv[0][0], order[kv[0][1]], kv[0][2])):
+        rows.append({"method": method, "class": cls, "snr": snr, "lots": len(rs),
+                     "found": _rate(x["scores"]["found"] for x in rs),
+                     "wrong": _rate(x["scores"]["wrong"] for x in rs),
+                     "localised": _rate(x["scores"]["localised"] for x in rs),
+                     "formula": _rate(x["scores"]["formula"] for x in rs),
+                     "explained": _rate(x["scores"]["explained"] for x in rs),
+                     "chi2_red": float(np.median([x["outcome"]["chi2_red"] for x in rs])),
+                     "seconds": float(np.median([x["outcome"]["seconds"] for x in rs]))})
+    return rows
+
+
+def _cell(kn):
+    k, n = kn
+    return "-" if n == 0 else f"{k}/{n} ({100.0 * k / n:.0f} %)"
+
+
+def markdown(rows: list) -> str:
+    lines = ["| method | class | SNR | lots | library effect found | wrong confirmation | localised | formula | "
+             "null explained | chi2_red (median) | s per lot (median) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['method']} | {r['class']} | {r['snr']} | {r['lots']} | {_cell(r['found'])} | "
+                     f"{_cell(r['wrong'])} | {_cell(r['localised'])} | {_cell(r['formula'])} | "
+                     f"{_cell(r['explained'])} | {r['chi2_red']:.3f} | {r['seconds']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+def _write_atomic(path, text):
+    tmp = path + ".tmp"
+    with open(tmp, "w") as fh:
+        fh.write(text)
+    os.replace(tmp, path)
+
+
+def _parse_seeds(text):
+    out = []
+    for part in text.split(","):
+        if "-" in part:
+            a, b = part.split("-")
+            out += list(range(int(a), int(b) + 1))
+        else:
+            out.append(int(part))
+    return out
+
+
+def _list(text, allowed, what):
+    items = [x for x in text.split(",") if x]
+    bad = [x for x in items if x not in allowed]
+    if bad:
+        raise SystemExit(f"--{what}: unknown {', '.join(bad)}; expected some of {', '.join(allowed)}.")
+    return items
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--methods", default="gyrojax,refit_ftest,pysindy")
+    p.add_argument("--snr", default="low,mid,high")
+    p.add_argument("--seeds", default="0-4")
+    p.add_argument("--designs", default="a,b")
+    p.add_argument("--effects", default="all", help="hidden effect names, 'all' (every one) ; null lots always run")
+    p.add_argument("--devices", type=int, default=6)
+    p.add_argument("--runs", type=int, default=2)
+    p.add_argument("--preset", default="paper-qmg", help="the preset every method starts from")
+    p.add_argument("--out", default="discovery_out")
+    p.add_argument("--quick", action="store_true", help="mid SNR, seed 0, design a, a handful of effects")
+    a = p.parse_args(argv)
+    if a.quick:
+        a.snr, a.seeds, a.designs, a.effects = "mid", "0", "a", ",".join(QUICK_EFFECTS)
+    methods = _list(a.methods, list(METHODS), "methods")
+    snrs = _list(a.snr, list(TARGET_CHI2), "snr")
+    designs = _list(a.designs, list(DESIGNS), "designs")
+    effects = list(HIDDEN) if a.effects == "all" else _list(a.effects, list(HIDDEN), "effects")
+    seeds = _parse_seeds(a.seeds)
+    os.makedirs(a.out, exist_ok=True)
+    runners = []
+    for m in methods:
+        inst = METHODS[m](preset=a.preset)
+        why = inst.available()
+        if why:
+            print(why, file=sys.stderr)
+        else:
+            runners.append(inst)
+    cases = [(d, s, None, "-") for d in designs for s in seeds]
+    cases += [(d, s, e, snr) for d in designs for s in seeds for snr in snrs for e in effects]
+    import jax
+
+    import gyrojax as gj
+
+    settings = {"methods": [m.name for m in runners], "snr": snrs, "seeds": seeds, "designs": designs,
+                "effects": effects, "devices": a.devices, "runs": a.runs, "preset": a.preset,
+                "target_chi2": TARGET_CHI2, "located_share": LOCATED_SHARE,
+                "versions": {"gyrojax": gj.__version__, "jax": jax.__version__, "numpy": np.__version__},
+                "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+                "command": " ".join(sys.argv)}
+    records, t_start, n_total = [], time.perf_counter(), len(cases) * len(runners)
+    for design, seed, hidden, snr in cases:
+        table, info = discovery_lot(hidden, snr="mid" if hidden is None else snr, design=design,
+                                    n_devices=a.devices, n_runs=a.runs, seed=seed)
+        for m in runners:
+            try:
+                out = m.run(table)
+            except Exception as exc:  # a method that fails on a lot is recorded as failing, never skipped silently
+                out = Outcome([], "failed", set(), None, [], math.nan, math.nan, note=f"{type(exc).__name__}: {exc}")
+            rec = {"method": m.name, "design": design, "seed": seed, "hidden": hidden, "snr": snr,
+                   "class": effect_class(hidden), "info": info,
+                   "outcome": {**dataclasses.asdict(out), "located": sorted(out.located)},
+                   "scores": score(out, info)}
+            records.append(rec)
+            done = len(records)
+            el = time.perf_counter() - t_start
+            print(f"[{done}/{n_total}] {m.name} design {design} seed {seed} {hidden or 'null'} {snr}: "
+                  f"{out.verdict}, confirmed {out.confirmed or '-'}, located {sorted(out.located) or '-'} "
+                  f"on {out.coordinate}, formula {out.formula or '-'}, chi2_red {out.chi2_red:.3f}, "
+                  f"{out.seconds:.1f} s; {rec['scores']} | ETA {el / done * (n_total - done) / 60:.1f} min",
+                  flush=True)
+            rows = score_rows(records)
+            _write_atomic(os.path.join(a.out, "discovery.json"),
+                          json.dumps({"settings": settings, "rows": rows, "records": records}, indent=1,
+                                     default=str))
+            _write_atomic(os.path.join(a.out, "discovery.md"), "# Discovery benchmark\n\n" + markdown(rows))
+    print(markdown(score_rows(records)))
+
+
+if __name__ == "__main__":
+    main()

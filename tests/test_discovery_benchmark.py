@@ -1,0 +1,168 @@
+"""The discovery benchmark (experiments/discovery_benchmark.py) and its generator (experiments/_discovery_lot.py):
+the generator is independent of gyrojax's models, its noise is as documented, each hidden effect changes only its
+declared sweeps, and the scores are right on hand-made outcomes."""
+
+import ast
+
+import numpy as np
+import pytest
+from _experiments import EXPERIMENTS, load_experiment
+
+
+lotgen = load_experiment("_discovery_lot")
+bench = load_experiment("discovery_benchmark")
+
+
+def test_generator_imports_no_gyrojax_physics():
+    tree = ast.parse((EXPERIMENTS / "_discovery_lot.py").read_text())
+    imported = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            imported += [(a.name, None) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            imported += [(node.module, a.name) for a in node.names]
+    for module, name in imported:
+        if module and module.split(".")[0] == "gyrojax":
+            # only the table packaging: gyrojax.Table and gyrojax.write_table, from the top level
+            assert module == "gyrojax" and name in ("Table", "write_table"), (module, name)
+    assert ("gyrojax", "Table") in imported
+    # and no attribute of gyrojax is reached any other way
+    assert "gj." not in (EXPERIMENTS / "_discovery_lot.py").read_text()
+
+
+@pytest.mark.parametrize("design", ["a", "b"])
+def test_null_lot_has_the_documented_noise(design):
+    for seed in range(3):
+        table, info = lotgen.discovery_lot(None, design=design, n_devices=3, n_runs=2, seed=seed)
+        chi2, n = lotgen.truth_chi2(table, 3, 2, seed, design)
+        assert n == len(table) == 3 * 2 * 3 * 22
+        assert abs(chi2 - n) < 4.0 * np.sqrt(2.0 * n), (seed, chi2, n)
+        assert info["hidden"] is None
+
+
+def test_designs_are_far_apart():
+    ta, _ = lotgen.discovery_lot(None, design="a", n_devices=2, n_runs=1, seed=0)
+    tb, _ = lotgen.discovery_lot(None, design="b", n_devices=2, n_runs=1, seed=0)
+    fa, fb = np.nanmean(ta.columns["drive_freq_hz"]), np.nanmean(tb.columns["drive_freq_hz"])
+    assert fb / fa == pytest.approx(2.0, rel=0.02)
+    ra = np.abs(ta.columns["output"][ta.columns["sweep"] == "rate_table"]).max()
+    rb = np.abs(tb.columns["output"][tb.columns["sweep"] == "rate_table"]).max()
+    assert rb / ra == pytest.approx(0.6, rel=0.05)
+
+
+def test_enough_hidden_effects_of_each_class():
+    lib = [h for h in lotgen.HIDDEN_LIST if h.library is not None]
+    out = [h for h in lotgen.HIDDEN_LIST if h.library is None]
+    assert len(lib) >= 12 and len(out) >= 12
+    import gyrojax as gj
+
+    assert {h.library for h in lib} <= set(gj.EFFECTS)
+    for h in lotgen.HIDDEN_LIST:
+        assert h.coordinate in ("input", "temperature_c", "time_s", "drive_freq_hz", "run", "device", "model")
+        assert h.sweeps <= set(lotgen.SWEEPS)
+
+
+@pytest.mark.parametrize("name", list(lotgen.HIDDEN))
+def test_hidden_effect_changes_only_its_sweeps(name):
+    null, _ = lotgen.discovery_lot(None, n_devices=3, n_runs=2, seed=4)
+    table, info = lotgen.discovery_lot(name, snr="mid", n_devices=3, n_runs=2, seed=4)
+    diff = np.asarray(table.columns["output"]) - np.asarray(null.columns["output"])
+    sweeps = table.columns["sweep"]
+    changed = {s for s in lotgen.SWEEPS if np.any(diff[sweeps == s] != 0)}
+    assert changed == set(lotgen.HIDDEN[name].sweeps)
+    assert set(info["visible_sweeps"]) <= changed
+    # its size is the one whose visible chi2 is the mid target
+    lot_rows = lotgen._rows(lotgen.DESIGNS["a"], 3, 2, np.random.default_rng(4))
+    lot = lotgen.Lot(lotgen.DESIGNS["a"], {k: lot_rows[k] for k in ("device", "run", "sweep", "input", "temperature_c",
+                                                                   "time_s", "drive_freq_hz")},
+                     lot_rows["dev"], lot_rows["sf"], lot_rows["full_scale"], lot_rows["dtdt"], lot_rows["phase"],
+                     lot_rows["clean"])
+    chi2, _ = lotgen.visible_chi2(lot, diff, lot_rows["sigma"])
+    assert chi2 == pytest.approx(lotgen.TARGET_CHI2["mid"], rel=1e-6)
+
+
+def test_generator_refuses_bad_arguments():
+    with pytest.raises(ValueError, match="unknown hidden effect 'nope'"):
+        lotgen.discovery_lot("nope")
+    with pytest.raises(ValueError, match="snr must be one of"):
+        lotgen.discovery_lot(None, snr="huge")
+    with pytest.raises(ValueError, match="design must be one of"):
+        lotgen.discovery_lot(None, design="z")
+
+
+def _info(name):
+    _, info = lotgen.discovery_lot(name, n_devices=2, n_runs=2, seed=0)
+    return info
+
+
+def test_scores_of_hand_made_outcomes():
+    O = bench.Outcome  # noqa: E741
+    lib = _info("zro_tempco")  # visible on rate_table and vcf_static, coordinate temperature_c
+    s = bench.score(O(["zro_tempco"], "explained", set(), None, [], 1.0), lib)
+    assert s == {"found": True, "wrong": False, "localised": True, "formula": False, "explained": None}
+    s = bench.score(O(["dac_inl"], "partly explained", {"rate_table"}, "input", ["lin(temperature_c)"], 1.2), lib)
+    assert s == {"found": False, "wrong": True, "localised": False, "formula": True, "explained": None}
+    s = bench.score(O([], "unexplained", {"rate_table", "vcf_static"}, "temperature_c", [], 1.2), lib)
+    assert s["localised"] is True and s["found"] is False and s["wrong"] is False
+    out = _info("vcf_gain_tempco")  # vcf_static alone
+    s = bench.score(O(["vref_drift"], "unexplained", {"rate_table", "vcf_static"}, "temperature_c",
+                      ["lin(temperature_c)*model"], 1.3), out)
+    assert s == {"found": None, "wrong": True, "localised": False, "formula": True, "explained": None}
+    s = bench.score(O([], "unexplained", {"vcf_static"}, "temperature_c", [], 1.3), out)
+    assert s["localised"] is True and s["wrong"] is False and s["formula"] is False
+    hyst = _info("gain_hysteresis")  # no formula
+    assert bench.score(O([], "unexplained", set(), None, ["sq(input)"], 1.3), hyst)["formula"] is None
+    null = _info(None)
+    assert bench.score(O([], "explained", set(), None, [], 1.0), null) == {
+        "found": None, "wrong": False, "localised": None, "formula": None, "explained": True}
+    assert bench.score(O(["zro_tempco"], "explained", set(), None, [], 1.0), null)["wrong"] is True
+
+
+def test_score_rows_count_and_median():
+    recs = [{"method": "m", "class": "null", "snr": "-", "scores": {"found": None, "wrong": w, "localised": None,
+                                                                     "formula": None, "explained": e},
+             "outcome": {"chi2_red": c, "seconds": 2.0}} for w, e, c in ((False, True, 1.0), (True, False, 3.0))]
+    (row,) = bench.score_rows(recs)
+    assert row["wrong"] == (1, 2) and row["explained"] == (1, 2) and row["found"] == (0, 0)
+    assert row["chi2_red"] == 2.0
+    assert "1/2 (50 %)" in bench.markdown([row])
+
+
+def test_read_diagnosis_today_and_later_fields():
+    today = {"selected": ["zro_tempco"], "verdict": "partly explained", "final": {"chi2_red": 1.31},
+             "discrepancy": [{"coordinate": "temperature_c", "sweeps": ["rate_table", "vcf_static"]}]}
+    r = bench.read_diagnosis(today)
+    assert r == {"confirmed": ["zro_tempco"], "verdict": "partly explained", "located": {"rate_table", "vcf_static"},
+                 "coordinate": "temperature_c", "formula": [], "chi2_red": 1.31}
+    later = {"selected": [], "verdict": "unexplained", "final": {"chi2_red": 1.4},
+             "discrepancy": [{"coordinate": "temperature_c", "sweeps": ["rate_table", "vcf_static"],
+                              "sweep_shares": {"vcf_static": 0.93, "rate_table": 0.07},
+                              "formula": {"terms": [{"name": "lin(temperature_c)*model"}, "lin(time_s)"]}}]}
+    r = bench.read_diagnosis(later)
+    assert r["located"] == {"vcf_static"} and r["formula"] == ["lin(temperature_c)*model", "lin(time_s)"]
+    top_level_formula = {"verdict": "explained", "discrepancy": [], "formula": {"terms": ["step(time_s)"]}}
+    r = bench.read_diagnosis(top_level_formula)
+    assert r["located"] == set() and r["coordinate"] is None and r["formula"] == ["step(time_s)"]
+    assert r["confirmed"] == [] and np.isnan(r["chi2_red"])
+
+
+def test_f_test_and_term_names():
+    assert bench.f_test_p(1000.0, 700.0, 6, 700) < 1e-10
+    assert bench.f_test_p(700.0, 699.5, 6, 700) > 0.5
+    assert bench.f_test_p(700.0, 710.0, 6, 700) == 1.0
+    assert bench.coordinate_of("lin(temperature_c)*model") == "temperature_c"
+    assert bench.coordinate_of("cube(input)") == "input"
+    assert bench.coordinate_of("lin(run)*model") == "run"
+    assert bench.canonical("step(time_s)@0.5") == "step(time_s)"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("hidden", [None, "zro_tempco"])
+def test_gyrojax_method_on_a_null_and_a_library_lot(hidden):
+    table, info = lotgen.discovery_lot(hidden, snr="high", n_devices=3, n_runs=2, seed=0)
+    out = bench.GyrojaxMethod().run(table)
+    s = bench.score(out, info)
+    if hidden is None:
+        assert out.verdict == "explained" and 0.8 < out.chi2_red < 1.25 and not s["wrong"]
+    else:
+        assert s["found"] and not s["wrong"]
