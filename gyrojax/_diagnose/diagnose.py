@@ -39,8 +39,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     - `max_effects`: stop after this many (0: only rank the candidates at the baseline, no refit).
     - `ambiguity`: |cos| between fingerprints above which two candidates are reported as ambiguous.
     - `min_typical_chi2`: a candidate whose typical-size fingerprint, after the baseline took up what it
-      could, changes the lot's chi2 by less than this (and whose score is not significant) is reported as
-      not testable on this data.
+      could, changes the lot's chi2 by less than this is not testable on this data, whatever its p-value
+      (`gyrojax.plan` applies the same rule, `gyrojax/_testability.py`).
     - `max_typical_multiple`: a candidate whose score implies a size beyond this many times its typical
       size is not confirmed (the reason says so).
     - `probes`: the generic shapes scored beside the candidates (`gyrojax.PROBES`).
@@ -100,13 +100,14 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     discrepancy, designs = score_probes(fit, probes, alpha=alpha)
     baseline_discrepancy, baseline_designs = discrepancy, designs
     def first_ranking(scores, threshold):
-        return scores, tuple(c.effect for c in scores if not c.testable or (
-            c.typical_chi2 < min_typical_chi2 and c.p_value >= threshold))
+        # one rule (gyrojax._testability): untestable is what score_candidates marks so, whatever its p-value
+        return scores, tuple(c.effect for c in scores if not c.testable)
 
     if remaining and max_effects == 0:  # rank at the baseline only
-        ranking0, untestable = first_ranking(score_candidates(fit, remaining), alpha / len(remaining))
+        ranking0, untestable = first_ranking(score_candidates(fit, remaining, min_typical_chi2=min_typical_chi2),
+                                             alpha / len(remaining))
     while remaining and len(selected) < max_effects:
-        scores = score_candidates(fit, remaining)
+        scores = score_candidates(fit, remaining, min_typical_chi2=min_typical_chi2)
         threshold = alpha / len(remaining)
         if ranking0 is None:
             ranking0, untestable = first_ranking(scores, threshold)
@@ -180,7 +181,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         ranking0 = ()
     # Which library effect has the shape of what is left: every candidate not selected, at the final fit.
     others = [c for c in candidates if c not in selected]
-    final_scores = score_candidates(fit, others) if others else ()
+    final_scores = score_candidates(fit, others, min_typical_chi2=min_typical_chi2) if others else ()
     baseline_discrepancy = with_library(baseline, baseline_discrepancy, baseline_designs, ranking0, rejected,
                                          max_typical_multiple, alpha)
     discrepancy = with_library(fit, discrepancy, designs, final_scores, rejected, max_typical_multiple, alpha)

@@ -10,6 +10,7 @@ from .._effects.registry import EFFECTS
 from .._fitdata import FitData
 from .._identify import Fit
 from .._probes import score_columns
+from .._testability import MIN_TYPICAL_CHI2, is_testable, separates
 from .columns import effect_columns, row_blocks
 
 
@@ -59,8 +60,10 @@ class CandidateScore:
 TYPICAL_RANK_TOL = 1e-4
 
 
-def score_candidates(fit: Fit, candidates, *, rank_tol: float = TYPICAL_RANK_TOL) -> tuple[CandidateScore, ...]:
-    """Score test of each candidate (effect name held at zero in `fit.model`) against the fitted model."""
+def score_candidates(fit: Fit, candidates, *, rank_tol: float = TYPICAL_RANK_TOL,
+                     min_typical_chi2: float = MIN_TYPICAL_CHI2) -> tuple[CandidateScore, ...]:
+    """Score test of each candidate (effect name held at zero in `fit.model`) against the fitted model. A
+    candidate is testable by `gyrojax._testability`'s rule: its typical size leaves chi2 `min_typical_chi2`."""
     jac = np.asarray(fit.jacobian)
     res = np.asarray(fit.residual_vector)
     free = np.asarray(fit.free)
@@ -83,7 +86,8 @@ def score_candidates(fit: Fit, candidates, *, rank_tol: float = TYPICAL_RANK_TOL
         scored = score_columns(jac[:, :, free], jac[:, :, cols], res, rank_tol=rank_tol)
         order = np.argsort(-share)
         absorbed_by = tuple(names_free[k] for k in order if share[k] > 0.1 * max(np.sum(share), 0.0))
-        out.append(CandidateScore(name, scored.statistic, scored.df, scored.p_value, scored.df > 0,
+        testable = scored.df > 0 and is_testable(scored.information, min_typical_chi2)
+        out.append(CandidateScore(name, scored.statistic, scored.df, scored.p_value, testable,
                                   scored.fingerprint, EFFECTS[name].description, scored.information, visible,
                                   absorbed_by))
     return tuple(sorted(out, key=lambda c: (not c.testable, c.p_value, -c.statistic)))
@@ -95,9 +99,12 @@ def cosine(a, b):
 
 
 def separating_sweep(a, b, data: FitData, ambiguity):
+    """The sweep of `data` on whose rows the fingerprints `a` and `b` (at their fitted sizes) differ most, among
+    those that separate them by `gyrojax._testability.separates` (what one leaves after the other is
+    testable); None when no sweep does."""
     best, best_cos = None, ambiguity
     for sweep, i, j in row_blocks(data):
         c = abs(cosine(a[:, i:j], b[:, i:j]))
-        if (np.linalg.norm(a[:, i:j]) > 0 or np.linalg.norm(b[:, i:j]) > 0) and c < best_cos:
+        if separates(a[:, i:j], b[:, i:j]) and c < best_cos:
             best, best_cos = sweep, c
     return best
