@@ -68,47 +68,84 @@ def residuals(fit, sweep: str = "rate_table", *, ax=None, device: int | None = N
 
 
 def ranking(scores, *, alpha: float = 0.01, max_typical_multiple: float = 100.0, ax=None):
-    """Candidate effects ranked by the p-value of their score test (-log10 p: longer is more significant),
-    the Bonferroni threshold drawn; a significant candidate that would need more than `max_typical_multiple`
-    times its typical size is coloured apart (the diagnosis does not confirm it); candidates the data cannot
-    test are listed apart."""
+    """Candidate effects ranked by their score statistic S on a log axis (longer is more significant; p
+    underflows to 0 for strong candidates, S does not), each bar with its own significance threshold (the chi2
+    quantile of its df at the Bonferroni level, a black tick); a significant candidate that would need more
+    than `max_typical_multiple` times its typical size is coloured apart (the diagnosis does not confirm it);
+    candidates the data cannot test are listed apart."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    from ._stats import chi2_isf
+
     ax = _ax(ax)
     testable = [c for c in scores if c.testable]
     untestable = [c for c in scores if not c.testable]
     cut = alpha / max(len(scores), 1)
-    strength = [min(-math.log10(max(c.p_value, 1e-300)), 300.0) for c in testable]
+    floor = 1e-2  # S of 0 (nothing to explain) drawn at the axis' floor
+    strength = [max(float(c.statistic), floor) for c in testable]
+    limits = [chi2_isf(cut, max(int(c.df), 1)) for c in testable]
 
     def plausible(c):
         return getattr(c, "implied_multiple", 0.0) <= max_typical_multiple
 
     colours = [(PALETTE[1] if plausible(c) else PALETTE[4]) if c.p_value < cut else PALETTE[0] for c in testable]
-    bars = ax.barh([c.effect for c in testable][::-1], strength[::-1], color=colours[::-1])
-    ax.axvline(-math.log10(cut), color="k", ls="--", lw=0.8, label=f"significant: p < {alpha:g} / {len(scores)}")
-    # which colour means what, for the classes present
-    from matplotlib.patches import Patch
-
-    handles = [ax.get_legend_handles_labels()[0][0]]
+    labels = [c.effect for c in testable][::-1]
+    bars = ax.barh(labels, strength[::-1], color=colours[::-1])
+    ax.set_xscale("log")
+    lo = min(strength + limits + [1.0]) / 3.0
+    hi = max(strength + limits) * 3.0
+    ax.set_xlim(lo, hi)
+    for bar, lim in zip(bars, limits[::-1]):
+        y = bar.get_y()
+        ax.plot([lim, lim], [y - 0.08, y + bar.get_height() + 0.08], color="k", lw=1.2)
+    handles = [Line2D([], [], color="k", lw=1.2, label=f"significance threshold (p = {alpha:g} / {len(scores)})")]
     for colour, label in ((PALETTE[1], "significant, at a plausible size"),
                           (PALETTE[4], f"significant only beyond {max_typical_multiple:g}x its typical size"),
                           (PALETTE[0], "not significant")):
         if colour in colours:
             handles.append(Patch(color=colour, label=label))
-    # p underflows for strong candidates: the score S and the size it implies tell them apart
+    span = math.log(hi / lo)
     for bar, c in zip(bars, testable[::-1]):
         size = getattr(c, "implied_multiple", math.inf)
-        text = f"S = {c.statistic:.3g}" + (f", ~{size:.3g}x typical" if math.isfinite(size) else "")
-        inside = bar.get_width() > 0.5 * ax.get_xlim()[1]
-        ax.annotate(text, (bar.get_width(), bar.get_y() + bar.get_height() / 2), xytext=(-4 if inside else 4, 0),
+        text = f"p = {c.p_value:.2g}" + (f", ~{size:.3g}x typical" if math.isfinite(size) else "")
+        width = bar.get_width()
+        inside = math.log(width / lo) > 0.6 * span
+        ax.annotate(text, (width, bar.get_y() + bar.get_height() / 2), xytext=(-4 if inside else 4, 0),
                     textcoords="offset points", ha="right" if inside else "left", va="center", fontsize=7,
                     color="white" if inside else "black")
-    capped = any(s >= 300.0 for s in strength)
-    ax.set_xlabel("-log10 p of the score test (no refit)" + ("; p < 1e-300 drawn at 300" if capped else ""))
-    ax.set_title("which effect is missing?", fontsize=9)
+    ax.set_xlabel(f"score statistic S (chi2 units, log scale; S < {floor:g} drawn at {floor:g})"
+                  if min(strength, default=1.0) <= floor else "score statistic S (chi2 units, log scale)")
+    ax.set_title("which effect is missing? (score test at the baseline, no refit)", fontsize=9)
     if untestable:
-        ax.text(1.02, 0.0, "not testable on this data:\n" + "\n".join(c.effect for c in untestable),
-                transform=ax.transAxes, fontsize=7, va="bottom")
-    ax.legend(handles=handles, fontsize=7, loc="lower right")
+        ax.text(1.02, 1.0, "not testable on this data:\n" + "\n".join(c.effect for c in untestable),
+                transform=ax.transAxes, fontsize=7, va="top")
+    # below the axes, where it covers no bar
+    ax.legend(handles=handles, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False)
     return ax
+
+
+def _log_or_plain(ax, values):
+    """A log axis for values spanning a decade or more; else a linear one with plain tick labels and limits
+    that show the values (a log axis over a tiny range labels every tick in scientific notation)."""
+    from matplotlib.ticker import ScalarFormatter
+
+    v = np.asarray([x for x in values if np.isfinite(x)], dtype=float)
+    if v.size and np.all(v > 0) and v.max() / v.min() >= 10.0:
+        ax.set_yscale("log")
+        return
+    fmt = ScalarFormatter(useOffset=False)
+    fmt.set_scientific(False)
+    ax.yaxis.set_major_formatter(fmt)
+    if v.size:
+        top = float(v.max())
+        ax.set_ylim(min(0.0, float(v.min()) * 1.1), top * 1.15 if top > 0 else 1.0)
+
+
+def _wrap(text: str, width: int = 70) -> str:
+    import textwrap
+
+    return "\n".join(textwrap.wrap(text, width)) or text
 
 
 def error_fall(diagnosis, *, axes=None):
@@ -121,16 +158,19 @@ def error_fall(diagnosis, *, axes=None):
     labels = ["baseline"] + [f"+ {s.effect}" for s in diagnosis.steps]
     chi2 = [f.chi2_red_total for f in diagnosis.fits]
     nl = [nonlinearity_residual_ppm(f) for f in diagnosis.fits]
-    left.semilogy(labels, chi2, "o-", color=PALETTE[0])
+    left.plot(labels, chi2, "o-", color=PALETTE[0])
     left.axhline(1.0, color="k", ls="--", lw=0.8, label="noise level (chi2_red = 1)")
+    _log_or_plain(left, chi2 + [1.0])
     left.set_ylabel("reduced chi2")
     left.legend(fontsize=7)
-    right.semilogy(labels, nl, "s-", color=PALETTE[1])
+    right.plot(labels, nl, "s-", color=PALETTE[1])
+    _log_or_plain(right, nl)
     right.set_ylabel("nonlinearity residual (ppm of full scale)")
     left_text = diagnosis.verdict
     if diagnosis.remaining:
         left_text += f": {diagnosis.remaining[0].shape} is left ({100 * diagnosis.remaining[0].share:.0f} %)"
-    left.set_title(f"watch the error fall ({left_text})", fontsize=8)
+    # wrapped: a long verdict must not run off the figure
+    left.set_title(_wrap(f"watch the error fall ({left_text})", 60), fontsize=8)
     for a in axes:
         a.tick_params(axis="x", labelsize=7, rotation=15)
         a.set_xlabel("diagnosis step (effect added)")
@@ -163,14 +203,24 @@ def fingerprints(diagnosis, *, top: int = 3, device: int | None = None, axes=Non
         _, axes = plt.subplots(len(devices), 1, figsize=(9.6, 2.4 * len(devices)), squeeze=False)
         axes = axes[:, 0]
     rows = sum(int(np.prod(fit.data.blocks[s].inputs.shape[1:])) for s in fit.data.sweeps)
+    # a device's real points: a run shorter than the longest is padded, and padding is not data
+    real = np.concatenate([np.asarray(fit.data.blocks[s].mask).reshape(res.shape[0], -1) for s in fit.data.sweeps],
+                          axis=1)
+    # one look per candidate: a wide pale line under a dashed one under a dotted one with markers, so that a
+    # fingerprint lying on another stays visible
+    looks = ({"lw": 3.0, "ls": "-", "alpha": 0.55}, {"lw": 1.4, "ls": "--"}, {"lw": 1.0, "ls": ":", "marker": "x",
+                                                                                "ms": 3})
     for ax, d in zip(axes, devices):
-        ax.plot(res[d][:rows], ".", color="0.3", ms=3, label=f"baseline residual ({fit.devices[d]})")
+        keep = real[d][:rows]
+        x = np.arange(rows)
+        ax.plot(x[keep], res[d][:rows][keep], ".", color="0.3", ms=3, label=f"baseline residual ({fit.devices[d]})")
         for i, c in enumerate([c for c in diagnosis.ranking if c.testable][:top]):
-            ax.plot(c.fingerprint[d][:rows], lw=1, color=_colour(i), label=f"{c.effect} (predicted)")
+            y = np.where(keep, np.asarray(c.fingerprint[d][:rows], dtype=float), np.nan)
+            ax.plot(x, y, color=_colour(i), label=f"{c.effect} (predicted)", **looks[i % len(looks)])
         _boundaries(ax, fit.data, rows)
         ax.set_ylabel("standardised\nresidual")
-        ax.legend(fontsize=6, loc="upper right")
-    axes[-1].set_xlabel("point (sweeps in order; dotted: run boundaries; padding points are zero)")
+        ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # beside the panel, over no point
+    axes[-1].set_xlabel("point (sweeps in order; dotted: run boundaries; points a run lacks are left out)")
     return axes
 
 
@@ -261,6 +311,7 @@ def save(fig_or_ax, path):
     fig = fig_or_ax.figure if hasattr(fig_or_ax, "figure") and not isinstance(fig_or_ax, plt.Figure) else fig_or_ax
     buf = io.BytesIO()
     fig.tight_layout()
-    fig.savefig(buf, format="png", dpi=110)
+    # "tight": titles, legends and notes placed outside the axes are kept, not clipped
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
     plt.close(fig)
     atomic_write_bytes(path, buf.getvalue())

@@ -35,11 +35,13 @@ from .._diagnose import baseline_model, candidate_effects, full_key
 from .._effects.registry import EFFECTS
 from .._fitdata import FitData, fit_data
 from .._identify import Fit, identify
+from .._identify.fit import p_text
 from .._identify.problem import sf_temperature
 from .._noise import RateNoise
 from .._parameters import DEFAULT_FREE, Model, as_model, zero_effect
 from .._progress import as_progress
 from .._sweeps.protocol import Protocol
+from .._testability import MIN_TYPICAL_CHI2, is_testable
 from .experiment import (
     READS,
     CandidateExperiment,
@@ -55,7 +57,21 @@ from .simulate import simulate_runs
 
 SF_HELD_TOL = 0.1
 """A design determines the scale factor when the part of its gradient along directions the design cannot fix
-is below this many standard errors (identification's own test)."""
+is below this many standard errors (identification's own test). On the data given, whether the scale factor
+is determined is identification's own verdict: the baseline fit's status."""
+
+MAX_BUDGET_MIN = 7 * 24 * 60.0
+"""min: the longest scale-factor design the planner makes, a week of rate-table time per device. A longer
+budget is refused: the design is many short +/-200 deg/s runs, and over weeks the device's drift, the table's
+own calibration and the lot's schedule, none of which the model holds, decide the scale factor."""
+
+LONG_BUDGET_MIN = 24 * 60.0
+"""min: a design longer than a day of rate-table time per device is carried out with a note saying so (and
+what it is for a lot measured on one table)."""
+
+MIN_NONLINEARITY_RATES = 3
+"""Distinct rates below which a design measures no nonlinearity: a straight line through two rates leaves no
+residual (seed 000's nonlinearity is the largest residual from the least-squares line)."""
 
 MAX_EXACT_COMBINATIONS = 4096
 """Above this many combinations of runs (`(max_repeats + 1) ** experiments`), the cheapest set is searched
@@ -87,7 +103,11 @@ class Recommendation(eqx.Module):
 
 class CandidatePlan(eqx.Module):
     """What one candidate effect needs: its test on the data given, what one run of each experiment adds,
-    and the cheapest set of runs that makes it testable."""
+    and the cheapest set of runs with which its test reaches the target power.
+
+    `testable` is `gyrojax._testability`'s rule, the diagnosis's own: a typical size leaves an expected chi2
+    of at least `MIN_TYPICAL_CHI2` on the data given. `detected` is the stronger demand the plan works to: the
+    test's power at the typical size reaches `target_power`; runs are recommended until it does."""
 
     effect: str = eqx.field(static=True)
     df: int = eqx.field(static=True)
@@ -100,13 +120,15 @@ class CandidatePlan(eqx.Module):
     recommended_chi2: float = eqx.field(static=True)
     recommended_power: float = eqx.field(static=True)
     reason: str = eqx.field(static=True)
+    detected: bool = eqx.field(static=True, default=False)  # power at the typical size reaches the target
 
     @property
     def minutes(self) -> float:
         return float(sum(r.minutes for r in self.recommended))
 
     def to_json(self) -> dict:
-        return {"testable": self.testable, "df": self.df, "expected_chi2": self.expected_chi2, "power": self.power,
+        return {"testable": self.testable, "detected": self.detected, "df": self.df,
+                "expected_chi2": self.expected_chi2, "power": self.power,
                 "ambiguous_with": list(self.ambiguous_with),
                 "experiments": {name: {"minutes": m, "expected_chi2": lam, "power": p,
                                        "chi2_per_minute": (lam - self.expected_chi2) / m}
@@ -131,8 +153,11 @@ class ScaleFactorDesign(eqx.Module):
     seed000_runs: int = eqx.field(static=True)
     seed000_minutes: float = eqx.field(static=True)
     seed000_stderr: tuple = eqx.field(static=True)
-    data_stderr: tuple = eqx.field(static=True)  # on the data given
+    data_stderr: tuple = eqx.field(static=True)  # on the data given (NaN where identify does not determine it)
     scale_factor: tuple = eqx.field(static=True)
+    # identification's reason, per device, where the data given do not determine the scale factor ("" where
+    # they do)
+    data_not_determined: tuple = eqx.field(static=True, default=())
 
     @property
     def ratio(self) -> float:
@@ -151,7 +176,10 @@ class ScaleFactorDesign(eqx.Module):
                                                          "minutes": self.seed000_minutes,
                                                          "stderr": list(self.seed000_stderr)},
                 "ratio": self.ratio, "data_stderr": list(self.data_stderr),
-                "scale_factor": list(self.scale_factor), "unit": "LSB/(deg/s)"}
+                "data_not_determined": [w or None for w in self.data_not_determined],
+                "scale_factor": [math.nan if w else v for v, w in
+                                 zip(self.scale_factor, self.data_not_determined or ("",) * len(self.scale_factor))],
+                "unit": "LSB/(deg/s)"}
 
 
 class Plan(eqx.Module):
@@ -167,6 +195,7 @@ class Plan(eqx.Module):
     max_repeats: int = eqx.field(static=True)
     devices: tuple = eqx.field(static=True)
     search: str = eqx.field(static=True, default="exact")
+    warnings: tuple = eqx.field(static=True, default=())  # what the reader must know before acting on it
 
     def candidate(self, name: str) -> CandidatePlan:
         for c in self.candidates:
@@ -175,13 +204,11 @@ class Plan(eqx.Module):
         raise ValueError(f"no candidate {name!r} in this plan; it has {', '.join(c.effect for c in self.candidates)}.")
 
     def runs(self) -> dict:
-        """The runs to add: the union of the experiments recommended for the untestable candidates, per
-        experiment name `(experiment, runs, candidates)`: the most runs any candidate asks for, and the
-        candidates asking (in the plan's order)."""
+        """The runs to add: the union of the experiments recommended for the candidates whose test does not
+        reach the target power on the data given, per experiment name `(experiment, runs, candidates)`: the
+        most runs any candidate asks for, and the candidates asking (in the plan's order)."""
         out = {}
         for c in self.candidates:
-            if c.testable:
-                continue
             for r in c.recommended:
                 e, k, who = out.get(r.experiment.name, (r.experiment, 0, ()))
                 out[r.experiment.name] = (e, max(k, r.runs), who + (c.effect,))
@@ -212,17 +239,20 @@ class Plan(eqx.Module):
                 "scale_factor": None if self.scale_factor is None else self.scale_factor.to_json(),
                 "experiments": {e.name: e.to_json() for e in self.experiments},
                 "alpha": self.alpha, "target_power": self.target_power, "max_repeats": self.max_repeats,
-                "search": self.search,
+                "search": self.search, "warnings": list(self.warnings), "min_typical_chi2": MIN_TYPICAL_CHI2,
                 "devices": list(self.devices)})
 
     def summary(self) -> str:
-        lines = [f"candidate effects (expected chi2 of a typical-size effect; power at alpha = {self.alpha:g}, "
-                 f"target {self.target_power:g}; {len(self.devices)} device(s)):"]
+        lines = [f"warning: {w}" for w in self.warnings]
+        lines += [f"candidate effects (expected chi2 of a typical-size effect: testable at >= {MIN_TYPICAL_CHI2:g}, "
+                  f"as diagnose rules; detected at power {self.target_power:g}, alpha = {self.alpha:g}; "
+                  f"{len(self.devices)} device(s)):"]
         for c in self.candidates:
             amb = f", ambiguous with {', '.join(c.ambiguous_with)}" if c.ambiguous_with else ""
-            lines.append(f"  {c.effect:<20} now: chi2 {c.expected_chi2:10.3g}, power {c.power:.2f}{amb}"
-                         + (" -> testable" if c.testable else ""))
-            if c.testable:
+            state = (" -> detected" if c.detected else " -> testable, below the target power" if c.testable
+                     else " -> not testable")
+            lines.append(f"  {c.effect:<20} now: chi2 {c.expected_chi2:10.3g}, power {c.power:.2f}{amb}{state}")
+            if c.detected:
                 continue
             best = max(c.per_experiment, key=lambda x: (x[2] - c.expected_chi2) / x[1])
             lines.append(f"  {'':<20} best per minute: {best[0]} (+{(best[2] - c.expected_chi2) / best[1]:.3g} "
@@ -240,12 +270,29 @@ class Plan(eqx.Module):
         ref = float(np.mean(s.seed000_stderr))
         lines += [f"scale factor in {s.budget_min:g} min (per device, LSB per deg/s, mean over the lot; point "
                   "noise at the data's output_sigma, neighbours sharing the bias wander):",
-                  f"  on the data given: stderr {np.mean(s.data_stderr):.4g} (SF {np.mean(s.scale_factor):.6g})",
+                  "  on the data given: " + _data_sf_text(s, self.devices),
                   f"  seed 000's 22 rates x {s.seed000_runs} run(s) ({s.seed000_minutes:.0f} min): stderr {ref:.4g}",
                   f"  design: rates {list(s.rates_dps)} x {s.rate_runs} run(s)"
                   + (f" + VCF at {list(s.vcf_rates_dps)} deg/s x {s.vcf_runs} run(s)" if s.vcf_runs else "")
                   + f" ({s.minutes:.0f} min): stderr {mean:.4g}, {s.ratio:.3g} x seed 000's"]
         return "\n".join(lines)
+
+
+def _data_sf_text(s: ScaleFactorDesign, devices) -> str:
+    """The scale factor on the data given, in identification's terms: its stderr where the data determine
+    it, else that they do not, and why (identify's reason)."""
+    undetermined = [(d, w) for d, w in zip(devices, s.data_not_determined) if w]
+    ok = [k for k, w in enumerate(s.data_not_determined or ("",) * len(devices)) if not w]
+    text = ""
+    if ok:
+        se, sf = np.mean([s.data_stderr[k] for k in ok]), np.mean([s.scale_factor[k] for k in ok])
+        some = f", {len(ok)} of {len(devices)} devices" if undetermined else ""
+        text = f"stderr {se:.4g} (SF {sf:.6g}{some})"
+    if undetermined:
+        d, why = undetermined[0]
+        text += ("; " if text else "") + (f"SF not determined by the data on {len(undetermined)} of {len(devices)} "
+                                          f"device(s), as identify rules (e.g. {d}: {why})")
+    return text
 
 
 def _finite(obj):
@@ -441,6 +488,11 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     if not (isinstance(budget_min, (int, float)) and math.isfinite(budget_min) and budget_min >= seed_run_min):
         raise ValueError(f"budget_min must be at least one run of seed 000's protocol ({seed_run_min:g} min), got "
                          f"{budget_min!r}.")
+    if budget_min > MAX_BUDGET_MIN:
+        raise ValueError(f"budget_min {budget_min:.6g} min is {_duration(budget_min)} of rate-table time per device; "
+                         f"the planner designs at most {MAX_BUDGET_MIN:g} min ({_duration(MAX_BUDGET_MIN)}): over "
+                         "longer, drift, the table's calibration and the schedule decide the scale factor, not the "
+                         "noise the design averages down.")
     if data is not None and not isinstance(data, (Table, FitData)):
         raise TypeError(f"data must be a gyrojax.Table or FitData, got {type(data).__name__}.")
     say = as_progress(progress, "gyrojax.plan")
@@ -540,10 +592,11 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
             counts = tuple(1 if i == j else 0 for i in range(len(experiments)))
             lj = lam(counts)
             per.append((e.name, e.minutes, lj, power(lj, df, alpha)))
-        testable = p_now >= target_power
+        testable = is_testable(now)  # the diagnosis's rule (gyrojax/_testability.py)
+        detected = p_now >= target_power
         recommended, rec_chi2, rec_power, reason = (), now, p_now, ""
-        if testable:
-            reason = "testable on the data given"
+        if detected:
+            reason = f"detected on the data given (power {p_now:.2f} >= {target_power:g})"
         else:
             found = None
             if exact:
@@ -567,9 +620,14 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
                         found = (counts, lc)
             if found is None:
                 top = lam((max_repeats,) * len(experiments))
-                reason = (f"no combination of up to {max_repeats} runs of {', '.join(names)} makes it testable: a "
-                          f"typical size leaves chi2 {top:.3g} with all of them, {need:.3g} is needed for power "
-                          f"{target_power:g}; {EFFECTS[c].revealed_by or 'no measurement named'}")
+                # What the effect's own text names is not offered where these runs include it and it did not help.
+                hidden = (f"with {', '.join(amb)} free (ambiguous: they take what it leaves)" if amb else
+                          "after the baseline took its share")
+                reason = (f"no combination of up to {max_repeats} runs of {', '.join(names)} brings it to power "
+                          f"{target_power:g}: a typical size leaves chi2 {top:.3g} with all of them {hidden}, "
+                          f"{need:.3g} is needed" + ("" if is_testable(top) else
+                                                     f" (below {MIN_TYPICAL_CHI2:g}: not testable)")
+                          + f"; what would reveal it beyond these: {EFFECTS[c].revealed_by or 'no measurement named'}")
             else:
                 counts, rec_chi2 = found
                 rec_power = power(rec_chi2, df, alpha)
@@ -582,14 +640,55 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
                 recommended = tuple(recs)
                 reason = "cheapest combination (exact search)" if exact else "greedy search (most chi2 per minute)"
         plans.append(CandidatePlan(c, df, now, p_now, testable, amb, tuple(per), recommended, rec_chi2, rec_power,
-                                   reason))
-        say(f"{c}: now chi2 {now:.3g} (power {p_now:.2f})" + ("" if testable else (
+                                   reason, detected))
+        say(f"{c}: now chi2 {now:.3g} (power {p_now:.2f})" + ("" if detected else (
             f"; add {' + '.join(f'{r.runs} x {r.experiment.name}' for r in recommended)}" if recommended
             else "; not reachable with these experiments")))
     design = None if not scale_factor else _sf_design(fit, jac0, g, sf, all_exps, jac_e, noise, pool, budget_min,
                                                       protocol, identifiability_threshold, say)
+    warnings = _warnings(fit, design, len(fit.devices))
+    for w in warnings:
+        say(f"warning: {w}")
     return Plan(tuple(plans), design, experiments, fit, float(alpha), float(target_power), max_repeats, fit.devices,
-                search)
+                search, warnings)
+
+
+def _duration(minutes: float) -> str:
+    """`minutes` in the largest unit that reads well: '3.2 h', '7 days', '1.9e+03 years'."""
+    if minutes < 120:
+        return f"{minutes:.3g} min"
+    if minutes < 2 * 24 * 60:
+        return f"{minutes / 60:.3g} h"
+    if minutes < 2 * 365.25 * 24 * 60:
+        return f"{minutes / (24 * 60):.3g} days"
+    return f"{minutes / (365.25 * 24 * 60):.3g} years"
+
+
+def _warnings(fit: Fit, design, n_dev: int) -> tuple:
+    """What the reader must know before acting on the plan: a baseline the data reject (the Jacobians are a
+    model's that does not describe the data), a design that measures no nonlinearity, a design longer than a
+    day of table time."""
+    out = []
+    rejected = [d for d, st in zip(fit.devices, fit.status) if st == "model rejected"]
+    if rejected:
+        p = np.asarray(fit.p_value, dtype=float)
+        worst = int(np.nanargmin(np.where(np.isfinite(p), p, np.inf))) if np.any(np.isfinite(p)) else 0
+        out.append(f"the data reject the model this plan is made from on {len(rejected)} of {n_dev} device(s) "
+                   f"(e.g. {fit.devices[worst]}: chi2_red {float(np.asarray(fit.chi2_red)[worst]):.4g}, "
+                   f"{p_text(float(p[worst]))}): its expected chi2 and standard errors are those of a model that "
+                   "does not describe the data. Diagnose first (gyrojax diagnose) and plan from the diagnosis's "
+                   "final fit (--fit, or plan(fit=d.final))")
+    if design is not None:
+        if len(set(design.rates_dps)) < MIN_NONLINEARITY_RATES:
+            out.append(f"the scale-factor design's rates {list(design.rates_dps)} deg/s carry no nonlinearity "
+                       f"information: a straight line through {len(set(design.rates_dps))} rate(s) leaves no "
+                       f"residual (at least {MIN_NONLINEARITY_RATES} are needed, seed 000 uses 22). Use it for the "
+                       "scale factor only; measure the nonlinearity with seed 000's rates")
+        if design.minutes > LONG_BUDGET_MIN:
+            out.append(f"the scale-factor design takes {design.minutes:.0f} min ({_duration(design.minutes)}) of "
+                       f"rate-table time per device" + (f", {_duration(design.minutes * n_dev)} for the "
+                                                        f"{n_dev} devices on one table" if n_dev > 1 else ""))
+    return tuple(out)
 
 
 def _columns(fit: Fit):
@@ -692,17 +791,23 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
     _, sets, runs, used = best
     stderr = [math.sqrt(per_device(sets, runs, d)) for d in range(n_dev)]
     data_free = [int(i) for i in np.nonzero(np.asarray(fit.free))[0]]
-    data_se = []
+    data_se, undetermined = [], []
     for d in range(n_dev):
         info = jac0[d].T @ jac0[d]
+        # whether the data determine it is identification's verdict (the baseline's status), not the planner's
+        if fit.status[d] == "not determined":
+            data_se.append(math.nan)
+            undetermined.append(fit.warnings[d][0] if fit.warnings[d] else "identify: not determined")
+            continue
         data_se.append(math.sqrt(_sf_variance(info, g[d], data_free, 0.0)) if data_free else math.inf)
+        undetermined.append("")
     rates = tuple(float(levels["rate_table"][i]) for i in sets["rate_table"])
     vcf = tuple(float(levels["vcf_static"][i]) for i in sets.get("vcf_static", ())) if runs.get("vcf_static") else ()
     return ScaleFactorDesign(float(budget), rates, runs["rate_table"], vcf, runs.get("vcf_static", 0), float(used),
                              tuple(stderr), seed_runs,
                              seed_runs * (protocol.warmup_s + len(protocol.rates_dps) * protocol.dwell_s) / 60.0,
                              tuple(math.sqrt(v) for v in seed_var), tuple(data_se),
-                             tuple(float(x) for x in np.asarray(sf)))
+                             tuple(float(x) for x in np.asarray(sf)), tuple(undetermined))
 
 
 def _sqrt_info(info):
