@@ -290,7 +290,7 @@ PROBES: tuple[AbstractProbe, ...] = (
 """The generic shapes every diagnosis scores beside the candidate effects."""
 
 
-def _standardised(fit, sweep, g):
+def standardised(fit, sweep, g):
     """A change of the predictions (device, run, point, k) as columns of the standardised residuals (what
     the data carry beyond the model per unit coefficient), with each run's bias projected out as the fit
     does for biased sweeps."""
@@ -316,7 +316,7 @@ def design(fit, probe: AbstractProbe) -> np.ndarray:
         if g is None:
             parts.append(None)
             continue
-        cols = _standardised(fit, sweep, g)
+        cols = standardised(fit, sweep, g)
         k = cols.shape[-1] if k is None else k
         parts.append(cols.reshape(n, rows, -1))
     total = np.asarray(fit.residual_vector).shape[1]

@@ -1,0 +1,228 @@
+r"""The missing term's formula: a sparse closed form over a dictionary of terms in the recorded coordinates.
+
+The dictionary holds, for the sweeps a misfit was located on (each alone and together), terms of one coordinate
+(`lin`, `sq`, `cube` of its distance from a reference; `abs` and `sign` of the input; a `step` and an exponential
+`relax`ation along the time since power-on; a `periodic` error along the input), each as an offset of the output
+and as a gain (times the model's prediction, written `*model`), the products of the temperature and the time with
+the input, and a gain per run. Each term has one coefficient shared by the lot.
+
+Forward selection with the score test: at each step the term that removes the most chi2 beyond the fit's own
+columns and the terms already chosen is kept if its p-value is below `alpha` over the number of terms in the
+dictionary (Bonferroni: the family-wise rate of a spurious term is at most `alpha`), up to `MAX_TERMS`. The
+chosen terms are then fitted together; their coefficients come with standard errors from the projected
+information, and `share` is the part of the fit's excess chi2 the formula removes.
+
+Canonical names: `basis(coordinate)` with basis in lin, sq, cube, abs, sign, step, relax, periodic; a gain is
+`basis(coordinate)*model`; products are joined by `*` (`lin(temperature_c)*lin(input)`); `per_run*model` is a
+gain per run. References: input 0, temperature 25 C, time 0 s, drive frequency the device's mean.
+"""
+
+import dataclasses
+
+import numpy as np
+
+from .._sweeps.registry import sweep_kind
+from .locate import coordinates
+from .space import ResidualSpace
+
+
+MAX_TERMS = 3
+REFERENCE_C = 25.0  # deg C: where a temperature term is zero (the presets' reference temperature)
+RELAX_TAUS_S = (60.0, 300.0, 900.0, 3600.0)  # time constants tried for an exponential relaxation after power-on
+_POWERS = {"lin": 1, "sq": 2, "cube": 3}
+_UNITS = {"input": None, "temperature_c": "K", "time_s": "s", "drive_freq_hz": "Hz", "order": "point"}
+
+
+@dataclasses.dataclass(frozen=True)
+class Term:
+    """One dictionary term: its canonical `name`, the `sweeps` it acts on, how it reads in code (`expression`,
+    in `x` the input, `T` the temperature, `t` the time), whether it is a gain, and its changes of the
+    predictions per unit coefficient (sweep -> (device, run, point))."""
+
+    name: str
+    sweeps: tuple
+    expression: str
+    gain: bool
+    changes: dict
+    unit: str
+
+    @property
+    def label(self) -> str:
+        return f"{self.name} [{'+'.join(self.sweeps)}]"
+
+
+@dataclasses.dataclass(frozen=True)
+class Formula:
+    """The selected terms with their lot-wide coefficients, standard errors and the share of the excess chi2
+    they remove together."""
+
+    terms: tuple  # Term
+    coefficients: np.ndarray
+    stderr: np.ndarray
+    statistic: float
+    df: int
+    share: float
+    dictionary_size: int
+    left_statistic: float  # the location's flexible description beyond the formula
+    left_df: int
+    left_p_value: float
+    complete: bool  # nothing significant left of the location beyond the formula (at alpha)
+
+    @property
+    def description(self) -> str:
+        parts = [f"{_fmt(c, s)} {t.unit} x {t.name} on {'+'.join(t.sweeps)}"
+                 for t, c, s in zip(self.terms, self.coefficients, self.stderr)]
+        text = (f"{' + '.join(parts)} (takes {100 * self.share:.0f} % of the misfit; chosen from "
+                f"{self.dictionary_size} terms)")
+        if not self.complete:
+            text += (f"; it leaves chi2 {self.left_statistic:.4g} (df {self.left_df}, p = {self.left_p_value:.2g}) "
+                     "of the located misfit unexplained: no term of the dictionary has its shape")
+        return text
+
+    def to_json(self) -> dict:
+        return {"terms": [{"name": t.name, "sweeps": list(t.sweeps), "gain": t.gain, "expression": t.expression,
+                           "unit": t.unit} for t in self.terms],
+                "coefficients": [float(c) for c in self.coefficients], "stderr": [float(s) for s in self.stderr],
+                "share": self.share, "statistic": self.statistic, "df": self.df,
+                "dictionary_size": self.dictionary_size, "complete": self.complete,
+                "left": {"statistic": self.left_statistic, "df": self.left_df, "p": self.left_p_value},
+                "description": self.description}
+
+
+def _fmt(c, s):
+    return f"({c:.4g} +/- {s:.2g})"
+
+
+def _reference(name, x, mask):
+    if name == "temperature_c":
+        return REFERENCE_C
+    if name == "drive_freq_hz":
+        return (np.sum(np.where(mask, x, 0.0), axis=(1, 2), keepdims=True)
+                / np.maximum(mask.sum(axis=(1, 2), keepdims=True), 1))
+    return 0.0
+
+
+_CODE = {"input": "x", "temperature_c": f"(T - {REFERENCE_C})", "time_s": "t", "drive_freq_hz": "f",
+         "order": "n"}
+
+
+def dictionary(fit, sweeps, *, step_at: float | None = None, period: float | None = None) -> list:
+    """The dictionary of terms on the sweep sets `sweeps` (tuples of sweep names)."""
+    terms = []
+    for group in sweeps:
+        blocks = {s: fit.data.blocks[s] for s in group}
+        masks = {s: np.asarray(b.mask) for s, b in blocks.items()}
+        preds = {s: np.asarray(fit.predictions[s], float) for s in group}
+        coords = {s: coordinates(b) for s, b in blocks.items()}
+        names = set.intersection(*(set(c) for c in coords.values()))
+        out_unit = sweep_kind(group[0]).output_unit
+
+        def add(name, expr, fn, coordinate, *, gain_too=True, offset=True, unit_power=1):
+            cu = _UNITS.get(coordinate) or sweep_kind(group[0]).input_unit
+            per = f"/{cu}" if unit_power == 1 else (f"/{cu}^{unit_power}" if unit_power else "")
+            for gain in ((False, True) if gain_too else (False,)):
+                if not gain and not offset:
+                    continue
+                changes = {}
+                for s in group:
+                    v = fn(s)
+                    changes[s] = np.where(masks[s], v * (preds[s] if gain else 1.0), 0.0)
+                unit = ("1" + per if gain else out_unit + per)
+                terms.append(Term(name + ("*model" if gain else ""), tuple(group),
+                                  f"output * ({expr})" if gain else f"({expr})", gain, changes, unit))
+
+        for c in sorted(names):
+            if c == "order":
+                continue
+            x = {s: np.asarray(coords[s][c], float) for s in group}
+            ref = {s: _reference(c, x[s], masks[s]) for s in group}
+            code = _CODE[c]
+            for basis, k in _POWERS.items():
+                add(f"{basis}({c})", code if k == 1 else f"{code}**{k}",
+                    lambda s, k=k: (x[s] - ref[s]) ** k, c, gain_too=c != "input", unit_power=k)
+            if c == "input":
+                add("abs(input)", "abs(x)", lambda s: np.abs(x[s]), c)
+                add("sign(input)", "sign(x)", lambda s: np.sign(x[s]), c, unit_power=0)
+                if period:
+                    for fn, nm in ((np.sin, "sin"), (np.cos, "cos")):
+                        add("periodic(input)", f"{nm}(2 pi x / {period:.6g})",
+                            lambda s, fn=fn: fn(2 * np.pi * x[s] / period), c, gain_too=False, unit_power=0)
+            if c == "time_s":
+                for tau in RELAX_TAUS_S:
+                    add("relax(time_s)", f"exp(-t / {tau:g})", lambda s, tau=tau: np.exp(-x[s] / tau), c,
+                        unit_power=0)
+                if step_at is not None:
+                    add("step(time_s)", f"where(t >= {step_at:.6g}, 1, 0)",
+                        lambda s: (x[s] >= step_at).astype(float), c, unit_power=0)
+                    for r in range(min(m.shape[1] for m in masks.values())):
+                        # the same step in one run only (a jump after one power-on)
+                        add("step(time_s)", f"where((run == {r}) & (t >= {step_at:.6g}), 1, 0)",
+                            lambda s, r=r: ((x[s] >= step_at) & (np.arange(masks[s].shape[1]) == r)[None, :, None]
+                                            ).astype(float), c, unit_power=0)
+        if "input" in names:
+            xin = {s: np.asarray(coords[s]["input"], float) for s in group}
+            for c in ("temperature_c", "time_s"):
+                if c in names:
+                    xc = {s: np.asarray(coords[s][c], float) - _reference(c, np.asarray(coords[s][c]), masks[s])
+                          for s in group}
+                    add(f"lin({c})*lin(input)", f"{_CODE[c]} * x", lambda s, xc=xc: xc[s] * xin[s], c,
+                        gain_too=False)
+        runs = min(m.shape[1] for m in masks.values())
+        if runs >= 2:
+            for r in range(1, runs):
+                add(f"per_run({r})", f"run == {r}",
+                    lambda s, r=r: np.broadcast_to((np.arange(masks[s].shape[1]) == r)[None, :, None],
+                                                   masks[s].shape).astype(float), "order", offset=False,
+                    unit_power=0)
+    return terms
+
+
+def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, max_terms: int = MAX_TERMS,
+            space: ResidualSpace | None = None):
+    """A sparse formula for the misfit at `location` (a `Location` of `locate`; `step_at`, `period`: where its
+    scans found a step and a period), or None when no term of the dictionary is significant. The formula is
+    `complete` when the location's flexible description is not significant beyond it."""
+    space = space or ResidualSpace(fit)
+    groups = [(s,) for s in location.located_on]
+    if len(location.located_on) > 1:
+        groups.append(tuple(location.located_on))
+    loc = location.location
+    terms = dictionary(fit, groups, step_at=loc.get("at", step_at), period=loc.get("period", period))
+    if not terms:
+        return None
+    cols = {id(t): _columns(space, t) for t in terms}
+    cut = alpha / len(terms)
+    chosen, current = [], space
+    while len(chosen) < max_terms:
+        best = None
+        for t in terms:
+            if t in chosen:
+                continue
+            sc = current.score(cols[id(t)], shared=True)
+            if sc.df and sc.p_value < cut and (best is None or sc.statistic > best[1].statistic):
+                best = (t, sc)
+        if best is None:
+            break
+        chosen.append(best[0])
+        current = current.with_columns(cols[id(best[0])])
+    if not chosen:
+        return None
+    joint = space.score(np.concatenate([cols[id(t)] for t in chosen], axis=-1), shared=True)
+    coef = joint.coefficients[0]
+    err = np.sqrt(np.clip(np.diag(joint.covariance[0]), 0.0, None))
+    share = min(max(joint.statistic - joint.df, 0.0) / space.excess, 1.0) if space.excess > 0 else 0.0
+    left = current.score(location.columns)
+    return Formula(tuple(chosen), coef, err, joint.statistic, joint.df, share, len(terms), left.statistic,
+                   left.df, left.p_value, left.p_value >= alpha)
+
+
+def _columns(space, term: Term) -> np.ndarray:
+    return space.columns({s: g[..., None] for s, g in term.changes.items()})
+
+
+def ppm_per_unit(formula: Formula, i: int) -> tuple[float, float] | None:
+    """A gain term's coefficient and standard error in ppm per unit of its coordinate (None for an offset)."""
+    t = formula.terms[i]
+    if not t.gain:
+        return None
+    return 1e6 * float(formula.coefficients[i]), 1e6 * float(formula.stderr[i])

@@ -1,0 +1,535 @@
+r"""Where the misfit lives, without a list of shapes: flexible descriptions of the standardised residuals along
+every recorded coordinate of every sweep, scored beyond what the fit could absorb.
+
+For each sweep and each coordinate that moves within its runs (`input`, `temperature_c`, `time_s`,
+`drive_freq_hz`, `order`) two flexible descriptions are scored per device: an *offset* along the coordinate and a
+*gain* along it (the same basis times the model's prediction), each a piecewise-linear function on knots at the
+coordinate's quantiles (a linear spline whose effective degrees of freedom are the directions left after the
+fit's own columns are projected out). Beside them: a *gain per run* (and an offset per run on sweeps read
+without a turn-on bias), a *change-point scan* along time in every run (a step in the output at one dwell), and
+a *spectral scan* along the input (a periodic error of the input or the DAC word). Scans carry their own
+look-elsewhere correction (Bonferroni over the positions or periods scanned); every description is significant
+at `alpha` over the number of descriptions.
+
+The most significant description (by its tail probability) is a misfit's *location*; the same description on
+the other sweeps joins it when it stays significant beyond it; descriptions along other coordinates that the
+data cannot tell from it are named as confounded with it; then its columns join the absorbable span and the
+next location is sought. What each location reports is measured on the residuals: the share of the misfit
+each sweep carries along that coordinate (fitted to that sweep's residuals alone), where on the coordinate it
+sits (the interval where the fitted description exceeds half its peak, the runs and devices that carry it),
+and its size in output units and ppm of the sweep's full scale with a standard error, or no size with the
+reason where the data do not determine it.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+
+from .._compare import recorded_coordinates
+from .._stats import chi2_sf
+from .._sweeps.registry import sweep_kind
+from .space import ResidualSpace, Scored
+
+
+KNOTS = 6  # the linear spline's knots along a coordinate (quantiles): up to 6 directions per device
+# A coordinate whose spread within the runs is below this share of its spread over the lot is a property of runs
+# (or devices), not something the output can be described along within a run.
+WITHIN_RUN_SHARE = 1e-3
+# Within a device less than this share of the lot's spread: the coordinate mostly tells devices apart.
+WITHIN_DEVICE_SHARE = 0.1
+# A size whose standard error is above this share of its value is not determined by the data.
+SIZE_REL_STDERR = 0.5
+MAX_LOCATIONS = 3
+PERIODS = 24  # periods scanned along the input, log-spaced from 2.5 point spacings to twice the span
+
+
+@dataclasses.dataclass(frozen=True)
+class Description:
+    """One flexible description: its sweep, coordinate, family ("offset", "gain", "gain per run", "offset per
+    run", "step", "periodic"), columns (device, rows, k), score and, for scans, where it sits."""
+
+    sweep: str
+    coordinate: str
+    family: str
+    columns: np.ndarray
+    scored: Scored
+    p_value: float  # after the scan's own look-elsewhere correction
+    where: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def key(self) -> str:
+        return f"{self.sweep}:{self.coordinate}:{self.family}"
+
+
+@dataclasses.dataclass(frozen=True)
+class Location:
+    """Where one unexplained misfit lives, measured on the residuals (see the module docstring).
+
+    The attributes `probe`, `coefficient`, `coefficient_spread`, `unit`, `same_shape_as` and `library` carry
+    the generic shape (a probe) that has this misfit, when one does."""
+
+    coordinate: str
+    family: str
+    shape: str
+    sweeps: tuple  # (sweep, measured share), largest first
+    chi2_explained: float
+    df: int
+    share: float  # of the fit's chi2 in excess of its degrees of freedom
+    p_value: float
+    fingerprint: np.ndarray
+    columns: np.ndarray
+    located_on: tuple  # the sweeps the description is significant on
+    location: dict
+    size: dict | None
+    size_reason: str = ""
+    confounded_with: tuple = ()
+    notes: tuple = ()
+    probe: str = ""
+    coefficient: float = float("nan")
+    coefficient_spread: float = 0.0
+    unit: str = ""
+    same_shape_as: tuple = ()
+    library: str = ""
+    within: str = ""
+    significant: bool = True
+
+    @property
+    def key(self) -> str:
+        return f"{'+'.join(self.located_on)}:{self.coordinate}:{self.family}"
+
+    @property
+    def description(self) -> str:
+        where = ", ".join(f"{clean(s)} {100 * f:.0f} %" for s, f in self.sweeps) or "no single sweep"
+        text = f"{100 * self.share:.0f} % of the misfit is {self.shape} ({where})"
+        loc = _location_text(self.location)
+        if loc:
+            text += f", {loc}"
+        if self.size is not None:
+            text += (f": about {self.size['value']:.3g} +/- {self.size['stderr']:.2g} {self.size['unit']}"
+                     + (f" ({self.size['ppm_of_full_scale']:.3g} ppm of full scale)"
+                        if self.size.get("ppm_of_full_scale") is not None else ""))
+        elif self.size_reason:
+            text += f"; size not determined: {self.size_reason}"
+        if self.confounded_with:
+            text += f"; the data confound {self.coordinate} with {', '.join(self.confounded_with)}"
+        if self.same_shape_as:
+            text += f"; this data cannot tell it from {', '.join(self.same_shape_as)}"
+        return text + (f"; {self.library}" if self.library else "")
+
+    def to_json(self) -> dict:
+        return {"coordinate": self.coordinate, "shape": self.shape, "family": self.family,
+                "sweeps": list(self.located_on), "sweep_shares": {s: f for s, f in self.sweeps},
+                "chi2_explained": self.chi2_explained, "df": self.df, "share": self.share, "p": self.p_value,
+                "location": self.location, "size": self.size,
+                "size_reason": None if self.size is not None else self.size_reason,
+                "confounded_with": list(self.confounded_with), "notes": list(self.notes),
+                "description": self.description, "probe": self.probe or None,
+                "coefficient": _finite(self.coefficient), "coefficient_spread": _finite(self.coefficient_spread),
+                "unit": self.unit, "same_shape_as": list(self.same_shape_as), "within": self.within,
+                "library": self.library}
+
+
+def clean(name) -> str:
+    """A name from a data file as printable text: control characters escaped (a device name cannot start a line
+    of its own in a summary)."""
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in str(name))
+
+
+def _finite(x):
+    return float(x) if math.isfinite(x) else None
+
+
+def _location_text(loc: dict) -> str:
+    parts = []
+    if "interval" in loc:
+        lo, hi = loc["interval"]
+        parts.append(f"over {loc['coordinate']} {lo:.4g} to {hi:.4g}")
+    if "at" in loc:
+        parts.append(f"at {loc['coordinate']} {loc['at']:.4g}")
+    if loc.get("runs"):
+        parts.append("in " + ", ".join(f"{clean(d)} run {r}" for d, r in loc["runs"][:3])
+                     + (" ..." if len(loc["runs"]) > 3 else ""))
+    return " ".join(parts)
+
+
+# -- coordinates ---------------------------------------------------------------------------------------------
+def coordinates(block) -> dict:
+    """The coordinates of a sweep block a description can run along: `input` and the recorded ones."""
+    return {"input": np.asarray(block.inputs, float), **recorded_coordinates(block)}
+
+
+def _spread(values, mask):
+    """(spread within runs, within devices, over the lot): each the largest range over its groups."""
+    v = np.where(mask, values, np.nan)
+    with np.errstate(all="ignore"):
+        run = np.nanmax(np.nanmax(v, axis=2) - np.nanmin(v, axis=2))
+        dev = np.nanmax(np.nanmax(v, axis=(1, 2)) - np.nanmin(v, axis=(1, 2)))
+        lot = np.nanmax(v) - np.nanmin(v)
+    return float(np.nan_to_num(run)), float(np.nan_to_num(dev)), float(np.nan_to_num(lot))
+
+
+def _hats(x, mask, knots=KNOTS):
+    """Piecewise-linear hat functions of `x` (device, run, point) on knots at the quantiles of the real points:
+    (device, run, point, k); None when `x` takes fewer than three values."""
+    real = x[mask]
+    u = np.unique(real)
+    if u.size < 3:
+        return None
+    k = np.unique(np.quantile(real, np.linspace(0.0, 1.0, min(knots, u.size))))
+    if k.size < 3:
+        return None
+    eye = np.eye(k.size)
+    return np.stack([np.where(mask, np.interp(x, k, eye[j]), 0.0) for j in range(k.size)], axis=-1)
+
+
+def _log_p(stat: float, df: int) -> float:
+    """log of chi2(df)'s tail at `stat`, stable where the probability underflows."""
+    p = chi2_sf(stat, df)
+    if p > 1e-290:
+        return math.log(p)
+    a, x = df / 2.0, stat / 2.0
+    return (a - 1.0) * math.log(x) - x - math.lgamma(a)
+
+
+# -- the descriptions ----------------------------------------------------------------------------------------
+def describe(space: ResidualSpace) -> tuple[list, list]:
+    """Every flexible description of `space`'s residuals: (descriptions, notes on coordinates that were not
+    described along, and why)."""
+    fit, out, notes = space.fit, [], []
+    for sweep in fit.data.sweeps:
+        block = fit.data.blocks[sweep]
+        mask = np.asarray(block.mask)
+        pred = np.asarray(fit.predictions[sweep], float)
+        for name, x in coordinates(block).items():
+            x = np.where(mask, np.asarray(x, float), 0.0)
+            run, dev, lot = _spread(x, mask)
+            if lot <= 0:
+                continue
+            if run <= WITHIN_RUN_SHARE * lot:
+                notes.append(f"{name} on {sweep} is constant within runs: a property of runs (see 'run')")
+                continue
+            if dev < WITHIN_DEVICE_SHARE * lot:
+                notes.append(f"{name} on {sweep} varies mostly between devices ({dev:.3g} within a device "
+                             f"of its {lot:.3g} over the lot): described within each device only")
+            hats = _hats(x, mask)
+            if hats is None:
+                continue
+            families = [("offset", hats)]
+            if name != "input":  # a gain along the input is an offset along it
+                families.append(("gain", hats * pred[..., None]))
+            if name == "time_s" and mask.shape[1] >= 2:
+                # a shape in time that differs from run to run (a jump, a relaxation after one power-on)
+                eye = np.eye(mask.shape[1])[None, :, None, :, None]
+                families.append(("offset in each run", (hats[..., None, :] * eye).reshape(*mask.shape, -1)))
+            for family, g in families:
+                cols = space.columns({sweep: g})
+                sc = space.score(cols)
+                if sc.df:
+                    out.append(Description(sweep, name, family, cols, sc, sc.p_value, {"within_device": dev / lot}))
+        runs = mask.shape[1]
+        if runs >= 2:
+            eye = np.eye(runs)[None, :, None, :] * mask[..., None]
+            per_run = [("gain per run", pred[..., None] * eye)]
+            if not sweep_kind(sweep).biased:
+                per_run.append(("offset per run", eye.astype(float)))
+            for family, g in per_run:
+                cols = space.columns({sweep: g})
+                sc = space.score(cols)
+                if sc.df:
+                    out.append(Description(sweep, "run", family, cols, sc, sc.p_value))
+        coords = coordinates(block)
+        if "time_s" in coords:
+            d = _step_scan(space, sweep, np.where(mask, coords["time_s"], 0.0), mask)
+            if d is not None:
+                out.append(d)
+        d = _periodic_scan(space, sweep, np.asarray(block.inputs, float), mask)
+        if d is not None:
+            out.append(d)
+    return out, notes
+
+
+def _step_scan(space, sweep, t, mask):
+    """The strongest step of the output at one dwell (change point along time): a step at one position (in time
+    order) of one run index, either in every device (each its own height) or in one device; the look-elsewhere
+    correction is the number of positions tried."""
+    n_dev, n_run, n_pt = mask.shape
+    r = space.residuals
+    stats = {}  # (run, position) -> per-device statistics
+    positions = 0
+    for rn in range(n_run):
+        for j in range(2, n_pt - 1):
+            g = np.zeros((n_dev, n_run, n_pt, 1))
+            for dv in range(n_dev):
+                m = mask[dv, rn]
+                if m.sum() < 6 or j >= m.sum() - 1:
+                    continue
+                order = np.argsort(np.where(m, t[dv, rn], np.inf), kind="stable")
+                g[dv, rn, :, 0] = np.where(m & (t[dv, rn] >= t[dv, rn, order[j]]), 1.0, 0.0)
+            if not g.any():
+                continue
+            cols = space.columns({sweep: g})
+            pc = space.project(cols)[..., 0]
+            info = np.einsum("dr,dr->d", pc, pc)
+            own = np.einsum("dr,dr->d", cols[..., 0], cols[..., 0])
+            ok = info > 1e-9 * np.maximum(own, 1e-300)
+            per_dev = np.where(ok, np.einsum("dr,dr->d", pc, r) ** 2 / np.where(ok, info, 1.0), 0.0)
+            if ok.any():
+                stats[(rn, j)] = (per_dev, ok, cols)
+                positions += 1
+    if not stats:
+        return None
+    best = None
+    for (rn, j), (per_dev, ok, cols) in stats.items():
+        all_p = chi2_sf(float(per_dev.sum()), int(ok.sum()))
+        dv = int(np.argmax(per_dev))
+        one_p = chi2_sf(float(per_dev[dv]), 1)
+        for p, devs in ((all_p, np.flatnonzero(ok)), (one_p, np.array([dv]))):
+            if best is None or p < best[0]:
+                best = (p, rn, j, devs, cols)
+    p, rn, j, devs, cols = best
+    keep = np.zeros(n_dev, bool)
+    keep[devs] = True
+    cols = np.where(keep[:, None, None], cols, 0.0)
+    sc = space.score(cols)
+    fit = space.fit
+    at = [float(np.sort(t[dv, rn][mask[dv, rn]])[j]) for dv in devs]
+    where = {"runs": [[fit.devices[dv], fit.data.run_ids(sweep)[dv][rn]] for dv in devs],
+             "at": float(np.median(at)), "run_index": rn}
+    return Description(sweep, "time_s", "step", cols, sc, min(1.0, 2 * positions * p), where)
+
+
+def _periodic_scan(space, sweep, x, mask):
+    """The strongest periodic error along the input (sin and cos of one period, per device); the look-elsewhere
+    correction is the number of periods scanned."""
+    real = np.unique(x[mask])
+    if real.size < 8:
+        return None
+    span = float(real.max() - real.min())
+    step = float(np.median(np.diff(real)))
+    if span <= 0 or step <= 0:
+        return None
+    best = None
+    periods = np.geomspace(2.5 * step, 2.0 * span, PERIODS)
+    for period in periods:
+        w = 2.0 * np.pi * x / period
+        g = np.stack([np.sin(w), np.cos(w)], axis=-1) * mask[..., None]
+        cols = space.columns({sweep: g})
+        sc = space.score(cols)
+        if sc.df and (best is None or _log_p(sc.statistic, sc.df) < _log_p(best[0].statistic, best[0].df)):
+            best = (sc, cols, float(period))
+    if best is None:
+        return None
+    sc, cols, period = best
+    return Description(sweep, "input", "periodic", cols, sc, min(1.0, PERIODS * sc.p_value), {"period": period})
+
+
+def _strength(d: Description) -> float:
+    """-log p of a description (with the scan's look-elsewhere correction), for ranking."""
+    lp = _log_p(d.scored.statistic, d.scored.df)
+    if d.family == "step":
+        lp += math.log(max(d.p_value / max(d.scored.p_value, 1e-300), 1.0))
+    elif d.family == "periodic":
+        lp += math.log(PERIODS)
+    return -lp
+
+
+# -- locations -----------------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class Localisation:
+    """`locate`'s result: the `locations`, most significant first; `notes` on coordinates not described along;
+    and what the first round's scans found (`step_at`: the time of the strongest step, `period`: the strongest
+    period along the input), for the formula's dictionary."""
+
+    locations: tuple
+    notes: tuple
+    step_at: float | None
+    period: float | None
+
+
+def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS) -> Localisation:
+    """The misfit's locations at `fit`, most significant first (see the module docstring)."""
+    space = ResidualSpace(fit)
+    found = []
+    notes, hints = (), None
+    while len(found) < max_locations:
+        descs, new_notes = describe(space)
+        if hints is None:
+            hints = _hints(descs)
+            notes = tuple(dict.fromkeys(new_notes))
+        if not descs:
+            break
+        cut = alpha / len(descs)
+        significant = [d for d in descs if d.p_value < cut]
+        if not significant:
+            break
+        best = max(significant, key=_strength)
+        # Of coordinates the data cannot tell apart, name the one that moves most within each device: a
+        # coordinate that mostly tells devices apart (a drive frequency) is seen here only through its small
+        # excursions within a device, which another coordinate (the temperature behind them) explains as well.
+        confounded = _confounded(space, best, descs, cut)
+        primary = max([best] + confounded, key=lambda d: d.where.get("within_device", 1.0))
+        confounded = tuple(dict.fromkeys(d.coordinate for d in [best] + confounded if d is not primary))
+        best = primary
+        members, joined = [best], space.with_columns(best.columns)
+        for d in sorted(significant, key=_strength, reverse=True):
+            if d.sweep in {m.sweep for m in members} or (d.coordinate, d.family) != (best.coordinate, best.family):
+                continue
+            if d.family in ("step", "periodic"):
+                continue
+            if joined.score(d.columns).p_value < cut:
+                members.append(d)
+                joined = joined.with_columns(d.columns)
+        found.append(_location(space, fit, members, confounded))
+        space = joined
+    hints = hints or (None, None)
+    return Localisation(tuple(found), notes, *hints)
+
+
+def _hints(descs):
+    step = [d for d in descs if d.family == "step"]
+    periodic = [d for d in descs if d.family == "periodic"]
+    best_step = min(step, key=lambda d: d.p_value).where["at"] if step else None
+    best_period = min(periodic, key=lambda d: d.p_value).where["period"] if periodic else None
+    return best_step, best_period
+
+
+def _confounded(space, best, descs, cut) -> list:
+    """The descriptions of `best`'s sweep and family along other coordinates that the data cannot tell from it:
+    neither is significant beyond the other."""
+    out = []
+    if best.family in ("step", "periodic"):
+        return out
+    beyond_best = space.with_columns(best.columns)
+    for d in descs:
+        if d.coordinate == best.coordinate or d.sweep != best.sweep or d.family != best.family:
+            continue
+        if (beyond_best.score(d.columns).p_value >= cut
+                and space.with_columns(d.columns).score(best.columns).p_value >= cut):
+            out.append(d)
+    return out
+
+
+def _location(space, fit, members, confounded) -> Location:
+    best = members[0]
+    cols = np.concatenate([m.columns for m in members], axis=-1)
+    sc = space.score(cols)
+    excess = space.excess
+    share = min(max(sc.statistic - sc.df, 0.0) / excess, 1.0) if excess > 0 else 0.0
+    shares = _measured_shares(space, fit, best)
+    location = _where(fit, space, best, members, sc)
+    size, reason = _size(fit, space, members, sc)
+    return Location(best.coordinate, best.family, _shape_words(best), shares, sc.statistic, sc.df, share,
+                    max(min(d.p_value for d in members), 0.0), sc.fingerprint, cols,
+                    tuple(m.sweep for m in members), location, size, reason, tuple(confounded))
+
+
+def _shape_words(d: Description) -> str:
+    if d.family == "step":
+        return "a step of the output partway through a run"
+    if d.family == "offset in each run":
+        return f"an offset along {d.coordinate} that differs from run to run"
+    if d.family == "periodic":
+        return f"a periodic error along the input (period {d.where['period']:.3g})"
+    if d.coordinate == "run":
+        return "a gain that changes from run to run" if d.family == "gain per run" else \
+            "an offset that changes from run to run"
+    what = "an offset" if d.family == "offset" else "a gain"
+    return f"{what} that varies smoothly along {d.coordinate}"
+
+
+def _measured_shares(space, fit, best: Description) -> tuple:
+    """Each sweep's share of the misfit along `best`'s coordinate and family, fitted to its own residuals."""
+    if best.family in ("step", "periodic"):
+        return ((best.sweep, 1.0),)
+    found = {}
+    for sweep in fit.data.sweeps:
+        block = fit.data.blocks[sweep]
+        mask = np.asarray(block.mask)
+        coords = coordinates(block)
+        pred = np.asarray(fit.predictions[sweep], float)
+        if best.coordinate == "run":
+            if mask.shape[1] < 2:
+                continue
+            eye = np.eye(mask.shape[1])[None, :, None, :] * mask[..., None]
+            g = pred[..., None] * eye if best.family == "gain per run" else eye.astype(float)
+        else:
+            if best.coordinate not in coords:
+                continue
+            hats = _hats(np.where(mask, coords[best.coordinate], 0.0), mask)
+            if hats is None:
+                continue
+            g = hats * pred[..., None] if best.family == "gain" else hats
+        found[sweep] = space.raw_excess(space.columns({sweep: g}), sweep)
+    total = sum(found.values())
+    if total <= 0:
+        return ()
+    return tuple(sorted(((s, v / total) for s, v in found.items() if v / total >= 0.05), key=lambda x: -x[1]))
+
+
+def _rows_of(space, sweep):
+    i, j = space.blocks[sweep]
+    return i, j
+
+
+def _where(fit, space, best, members, sc) -> dict:
+    out = {"coordinate": best.coordinate, "sweeps": [m.sweep for m in members]}
+    if best.family == "step":
+        out.update(at=best.where["at"], runs=best.where["runs"])
+        return out
+    if best.family == "periodic":
+        out["period"] = best.where["period"]
+        return out
+    fp = sc.fingerprint
+    chi_dev_run = []
+    values = []
+    for m in members:
+        block = fit.data.blocks[m.sweep]
+        mask = np.asarray(block.mask)
+        i, j = _rows_of(space, m.sweep)
+        f = fp[:, i:j].reshape(mask.shape)
+        for dv, rn in np.ndindex(mask.shape[:2]):
+            chi_dev_run.append((float(np.sum(f[dv, rn][mask[dv, rn]] ** 2)), fit.devices[dv],
+                                fit.data.run_ids(m.sweep)[dv][rn]))
+        if best.coordinate != "run":
+            x = coordinates(block)[best.coordinate]
+            values.append((np.abs(f)[mask], np.asarray(x)[mask]))
+    total = sum(c for c, _, _ in chi_dev_run) or 1.0
+    runs = sorted(((c / total, d, r) for c, d, r in chi_dev_run), reverse=True)
+    out["runs"] = [[d, r] for s, d, r in runs if s >= 0.1]
+    if values:
+        a = np.concatenate([v[0] for v in values])
+        x = np.concatenate([v[1] for v in values])
+        if a.size and a.max() > 0:
+            sel = a >= 0.5 * a.max()
+            out["interval"] = [float(x[sel].min()), float(x[sel].max())]
+    return out
+
+
+def _size(fit, space, members, sc):
+    """The peak of the fitted description in output units (and ppm of the sweep's full scale), with its
+    standard error; None and the reason when the data do not determine it."""
+    best = None
+    pc = space.project(np.concatenate([m.columns for m in members], axis=-1))
+    for m in members:
+        block = fit.data.blocks[m.sweep]
+        mask = np.asarray(block.mask).reshape(len(fit.devices), -1)
+        sig = np.asarray(block.sigmas, float).reshape(len(fit.devices), -1)
+        i, j = _rows_of(space, m.sweep)
+        f = np.where(mask, sc.fingerprint[:, i:j] * sig, 0.0)
+        dv, row = np.unravel_index(int(np.argmax(np.abs(f))), f.shape)
+        value = float(f[dv, row])
+        if best is None or abs(value) > abs(best[0]):
+            g = pc[dv, i + row]
+            var = float(g @ sc.covariance[dv] @ g) if sc.covariance.shape[0] > 1 else float(g @ sc.covariance[0] @ g)
+            full = float(np.max(np.abs(np.asarray(fit.predictions[m.sweep])[dv][np.asarray(block.mask)[dv]])))
+            best = (value, math.sqrt(max(var, 0.0)) * float(sig[dv, row]), sweep_kind(m.sweep).output_unit, full,
+                    m.sweep)
+    value, stderr, unit, full, sweep = best
+    if not math.isfinite(value) or abs(value) == 0:
+        return None, "the fitted description is zero"
+    if not math.isfinite(stderr) or stderr > SIZE_REL_STDERR * abs(value):
+        return None, (f"its standard error ({stderr:.3g} {unit}) is more than {100 * SIZE_REL_STDERR:.0f} % of its "
+                      f"peak ({abs(value):.3g} {unit})")
+    return {"value": abs(value), "unit": unit, "stderr": stderr, "measure": "peak of the fitted description",
+            "sweep": sweep, "ppm_of_full_scale": 1e6 * abs(value) / full if full > 0 else None}, ""

@@ -1,0 +1,170 @@
+"""The fit's standardised residuals as a space to describe the misfit in: each device's residual vector, the
+span its free parameters and run biases could already absorb, and generic columns laid out in its rows.
+
+Everything here is host-side numpy on one fit: a column block is scored by projecting out the absorbable span
+(one SVD per device, taken once), as the score test does, so a thousand flexible descriptions cost no refit.
+"""
+
+import dataclasses
+
+import numpy as np
+
+from .._identify import Fit
+from .._probes import standardised
+from .._stats import chi2_sf
+from .columns import base_columns, excess_chi2, row_blocks
+
+
+# A projected direction carries information when its eigenvalue exceeds this share of the block's own largest
+# (before projection): the same unit-free rule as the probes' score test (`gyrojax._probes.RELATIVE_RANK_TOL`),
+# a little coarser since flexible bases (hat functions, products) have nearly collinear members.
+RANK_TOL = 1e-9
+
+
+@dataclasses.dataclass(frozen=True)
+class Scored:
+    """A block of columns fitted to the residuals beyond the absorbable span.
+
+    `statistic`: the chi2 it removes (the score S); `df`: its directions that carry information; `p_value`;
+    `coefficients` (device, k) per device, or (1, k) shared by the lot; `covariance` of the coefficients
+    ((device, k, k) or (1, k, k)); `fingerprint` (device, rows): the residual change it explains."""
+
+    statistic: float
+    df: int
+    p_value: float
+    coefficients: np.ndarray
+    covariance: np.ndarray
+    fingerprint: np.ndarray
+
+
+class ResidualSpace:
+    """A fit's residuals and the span of its free columns, per device, for scoring generic column blocks.
+
+    **Arguments:** `fit` (a `gyrojax.Fit`); `extra` (device, rows, m) further columns to treat as absorbable
+    (e.g. a candidate effect's, or a description already selected)."""
+
+    def __init__(self, fit: Fit, extra: np.ndarray | None = None):
+        self.fit = fit
+        self.data = fit.data
+        self.residuals = np.asarray(fit.residual_vector, float)
+        self.devices, self.rows = self.residuals.shape
+        self.blocks = {s: (i, j) for s, i, j in row_blocks(fit.data)}
+        self.excess = excess_chi2(fit)
+        base = base_columns(fit)
+        if extra is not None and extra.shape[-1]:
+            base = np.concatenate([base, extra], axis=-1)
+        self.base = base
+        self._u = _spans(base)
+
+    def with_columns(self, cols: np.ndarray) -> "ResidualSpace":
+        """The same fit with `cols` (device, rows, k) added to the absorbable span."""
+        out = ResidualSpace.__new__(ResidualSpace)
+        out.__dict__.update(self.__dict__)
+        out.base = np.concatenate([self.base, cols], axis=-1)
+        out._u = _spans(out.base)
+        return out
+
+    # -- columns ------------------------------------------------------------------------------------------
+    def columns(self, changes: dict) -> np.ndarray:
+        """`changes`: sweep -> (device, run, point, k) changes of the predictions per unit coefficient (output
+        unit). Returns them as standardised-residual columns (device, rows, k), run biases projected out on
+        biased sweeps, zero on the other sweeps' rows and the prior rows."""
+        k = max((np.shape(g)[-1] for g in changes.values()), default=0)
+        out = np.zeros((self.devices, self.rows, k))
+        for sweep, g in changes.items():
+            i, j = self.blocks[sweep]
+            part = standardised(self.fit, sweep, g).reshape(self.devices, j - i, -1)
+            out[:, i:j, :part.shape[-1]] = part
+        return out
+
+    def project(self, cols: np.ndarray) -> np.ndarray:
+        """`cols` with each device's absorbable span removed."""
+        out = np.empty_like(cols)
+        for d in range(self.devices):
+            u = self._u[d]
+            out[d] = cols[d] - u @ (u.T @ cols[d])
+        return out
+
+    # -- scores -------------------------------------------------------------------------------------------
+    def score(self, cols: np.ndarray, *, shared: bool = False, rows: slice | None = None) -> Scored:
+        """Fit `cols` (device, rows, k) to the residuals beyond the absorbable span: per device (each device its
+        own coefficients) or `shared` (one set for the lot). `rows`: use only these residual rows (the
+        projection is still the whole fit's)."""
+        pc = self.project(cols)
+        r = self.residuals
+        if rows is not None:
+            pc, r = pc[:, rows], r[:, rows]
+        n, _, k = pc.shape
+        if k == 0:
+            return Scored(0.0, 0, 1.0, np.zeros((1 if shared else n, 0)), np.zeros((1 if shared else n, 0, 0)),
+                          np.zeros(self.residuals.shape))
+        own = np.array([float(np.linalg.norm(cols[d], 2)) ** 2 for d in range(n)])
+        if shared:
+            info = np.einsum("drk,drl->kl", pc, pc)
+            b = np.einsum("drk,dr->k", pc, r)
+            inv, df = _pinv(info, RANK_TOL * float(own.max()))
+            coef = inv @ b
+            stat = float(b @ coef)
+            fp = np.einsum("drk,k->dr", pc, coef)
+            return Scored(stat, df, chi2_sf(stat, df), coef[None], inv[None], self._full(fp, rows))
+        coefs, covs, stat, df = np.zeros((n, k)), np.zeros((n, k, k)), 0.0, 0
+        fp = np.zeros(r.shape)
+        for d in range(n):
+            inv, df_d = _pinv(pc[d].T @ pc[d], RANK_TOL * own[d])
+            if df_d == 0:
+                continue
+            b = pc[d].T @ r[d]
+            coefs[d], covs[d] = inv @ b, inv
+            stat += float(b @ coefs[d])
+            df += df_d
+            fp[d] = pc[d] @ coefs[d]
+        return Scored(stat, df, chi2_sf(stat, df), coefs, covs, self._full(fp, rows))
+
+    def _full(self, fp, rows):
+        if rows is None:
+            return fp
+        out = np.zeros(self.residuals.shape)
+        out[:, rows] = fp
+        return out
+
+    def sweep_rows(self, sweep: str) -> slice:
+        i, j = self.blocks[sweep]
+        return slice(i, j)
+
+    def raw_excess(self, cols: np.ndarray, sweep: str) -> float:
+        """What `cols` (device, rows, k) explain of one sweep's residuals as they are (no span projected out,
+        run biases already are), beyond their degrees of freedom: the misfit that sits on that sweep along
+        them, measured on its own residuals."""
+        sl = self.sweep_rows(sweep)
+        total = 0.0
+        for d in range(self.devices):
+            c, r = cols[d, sl], self.residuals[d, sl]
+            if not np.any(c):
+                continue
+            inv, df = _pinv(c.T @ c, RANK_TOL * float(np.linalg.norm(c, 2)) ** 2)
+            b = c.T @ r
+            total += float(b @ inv @ b) - df
+        return max(total, 0.0)
+
+
+def _spans(base: np.ndarray) -> list:
+    """Each device's orthonormal basis of the span of `base` (device, rows, m), singular values above 1e-12 of
+    the largest (as `gyrojax._probes.project_out`)."""
+    out = []
+    for d in range(base.shape[0]):
+        if base.shape[-1] == 0:
+            out.append(np.zeros((base.shape[1], 0)))
+            continue
+        u, s, _ = np.linalg.svd(base[d], full_matrices=False)
+        out.append(u[:, s > 1e-12 * max(float(s[0]), 1e-300)])
+    return out
+
+
+def _pinv(info: np.ndarray, floor: float):
+    """Pseudo-inverse of a symmetric information matrix over its eigen-directions above `floor`, and their
+    count."""
+    evals, evecs = np.linalg.eigh(info)
+    keep = evals > max(floor, 0.0)
+    if not keep.any():
+        return np.zeros_like(info), 0
+    return (evecs[:, keep] / evals[keep]) @ evecs[:, keep].T, int(keep.sum())
