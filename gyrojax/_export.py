@@ -26,8 +26,9 @@ neither one of those versioned packages nor Python's standard library (a user's 
 `docs/adding_an_effect.md`), a hash of that module's source file. An object the walk does not understand (one
 with state it cannot see, a module without a source file, a tracer) means no key: the call takes the plain
 `equinox.filter_jit` path. A gyrojax module-level function or class replaced at run time by one from a user's
-file (a test's monkeypatch) is part of the key. A class or function of a user's module that reads
-code from another user module is covered only through its own module's file: edit both, or delete the folder.
+file (a test's monkeypatch) is part of the key. The key also holds
+`gyrojax._plugins.user_code_digest()`, a hash of the sources of the user effect modules loaded and of the modules
+they import from the user's folders: a helper module edited since gives a new key.
 A source file (gyrojax's or a user's) changed after gyrojax was imported means no key: the code running may not
 be the code on disk.
 
@@ -315,8 +316,10 @@ def _trace_context() -> str:
 def program_key(name: str, args: tuple) -> str:
     """The key of program `name` called with `args` (a hex SHA-256); raises `_Unhashable` when some part of it
     cannot be described deterministically."""
+    from ._plugins import user_code_digest  # user effect modules and the helpers they import
+
     devices = jax.devices()
-    out = [name, repr(_versions()), _trace_context(), *_replaced(), jax.default_backend(),
+    out = [name, repr(_versions()), user_code_digest(), _trace_context(), *_replaced(), jax.default_backend(),
            repr(sorted({d.device_kind for d in devices})), str(len(devices))]
     _describe(args, out, set())
     return hashlib.sha256("\n".join(out).encode()).hexdigest()

@@ -105,10 +105,21 @@ def _load_effects(args) -> None:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         load_effect_entry_points()
+        for path in getattr(args, "effects_module", None) or ():
+            load_effects_module(path)
     for w in caught:
         print(f"gyrojax {args.command}: warning: {w.message}", file=sys.stderr)
-    for path in getattr(args, "effects_module", None) or ():
-        load_effects_module(path)
+
+
+def _check_finite_effects(effects, gyro) -> None:
+    """Refuse, by name, an effect that gives `gyro` NaN or infinite parameters (a user effect's bug: without
+    this it surfaces far away, as a failed SVD or an unsettled loop). `effects`: (name, scale) pairs."""
+    from ._plugins import nonfinite_effect
+
+    for name, scale in effects:
+        why = nonfinite_effect(name, gyro, scale)
+        if why is not None:
+            raise RuntimeError(f"{why}; an effect must give finite parameters at every size (fix the effect).")
 
 
 def _write_json(obj, path) -> None:
@@ -146,6 +157,7 @@ def _cmd_simulate(args):
 
     tiers = {"steady": gj.CAMPAIGN_TIER, "averaged": gj.Averaged(), "full": gj.FullWaveform()}
     gyro = gj.preset(args.preset)
+    _check_finite_effects(args.effect, gyro)
     for name, scale in args.effect:
         gyro = gj.add_effect(gyro, name, scale)
     table = simulate_table(gyro, devices=args.devices, runs=args.runs, sweeps=args.sweeps,
@@ -172,7 +184,7 @@ def _cmd_metrics(args):
         if not kind.straight_line:
             print(f"{head} bandwidth {_na(p.get('bandwidth_hz'), '.4g', why.get('bandwidth_hz'), ' Hz')}")
             continue
-        if p["scale_factor"] is None or p["nonlinearity_max_ppm"] is None:
+        if p["undetermined"]:  # a figure that applies to the kind but was not determined
             undetermined += 1
         unit = kind.scale_factor_unit
         sf = _na(p["scale_factor"], ".6g", why.get("scale_factor"), f" {unit}" if unit else "")
@@ -357,6 +369,7 @@ def _cmd_identify(args):
     _check_outputs(("--json", args.json, False), ("--save", args.save, False))
     _load_effects(args)
     table = read_table(args.data)
+    _check_finite_effects([(name, 1.0) for name in dict.fromkeys(args.effect)], preset(args.model))
     model = Model(preset(args.model), tuple(zero_effect(name) for name in args.effect))
     fit = identify(model, table, free=args.free or DEFAULT_FREE)
     print(fit.summary())

@@ -49,13 +49,15 @@ def effect_source(cls="UserGain", name="user_gain", size="5e-4"):
 def clean_registry(monkeypatch):
     effects, files, modules = dict(gj.EFFECTS), dict(_plugins._loaded_files), set(sys.modules)
     monkeypatch.setattr(_plugins, "_entry_points_loaded", False)
+    monkeypatch.setattr(_plugins, "_sources", {})
+    monkeypatch.setattr(_plugins, "_origins", {})
     yield
     for name in set(gj.EFFECTS) - set(effects):
         del gj.EFFECTS[name]
     _plugins._loaded_files.clear()
     _plugins._loaded_files.update(files)
     for name in set(sys.modules) - modules:
-        if name.startswith(("gyrojax_user_effects_", "gjtest_")):
+        if name.startswith(("gyrojax_user_effects_", "gjtest_")) or name.startswith("gjhelper"):
             del sys.modules[name]
 
 
@@ -147,3 +149,99 @@ def test_the_cli_reports_a_broken_entry_point_as_a_warning(tmp_path, monkeypatch
     assert main(["compensate", str(data), "--method", "polynomial"]) == 0
     err = capsys.readouterr().err
     assert "gyrojax compensate: warning: gyrojax: entry point 'broken'" in err and "was skipped" in err
+
+
+@pytest.mark.parametrize("method, text, message", [
+    ("apply", "def apply(self):\n    return None",
+     "method apply\\(self\\): does not match AbstractEffect.apply\\(self, gyro"),
+    ("typical", "@classmethod\ndef typical(cls, scale, extra):\n    return cls(0.0)",
+     "method typical\\(cls, scale, extra\\): does not match AbstractEffect.typical"),
+    ("supports", "def supports(self, gyro):\n    return True", "method supports: must be a classmethod"),
+])
+def test_a_wrong_method_signature_is_refused_naming_file_class_and_method(tmp_path, method, text, message):
+    path = tmp_path / "wrong.py"
+    body = textwrap.indent(text, "    ")
+    path.write_text(effect_source("Base", "base_gain") + f"\n\nclass Wrong(Base):\n    name = 'wrong_sig'\n\n{body}\n")
+    with pytest.raises(ValueError, match=f"{path}: effect class Wrong, {message}"):
+        load_effects_module(path)
+    assert "wrong_sig" not in gj.EFFECTS and "base_gain" not in gj.EFFECTS
+
+
+def test_sys_exit_while_importing_is_a_clear_error(tmp_path):
+    path = tmp_path / "exits.py"
+    path.write_text("import sys\n\nsys.exit(3)\n")
+    with pytest.raises(ValueError, match=f"{path}: line 3: the file called sys.exit\\(3\\) while being imported"):
+        load_effects_module(path)
+
+
+def test_a_file_that_registers_nothing_warns(tmp_path):
+    path = tmp_path / "empty.py"
+    path.write_text("import math\n\nX = math.pi\n")
+    with pytest.warns(UserWarning, match=f"{path}: defines no effect class .*nothing was registered"):
+        assert load_effects_module(path) == ()
+
+
+NAN_APPLY = ("gyro.excitation.dac.gain_error + self.gain)",
+             "gyro.excitation.dac.gain_error + self.gain * jnp.inf * 0.0)")
+
+
+def test_an_effect_giving_nan_is_named(tmp_path):
+    path = tmp_path / "nan_fx.py"
+    path.write_text(effect_source("NanGain", "nan_gain").replace(*NAN_APPLY))
+    load_effects_module(path)
+    why = _plugins.nonfinite_effect("nan_gain", gj.paper_qmg())
+    assert why == (f"effect 'nan_gain' (class NanGain in {path}) gives the device a non-finite value at zero: "
+                   "excitation.dac.gain_error = nan")
+    assert _plugins.nonfinite_effect("dac_inl", gj.paper_qmg()) is None
+
+
+@pytest.mark.parametrize("argv", [
+    ["simulate", "--preset", "paper-qmg", "--effect", "nan_gain=2", "--out", "o.csv"],
+    ["identify", "d.csv", "--effect", "nan_gain"],
+])
+def test_the_cli_refuses_an_effect_giving_nan_by_name(tmp_path, monkeypatch, capsys, argv):
+    from gyrojax.cli import main
+
+    path = tmp_path / "nan_fx.py"
+    path.write_text(effect_source("NanGain", "nan_gain").replace(*NAN_APPLY))
+    rates = (-200, -100, -50, -10, 0, 10, 50, 100, 200)
+    (tmp_path / "d.csv").write_text("\n".join(["device,run,sweep,input,output",
+                                               *(f"A,0,rate_table,{x},{x * 13771.0}" for x in rates)]) + "\n")
+    monkeypatch.chdir(tmp_path)
+    assert main([*argv, "--effects-module", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert (f"failed: effect 'nan_gain' (class NanGain in {path}) gives the device a non-finite value at zero: "
+            "excitation.dac.gain_error = nan; an effect must give finite parameters") in err
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_the_user_code_digest_follows_the_modules_an_effect_imports(tmp_path, monkeypatch):
+    from gyrojax import _export
+
+    helper = tmp_path / "gjhelper_sign.py"
+    helper.write_text("SIGN = 1.0\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    path = tmp_path / "signed.py"
+    path.write_text(effect_source().replace("import gyrojax as gj", "import gyrojax as gj\nfrom gjhelper_sign import "
+                                            "SIGN").replace("+ self.gain)", "+ SIGN * self.gain)"))
+    assert _plugins.user_code_digest() == ""
+    key_without = _export.program_key("p", ())
+    load_effects_module(path)
+    first, key_first = _plugins.user_code_digest(), _export.program_key("p", ())
+    assert first and key_first != key_without
+    recorded = _plugins.user_effect_code(["user_gain", "dac_inl"])
+    assert list(recorded) == ["user_gain"] and recorded["user_gain"]["module"] == str(path)
+
+    # The helper is edited; a later process (here: the module loaded afresh) imports the new one.
+    helper.write_text("SIGN = -1.0\n")
+    del gj.EFFECTS["user_gain"]
+    _plugins._loaded_files.clear()
+    _plugins._sources.clear()
+    for name in [m for m in sys.modules if m.startswith(("gyrojax_user_effects_", "gjhelper"))]:
+        del sys.modules[name]
+    load_effects_module(path)
+    assert _plugins.user_code_digest() != first
+    assert _export.program_key("p", ()) != key_first  # the exported program of the old helper is not served
+    changes = _plugins.user_code_changes(recorded, ["user_gain"])
+    assert changes == [f"effect 'user_gain': the code of its module {path} (or of a module it imports) differs "
+                       f"from that of {path} when the fit was made"]
