@@ -34,13 +34,20 @@ compiles again if not.
 A folder that cannot be written does not stop the import: gyrojax warns once and runs without the cache. The
 folder may be deleted at any time (it is only a cache); it grows by one file per compiled program (a few MB
 for a fit) and JAX never trims it unless `jax_compilation_cache_max_size` is set (that needs the `filelock`
-package). Anyone who can write to the folder can make your JAX processes run code of their choosing: keep it
-private (gyrojax creates it with mode 0o700), never shared with users you do not trust.
+package).
+
+**Trust.** Anyone who can write to the folder can make your JAX processes run code of their choosing, so
+gyrojax creates it with mode 0o700 and uses an existing folder only if it is owned by the user running gyrojax
+and not writable by its group or others (on POSIX systems; `folder_problem`). Otherwise the import warns once,
+naming the folder and why, and runs without the cache; `compilation_cache(path)` refuses such a folder. The
+warnings are `CacheWarning`s (a `RuntimeWarning`), each given once per process, and shown as
+"gyrojax: warning: ..." rather than with Python's file and line.
 """
 
 from __future__ import annotations
 
 import os
+import stat
 import sys
 import tempfile
 import warnings
@@ -76,6 +83,50 @@ def default_cache_dir() -> str:
     if not os.path.isabs(base):  # the XDG spec: a relative value is invalid and ignored
         base = os.path.join(os.path.expanduser("~"), ".cache")
     return os.path.join(base, "gyrojax", "jax")
+
+
+class CacheWarning(RuntimeWarning):
+    """A cache folder gyrojax does not use (it cannot be written, or others could change what is in it)."""
+
+
+_given: set[str] = set()
+
+
+def _format(message, category, filename, lineno, line=None, *, _python=warnings.formatwarning):
+    # The cache's warnings come from the import, not from a line of the user's: shown in gyrojax's words.
+    if issubclass(category, CacheWarning):
+        return f"gyrojax: warning: {message}\n"
+    return _python(message, category, filename, lineno, line)
+
+
+if not getattr(warnings.formatwarning, "_gyrojax", False):
+    _format._gyrojax = True
+    warnings.formatwarning = _format
+
+
+def warn_once(message: str) -> None:
+    """Give `message` as a `CacheWarning`, once per process (the import and the exported programs check the
+    same folder)."""
+    if message not in _given:
+        _given.add(message)
+        warnings.warn(message, CacheWarning, stacklevel=3)
+
+
+def folder_problem(path: str) -> str | None:
+    """Why the existing folder `path` cannot be trusted to hold programs gyrojax runs, or None: owned by
+    another user, or writable by its group or others (a symbolic link to it is followed: the folder is what is
+    checked). Not checked on systems without POSIX owners (Windows)."""
+    if not hasattr(os, "getuid"):
+        return None
+    st = os.stat(path)
+    if not stat.S_ISDIR(st.st_mode):
+        return "it is not a folder"
+    if st.st_uid != os.getuid():
+        return f"it is owned by user id {st.st_uid}, not by the user running gyrojax (user id {os.getuid()})"
+    who = [w for bit, w in ((stat.S_IWGRP, "its group"), (stat.S_IWOTH, "all users")) if st.st_mode & bit]
+    if who:
+        return f"it is writable by {' and '.join(who)} (mode 0o{stat.S_IMODE(st.st_mode):03o})"
+    return None
 
 
 def _writable(path: str) -> str | None:
@@ -125,12 +176,17 @@ def enable_default() -> str | None:
     if value is not None and value.strip().lower() in OFF_VALUES:
         return None
     path = os.path.abspath(os.path.expanduser(value)) if value is not None else default_cache_dir()
+    origin = f"{ENV_VAR}={value!r}" if value is not None else f"the default (set {ENV_VAR} to move it)"
     problem = _writable(path)
     if problem is not None:
-        origin = f"{ENV_VAR}={value!r}" if value is not None else f"the default (set {ENV_VAR} to move it)"
-        warnings.warn(f"gyrojax: the compilation cache folder {path} from {origin} cannot be written ({problem}); "
-                      "running without the persistent compilation cache, so every new process compiles again.",
-                      RuntimeWarning, stacklevel=2)
+        warn_once(f"the compilation cache folder {path} from {origin} cannot be written ({problem}); running "
+                  "without the persistent compilation cache, so every new process compiles again.")
+        return None
+    untrusted = folder_problem(path)
+    if untrusted is not None:
+        warn_once(f"the compilation cache folder {path} from {origin} is not used: {untrusted}, so others could "
+                  "change the programs gyrojax runs. Running without the persistent compilation cache; use a "
+                  f"folder of your own that only you can write (chmod 700), or set {ENV_VAR} to one.")
         return None
     _thresholds()
     _use(path)
@@ -157,8 +213,8 @@ def compilation_cache(path=_UNSET) -> str | None:
 
     **Returns:** the folder in use now, or `None` when no persistent cache is used.
 
-    Raises `ValueError` if `path` is given and the folder cannot be created or written (nothing is changed
-    then), `TypeError` if it is not a path.
+    Raises `ValueError` if `path` is given and the folder cannot be created or written, or is owned by
+    another user or writable by others (nothing is changed then), `TypeError` if it is not a path.
 
     The cache is trusted code: whoever can write to the folder can make your JAX processes run code of their
     choosing, so do not point it at a folder shared with users you do not trust.
@@ -173,6 +229,8 @@ def compilation_cache(path=_UNSET) -> str | None:
                         f"got {type(path).__name__}.")
     folder = os.path.abspath(os.path.expanduser(os.fspath(path)))
     problem = _writable(folder)
+    if problem is None:
+        problem = folder_problem(folder)
     if problem is not None:
         raise ValueError(f"compilation_cache: path {folder} cannot be used as a cache folder ({problem}).")
     _thresholds()

@@ -42,15 +42,19 @@ write to it can change what your programs compute.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import enum
 import functools
 import hashlib
+import hmac
 import json
 import logging
 import os
+import stat
 import sys
 import sysconfig
+import tempfile
 import time
 import types
 from collections.abc import Callable
@@ -60,15 +64,23 @@ import jax
 import numpy as np
 from jax import export
 
+from ._cache import folder_problem, warn_once
 from ._compile import compiler_options, jit, top_level
 from ._io import atomic_write_bytes
+from ._reading import open_regular, read_exactly
 from ._version import __version__
 
 
 FOLDER = "gyrojax_export"
 """The sub-folder of the compilation cache folder that holds the exported programs."""
 
-_MAGIC = b"gyrojax-export 1\n"
+_MAGIC = b"gyrojax-export 2\n"
+KEY_FILE = "gyrojax_export.key"
+"""The per-user secret (32 random bytes, mode 0o600) in the cache folder that keys every artifact's digest."""
+
+MAX_ENTRY_BYTES = 64 * 2**20
+"""The largest artifact written or read (identify's solve of the demo lot is about 200 kB)."""
+
 _VERSIONED = ("gyrojax", "jax", "jaxlib", "numpy", "equinox", "lineax", "optimistix", "diffrax")
 """Packages whose code is identified by their version (and, for gyrojax, the hash of its files)."""
 
@@ -333,6 +345,74 @@ def _folder() -> str | None:
     return cache
 
 
+_trusted: dict[str, tuple[str, bytes] | None] = {}  # cache folder -> (export folder, secret), None: no export
+
+
+def _export_folder() -> tuple[str, bytes] | None:
+    """The export folder of the cache folder in use and its secret, or None (cache off, or a folder that others
+    could change: then one warning says why)."""
+    cache = _folder()
+    if cache is None:
+        return None
+    if cache not in _trusted:
+        _trusted[cache] = _trust(os.path.join(cache, FOLDER))
+    return _trusted[cache]
+
+
+def _trust(folder: str) -> tuple[str, bytes] | None:
+    try:
+        if os.path.islink(folder):
+            problem = "it is a symbolic link (links inside the cache are not followed)"
+        else:
+            os.makedirs(folder, mode=0o700, exist_ok=True)
+            problem = folder_problem(os.path.dirname(folder)) or folder_problem(folder)
+        if problem is None:
+            return folder, _secret(os.path.dirname(folder))
+    except OSError as e:
+        problem = f"{type(e).__name__}: {e.strerror or e}"
+    warn_once(f"the exported programs' folder {folder} is not used: {problem}. Programs are traced in every "
+              "process instead of loaded.")
+    return None
+
+
+def _secret(folder: str) -> bytes:
+    """The folder's secret key, made now if it has none usable (a new key only means the programs stored so
+    far are traced and written again)."""
+    path = os.path.join(folder, KEY_FILE)
+    for _ in range(3):
+        key = _read_secret(path)
+        if key is not None:
+            return key
+        fd, tmp = tempfile.mkstemp(dir=folder)  # mode 0o600
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(os.urandom(32))
+            try:
+                os.link(tmp, path)  # the key appears whole, and of two processes making one, one wins
+            except FileExistsError:
+                pass
+            except OSError:  # a file system without hard links
+                os.replace(tmp, path)
+        finally:
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(tmp)
+    raise OSError(f"cannot make the key file {path}")
+
+
+def _read_secret(path: str) -> bytes | None:
+    """The key at `path`; None if there is none, or it is not a private file of the user's (then removed)."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return None
+    ours = not hasattr(os, "getuid") or st.st_uid == os.getuid()
+    if stat.S_ISREG(st.st_mode) and st.st_size == 32 and ours and not st.st_mode & 0o077:
+        with open_regular(path, "give the export folder's key file") as f:
+            return read_exactly(f, 32, path)
+    os.remove(path)
+    return None
+
+
 def _single_device(leaves) -> bool:
     return all(not isinstance(x, jax.Array) or len(x.sharding.device_set) == 1 for x in leaves)
 
@@ -376,7 +456,7 @@ def _avals_from(items):
     return tuple(jax.core.ShapedArray(tuple(shape), np.dtype(dtype), weak_type=weak) for shape, dtype, weak in items)
 
 
-def _serialize(exported: export.Exported, key: str) -> bytes:
+def _serialize(exported: export.Exported, key: str, secret: bytes) -> bytes:
     """The stored form of a single-device program without effects or shardings (`jax.export`'s own
     serialization needs the `flatbuffers` package, which gyrojax does not require)."""
     if (exported.nr_devices != 1 or exported.ordered_effects or exported.unordered_effects
@@ -390,20 +470,29 @@ def _serialize(exported: export.Exported, key: str) -> bytes:
             "calling_convention_version": int(exported.calling_convention_version),
             "module_kept_var_idx": [int(i) for i in exported.module_kept_var_idx],
             "uses_global_constants": bool(exported.uses_global_constants)}
+    module = bytes(exported.mlir_module_serialized)
+    meta["module_bytes"] = len(module)
     text = json.dumps(meta, sort_keys=True).encode()
-    body = str(len(text)).encode() + b"\n" + text + bytes(exported.mlir_module_serialized)
-    return _MAGIC + key.encode() + b"\n" + hashlib.sha256(body).hexdigest().encode() + b"\n" + body
+    body = str(len(text)).encode() + b"\n" + text + module
+    return _MAGIC + key.encode() + b"\n" + _digest(secret, body) + b"\n" + body
 
 
-def _deserialize(data: bytes, key: str) -> export.Exported:
+def _digest(secret: bytes, body: bytes) -> bytes:
+    # Keyed: whoever can change an artifact but cannot read the user's secret cannot make a valid one.
+    return hmac.new(secret, body, hashlib.sha256).hexdigest().encode()
+
+
+def _deserialize(data: bytes, key: str, secret: bytes) -> export.Exported:
     header = _MAGIC + key.encode() + b"\n"
     if not data.startswith(header):
         raise ValueError("wrong header")
     digest, body = data[len(header):].split(b"\n", 1)
-    if hashlib.sha256(body).hexdigest().encode() != digest:
-        raise ValueError("damaged (its digest differs)")
+    if not hmac.compare_digest(_digest(secret, body), digest):
+        raise ValueError("damaged or not written by this user (its keyed digest differs)")
     size, rest = body.split(b"\n", 1)
     meta, module = json.loads(rest[:int(size)]), rest[int(size):]
+    if len(module) != meta["module_bytes"]:
+        raise ValueError("its module's size differs from its header's")
     in_avals, out_avals = _avals_from(meta["in_avals"]), _avals_from(meta["out_avals"])
     n, m = len(in_avals), len(out_avals)
     out_tree = jax.tree.structure(_tree_example(meta["out_tree"]))
@@ -429,21 +518,31 @@ def _jitted_call(exported: export.Exported) -> Callable:
     return jax.jit(call, compiler_options=compiler_options())
 
 
-def _load(path: str, key: str, leaves) -> Callable | None:
-    """The jitted call of the program stored at `path`, or None if there is none usable."""
+def _regular(path: str) -> bool:
+    """Whether `path` is a regular file itself (a symbolic link inside the cache is not followed)."""
     try:
-        with open(path, "rb") as f:
-            data = f.read()
+        return stat.S_ISREG(os.lstat(path).st_mode)
     except FileNotFoundError:
+        return False
+
+
+def _load(path: str, key: str, secret: bytes, leaves) -> Callable | None:
+    """The jitted call of the program stored at `path`, or None if there is none usable."""
+    if not _regular(path):
         return None
-    exported = _deserialize(data, key)
+    with open_regular(path, "give an exported program") as f:
+        size = os.fstat(f.fileno()).st_size
+        if size > MAX_ENTRY_BYTES:
+            raise ValueError(f"{size} bytes, more than the {MAX_ENTRY_BYTES} an exported program may have")
+        data = read_exactly(f, size, path)
+    exported = _deserialize(data, key, secret)
     if exported.nr_devices != 1 or [(a.shape, a.dtype) for a in exported.in_avals] != [
             (a.shape, a.dtype) for a in _avals(leaves)]:
         raise ValueError("inputs differ from the key's")
     return _jitted_call(exported)
 
 
-def _export(fn, static, treedef, leaves, path: str, key: str) -> Callable | None:
+def _export(fn, static, treedef, leaves, path: str, key: str, secret: bytes) -> Callable | None:
     """Trace `fn`, store it at `path` and return the jitted call of the stored form; None if it cannot be
     exported (a marker is written then, so that later processes do not trace it twice)."""
     def flat(*xs):
@@ -462,27 +561,37 @@ def _export(fn, static, treedef, leaves, path: str, key: str) -> Callable | None
         return None
     try:
         exported = export.export(jax.jit(flat))(*_avals(leaves))
-        data = _serialize(exported, key)
+        data = _serialize(exported, key, secret)
+        if len(data) > MAX_ENTRY_BYTES:
+            raise ValueError(f"{len(data)} bytes, more than the {MAX_ENTRY_BYTES} an exported program may have")
     except Exception as e:  # noqa: BLE001 - host callbacks, outputs that are not arrays, ...
         _log.debug("gyrojax export: %s not exported (%s: %s)", path, type(e).__name__, e)
         try:
-            atomic_write_bytes(path + ".refused", f"{type(e).__name__}: {e}"[:2000].encode())
+            _write(path + ".refused", f"{type(e).__name__}: {e}"[:2000].encode())
         except OSError:
             pass
         return None
     try:
-        atomic_write_bytes(path, data)
+        _write(path, data)
     except OSError as e:
         _log.debug("gyrojax export: %s not written (%s)", path, e)
     return _jitted_call(exported)
 
 
+def _write(path: str, data: bytes) -> None:
+    """Write `path` atomically, replacing a symbolic link there rather than writing through it."""
+    if os.path.islink(path):
+        os.remove(path)
+    atomic_write_bytes(path, data)
+
+
 def _exported_call(name: str, fn, args) -> tuple[Callable | None, str | None, list]:
     """The jitted call of `fn`'s exported program for `args` (loaded or made now), its key and the array
     leaves it takes; the call None: the plain path."""
-    folder = _folder()
-    if folder is None:
+    trusted = _export_folder()
+    if trusted is None:
         return None, None, []
+    secret = trusted[1]
     dynamic, static = eqx.partition(args, eqx.is_array)
     leaves, treedef = jax.tree.flatten(dynamic)
     if not _single_device(leaves):
@@ -496,13 +605,13 @@ def _exported_call(name: str, fn, args) -> tuple[Callable | None, str | None, li
         return _loaded[key], key, leaves
     path = _path(name, key)
     call = None
-    if not os.path.exists(path + ".refused"):
+    if not _regular(path + ".refused"):
         try:
-            call = _load(path, key, leaves)
-        except Exception as e:  # noqa: BLE001 - a corrupt or foreign file: made again below
+            call = _load(path, key, secret, leaves)
+        except Exception as e:  # noqa: BLE001 - a corrupt, tampered or foreign file: made again below
             _log.debug("gyrojax export: %s unreadable (%s: %s)", path, type(e).__name__, e)
         if call is None:
-            call = _export(fn, static, treedef, leaves, path, key)
+            call = _export(fn, static, treedef, leaves, path, key, secret)
     _loaded[key] = call
     return call, key, leaves
 
