@@ -41,6 +41,7 @@ from ._fitdata import FIT_COLUMNS, FitData
 from ._identify import Fit, Unidentifiable, chi2_p_value
 from ._io import atomic_write_bytes
 from ._parameters import Entry, Model, batched, zero_effect
+from ._plugins import user_code_changes, user_effect_code
 from ._reading import open_regular, read_exactly
 from ._version import __version__
 
@@ -195,6 +196,8 @@ def _header(fit: Fit, preset_name: str) -> dict:
         "sweeps": list(fit.data.blocks), "result_sweeps": list(fit.residuals),
         "data_runs": [[s, [list(r) for r in runs]] for s, runs in fit.data.runs],
         "data_weighted": bool(fit.data.weighted), "data_source": fit.data.source,
+        # the code of the user effects the fit used (gyrojax._plugins): loading with other code warns
+        "user_effects": user_effect_code(fit.model.effect_names),
     }
 
 
@@ -357,6 +360,10 @@ def load_fit(path) -> Fit:
     except (KeyError, TypeError, ValueError, RuntimeError) as e:
         raise ValueError(f"{path}: cannot rebuild the fit (preset {header.get('preset')!r}, effects "
                          f"{header.get('effects')!r}): {e}.") from None
+    if "user_effects" in header:
+        for change in user_code_changes(header["user_effects"], tuple(header["effects"])):
+            warnings.warn(f"{path}: {change}: the fit's numbers may not be what this code computes; fit the data "
+                          "again with it.", UserWarning, stacklevel=2)
     if version == 2:
         warnings.warn(f"{path}: {_V2_NOTE}.", UserWarning, stacklevel=2)
     if version == 1:

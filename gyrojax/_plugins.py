@@ -132,7 +132,8 @@ def user_code_changes(recorded: dict, effect_names) -> list[str]:
         if was == is_ or (was and is_ and was["sha256"] == is_["sha256"]):
             continue
         if was is None:
-            out.append(f"effect {name!r} comes now from the user module {is_['module']}, the library's when saved")
+            out.append(f"effect {name!r} comes now from the user module {is_['module']}; the fit recorded no user "
+                       "code for it")
         elif is_ is None:
             out.append(f"effect {name!r} came from the user module {was['module']}; it is not loaded from it now")
         else:
@@ -153,6 +154,7 @@ def nonfinite_effect(name: str, gyro, scale: float = 1.0) -> str | None:
     """Why effect `name` cannot be used on the device `gyro`: the first parameter of the device that it makes
     NaN or infinite, at zero or at `scale` times its typical size (or the exception its `apply` raised); None
     when it gives finite devices or does not act on `gyro`. `gyro` is one device (no lot axis)."""
+    import equinox as eqx
     import jax
     import jax.numpy as jnp
     import numpy as np
@@ -165,15 +167,21 @@ def nonfinite_effect(name: str, gyro, scale: float = 1.0) -> str | None:
         return None  # not this effect's device: `apply` says so where it is used
     zero = jax.tree.map(lambda x: jnp.zeros_like(jnp.asarray(x, dtype=float)), typical)
     size = "at its typical size" if scale == 1.0 else f"at {scale:g} times its typical size"
+    def bad(leaf):  # an inexact array with a NaN or an infinity
+        value = np.asarray(leaf) if eqx.is_array(leaf) or isinstance(leaf, float) else None
+        return value is not None and np.issubdtype(value.dtype, np.inexact) and not np.all(np.isfinite(value))
+
+    before = [bad(leaf) for leaf in jax.tree.leaves(gyro)]
     for size, eff in (("at zero", zero), (size, typical)):
         try:
             out = eff.apply(gyro)
         except Exception as e:
             return f"effect {name!r} ({effect_origin(cls)}): apply() {size} raised {type(e).__name__}: {e}"
-        for path, leaf in jax.tree_util.tree_flatten_with_path(out)[0]:
-            value = np.asarray(leaf) if hasattr(leaf, "dtype") or isinstance(leaf, float) else None
-            if value is not None and np.issubdtype(value.dtype, np.inexact) and not np.all(np.isfinite(value)):
-                shown = value if value.size == 1 else value[~np.isfinite(value)][0]
+        leaves = jax.tree_util.tree_flatten_with_path(out)[0]
+        for (path, leaf), was_bad in zip(leaves, before + [False] * (len(leaves) - len(before))):
+            if bad(leaf) and not was_bad:  # a leaf the device holds non-finite by design (inf: none) is its own
+                value = np.asarray(leaf).ravel()
+                shown = value[~np.isfinite(value)][0]
                 return (f"effect {name!r} ({effect_origin(cls)}) gives the device a non-finite value {size}: "
                         f"{jax.tree_util.keystr(path).lstrip('.')} = {float(np.real(shown))}")
     return None

@@ -4,11 +4,13 @@ points), registered like the built-in ones; registered effects are global, so ev
 import importlib.metadata
 import sys
 import textwrap
+import warnings
 
 import pytest
 
 import gyrojax as gj
 from gyrojax import _plugins, load_effect_entry_points, load_effects_module
+from gyrojax._parameters import zero_effect
 from gyrojax._plugins import ENTRY_POINT_GROUP
 
 
@@ -245,3 +247,31 @@ def test_the_user_code_digest_follows_the_modules_an_effect_imports(tmp_path, mo
     changes = _plugins.user_code_changes(recorded, ["user_gain"])
     assert changes == [f"effect 'user_gain': the code of its module {path} (or of a module it imports) differs "
                        f"from that of {path} when the fit was made"]
+
+
+@pytest.mark.slow
+def test_a_saved_fit_records_its_user_code_and_warns_when_loaded_with_other_code(tmp_path, monkeypatch):
+    helper = tmp_path / "gjhelper_fit.py"
+    helper.write_text("SIGN = 1.0\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    path = tmp_path / "fitted.py"
+    path.write_text(effect_source().replace("import gyrojax as gj", "import gyrojax as gj\nfrom gjhelper_fit import "
+                                            "SIGN").replace("+ self.gain)", "+ SIGN * self.gain)"))
+    load_effects_module(path)
+    table = gj.simulate_table(gj.paper_qmg(), devices=1, runs=1, sweeps=("rate_table",), seed=1, progress=False)
+    model = gj.Model(gj.paper_qmg(), (zero_effect("user_gain"),))
+    fit = gj.identify(model, table, free=("k_vf",), progress=False)
+    saved = tmp_path / "u.fit"
+    gj.save_fit(fit, saved)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the same code: no warning
+        gj.load_fit(saved)
+    helper.write_text("SIGN = -1.0\n")  # edited, and loaded afresh (as a later process would)
+    del gj.EFFECTS["user_gain"]
+    _plugins._loaded_files.clear()
+    _plugins._sources.clear()
+    for name in [m for m in sys.modules if m.startswith(("gyrojax_user_effects_", "gjhelper"))]:
+        del sys.modules[name]
+    load_effects_module(path)
+    with pytest.warns(UserWarning, match=f"u.fit: effect 'user_gain': the code of its module {path} .*differs"):
+        gj.load_fit(saved)
