@@ -308,7 +308,8 @@ def _table_and_fit(args):
 def _cmd_diagnose(args):
     from ._diagnose import diagnose, write_report
 
-    _check_outputs(("--json", args.json, False), ("--report", args.report, True))
+    _check_outputs(("--json", args.json, False), ("--report", args.report, True),
+                   ("--draft-effect", args.draft_effect, False))
     table, fit = _table_and_fit(args)
     diag = diagnose(table, args.model, alpha=args.alpha, fit=fit, progress=not args.quiet)
     print(diag.summary())
@@ -319,6 +320,19 @@ def _cmd_diagnose(args):
     if args.json:
         _write_json(diag.to_json(), args.json)
         print(f"wrote {args.json}")
+    if args.draft_effect:
+        from ._diagnose.draft import DraftError, write_draft
+
+        if diag.formula is None:
+            print("gyrojax diagnose: no draft written: no term of the dictionary is significant in what is left "
+                  f"(verdict: {diag.verdict})", file=sys.stderr)
+            return EXIT_FAILED
+        try:
+            write_draft(diag.formula, args.draft_effect, source=str(args.data))
+        except DraftError as e:
+            print(f"gyrojax diagnose: no draft written: {e}", file=sys.stderr)
+            return EXIT_FAILED
+        print(f"wrote {args.draft_effect}: {diag.formula.description}; load it with --effects-module")
     if "not converged" in diag.final.status:
         bad = [f"{d}: {m}" for d, m, st in zip(diag.final.devices, diag.final.result_message, diag.final.status)
                if st == "not converged"]
@@ -391,9 +405,22 @@ def _cmd_demo(args):
     from ._demo import run_demo
 
     _check_outputs(("--out", args.out, True))
+    where = os.path.abspath(args.out)  # said in full: the default is a folder in the current one
     with atomic_directory(args.out) as folder:  # the demo folder appears whole or not at all
         run_demo(folder, full_tier=args.full and not args.no_full, progress=not args.quiet,
-                 log=lambda m: print(m.replace(folder, args.out), flush=True))
+                 log=lambda m: print(m.replace(folder, where), flush=True))
+    return EXIT_OK
+
+
+def _cmd_describe(args):
+    from ._describe import describe, describe_text
+
+    _check_outputs(("--json", args.json, False))
+    records = describe(args.model)
+    print(describe_text(records))
+    if args.json:
+        _write_json([r.to_json() for r in records], args.json)
+        print(f"wrote {args.json}")
     return EXIT_OK
 
 
@@ -479,6 +506,9 @@ def build_parser():
                            "gyrojax before: it is replaced as a whole)")
     diag.add_argument("--fit", metavar="FIT", help="a fit of this data saved by `gyrojax identify --save`: the "
                                                   "baseline, instead of fitting it again (its preset replaces --model)")
+    diag.add_argument("--draft-effect", metavar="FILE.py",
+                      help="write the proposed missing term (the diagnosis's formula) as an effect module here, "
+                           "ready for --effects-module")
     diag.add_argument("--quiet", action="store_true", help="no progress messages (on standard error)")
     _effects_module_option(diag)
     diag.set_defaults(func=_cmd_diagnose)
@@ -535,6 +565,15 @@ def build_parser():
     demo.add_argument("--no-full", action="store_true", help="skip the full-waveform tier (the default)")
     demo.add_argument("--quiet", action="store_true", help="only the steps and their results, no progress messages")
     demo.set_defaults(func=_cmd_demo)
+
+    desc = sub.add_parser("describe", help="every leaf of a preset device: its path, value, unit and provenance",
+                          description="List every leaf of the preset's device (the path an effect reads or "
+                                      "writes, e.g. vcf_electrode.force_per_volt2), with its value, unit, "
+                                      "description and where the preset took it from (docs/adding_an_effect.md).")
+    desc.add_argument("--model", choices=sorted(PRESETS), default="paper-qmg",
+                      help="the preset to describe (default paper-qmg)")
+    desc.add_argument("--json", help="write the records (path, value, unit, description, provenance) as JSON here")
+    desc.set_defaults(func=_cmd_describe)
     return parser
 
 
