@@ -34,6 +34,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 from ._data.arrays import padded_columns
 from ._data.cells import DataError
 from ._data.table import Table
+from ._data.validate import check_outputs_change
 from ._sweeps.registry import SWEEP_KINDS, sweep_kind, sweep_names
 
 
@@ -445,6 +446,39 @@ def _num(x) -> float | None:
 
 _FLAT = "the outputs do not change with the input (scale factor 0)"
 
+# The figures a sweep should give where they apply: one of them None is a number the data did not determine.
+_DETERMINED = ("scale_factor", "bias", "nonlinearity_max_ppm", "nonlinearity_rms_ppm", "bandwidth_hz")
+
+# The report's keys of each metric an `AbstractSweep.applicable_metrics` names.
+_METRIC_KEYS = {
+    "scale_factor": ("scale_factor", "scale_factor_vs_rate", "scale_factor_mean"),
+    "bias": ("bias", "bias_vs_rate"),
+    "nonlinearity": ("nonlinearity_max_ppm", "nonlinearity_rms_ppm", "nonlinearity_max_ppm_vs_rate",
+                     "nonlinearity_rms_ppm_vs_rate"),
+    "asymmetry": ("asymmetry_ppm",),
+    "repeatability": ("repeatability_ppm",),
+    "bandwidth": ("bandwidth_hz", "phase_deg_at_bandwidth", "low_frequency_gain"),
+}
+
+
+def _drop_inapplicable(rec: dict[str, Any], sweep: str, brief: bool = False) -> dict[str, str]:
+    """Set to None the numbers of `rec` that are no measurement on this sweep kind (its `applicable_metrics`);
+    returns the reason for each (`brief`: the kind's reason in full for the first key only, the others refer to
+    it, so that a line of text says it once)."""
+    kind = sweep_kind(sweep)
+    applies = kind.applicable_metrics()
+    reasons = {}
+    for metric, keys in _METRIC_KEYS.items():
+        if metric in applies:
+            continue
+        for key in keys:
+            if key in rec:
+                rec[key] = None
+                first = next(iter(reasons), None)
+                reasons[key] = (f"not a measurement on a {sweep} sweep (see {first})" if brief and first
+                                else kind.metric_not_applicable(metric))
+    return reasons
+
 
 def _why_not(rec: dict[str, Any], outputs: np.ndarray, inputs: np.ndarray) -> dict[str, str]:
     """The reason for each None among a point record's numbers (see `metrics_report`)."""
@@ -541,6 +575,8 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
                                 f"{name(key, rows)} but not this one; give it for all or none.",
                                 source=table.source, row=r + 1, column="rate_dps")
 
+    check_outputs_change(table, groups)
+
     records: dict[tuple, dict[str, Any]] = {}
     device_records: list[dict[str, Any]] = []
     for sweep in sweep_names():
@@ -568,8 +604,9 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
                     "phase_deg_at_bandwidth": _num(bw.phase_deg[d, k]) if has_phase else None,
                     "low_frequency_gain": _num(bw.low_frequency_gain[d, k])}
                 sel = arr.mask[d, k]
-                records[(dev, r, sweep)]["not_applicable"] = _why_not(records[(dev, r, sweep)],
-                                                                      arr.outputs[d, k][sel], arr.inputs[d, k][sel])
+                why = _why_not(records[(dev, r, sweep)], arr.outputs[d, k][sel], arr.inputs[d, k][sel])
+                records[(dev, r, sweep)]["undetermined"] = [key for key in why if key in _DETERMINED]
+                records[(dev, r, sweep)]["not_applicable"] = why
             continue
         fit = fit_scale_factor(arr.inputs, arr.outputs, mask=arr.mask, sigmas=sig, full_scale=full_scale)
         asym = asymmetry(arr.inputs, arr.outputs, mask=arr.mask, sigmas=sig, common_bias=common_bias)
@@ -591,7 +628,11 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
                             "nonlinearity_max_ppm_vs_rate": _num(vs_rate.nonlinearity_max_ppm[d, k]),
                             "nonlinearity_rms_ppm_vs_rate": _num(vs_rate.nonlinearity_rms_ppm[d, k])})
             sel = arr.mask[d, k]
-            rec["not_applicable"] = _why_not(rec, arr.outputs[d, k][sel], arr.inputs[d, k][sel])
+            kind_reasons = _drop_inapplicable(rec, sweep, brief=True)
+            why = _why_not({key: v for key, v in rec.items() if key not in kind_reasons}, arr.outputs[d, k][sel],
+                           arr.inputs[d, k][sel])
+            rec["undetermined"] = [key for key in why if key in _DETERMINED]
+            rec["not_applicable"] = {**why, **kind_reasons}
             records[(dev, r, sweep)] = rec
         run_mask = arr.mask.any(axis=-1)
         rep = repeatability(np.where(run_mask, fit.scale_factor, 0.0), mask=run_mask, ddof=ddof)
@@ -599,8 +640,9 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
         for d, dev in enumerate(arr.devices):
             sf = fit.scale_factor[d][run_mask[d]]
             rec = {"device": dev, "sweep": sweep, "n_runs": int(n_runs[d]),
-                   "scale_factor_mean": _num(np.mean(sf)), "repeatability_ppm": _num(rep[d]), "not_applicable": {}}
-            if rec["repeatability_ppm"] is None:
+                   "scale_factor_mean": _num(np.mean(sf)), "repeatability_ppm": _num(rep[d])}
+            rec["not_applicable"] = _drop_inapplicable(rec, sweep)
+            if rec["repeatability_ppm"] is None and "repeatability_ppm" not in rec["not_applicable"]:
                 rec["not_applicable"]["repeatability_ppm"] = (
                     f"{int(n_runs[d])} run{'s' * (int(n_runs[d]) != 1)}: a repeatability needs at least {ddof + 1}"
                     if int(n_runs[d]) <= ddof else "the mean scale factor is 0: there is nothing to be relative to")

@@ -151,17 +151,15 @@ def _write_csv(path, rows):
 RATES = (-200, -150, -100, -50, -20, -10, 0, 10, 20, 50, 100, 150, 200)
 
 
-def test_metrics_on_constant_outputs_prints_na_and_exits_1(tmp_path, capsys):
+def test_metrics_on_constant_outputs_is_a_data_error(tmp_path, capsys):
+    """A rate table whose outputs do not change (a dead output): refused by name, exit 2, as compensate does."""
     data = _write_csv(tmp_path / "flat.csv", [("A", r, "rate_table", x, 0.0, 4000.0) for r in (0, 1) for x in RATES])
     js = tmp_path / "m.json"
-    assert main(["metrics", str(data), "--json", str(js)]) == 1
-    out, err = capsys.readouterr()
-    assert "SF 0 LSB/(deg/s)  NL n/a (the outputs do not change with the input (scale factor 0)" in out
-    assert "repeatability n/a (the mean scale factor is 0" in out
-    assert "2 sweep(s) gave no nonlinearity" in err
-    report = json.loads(js.read_text())  # written, and true: null with the reason
-    assert report["points"][0]["nonlinearity_max_ppm"] is None
-    assert "do not change" in report["points"][0]["not_applicable"]["nonlinearity_max_ppm"]
+    assert main(["metrics", str(data), "--json", str(js)]) == 2
+    err = capsys.readouterr().err
+    assert ("flat.csv: data row 1 (line 2), column 'output': device 'A', run 0: the rate_table outputs are all 0.0"
+        in err)
+    assert not js.exists()
 
 
 @pytest.mark.parametrize("method", ["polynomial", "composite"])

@@ -335,21 +335,24 @@ def test_constant_outputs_under_jit_and_grad():
 
 
 def test_metrics_report_says_why_a_number_is_missing():
-    rows = [{"device": "A", "run": r, "sweep": "rate_table", "input": x, "output": 0.1 if r == 1 else 3.0 * x}
+    rows = [{"device": "A", "run": r, "sweep": "rate_table", "input": x, "output": 0.1 * x if r == 1 else 3.0 * x}
             for r in (0, 1) for x in (-10.0, -5.0, 0.0, 5.0, 10.0)]
     rows += [{"device": "B", "run": 0, "sweep": "rate_table", "input": x, "output": 2.0 * x} for x in (1.0, 2.0, 3.0)]
+    # a quadrature injection whose outputs do not change: a slope of 0, measured (its sign is no convention)
+    rows += [{"device": "C", "run": 0, "sweep": "quadrature_injection", "input": x, "output": 0.1}
+             for x in (-1.0, 0.0, 1.0)]
     report = metrics_report(Table.from_records(rows, source="flat.csv"))
     json.dumps(report, allow_nan=False)
-    good, flat, one_sided = report["points"]
-    assert good["not_applicable"] == {}
+    good, straight, one_sided, flat = report["points"]
+    assert good["not_applicable"] == {} and straight["not_applicable"] == {}
     assert flat["scale_factor"] == 0.0 and flat["nonlinearity_max_ppm"] is None and flat["asymmetry_ppm"] is None
-    assert flat["not_applicable"]["nonlinearity_max_ppm"].startswith("the outputs do not change with the input")
+    assert flat["not_applicable"]["nonlinearity_max_ppm"].startswith("not a measurement on a quadrature_injection")
     assert set(flat["not_applicable"]) == {"nonlinearity_max_ppm", "nonlinearity_rms_ppm", "asymmetry_ppm"}
     assert one_sided["not_applicable"] == {
         "asymmetry_ppm": "the sweep lacks positive or negative inputs; an asymmetry needs both signs"}
     dev = {d["device"]: d for d in report["devices"]}
-    assert dev["A"]["repeatability_ppm"] is not None  # 3 and 0: measured, enormous
+    assert dev["A"]["repeatability_ppm"] is not None  # 3 and 0.1: measured, enormous
     assert dev["B"]["not_applicable"] == {"repeatability_ppm": "1 run: a repeatability needs at least 2"}
-    both_flat = [dict(r, output=0.0) for r in rows[:10]]
-    (d,) = metrics_report(Table.from_records(both_flat))["devices"]
+    opposite = [dict(r, output=float(r["input"]) * (1.0 if r["run"] == 0 else -1.0)) for r in rows[:10]]
+    (d,) = metrics_report(Table.from_records(opposite))["devices"]
     assert d["repeatability_ppm"] is None and "mean scale factor is 0" in d["not_applicable"]["repeatability_ppm"]

@@ -9,6 +9,7 @@ import numpy as np
 
 from .._data.cells import DataError
 from .._data.table import Table
+from .._data.validate import check_outputs_change
 from .._metrics import (
     FULL_SCALE_CONVENTIONS,
     MIN_POINTS_LINEAR,
@@ -187,12 +188,8 @@ def compensate(table: Table, *, method: str | AbstractCompensator = "composite",
             raise DataError(f"{table.locate(int(rows[0]))}: device {dev!r}, run {run} has {len(rows)} rate_table "
                             f"point(s); judging a compensation needs at least {MIN_POINTS_LINEAR}.",
                             source=table.source, row=int(rows[0]) + 1)
-        out = table["output"][rows]
-        if np.ptp(out) == 0.0:
-            raise DataError(f"{table.locate(int(rows[0]), 'output')}: device {dev!r}, run {run}: the rate_table "
-                            f"outputs are all {float(out[0])!r}, the same at every rate: there is no scale factor to "
-                            "compensate (a disconnected or saturated output?). Remove the run or fix the file.",
-                            source=table.source, row=int(rows[0]) + 1, column="output")
+    check_outputs_change(table, groups)
+    for (dev, run, _), rows in groups.items():
         for name in compensator.requires:
             values = table[name][rows] if name in table else np.full(len(rows), np.nan)
             bad = rows[~np.isfinite(values)]

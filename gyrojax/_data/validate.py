@@ -201,3 +201,23 @@ def group_rows(columns: Mapping[str, np.ndarray]) -> dict[tuple[str, int, str], 
     for i, key in enumerate(zip(columns["device"].tolist(), columns["run"].tolist(), columns["sweep"].tolist())):
         groups.setdefault(key, []).append(i)
     return {k: np.asarray(v, dtype=np.int64) for k, v in groups.items()}
+
+
+def check_outputs_change(table, groups: Mapping[tuple[str, int, str], np.ndarray]) -> None:
+    """Refuse a run whose outputs are all equal in a sweep whose output must change with its input (a kind
+    whose slope's sign a convention sets, `AbstractSweep.sign_definite`: a rate table, a VCF or DAC sweep):
+    a disconnected or saturated output, which has no scale factor to measure or compensate. The one rule of
+    `metrics_report` and `compensate`: a `DataError` naming the file, row, device, run and sweep.
+
+    `groups`: the rows of each `(device, run, sweep)` of `table` (`Table.groups`)."""
+    for (dev, run, sweep), rows in groups.items():
+        kind = sweep_kind(sweep)
+        if not (kind.straight_line and kind.sign_definite) or len(rows) < 2:
+            continue
+        out = table["output"][rows]
+        if np.ptp(out) == 0.0:
+            each = "rate" if kind.rate_input else kind.input_quantity
+            raise DataError(f"{table.locate(int(rows[0]), 'output')}: device {dev!r}, run {run}: the {sweep} outputs "
+                            f"are all {float(out[0])!r}, the same at every {each}: there is no scale factor to "
+                            "measure or compensate (a disconnected or saturated output?). Remove the run or fix the "
+                            "file.", source=table.source, row=int(rows[0]) + 1, column="output")

@@ -103,11 +103,8 @@ class AbstractSweep(eqx.Module):
             return f"a {self.name} sweep gives a bandwidth, not a straight-line fit"
         if metric == "bandwidth":
             return f"a {self.name} sweep gives a straight-line fit, not a bandwidth"
-        if "scale_factor" not in self.applicable_metrics():
-            return (f"the output of a {self.name} sweep is not proportional to its input by design: a "
-                    "straight-line slope of it is no scale factor")
-        return (f"the output of a {self.name} sweep is not proportional to its input by design (its slope is a "
-                "small effect, not a gain), so figures relative to the slope are noise")
+        return (f"not a measurement on a {self.name} sweep: its output is not proportional to its input by design "
+                "(the slope is a small effect, not a gain), so figures relative to the slope are noise")
 
     # -- protocol ------------------------------------------------------------------------------------------------
 

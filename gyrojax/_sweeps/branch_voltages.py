@@ -129,9 +129,9 @@ class BranchRatio(AbstractSweep):
         return ("bias",)  # the ratio at zero rate: the branches' mismatch
 
     def metric_not_applicable(self, metric: str) -> str:
-        return ("the branch ratio is 1 at every rate for matched branches and changes with the rate only by small "
-                "effects (which identify and diagnose fit): its slope is no scale factor, and figures relative to "
-                "the slope are noise; the bias (the ratio at zero rate) is the branches' mismatch")
+        return ("not a measurement on a branch_ratio sweep: the ratio is 1 at every rate for matched branches and "
+                "changes with the rate only by small effects (fitted by identify and diagnose); its bias, the "
+                "ratio at zero rate, is the branches' mismatch")
 
     def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:
         return np.asarray(protocol.branch_rates_dps)

@@ -41,9 +41,8 @@ class DriveFrequency(AbstractSetpointSweep):
         return ()
 
     def metric_not_applicable(self, metric: str) -> str:
-        return ("the drive frequency is the same at every set-point but for a cubic drive spring's bend "
-                "(duffing_drive, which identify and diagnose fit): a straight line through it measures no scale "
-                "factor, bias or nonlinearity of the gyro")
+        return ("not a measurement on a drive_frequency sweep: the frequency changes with the set-point only by a "
+                "cubic drive spring's bend (duffing_drive, fitted by identify and diagnose)")
 
     def dwell_s(self, protocol: "Protocol") -> float:
         return protocol.drive_dwell_s
