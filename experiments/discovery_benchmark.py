@@ -29,6 +29,7 @@ import math
 import os
 import sys
 import time
+import warnings
 
 import numpy as np
 
@@ -176,7 +177,7 @@ class RefitFTest(Method):
             return gj.identify(full, data, free=DEFAULT_FREE, hold=held, progress=False)
 
         fit = fit_with(())
-        selected, remaining = [], list(candidates)
+        selected, remaining, steps = [], list(candidates), []
         while remaining and len(selected) < self.max_effects:
             best = None
             for c in remaining:
@@ -189,6 +190,7 @@ class RefitFTest(Method):
                     best = (c, p, new)
             if best is None or best[1] >= self.alpha:
                 break
+            steps.append(f"{best[0]} (F-test p = {best[1]:.2g}, chi2 {fit.chi2_total:.1f} -> {best[2].chi2_total:.1f})")
             selected.append(best[0])
             remaining.remove(best[0])
             fit = best[2]
@@ -197,7 +199,7 @@ class RefitFTest(Method):
         explained = float(fit.p_value_total) >= self.alpha
         verdict = "explained" if explained else ("partly explained" if selected else "unexplained")
         return Outcome(selected, verdict, set() if explained else {top}, None, [], float(fit.chi2_red_total),
-                       time.perf_counter() - t0)
+                       time.perf_counter() - t0, note="; ".join(steps))
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -228,7 +230,8 @@ def dictionary(c: dict) -> dict:
     """Canonical term name -> feature column (output units) over one sweep's points (`_coords`)."""
     x = c["input"] / np.max(np.abs(c["input"]))
     model = c["model"] / np.max(np.abs(c["model"]))
-    terms = {"lin(input)": x, "sq(input)": x**2, "cube(input)": x**3, "abs(input)": np.abs(x),
+    # order matters: a later column within DUPLICATE_COS of an earlier one is dropped (|x| before x^2)
+    terms = {"lin(input)": x, "abs(input)": np.abs(x), "sq(input)": x**2, "cube(input)": x**3,
              "sign(input)": np.sign(x), "sign(input)*lin(input)": x * (x > 0)}
     for q in (0.25, 0.5):
         terms[f"step(input)@{q}"] = (x >= q).astype(float)
@@ -274,6 +277,29 @@ def _project_out_baseline(c, cols):
     return out
 
 
+DUPLICATE_COS = 0.95  # columns this close (after the baseline took its part) are one column to a sparse fit
+
+
+EMPTY_SHARE = 1e-3  # a column the baseline takes up to this share of its norm is the baseline's own direction
+
+
+def _distinct_columns(x, names, before):
+    """Unit-norm columns of `x`, dropping those the baseline took up (norm below EMPTY_SHARE of `before`, their norm
+    before the projection) and any within DUPLICATE_COS of an earlier one (the dictionary's order decides:
+    temperature before the drive frequency, which follows it through the TCF)."""
+    keep, cols = [], []
+    for i in range(x.shape[1]):
+        n = np.linalg.norm(x[:, i])
+        if not n > EMPTY_SHARE * before[i]:
+            continue
+        v = x[:, i] / n
+        if any(abs(float(v @ w)) > DUPLICATE_COS for w in cols):
+            continue
+        keep.append(i)
+        cols.append(v)
+    return (np.stack(cols, axis=1) if cols else np.zeros((x.shape[0], 0))), [names[i] for i in keep]
+
+
 def coordinate_of(term: str) -> str:
     """The recorded coordinate a canonical term varies with: the first factor other than input or model."""
     coords = [f[f.index("(") + 1:-1] if "(" in f else f for f in term.split("*")]
@@ -287,8 +313,8 @@ class PySindy(Method):
 
     name = "pysindy"
 
-    def __init__(self, preset: str = "paper-qmg", threshold: float = 4.0, alpha: float = 0.01):
-        self.preset, self.threshold, self.alpha = preset, threshold, alpha
+    def __init__(self, preset: str = "paper-qmg", threshold: float = 4.0, ridge: float = 0.05, alpha: float = 0.01):
+        self.preset, self.threshold, self.ridge, self.alpha = preset, threshold, ridge, alpha
 
     def available(self):
         try:
@@ -313,12 +339,16 @@ class PySindy(Method):
             c = _coords(fit, s)
             terms = dictionary(c)
             names = list(terms)
-            x = _project_out_baseline(c, np.stack([terms[n] for n in names], axis=1))
-            norm = np.linalg.norm(x, axis=0)
-            keep = norm > 1e-9 * max(norm.max(), 1e-300)
-            x, names = x[:, keep] / norm[keep], [n for n, k in zip(names, keep) if k]
-            opt = ps.STLSQ(threshold=self.threshold, alpha=0.0)
-            opt.fit(x, c["residual"][:, None])
+            raw = np.stack([terms[n] for n in names], axis=1)
+            x, names = _distinct_columns(_project_out_baseline(c, raw), names,
+                                         np.linalg.norm(raw / c["sigma"][:, None], axis=0))
+            if not names:
+                explained[s], proposals[s] = 0.0, []
+                continue
+            opt = ps.STLSQ(threshold=self.threshold, alpha=self.ridge)
+            with warnings.catch_warnings():  # "eliminated all coefficients" is the null answer, not a problem
+                warnings.simplefilter("ignore", UserWarning)
+                opt.fit(x, c["residual"][:, None])
             coef = np.ravel(opt.coef_)
             nz = np.flatnonzero(coef)
             explained[s] = float(np.sum((x[:, nz] @ coef[nz]) ** 2)) if nz.size else 0.0
