@@ -35,6 +35,7 @@ import warnings
 
 from . import _stop
 from ._io import OutputPathError, atomic_directory, atomic_write_json, check_output_paths
+from ._text import safe_name, safe_text
 
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
@@ -84,6 +85,11 @@ def _signals_raise():
         sys.unraisablehook = previous_hook
         for s, h in previous.items():
             signal.signal(s, h)
+
+
+def _names(table) -> tuple[str, ...]:
+    """The device names of `table`, for `safe_text`: a name with a newline or an escape is shown escaped."""
+    return tuple(dict.fromkeys(table["device"].tolist()))
 
 
 def _na(value, spec: str, reason: str | None = None, unit: str = "") -> str:
@@ -179,7 +185,7 @@ def _cmd_metrics(args):
     undetermined = 0
     for p in report["points"]:
         why = p.get("not_applicable", {})
-        head = f"{p['device']:>16} run {p['run']:<3} {p['sweep']:<11}"
+        head = f"{safe_name(p['device']):>16} run {p['run']:<3} {p['sweep']:<11}"
         kind = sweep_kind(p["sweep"])
         if not kind.straight_line:
             print(f"{head} bandwidth {_na(p.get('bandwidth_hz'), '.4g', why.get('bandwidth_hz'), ' Hz')}")
@@ -196,7 +202,7 @@ def _cmd_metrics(args):
     for d in report["devices"]:
         if d["n_runs"] > 1:
             rep = _na(d["repeatability_ppm"], ".2f", d.get("not_applicable", {}).get("repeatability_ppm"), " ppm")
-            print(f"{d['device']:>16} {d['sweep']:<11} repeatability {rep} over {d['n_runs']} runs")
+            print(f"{safe_name(d['device']):>16} {d['sweep']:<11} repeatability {rep} over {d['n_runs']} runs")
     if args.json:
         _write_json(report, args.json)
         print(f"wrote {args.json}")
@@ -263,14 +269,14 @@ def _cmd_compensate(args):
     for r in result.runs:
         before, after = r["nonlinearity_max_ppm_before"], r["nonlinearity_max_ppm_after"]
         undetermined += before is None or after is None
-        print(f"{r['device']:>16} {r['run']:>4} {'train' if r['used_for_training'] else 'held-out':>8}  "
+        print(f"{safe_name(r['device']):>16} {r['run']:>4} {'train' if r['used_for_training'] else 'held-out':>8}  "
               f"{_na(before, '10.2f', _compensation_na(r, 'before'))} -> "
               f"{_na(after, '.2f', _compensation_na(r, 'after'))}")
     for d in result.devices:
         if d["n_runs"] < 2:
             continue
         before, after = d["repeatability_ppm_before"], d["repeatability_ppm_after"]
-        print(f"{d['device']:>16} repeatability over {d['n_runs']} runs: "
+        print(f"{safe_name(d['device']):>16} repeatability over {d['n_runs']} runs: "
               f"{_na(before, '.2f', 'not determined', ' ppm')} -> {_na(after, '.2f', 'not determined', ' ppm')} "
               f"({args.method}, trained on runs "
               f"{', '.join(map(str, d['train_runs']))})")
@@ -279,7 +285,7 @@ def _cmd_compensate(args):
         print(f"wrote {args.json}")
     for d in result.devices:
         if d.get("converged") is False:
-            print(f"gyrojax compensate: device {d['device']}: {d['message']}", file=sys.stderr)
+            print(f"gyrojax compensate: device {safe_name(d['device'])}: {safe_text(d['message'])}", file=sys.stderr)
     if undetermined:
         print(f"gyrojax compensate: {undetermined} run(s) gave no nonlinearity (n/a above)", file=sys.stderr)
         return EXIT_FAILED
@@ -305,6 +311,18 @@ def _table_and_fit(args):
     return table, fit
 
 
+def _escape_markdown(folder: str, names) -> None:
+    """The report's Markdown pages with the data's unsafe device names escaped (see `safe_text`)."""
+    for entry in sorted(os.listdir(folder)):
+        if entry.endswith(".md"):
+            path = os.path.join(folder, entry)
+            with open(path, encoding="utf-8") as f:
+                text = f.read()
+            if safe_text(text, names) != text:
+                with open(path, "w", encoding="utf-8") as f:
+                    f.write(safe_text(text, names))
+
+
 def _cmd_diagnose(args):
     from ._diagnose import diagnose, write_report
 
@@ -312,10 +330,12 @@ def _cmd_diagnose(args):
                    ("--draft-effect", args.draft_effect, False))
     table, fit = _table_and_fit(args)
     diag = diagnose(table, args.model, alpha=args.alpha, fit=fit, progress=not args.quiet)
-    print(diag.summary())
+    names = _names(table)
+    print(safe_text(diag.summary(), names))
     if args.report:
         with atomic_directory(args.report) as folder:  # the report folder appears whole or not at all
             write_report(diag, folder)
+            _escape_markdown(folder, names)
         print(f"wrote report to {args.report}")
     if args.json:
         _write_json(diag.to_json(), args.json)
@@ -334,8 +354,8 @@ def _cmd_diagnose(args):
             return EXIT_FAILED
         print(f"wrote {args.draft_effect}: {diag.formula.description}; load it with --effects-module")
     if "not converged" in diag.final.status:
-        bad = [f"{d}: {m}" for d, m, st in zip(diag.final.devices, diag.final.result_message, diag.final.status)
-               if st == "not converged"]
+        bad = [f"{safe_name(d)}: {m}" for d, m, st in zip(diag.final.devices, diag.final.result_message,
+                                                            diag.final.status) if st == "not converged"]
         print(f"gyrojax diagnose: the final fit did not converge: {'; '.join(bad)}", file=sys.stderr)
         return EXIT_FAILED
     return EXIT_OK
@@ -347,7 +367,7 @@ def _cmd_plan(args):
     _check_outputs(("--json", args.json, False))
     table, fit = _table_and_fit(args)
     result = plan(table, args.model, fit=fit, budget_min=args.budget_min, progress=not args.quiet)
-    print(result.summary())
+    print(safe_text(result.summary(), _names(table)))
     if args.json:
         _write_json(result.to_json(), args.json)
         print(f"wrote {args.json}")
@@ -386,15 +406,16 @@ def _cmd_identify(args):
     _check_finite_effects([(name, 1.0) for name in dict.fromkeys(args.effect)], preset(args.model))
     model = Model(preset(args.model), tuple(zero_effect(name) for name in args.effect))
     fit = identify(model, table, free=args.free or DEFAULT_FREE)
-    print(fit.summary())
-    print(compare(fit).summary())
+    names = _names(table)
+    print(safe_text(fit.summary(), names))
+    print(safe_text(compare(fit).summary(), names))
     if args.json:
         _write_json(fit_report(fit), args.json)
         print(f"wrote {args.json}")
     if args.save:
         save_fit(fit, args.save)
         print(f"wrote {args.save}")
-    bad = [f"{d}: {st}" for d, st in zip(fit.devices, fit.status) if st != "ok"]
+    bad = [f"{safe_name(d)}: {st}" for d, st in zip(fit.devices, fit.status) if st != "ok"]
     if bad:
         print("gyrojax identify: " + "; ".join(bad) + " (see the warnings above; the files written say so too)",
               file=sys.stderr)

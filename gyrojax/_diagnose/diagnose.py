@@ -10,10 +10,11 @@ from .._data.table import Table
 from .._fitdata import fit_data
 from .._identify import Fit, MultiStart, identify
 from .._parameters import DEFAULT_FREE, Model, as_model, zero_effect
+from .._plugins import nonfinite_effect
 from .._probes import PROBES
 from .._progress import as_progress
 from .._stats import chi2_sf
-from .candidates import baseline_model, candidate_effects, full_key
+from .candidates import baseline_model, candidate_effects, first_device, full_key, is_lot
 from .columns import effect_columns
 from .discrepancy import look_alikes, score_probes, with_library
 from .guards import MAX_TYPICAL_MULTIPLE, Rejection, contradictions, probe_guard, verdict_of
@@ -69,6 +70,11 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     else:
         base = as_model(model)
     candidates = candidate_effects(base, candidates, "diagnose")
+    # A candidate that gives the device NaN or infinite values (a user effect's bug) is dropped with a note.
+    one = first_device(base.device) if is_lot(base.device) else base.device
+    broken = [Rejection(c, f"{why}: dropped from the candidates", kind="non-finite model")
+              for c in candidates if (why := nonfinite_effect(c, one)) is not None]
+    candidates = tuple(c for c in candidates if c not in {r.effect for r in broken})
     full = Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates))
     say = as_progress(progress, "gyrojax.diagnose")
 
@@ -93,7 +99,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         # likelihood-ratio tests compare fits of the same weighted data.
         weights.update(data=baseline.data, estimate_noise=False)
         say("the data give no output_sigma: every fit uses the noise estimated from the baseline's residuals")
-    fits, steps, ambiguous, rejected = [fit], [], [], []
+    fits, steps, ambiguous, rejected = [fit], [], [], list(broken)
     ranking0, untestable = None, ()
     selected: list[str] = []
     remaining = list(candidates)
