@@ -1,6 +1,7 @@
 """`diagnose`: the baseline fit with every candidate at zero, then score, guard, refit and confirm one effect
 at a time until no candidate is significant."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -16,8 +17,12 @@ from .._progress import as_progress
 from .._stats import chi2_sf
 from .candidates import baseline_model, candidate_effects, first_device, full_key, is_lot
 from .columns import effect_columns
-from .discrepancy import look_alikes, score_probes, with_library
+from .discrepancy import look_alikes, score_probes, with_shapes
+from .encompass import encompassing_guard
+from .fdr import bh_q_values, selection_p
+from .formula import propose, term_size
 from .guards import MAX_TYPICAL_MULTIPLE, Rejection, contradictions, probe_guard, verdict_of
+from .locate import locate
 from .score import cosine, score_candidates, separating_sweep
 from .solution import Diagnosis, Step
 
@@ -104,7 +109,9 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     selected: list[str] = []
     remaining = list(candidates)
     discrepancy, designs = score_probes(fit, probes, alpha=alpha)
-    baseline_discrepancy, baseline_designs = discrepancy, designs
+    located = locate(fit, alpha=alpha)
+    baseline_discrepancy, baseline_designs, baseline_located = discrepancy, designs, located
+    family: list[float] = []  # every refit's selection-corrected p-value, for the false-discovery control
     def first_ranking(scores, threshold):
         # one rule (gyrojax._testability): untestable is what score_candidates marks so, whatever its p-value
         return scores, tuple(c.effect for c in scores if not c.testable)
@@ -129,7 +136,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
                 kind=f"only at ~{best.implied_multiple:.3g}x its typical size"))
             remaining.remove(best.effect)
             continue
-        guard = probe_guard(fit, best, discrepancy, designs, threshold, alpha)
+        guard = (probe_guard(fit, best, discrepancy, designs, threshold, alpha)
+                 or encompassing_guard(fit, best, located, threshold, alpha))
         if guard is not None:
             rejected.append(Rejection(best.effect, guard, kind="not its shape"))
             remaining.remove(best.effect)
@@ -143,6 +151,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
             separated = seps.pop() if len(seps) == 1 else None
         say(f"refitting with {best.effect} (step {len(selected) + 1}; score S = {best.statistic:.4g}, "
             f"p = {best.p_value:.2g})")
+        n_tried = len(remaining)
         new = fit_with(tuple(selected) + (best.effect,))
         lr = fit.chi2_total - new.chi2_total
         df = int(np.sum(new.free)) - int(np.sum(fit.free))
@@ -165,6 +174,21 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
             rejected.append(Rejection(best.effect, f"likelihood-ratio p = {p_lr:.3g} >= alpha: the refit does not "
                                                    "confirm what the score promised", kind="refit rejects it"))
             continue
+        family.append(selection_p(p_lr, n_tried))
+        q = float(bh_q_values(family)[-1])
+        if q >= alpha:
+            rejected.append(Rejection(best.effect, (
+                f"false-discovery control: the refit's p = {p_lr:.3g}, as the best of {n_tried} candidates "
+                f"{family[-1]:.3g}, has q = {q:.3g} >= alpha over the {len(family)} refits of this diagnosis"),
+                kind="not significant under false-discovery control"))
+            continue
+        at_noise = not compare(fit, alpha=alpha).fails and not located.locations
+        if at_noise and delta_bic >= 0:
+            rejected.append(Rejection(best.effect, (
+                f"the model before it already describes the data at the noise level, and the information "
+                f"criterion does not prefer it (delta BIC {delta_bic:+.3g}; LR p = {p_lr:.2g})"),
+                kind="not preferred at the noise level"))
+            continue
         worse = contradictions(fit, new, alpha, df_total)
         if worse:
             rejected.append(Rejection(best.effect, "contradicted by " + "; ".join(
@@ -181,18 +205,29 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         multiple = float(np.max(np.abs(np.asarray(fit.u)[:, cols])))
         steps.append(Step(best.effect, best.statistic, best.p_value, lr, df_total, p_lr, delta_bic,
                           fit.chi2_red_total, nonlinearity_residual_ppm(fit), scores, group, separated, multiple,
-                          best.implied_multiple, look_alikes=alike))
+                          best.implied_multiple, look_alikes=alike, q_value=q))
         discrepancy, designs = score_probes(fit, probes, alpha=alpha)
+        located = locate(fit, alpha=alpha)
     if ranking0 is None:
         ranking0 = ()
     # Which library effect has the shape of what is left: every candidate not selected, at the final fit.
     others = [c for c in candidates if c not in selected]
     final_scores = score_candidates(fit, others, min_typical_chi2=min_typical_chi2) if others else ()
-    baseline_discrepancy = with_library(baseline, baseline_discrepancy, baseline_designs, ranking0, rejected,
-                                         max_typical_multiple, alpha)
-    discrepancy = with_library(fit, discrepancy, designs, final_scores, rejected, max_typical_multiple, alpha)
+    baseline_discrepancy = with_shapes(baseline, baseline_located.locations, baseline_discrepancy, baseline_designs,
+                                       ranking0, rejected, max_typical_multiple, alpha)
+    discrepancy = with_shapes(fit, located.locations, discrepancy, designs, final_scores, rejected,
+                              max_typical_multiple, alpha)
+    formula = propose(fit, discrepancy[0], step_at=located.step_at, period=located.period, alpha=alpha) \
+        if discrepancy else None
+    size = term_size(formula, discrepancy[0]) if discrepancy else None
+    if size is not None:  # the misfit's size as the term's coefficient, where one term of its coordinate has it
+        discrepancy = (dataclasses.replace(discrepancy[0], size=size),) + discrepancy[1:]
     comparisons = tuple(compare(f, alpha=alpha) for f in fits)
-    say(f"done: {verdict_of(comparisons[-1], steps)}; selected {', '.join(selected) or 'none'}")
+    verdict = verdict_of(comparisons[-1], steps)
+    if verdict == "explained" and discrepancy:  # a located misfit is a failure the omnibus test missed
+        verdict = "partly explained" if steps else "unexplained"
+    say(f"done: {verdict}; selected {', '.join(selected) or 'none'}")
     return Diagnosis(baseline, fit, tuple(fits), ranking0, tuple(steps), tuple(ambiguous), untestable,
                      tuple(rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2, comparisons,
-                     baseline_discrepancy, discrepancy, verdict_of(comparisons[-1], steps), max_typical_multiple)
+                     baseline_discrepancy, discrepancy, verdict, max_typical_multiple, formula=formula,
+                     notes=located.notes)

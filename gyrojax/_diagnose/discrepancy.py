@@ -10,6 +10,7 @@ from .._fitdata import FitData
 from .._identify import Fit
 from .._probes import PROBES, design, project_out, score_columns
 from .columns import base_columns, effect_columns, excess_chi2, row_blocks
+from .space import ResidualSpace
 
 
 # A candidate "has" a residual shape when the shape, beyond the baseline and the candidate, keeps less than this
@@ -188,38 +189,63 @@ def with_library(fit, discrepancy, designs, scores, rejected, max_multiple, alph
     """The discrepancies with `library` filled in: which candidate takes the whole of a shape's misfit (the
     shape adds nothing beyond it, at the probes' significance), and why it does not explain it (implausible
     size, refused), or that none does."""
+    cut = alpha / max(len(discrepancy), 1)
+    return tuple(d if not d.significant or d.within else dataclasses.replace(
+        d, library=_library_text(fit, designs[d.probe], d.chi2_explained, scores, rejected, max_multiple, cut))
+        for d in discrepancy)
+
+
+def with_shapes(fit, locations, discrepancy, designs, scores, rejected, max_multiple, alpha) -> tuple:
+    """The `Location`s of `locate` with what the lists know of them: the generic shape (probe) that has a
+    location's whole misfit (the location is not significant beyond it, or keeps less than `SHAPE_SHARE_LEFT`
+    of its chi2), with its coefficient, and which library effect has it (`with_library`'s rule)."""
+    if not locations:
+        return ()
+    space = ResidualSpace(fit)
+    cut = alpha / max(len(locations), 1)
+    out = []
+    for loc in locations:
+        matched = None
+        for d in discrepancy:
+            if not d.significant or d.within:
+                continue
+            if d.coordinate != loc.coordinate and d.coordinate not in loc.confounded_with:
+                continue
+            left = space.with_columns(designs[d.probe]).score(loc.columns)
+            if left.p_value >= cut or left.statistic <= SHAPE_SHARE_LEFT * loc.chi2_explained:
+                matched = d
+                break
+        if matched is not None:
+            loc = dataclasses.replace(loc, shape=matched.shape, probe=matched.probe,
+                                      coefficient=matched.coefficient, coefficient_spread=matched.coefficient_spread,
+                                      unit=matched.unit, same_shape_as=matched.same_shape_as)
+        out.append(dataclasses.replace(loc, library=_library_text(fit, loc.columns, loc.chi2_explained, scores,
+                                                                  rejected, max_multiple, cut)))
+    return tuple(out)
+
+
+def _library_text(fit, columns, chi2, scores, rejected, max_multiple, cut) -> str:
     reasons = {r.effect: r.kind or r.reason for r in rejected}
     base = base_columns(fit)
     res = np.asarray(fit.residual_vector)
     jac = np.asarray(fit.jacobian)
-    cut = alpha / max(len(discrepancy), 1)
-    out = []
-    for d in discrepancy:
-        if not d.significant or d.within:
-            out.append(d)
+    parts, plausible = [], False
+    for c in scores:
+        if not c.testable:
             continue
-        parts, plausible = [], False
-        for c in scores:
-            if not c.testable:
-                continue
-            je = jac[:, :, effect_columns(fit, c.effect)]
-            left = score_columns(np.concatenate([base, je], axis=-1), designs[d.probe], res)
-            # the shape leaves misfit this candidate cannot take: significant, and a share of what the shape
-            # explained (see SHAPE_SHARE_LEFT)
-            if left.p_value < cut and left.statistic > SHAPE_SHARE_LEFT * d.chi2_explained:
-                continue
-            if c.effect in reasons:
-                parts.append(f"{c.effect} has it but was not confirmed ({reasons[c.effect]})")
-            elif c.implied_multiple > max_multiple:
-                parts.append(f"{c.effect} has it only at ~{c.implied_multiple:.3g}x its typical size")
-            else:
-                parts.append(f"{c.effect} has it")
-                plausible = True
-        if not parts:
-            text = "no effect in the library has this fingerprint"
-        elif not plausible:
-            text = "no effect in the library explains it: " + "; ".join(parts)
+        je = jac[:, :, effect_columns(fit, c.effect)]
+        left = score_columns(np.concatenate([base, je], axis=-1), columns, res)
+        if left.p_value < cut and left.statistic > SHAPE_SHARE_LEFT * chi2:
+            continue
+        if c.effect in reasons:
+            parts.append(f"{c.effect} has it but was not confirmed ({reasons[c.effect]})")
+        elif c.implied_multiple > max_multiple:
+            parts.append(f"{c.effect} has it only at ~{c.implied_multiple:.3g}x its typical size")
         else:
-            text = "; ".join(parts)
-        out.append(dataclasses.replace(d, library=text))
-    return tuple(out)
+            parts.append(f"{c.effect} has it")
+            plausible = True
+    if not parts:
+        return "no effect in the library has this fingerprint"
+    if not plausible:
+        return "no effect in the library explains it: " + "; ".join(parts)
+    return "; ".join(parts)

@@ -45,6 +45,7 @@ class Term:
     gain: bool
     changes: dict
     unit: str
+    coordinate: str = ""  # the recorded coordinate it runs along ("" for a gain per run)
 
     @property
     def label(self) -> str:
@@ -129,7 +130,8 @@ def dictionary(fit, sweeps, *, step_at: float | None = None, period: float | Non
                     changes[s] = np.where(masks[s], v * (preds[s] if gain else 1.0), 0.0)
                 unit = ("1" + per if gain else out_unit + per)
                 terms.append(Term(name + ("*model" if gain else ""), tuple(group),
-                                  f"output * ({expr})" if gain else f"({expr})", gain, changes, unit))
+                                  f"output * ({expr})" if gain else f"({expr})", gain, changes, unit,
+                                  "" if coordinate == "order" else coordinate))
 
         for c in sorted(names):
             if c == "order":
@@ -220,9 +222,17 @@ def _columns(space, term: Term) -> np.ndarray:
     return space.columns({s: g[..., None] for s, g in term.changes.items()})
 
 
-def ppm_per_unit(formula: Formula, i: int) -> tuple[float, float] | None:
-    """A gain term's coefficient and standard error in ppm per unit of its coordinate (None for an offset)."""
-    t = formula.terms[i]
-    if not t.gain:
+def term_size(formula: Formula, location) -> dict | None:
+    """The size of `location`'s misfit as the formula's coefficient, when the formula is one complete term
+    along the location's coordinate: {value, unit, stderr} (a gain in ppm per unit of the coordinate)."""
+    if formula is None or not formula.complete or len(formula.terms) != 1:
         return None
-    return 1e6 * float(formula.coefficients[i]), 1e6 * float(formula.stderr[i])
+    t = formula.terms[0]
+    if t.coordinate != location.coordinate:
+        return None
+    value, err = float(formula.coefficients[0]), float(formula.stderr[0])
+    unit = t.unit
+    if t.gain:
+        value, err = 1e6 * value, 1e6 * err
+        unit = "ppm" + unit[1:] if unit.startswith("1") else "ppm"
+    return {"value": value, "unit": unit, "stderr": err, "measure": f"coefficient of {t.name}"}

@@ -17,6 +17,7 @@ def write_report(diagnosis: "Diagnosis", out_dir) -> dict:
 
     from .. import plot
     from .._io import atomic_directory, atomic_write_bytes, atomic_write_json
+    from .solution import discrepancy_text
 
     with atomic_directory(out_dir) as folder:
         sweeps = diagnosis.baseline.data.sweeps
@@ -60,7 +61,7 @@ def write_report(diagnosis: "Diagnosis", out_dir) -> dict:
                   "implies.", ""]
         for title, items in (("At the baseline", found), ("What is left at the end", left)):
             lines += [f"{title}:", ""]
-            lines += [f"- `{d.coordinate}`: {d.description} (S = {d.chi2_explained:.4g}, p = {d.p_value:.2g})"
+            lines += [f"- `{d.coordinate}`: {discrepancy_text(d)} (S = {d.chi2_explained:.4g}, p = {d.p_value:.2g})"
                       for d in items] or ["- nothing significant"]
             lines.append("")
         lines += ["## Summary", "", "```", diagnosis.summary(comparisons=False), "```", "",
@@ -73,9 +74,10 @@ def write_report(diagnosis: "Diagnosis", out_dir) -> dict:
         lines += ["## Step by step", "", "| step | effect | chi2_red | nonlinearity residual (ppm) |",
                   "|---|---|---|---|",
                   f"| 0 | baseline | {diagnosis.baseline.chi2_red_total:.3f} | "
-                  f"{diagnosis.baseline_nonlinearity_ppm:.2f} |"]
+                  f"{_ppm_cell(diagnosis.baseline_nonlinearity_ppm, diagnosis.baseline)} |"]
         for k, s in enumerate(diagnosis.steps, 1):
-            lines.append(f"| {k} | + {s.effect} | {s.chi2_red_after:.3f} | {s.nonlinearity_ppm_after:.2f} |")
+            lines.append(f"| {k} | + {s.effect} | {s.chi2_red_after:.3f} | "
+                         f"{_ppm_cell(s.nonlinearity_ppm_after, diagnosis.fits[k])} |")
         if diagnosis.rejected:
             lines += ["", "Candidates not confirmed, and why:", ""]
             lines += [f"- `{r.effect}`: {r.reason}." for r in diagnosis.rejected]
@@ -88,3 +90,12 @@ def write_report(diagnosis: "Diagnosis", out_dir) -> dict:
             lines += [f"## {title}", "", f"![{title}]({name})", ""]
         atomic_write_bytes(os.path.join(folder, "diagnosis.md"), "\n".join(lines).encode())
     return report
+
+
+def _ppm_cell(value: float, fit) -> str:
+    """A nonlinearity for the step table: the number, or n/a with the reason."""
+    import math
+
+    from .solution import nonlinearity_not_determined
+
+    return f"{value:.2f}" if math.isfinite(value) else f"n/a ({nonlinearity_not_determined(fit)})"

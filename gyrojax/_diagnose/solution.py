@@ -4,6 +4,8 @@ JSON."""
 import dataclasses
 import math
 
+import numpy as np
+
 from .._compare import nonlinearity_residual_ppm
 from .._effects.registry import EFFECTS
 from .._identify import Fit
@@ -38,6 +40,8 @@ class Step:
     implied_multiple: float = float("nan")  # at the score stage, before the refit
     contradicted_by: tuple = ()  # sweeps whose misfit the step made significantly worse (none when accepted)
     look_alikes: tuple = ()  # LookAlike: shapes the data cannot tell from this effect (`look_alikes`)
+    # Benjamini-Hochberg q-value of the step's selection-corrected likelihood-ratio p-value over every refit
+    q_value: float = float("nan")
 
 
 VERDICTS = ("explained", "partly explained", "unexplained")
@@ -65,6 +69,8 @@ class Diagnosis:
     discrepancy: tuple = ()  # the same at the final fit: where what is left lives
     verdict: str = "unexplained"
     max_typical_multiple: float = MAX_TYPICAL_MULTIPLE
+    formula: object = None  # `Formula` proposed for the leading discrepancy (gyrojax/_diagnose/formula.py)
+    notes: tuple = ()  # coordinates the localisation did not describe along, and why
 
     @property
     def selected(self) -> tuple[str, ...]:
@@ -93,27 +99,48 @@ class Diagnosis:
             what = (f"{', '.join(self.selected)} {verb}" if self.steps else "the baseline explains")
             return f"verdict: explained: {what} the data at the noise level{tail}{alike}"
         left = self.remaining
-        where = (f"; what is left: {left[0].description}" if left else
+        where = (f"; what is left: {discrepancy_text(left[0])}" if left else
                  "; no generic shape (bias or gain in temperature, time, run; cubics; bow; K+/K-) explains what "
                  "is left: see where the model fails")
+        # A chi2 at the noise level is no failure: the verdict then rests on structure in the residuals alone.
+        fails = final is None or final.fails
+        if left and fails and round(100 * left[0].share) < 1:
+            where = (f"; no generic shape takes 1 % of what is left (the most significant: "
+                     f"{discrepancy_text(left[0])}): see where the model fails")
+        state = "the model still fails" if fails else "the residuals keep structure"
+        if not fails:
+            worst = min(final.flagged, key=lambda f: f.p_value, default=None)
+            state += f" ({worst.label}: p = {worst.p_value:.2g}, {worst.meaning})" if worst is not None else ""
+            tail = f" though the chi2 is at the noise level{tail}"
+        fails_now = "the model fails" if fails else state
         if self.verdict == "partly explained":
             base = max(self.baseline.chi2_total - self.baseline.dof_total, 1e-300)
             gone = (self.baseline.chi2_total - self.final.chi2_total) / base
             return (f"verdict: partly explained: {', '.join(self.selected)} take {100 * min(gone, 1.0):.0f} % of "
-                    f"the baseline's excess misfit, but the model still fails{tail}{where}{alike}")
-        return f"verdict: unexplained: no library effect is confirmed and the model fails{tail}{where}"
+                    f"the baseline's excess misfit, but {state}{tail}{where}{self._formula_text()}"
+                    f"{alike}")
+        return (f"verdict: unexplained: no library effect is confirmed and {fails_now}{tail}{where}"
+                f"{self._formula_text()}")
+
+    def _formula_text(self) -> str:
+        f = self.formula
+        if f is None:
+            return ""
+        if not f.complete:
+            return f"; no term of the dictionary has its shape (the closest: {f.description})"
+        return f"; a term that would explain it: {f.description}"
 
     def summary(self, comparisons: bool = True) -> str:
         """A few dozen lines for a terminal; `comparisons=False` leaves out the `compare` blocks of the baseline
         and the final fit."""
         lines = [f"baseline: chi2_red {self.baseline.chi2_red_total:.3f}, model-vs-measurement nonlinearity "
-                 f"{self.baseline_nonlinearity_ppm:.2f} ppm"]
+                 f"{ppm_text(self.baseline_nonlinearity_ppm, self.baseline)}"]
         if self.comparisons and comparisons:
             lines += ["  " + x for x in self.comparisons[0].summary().splitlines()]
         found = [d for d in self.baseline_discrepancy if d.significant and not d.within]
         if found:
             lines.append("where the misfit lives (generic shapes, score test, no refit):")
-            lines += [f"  {d.coordinate:<14} {d.description} (S = {d.chi2_explained:.4g}, p = {d.p_value:.2g})"
+            lines += [f"  {d.coordinate:<14} {discrepancy_text(d)} (S = {d.chi2_explained:.4g}, p = {d.p_value:.2g})"
                       for d in found[:4]]
         lines.append("candidates at the first step (score test, no refit):")
         for c in self.ranking:
@@ -131,7 +158,8 @@ class Diagnosis:
                 if s.ambiguous_with else ""
             lines.append(f"+ {s.effect}: LR {s.lr_statistic:.1f} (df {s.lr_df}, p {s.lr_p_value:.2g}), dBIC "
                          f"{s.delta_bic:.1f} -> chi2_red {s.chi2_red_after:.3f}, nonlinearity residual "
-                         f"{s.nonlinearity_ppm_after:.2f} ppm{amb}; fitted at {s.typical_multiple:.3g}x its "
+                         f"{ppm_text(s.nonlinearity_ppm_after, self.final)}{amb}; fitted "
+                         f"at {s.typical_multiple:.3g}x its "
                          "typical size")
             lines += [f"  ~ this data cannot tell {s.effect} from {a.description}" for a in s.look_alikes]
             if s.typical_multiple > IMPLAUSIBLE_MULTIPLE:
@@ -158,7 +186,7 @@ class Diagnosis:
         verdict, discrepancy (what is left, most explanatory first), baseline_discrepancy, compare."""
         return {
             "baseline": {"chi2_red": self.baseline.chi2_red_total,
-                         "nonlinearity_ppm": self.baseline_nonlinearity_ppm},
+                         **_ppm_json(self.baseline_nonlinearity_ppm, self.baseline)},
             "ranking": [{"effect": c.effect, "statistic": c.statistic, "df": c.df, "p_value": c.p_value,
                          "testable": c.testable, "typical_chi2": c.typical_chi2, "visible_chi2": c.visible_chi2,
                          "implied_multiple": _finite(c.implied_multiple),
@@ -167,10 +195,10 @@ class Diagnosis:
             "steps": [{"effect": s.effect, "statistic": s.statistic, "p_value": s.p_value,
                        "chi2_red_after": s.chi2_red_after, "lr_statistic": s.lr_statistic, "lr_df": s.lr_df,
                        "lr_p_value": s.lr_p_value, "delta_bic": s.delta_bic,
-                       "nonlinearity_ppm_after": s.nonlinearity_ppm_after,
+                       **_ppm_json(s.nonlinearity_ppm_after, self.final, "nonlinearity_ppm_after"),
                        "ambiguous_with": list(s.ambiguous_with), "separated_by": s.separated_by,
                        "typical_multiple": s.typical_multiple, "implied_multiple": _finite(s.implied_multiple),
-                       "contradicted_by": list(s.contradicted_by),
+                       "contradicted_by": list(s.contradicted_by), "q_value": _finite(s.q_value),
                        "look_alikes": [a.to_json() for a in s.look_alikes]}
                       for s in self.steps],
             "selected": list(self.selected),
@@ -179,10 +207,12 @@ class Diagnosis:
             "rejected": [{"effect": r.effect, "reason": r.reason, "contradicted_by": list(r.contradicted_by)}
                          for r in self.rejected],
             "final": {"chi2_red": self.final.chi2_red_total,
-                      "nonlinearity_ppm": nonlinearity_residual_ppm(self.final)},
+                      **_ppm_json(nonlinearity_residual_ppm(self.final), self.final)},
             "verdict": self.verdict,
             "verdict_text": self.verdict_text(),
             "discrepancy": [d.to_json() for d in self.remaining],
+            "formula": self.formula.to_json() if self.formula is not None else None,
+            "localisation_notes": list(self.notes),
             "baseline_discrepancy": [d.to_json() for d in self.baseline_discrepancy if d.significant and not d.within],
             "compare": [c.to_json() for c in self.comparisons],
         }
@@ -190,3 +220,41 @@ class Diagnosis:
 
 def _finite(x):
     return float(x) if math.isfinite(x) else None
+
+
+def discrepancy_text(d) -> str:
+    """A significant discrepancy in words: its share of the misfit where it has one (1 % or more); else what it
+    is, where and how large, with "below 1 % of the misfit" (significant in a large lot, or at a chi2 at the
+    noise level, where there is no excess misfit to share) rather than "0 % of the misfit is"."""
+    if round(100 * d.share) >= 1:
+        return d.description
+    where = ", ".join(f"{s} {100 * f:.0f} %" for s, f in d.sweeps)
+    size = f"{d.coefficient:.3g} {d.unit}" + (f" (device spread {d.coefficient_spread:.2g})"
+                                               if d.coefficient_spread > 0 else "")
+    text = f"{d.shape} ({where}): about {size}, significant but below 1 % of the misfit"
+    if d.same_shape_as:
+        text += f"; this data cannot tell it from {', '.join(d.same_shape_as)}"
+    return text + (f"; {d.library}" if d.library else "")
+
+
+def nonlinearity_not_determined(fit: Fit) -> str:
+    """Why the model-vs-measurement nonlinearity of `fit` (`nonlinearity_residual_ppm`) is not a number."""
+    if "rate_table" not in fit.residuals:
+        return ("no rate_table sweep: the nonlinearity is that of the rate-table points, as ppm of the scale "
+                "factor's full scale")
+    if not np.all(np.isfinite(np.asarray(fit.scale_factor))):
+        return "the data do not determine the scale factor (as identify says): there is no full scale to divide by"
+    return "not determined by this fit"
+
+
+def ppm_text(value: float, fit: Fit) -> str:
+    """A nonlinearity for text: "1.88 ppm", or "n/a (the reason)" where it is not a number."""
+    return f"{value:.2f} ppm" if math.isfinite(value) else f"n/a ({nonlinearity_not_determined(fit)})"
+
+
+def _ppm_json(value: float, fit: Fit, key: str = "nonlinearity_ppm") -> dict:
+    """`{key: value}`, or `{key: None, "not_determined": {key: reason}}` where it is not a number (as identify
+    writes a scale factor the data do not determine)."""
+    if math.isfinite(value):
+        return {key: float(value)}
+    return {key: None, "not_determined": {key: nonlinearity_not_determined(fit)}}
