@@ -623,11 +623,16 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
                 # What the effect's own text names is not offered where these runs include it and it did not help.
                 hidden = (f"with {', '.join(amb)} free (ambiguous: they take what it leaves)" if amb else
                           "after the baseline took its share")
+                # An ambiguous candidate's own revealing text may name a sweep among these runs: that sweep
+                # separates the two at a larger size (diagnose's "X separates them" is at the fitted size), not
+                # at the typical size planned here, so it is not offered.
+                beyond = (f"at its typical size none of these runs tells it from {', '.join(amb)} (a sweep that "
+                          "separates them at a larger fitted size, as diagnose may report, does not at this one)"
+                          if amb else f"revealed by: {EFFECTS[c].revealed_by or 'no measurement named'}")
                 reason = (f"no combination of up to {max_repeats} runs of {', '.join(names)} brings it to power "
                           f"{target_power:g}: a typical size leaves chi2 {top:.3g} with all of them {hidden}, "
                           f"{need:.3g} is needed" + ("" if is_testable(top) else
-                                                     f" (below {MIN_TYPICAL_CHI2:g}: not testable)")
-                          + f"; what would reveal it beyond these: {EFFECTS[c].revealed_by or 'no measurement named'}")
+                                                     f" (below {MIN_TYPICAL_CHI2:g}: not testable)") + f"; {beyond}")
             else:
                 counts, rec_chi2 = found
                 rec_power = power(rec_chi2, df, alpha)
