@@ -3,6 +3,7 @@ given follows identify's verdict, the budget is bounded, the plan warns where it
 short, one rule says what is testable (diagnose and plan), and the plots rank, label and show what they claim."""
 
 import math
+import pathlib
 import types
 
 import matplotlib
@@ -183,3 +184,23 @@ def test_plan_of_the_dac_only_table2_follows_identifys_verdict_on_the_scale_fact
     dac = p.candidate("dac_inl")
     assert dac.testable and not dac.detected and dac.recommended
     assert not p.candidate("agc_finite_gain").testable
+
+
+def test_the_demos_default_folder_is_ignored_by_git():
+    root = pathlib.Path(__file__).resolve().parent.parent
+    assert "/gyrojax-demo/" in (root / ".gitignore").read_text().splitlines()
+
+
+@pytest.mark.slow
+def test_the_demo_says_where_it_writes_names_its_lot_and_explains_the_bandwidth(tmp_path, capsys, monkeypatch):
+    from gyrojax._demo import BANDWIDTH_NOTE, LOT_SOURCE
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["demo", "--no-full", "--quiet"]) == 0  # the default folder, in the current one
+    out = capsys.readouterr().out
+    where = tmp_path / "gyrojax-demo"
+    assert f"writing the demo's report, data and plots into {where}\n" in out
+    assert f"paper reports 354.3 Hz (measured) / 349.5 Hz (simulated): {BANDWIDTH_NOTE}" in out
+    assert "verdict: explained: dac_inl explains the data" in out
+    report = (where / "diagnosis" / "diagnosis.md").read_text()
+    assert f"Data: `{LOT_SOURCE}`" in report and str(tmp_path) not in report
