@@ -137,3 +137,58 @@ def test_compilation_cache_moves_disables_and_checks_its_argument(tmp_path):
     assert len(r["errors"]) == 2 and all("path" in e for e in r["errors"])
     assert r["errors"][0].startswith("TypeError") and r["errors"][1].startswith("ValueError")
     assert r["still_off"] is None
+
+
+def _import_stderr(tmp_path, **env_vars):
+    """What a plain `import gyrojax` prints on standard error (Python's own warning display)."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("JAX_COMPILATION_CACHE_DIR", "JAX_ENABLE_COMPILATION_CACHE", "GYROJAX_CACHE_DIR")}
+    env["XDG_CACHE_HOME"] = str(tmp_path / "xdg")
+    env.update(env_vars)
+    proc = subprocess.run([sys.executable, "-c", "import gyrojax; print(gyrojax.compilation_cache())"], env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc.stdout.strip(), proc.stderr
+
+
+def test_a_folder_others_can_write_is_not_used(tmp_path):
+    """Whoever can write the folder can change the programs gyrojax runs: a world-writable folder gives one
+    warning, naming it and why, and no cache."""
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    shared.chmod(0o777)
+    r = _run(tmp_path, TINY, GYROJAX_CACHE_DIR=str(shared))
+    assert r["dir"] is None and r["y"] == 6.0 and r["writes"] == 0
+    assert len(r["warnings"]) == 1
+    assert (f"the compilation cache folder {shared} from GYROJAX_CACHE_DIR={str(shared)!r} is not used: it is "
+            "writable by its group and all users (mode 0o777)") in r["warnings"][0]
+    assert os.listdir(shared) == []
+    printed, err = _import_stderr(tmp_path, GYROJAX_CACHE_DIR=str(shared))
+    assert printed == "None"
+    assert err.count("gyrojax: warning: the compilation cache folder") == 1 and "RuntimeWarning" not in err, err
+    r = _run(tmp_path, f"""
+        try:
+            gj.compilation_cache({str(shared)!r})
+        except ValueError as e:
+            result['error'] = str(e)
+    """, GYROJAX_CACHE_DIR="off")
+    assert "cannot be used as a cache folder (it is writable by its group and all users" in r["error"]
+
+
+def test_the_unwritable_folder_warning_is_printed_once_in_gyrojax_words(tmp_path):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    printed, err = _import_stderr(tmp_path, GYROJAX_CACHE_DIR=str(blocker / "cache"))
+    assert printed == "None"
+    assert f"gyrojax: warning: the compilation cache folder {blocker / 'cache'} " in err, err
+    assert err.count("gyrojax: warning:") == 1 and "_cache.py" not in err and "RuntimeWarning" not in err, err
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="giving a folder away needs root")
+def test_a_folder_of_another_user_is_not_used(tmp_path):
+    theirs = tmp_path / "theirs"
+    theirs.mkdir(mode=0o700)
+    os.chown(theirs, 65534, 65534)
+    r = _run(tmp_path, TINY, GYROJAX_CACHE_DIR=str(theirs))
+    assert r["dir"] is None and r["writes"] == 0 and len(r["warnings"]) == 1
+    assert "is not used: it is owned by user id 65534, not by the user running gyrojax" in r["warnings"][0]

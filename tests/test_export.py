@@ -192,6 +192,64 @@ def test_a_disabled_cache_writes_nothing(program):
     assert not (program / "xdg").exists()
 
 
+def _forged(artifact: bytes, other: bytes) -> bytes:
+    """`other`'s program under `artifact`'s key, its digest recomputed as anyone who can write the file can (a
+    plain SHA-256 of the rest)."""
+    import hashlib
+
+    magic, key, _, _ = artifact.split(b"\n", 3)
+    body = other.split(b"\n", 3)[3]
+    return b"\n".join((magic, key, hashlib.sha256(body).hexdigest().encode(), body))
+
+
+def test_a_tampered_artifact_is_refused_and_traced_again(program):
+    """Whoever could write an artifact changed the numbers (a reported SF from 13709.208 to 13846.300): the
+    program of OFFSET = 2.0 put under the key of OFFSET = 1.0 is refused, not run."""
+    cache = program / "cache"
+    _run(program, cache)
+    (name,) = _artifacts(cache)
+    path = cache / "gyrojax_export" / name
+    (program / "plugin.py").write_text(PLUGIN.replace("OFFSET = 1.0", "OFFSET = 2.0"))
+    _run(program, cache)
+    (other,) = set(_artifacts(cache)) - {name}
+    (program / "plugin.py").write_text(PLUGIN)  # the first key again
+    good = path.read_bytes()
+    path.write_bytes(_forged(good, (cache / "gyrojax_export" / other).read_bytes()))
+    out = _run(program, cache)
+    assert "export_response" in out["traces"]  # the forged file was not used
+    np.testing.assert_allclose(out["y"], _expected(1.0), rtol=1e-14)
+    assert sorted(_artifacts(cache)) == sorted([name, other])
+    assert path.read_bytes() == good  # the program of this key, written again
+    key = cache / "gyrojax_export.key"
+    assert key.stat().st_size == 32 and key.stat().st_mode & 0o777 == 0o600
+
+
+def test_a_symlinked_artifact_is_not_followed(program):
+    cache = program / "cache"
+    first = _run(program, cache)
+    (name,) = _artifacts(cache)
+    path = cache / "gyrojax_export" / name
+    elsewhere = program / "elsewhere.jaxexport"
+    path.rename(elsewhere)
+    path.symlink_to(elsewhere)
+    kept = elsewhere.read_bytes()
+    second = _run(program, cache)
+    assert "export_response" in second["traces"]  # the link was neither read ...
+    assert second["y"] == first["y"]
+    assert not path.is_symlink() and path.read_bytes() == kept  # ... nor written through
+    assert elsewhere.read_bytes() == kept
+
+
+def test_an_export_folder_others_can_write_is_not_used(program):
+    cache = program / "cache"
+    (cache / "gyrojax_export").mkdir(parents=True, mode=0o700)
+    (cache / "gyrojax_export").chmod(0o777)
+    out = _run(program, cache)
+    assert out["cache"] == str(cache) and "export_response" not in out["traces"] and "response" in out["traces"]
+    np.testing.assert_allclose(out["y"], _expected(1.0), rtol=1e-14)
+    assert _artifacts(cache) == []
+
+
 # One device, the rate table only: identify's evaluation pass and vmapped solve, the two exported programs.
 FIT = textwrap.dedent("""
     import json, os, sys
