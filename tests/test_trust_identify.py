@@ -368,7 +368,7 @@ def test_status_round_trips_and_loading_warns(cubic, clean, tmp_path):
     assert back.status == cubic.status and back.warnings == cubic.warnings
     assert back.summary() == cubic.summary()
     header = _header(path)
-    assert header["format_version"] == 2 and header["status"] == ["model rejected"]
+    assert header["format_version"] == 3 and header["status"] == ["model rejected"]
     ok_path = tmp_path / "clean.fit"
     gj.save_fit(clean, ok_path)
     with warnings.catch_warnings():
