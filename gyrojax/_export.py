@@ -8,9 +8,9 @@ every other leaf is static) and, when the compilation cache is on, exports the t
 StableHLO) to `<cache folder>/gyrojax_export/<name>-<key>.jaxexport`. A later process whose call has the same key
 rebuilds the `jax.export.Exported` and runs it through `jax.jit(exported.call)`: no tracing of `fn`; the compile of
 the embedded module hits the persistent cache. The file holds the module's bytes, its inputs' and outputs' shapes
-and dtypes, the outputs' tree and a SHA-256 of all of them, in a format of gyrojax's own (`jax.export`'s `serialize`
-needs the `flatbuffers` package, which gyrojax does not require); only single-device programs without effects or
-shardings are stored, and outputs must be arrays in tuples, lists and dicts.
+and dtypes, the outputs' tree and an HMAC-SHA256 of all of them, in a format of gyrojax's own (`jax.export`'s
+`serialize` needs the `flatbuffers` package, which gyrojax does not require); only single-device programs without
+effects or shardings are stored, and outputs must be arrays in tuples, lists and dicts.
 
 **Measured** (`benchmarks/bench_compile.py --entries identify`, 2-core CPU, load 4.5-6, 2026-11-26): the
 first `identify` of the demo lot in a process with a warm cache 5.2 s with the exported programs against
@@ -36,8 +36,16 @@ be the code on disk.
 an argument is spread over more than one device, the program cannot be exported (a host callback, such as an
 `equinox.error_if` kept in the compiled code: then a small marker file stops later processes from trying
 again), or an artifact cannot be read, deserialized or called (it is then rewritten). Artifacts are written
-atomically; the folder may be deleted at any time. Like the compilation cache it is trusted code: whoever can
-write to it can change what your programs compute.
+atomically; the folder may be deleted at any time.
+
+**Trust.** An artifact is code that runs: whoever could change one could change what your programs compute. So
+the digest is keyed (HMAC-SHA256) with a per-user secret, `KEY_FILE` in the cache folder (32 random bytes, mode
+0o600, replaced if it is not a private file of the user's): a file changed without that key is refused and the
+program traced and written again. The cache folder and `gyrojax_export` must be the user's own and writable by
+no one else (`_cache.folder_problem`; otherwise one warning and no export), `gyrojax_export` must not be a
+symbolic link, and an artifact or marker that is a link is neither read nor written through (it is replaced).
+Artifacts are read only as regular files of at most `MAX_ENTRY_BYTES`, their module's size checked against
+their header.
 """
 
 from __future__ import annotations
