@@ -125,3 +125,136 @@ def test_a_constant_output_is_one_data_error_for_metrics_and_compensate(tmp_path
     for call in (gj.metrics_report, gj.compensate):
         with pytest.raises(gj.DataError, match=message.replace(r" \(line 7\)", "")):  # a table has no lines
             call(table)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# diagnose: verdict text that does not contradict its numbers (a synthetic diagnosis).
+
+
+def _synthetic_diagnosis(chi2, points, share, flagged=True, verdict="partly explained"):
+    from types import SimpleNamespace
+
+    from gyrojax._compare import Finding
+    from gyrojax._diagnose.discrepancy import Discrepancy
+    from gyrojax._diagnose.solution import Diagnosis, Step
+    from gyrojax._stats import chi2_sf
+
+    p = chi2_sf(chi2, points)
+    finding = Finding("rate_table", "even bow", 40.0, 1, 1e-9, True, "an even (quadratic) shape: a bow")
+    comparison = SimpleNamespace(chi2=chi2, points=points, p_value=p, fails=p < 0.01,
+                                 flagged=(finding,) if flagged else (), to_json=dict)
+    left = Discrepancy("offset_per_run", "run", "an offset that changes from run to run", (("dac", 1.0),), 40.0, 3,
+                       share, 1e-9, True, 5.6e-6, 9.8e-6, "output unit", np.zeros(1))
+    step = Step("dac_inl", 900.0, 0.0, 900.0, 4, 0.0, -850.0, 0.9, 2.0, (), (), None)
+    fit = SimpleNamespace(chi2_total=1e6, dof_total=2e5, chi2_red_total=5.0, residuals={})
+    final = SimpleNamespace(chi2_total=chi2, dof_total=points)
+    return Diagnosis(baseline=fit, final=final, fits=(fit, final), ranking=(), steps=(step,), ambiguous=(),
+                     untestable=(), rejected=(), alpha=0.01, baseline_nonlinearity_ppm=1.0,
+                     comparisons=(comparison, comparison), discrepancy=(left,), verdict=verdict)
+
+
+def test_verdict_text_does_not_call_a_chi2_at_the_noise_level_a_failure_nor_present_0_percent():
+    """The issue's 200k-row lot: "model still fails (p = 1) ... 0 % of the misfit". At p = 1 the chi2 is no
+    failure (the verdict rests on structure in the residuals, which it names), and a share that rounds to 0 % is
+    not presented as where the misfit lives."""
+    text = _synthetic_diagnosis(1.9e5, 200_000, 0.0).verdict_text()
+    assert "fails" not in text and "0 % of the misfit" not in text
+    assert "the residuals keep structure (rate_table even bow: p = 1e-09" in text
+    assert "though the chi2 is at the noise level (chi2 1.9e+05 over 200000 points, p = 1)" in text
+    assert "what is left: an offset that changes from run to run (dac 100 %): about 5.6e-06 output unit" in text
+    assert "significant but below 1 % of the misfit" in text
+    # a failing model whose leading remaining shape takes under 1 % of the misfit: not "what is left"
+    text = _synthetic_diagnosis(2.7e7, 438, 0.001).verdict_text()
+    assert "but the model still fails (chi2 2.7e+07 over 438 points, p = 0)" in text
+    assert "no generic shape takes 1 % of what is left (the most significant: an offset" in text
+    assert "0 % of the misfit" not in text
+    # a share that is a finding stays one
+    text = _synthetic_diagnosis(2.7e7, 438, 0.4, verdict="unexplained").verdict_text()
+    assert "no library effect is confirmed and the model fails" in text
+    assert "what is left: 40 % of the misfit is an offset that changes from run to run" in text
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# diagnose of data that do not determine the scale factor: null with the reason, not NaN.
+
+
+def test_diagnosis_without_a_rate_table_writes_null_nonlinearity_with_the_reason():
+    """VCF rows only: no rate-table nonlinearity exists. The summary says n/a and why (was "nan ppm"), the JSON
+    holds null and the reason (was NaN, which the CLI refused: exit 1)."""
+    import json
+    from types import SimpleNamespace
+
+    from gyrojax._diagnose.solution import nonlinearity_not_determined
+
+    diag = _synthetic_diagnosis(42.4, 44, 0.0, flagged=False, verdict="explained")
+    fit = SimpleNamespace(chi2_red_total=1.06, chi2_total=42.4, dof_total=40, residuals={"vcf_static": np.zeros(3)},
+                          scale_factor=np.array([np.nan, np.nan]))
+    comparison = SimpleNamespace(chi2=42.4, points=44, p_value=0.54, fails=False, flagged=(), to_json=lambda: {})
+    diag = type(diag)(**{**diag.__dict__, "baseline": fit, "final": fit, "fits": (fit,), "steps": (),
+                         "baseline_nonlinearity_ppm": float("nan"), "comparisons": (comparison,)})
+    why = "no rate_table sweep: the nonlinearity is that of the rate-table points"
+    assert f"model-vs-measurement nonlinearity n/a ({why}" in diag.summary(comparisons=False)
+    assert "nan" not in diag.summary(comparisons=False)
+    out = json.loads(json.dumps(diag.to_json(), allow_nan=False))
+    for part in ("baseline", "final"):
+        assert out[part]["nonlinearity_ppm"] is None
+        assert out[part]["not_determined"]["nonlinearity_ppm"].startswith(why)
+    fit.residuals["rate_table"] = np.zeros(3)  # a rate table, but the scale factor is not determined
+    assert nonlinearity_not_determined(fit).startswith("the data do not determine the scale factor")
+
+
+@pytest.mark.slow
+def test_diagnose_cli_of_vcf_rows_only_writes_json_and_report(tmp_path, capsys):
+    """The issue's case end to end: `diagnose --json --report` of a VCF-only lot exits 0 (was 1 for the JSON and
+    2, naming a temporary path, for the report) and writes null with the reason."""
+    import json
+
+    from gyrojax._data.files import write_table
+    from gyrojax.cli import main
+
+    table = gj.simulate_table(gj.preset("paper-qmg"), devices=2, runs=1, sweeps=("vcf_static",), seed=4,
+                              progress=False)
+    write_table(table, tmp_path / "vcf.csv")
+    js, rep = tmp_path / "d.json", tmp_path / "rep"
+    assert main(["diagnose", str(tmp_path / "vcf.csv"), "--quiet", "--json", str(js), "--report", str(rep)]) == 0
+    out = capsys.readouterr().out
+    assert "nonlinearity n/a (no rate_table sweep" in out and "nan" not in out
+    report = json.loads(js.read_text())
+    assert report["baseline"]["nonlinearity_ppm"] is None and "no rate_table" in report["baseline"]["not_determined"][
+        "nonlinearity_ppm"]
+    assert "| 0 | baseline | 1.0" in (rep / "diagnosis.md").read_text()
+    assert "n/a (no rate_table sweep" in (rep / "diagnosis.md").read_text()
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# diagnose: fitted effect sizes per device, with standard errors from the fit's covariance.
+
+
+def test_diagnosis_gives_each_devices_fitted_effect_size_with_its_standard_error():
+    """Was: "fitted at 3.1x its typical size", the largest device's value and no standard error. Now every
+    device's value of every parameter of the effect, +/- its standard error, in the JSON and the summary."""
+    from types import SimpleNamespace
+
+    from gyrojax._diagnose.solution import effect_sizes
+
+    names = ("k_vf", "dac_inl.c[0]", "dac_inl.c[1]")
+    cov = np.zeros((2, 3, 3))
+    cov[:, 1, 1], cov[:, 2, 2] = [0.04**2, 0.05**2], [0.1**2, 0.2**2]
+    final = SimpleNamespace(
+        names=names, devices=("A", "B"), free=np.array([True, True, True]), covariance=cov,
+        u=np.array([[0.01, 0.98, -0.3], [0.02, 3.1, 0.1]]),
+        values=np.array([[1.0, 9.8e-6, -3e-6], [1.0, 3.1e-5, 1e-6]]),
+        stderr=np.array([[1e-3, 4e-7, 1e-6], [1e-3, 5e-7, 2e-6]]), chi2_total=430.0, dof_total=438,
+        chi2_red_total=0.98, residuals={})
+    diag = _synthetic_diagnosis(430.0, 438, 0.0, flagged=False, verdict="explained")
+    diag = type(diag)(**{**diag.__dict__, "final": final, "fits": (diag.baseline, final)})
+    sizes = effect_sizes(final, "dac_inl")
+    assert [(s["device"], s["parameter"]) for s in sizes] == [("A", "dac_inl.c[0]"), ("A", "dac_inl.c[1]"),
+                                                              ("B", "dac_inl.c[0]"), ("B", "dac_inl.c[1]")]
+    assert sizes[2]["value"] == 3.1e-5 and sizes[2]["stderr"] == 5e-7
+    assert sizes[2]["typical_multiple"] == 3.1 and sizes[2]["typical_multiple_stderr"] == pytest.approx(0.05)
+    text = diag.summary(comparisons=False)
+    assert "  fitted, A: dac_inl.c[0] = 9.8e-06 +/- 4e-07 (0.98 +/- 0.04 x typical); dac_inl.c[1]" in text
+    assert "  fitted, B: dac_inl.c[0] = 3.1e-05 +/- 5e-07 (3.1 +/- 0.05 x typical)" in text
+    (step,) = diag.to_json()["steps"]
+    assert step["sizes"] == sizes

@@ -161,6 +161,7 @@ class Diagnosis:
                          f"{ppm_text(s.nonlinearity_ppm_after, self.final)}{amb}; fitted "
                          f"at {s.typical_multiple:.3g}x its "
                          "typical size")
+            lines += [f"  {line}" for line in sizes_text(effect_sizes(self.final, s.effect))]
             lines += [f"  ~ this data cannot tell {s.effect} from {a.description}" for a in s.look_alikes]
             if s.typical_multiple > IMPLAUSIBLE_MULTIPLE:
                 lines.append(f"  ! {s.effect} explains the data only at {s.typical_multiple:.3g}x its typical size "
@@ -199,7 +200,8 @@ class Diagnosis:
                        "ambiguous_with": list(s.ambiguous_with), "separated_by": s.separated_by,
                        "typical_multiple": s.typical_multiple, "implied_multiple": _finite(s.implied_multiple),
                        "contradicted_by": list(s.contradicted_by), "q_value": _finite(s.q_value),
-                       "look_alikes": [a.to_json() for a in s.look_alikes]}
+                       "look_alikes": [a.to_json() for a in s.look_alikes],
+                       "sizes": effect_sizes(self.final, s.effect)}
                       for s in self.steps],
             "selected": list(self.selected),
             "ambiguous": [list(g) for g in self.ambiguous],
@@ -220,6 +222,51 @@ class Diagnosis:
 
 def _finite(x):
     return float(x) if math.isfinite(x) else None
+
+
+def effect_sizes(fit: Fit, effect: str) -> list:
+    """Per device, each fitted parameter of `effect` in `fit`: `device`, `parameter`, `value` and `stderr`
+    (physical units), `typical_multiple` and `typical_multiple_stderr` (the internal coordinate: the size in
+    units of the effect's typical size, from the fit's covariance); `stderr_scaled` where the model is rejected
+    (the standard error times sqrt(chi2_red)). None where a standard error is not determined (a held
+    parameter)."""
+    names = list(fit.names)
+    cols = [i for i, name in enumerate(names) if name.startswith(effect + ".")]
+    u = np.asarray(fit.u)
+    values, stderr = np.asarray(fit.values), np.asarray(fit.stderr)
+    scaled = np.asarray(getattr(fit, "stderr_scaled", fit.stderr))
+    cov = np.asarray(fit.covariance)
+    u_se = np.sqrt(np.abs(np.diagonal(cov, axis1=-2, axis2=-1)))
+    free = np.asarray(fit.free)
+    out = []
+    for d, device in enumerate(fit.devices):
+        for i in cols:
+            held = not bool(free[i])
+            out.append({"device": str(device), "parameter": names[i], "value": _finite(float(values[d, i])),
+                        "stderr": None if held else _finite(float(stderr[d, i])),
+                        "stderr_scaled": None if held else _finite(float(scaled[d, i])),
+                        "typical_multiple": _finite(float(u[d, i])),
+                        "typical_multiple_stderr": None if held else _finite(float(u_se[d, i]))})
+    return out
+
+
+def sizes_text(sizes: list) -> list:
+    """`effect_sizes` as lines of text, one per device: each parameter's value +/- its standard error, and its
+    size in units of the typical one."""
+
+    def pm(value, se, spec):
+        if value is None:
+            return "n/a"
+        return format(value, spec) + (f" +/- {se:.2g}" if se is not None else " (held, no standard error)")
+
+    lines, by_device = [], {}
+    for s in sizes:
+        by_device.setdefault(s["device"], []).append(s)
+    for device, items in by_device.items():
+        parts = [f"{s['parameter']} = {pm(s['value'], s['stderr'], '.4g')} "
+                 f"({pm(s['typical_multiple'], s['typical_multiple_stderr'], '.3g')} x typical)" for s in items]
+        lines.append(f"fitted, {device}: " + "; ".join(parts))
+    return lines
 
 
 def discrepancy_text(d) -> str:
