@@ -29,6 +29,7 @@ import numpy as np
 from .._compare import recorded_coordinates
 from .._stats import chi2_sf
 from .._sweeps.registry import sweep_kind
+from .._text import safe_name as clean
 from .space import ResidualSpace, Scored
 
 
@@ -128,12 +129,6 @@ class Location:
                 "coefficient": _finite(self.coefficient), "coefficient_spread": _finite(self.coefficient_spread),
                 "unit": self.unit, "same_shape_as": list(self.same_shape_as), "within": self.within,
                 "library": self.library}
-
-
-def clean(name) -> str:
-    """A name from a data file as printable text: control characters escaped (a device name cannot start a line
-    of its own in a summary)."""
-    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in str(name))
 
 
 def _finite(x):
