@@ -442,6 +442,17 @@ def markdown(rows: list) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _git_describe() -> str | None:
+    """The working tree the run used (`git describe --always --dirty`), or None outside a git checkout."""
+    import subprocess
+
+    try:
+        return subprocess.run(["git", "describe", "--always", "--dirty"], capture_output=True, text=True, timeout=30,
+                              cwd=os.path.dirname(os.path.abspath(__file__))).stdout.strip() or None
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
 def _write_atomic(path, text):
     tmp = path + ".tmp"
     with open(tmp, "w") as fh:
@@ -506,7 +517,8 @@ def main(argv=None):
     settings = {"methods": [m.name for m in runners], "snr": snrs, "seeds": seeds, "designs": designs,
                 "effects": effects, "devices": a.devices, "runs": a.runs, "preset": a.preset,
                 "target_chi2": TARGET_CHI2, "located_share": LOCATED_SHARE,
-                "versions": {"gyrojax": gj.__version__, "jax": jax.__version__, "numpy": np.__version__},
+                "versions": {"gyrojax": gj.__version__, "jax": jax.__version__, "numpy": np.__version__,
+                             "tree": _git_describe()},
                 "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
                 "command": " ".join(sys.argv)}
     records, t_start, n_total = [], time.perf_counter(), len(cases) * len(runners)
