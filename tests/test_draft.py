@@ -64,7 +64,7 @@ def test_a_draft_is_refused_where_a_readout_term_cannot_hold_it(tmp_path):
     with pytest.raises(DraftError, match="acts on the dac sweep, which is not read through the readout"):
         draft_effect_source(_formula(dac, coefficients=[1e-12]))
     freq = Term("lin(drive_freq_hz)*model", ("rate_table",), "output * (f)", True, {}, "1/Hz", "drive_freq_hz")
-    with pytest.raises(DraftError, match="drive-frequency reading or the run"):
+    with pytest.raises(DraftError, match="drive-frequency reading, the run or the rate"):
         draft_effect_source(_formula(freq, coefficients=[1e-6]))
     with pytest.raises(DraftError, match="lower-case Python identifier"):
         draft_effect_source(_formula(GAIN_T, coefficients=[1e-5]), name="Bad Name")

@@ -33,10 +33,11 @@ def draft_effect_source(formula: Formula, *, name: str = "drafted_term", source:
                 raise DraftError(f"the term {t.name} acts on the {s} sweep, which is not read through the readout "
                                  "(AbstractOutputTerm acts on settled rate outputs: rate_table, vcf_static): write "
                                  "it by hand as the kind of term that acts there (docs/adding_an_effect.md).")
-        if "f" in re.findall(r"[A-Za-z_]+", t.expression) or "run" in t.expression:
-            raise DraftError(f"the term {t.name} depends on the drive-frequency reading or the run, which a "
-                             "readout term does not receive (PointConditions: input, temperature, time): write it "
-                             "by hand (docs/adding_an_effect.md).")
+        symbols = set(re.findall(r"[A-Za-z_]+", t.expression))
+        if symbols & {"f", "run", "dTdt"}:
+            raise DraftError(f"the term {t.name} depends on the drive-frequency reading, the run or the rate of "
+                             "change of the temperature, which a readout term does not receive (PointConditions: "
+                             "input, temperature, time): write it by hand (docs/adding_an_effect.md).")
         expr = " " + t.expression + " "
         for a, b in _JAX:
             expr = expr.replace(a, b)

@@ -30,7 +30,8 @@ MAX_TERMS = 3
 REFERENCE_C = 25.0  # deg C: where a temperature term is zero (the presets' reference temperature)
 RELAX_TAUS_S = (60.0, 300.0, 900.0, 3600.0)  # time constants tried for an exponential relaxation after power-on
 _POWERS = {"lin": 1, "sq": 2, "cube": 3}
-_UNITS = {"input": None, "temperature_c": "K", "time_s": "s", "drive_freq_hz": "Hz", "order": "point"}
+_UNITS = {"input": None, "temperature_c": "K", "time_s": "s", "drive_freq_hz": "Hz", "order": "point",
+          "dtemperature_dt": "(K/s)"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,7 +105,7 @@ def _reference(name, x, mask):
 
 
 _CODE = {"input": "x", "temperature_c": f"(T - {REFERENCE_C})", "time_s": "t", "drive_freq_hz": "f",
-         "order": "n"}
+         "order": "n", "dtemperature_dt": "dTdt"}
 
 
 def dictionary(fit, sweeps, *, step_at: float | None = None, period: float | None = None) -> list:

@@ -150,8 +150,27 @@ def _location_text(loc: dict) -> str:
 
 # -- coordinates ---------------------------------------------------------------------------------------------
 def coordinates(block) -> dict:
-    """The coordinates of a sweep block a description can run along: `input` and the recorded ones."""
-    return {"input": np.asarray(block.inputs, float), **recorded_coordinates(block)}
+    """The coordinates of a sweep block a description can run along: `input`, the recorded ones, and, where
+    both the die temperature and the time are recorded, the rate of change of the temperature
+    (`dtemperature_dt`, K/s, by differences along time within each run): a heating die is not a warm one."""
+    out = {"input": np.asarray(block.inputs, float), **recorded_coordinates(block)}
+    if "temperature_c" in out and "time_s" in out:
+        out["dtemperature_dt"] = _rate_of_change(out["temperature_c"], out["time_s"], np.asarray(block.mask))
+    return out
+
+
+def _rate_of_change(temp, time, mask):
+    rate = np.zeros(mask.shape)
+    for d, r in np.ndindex(mask.shape[:2]):
+        m = mask[d, r]
+        if m.sum() < 2:
+            continue
+        idx = np.flatnonzero(m)
+        order = idx[np.argsort(time[d, r][idx], kind="stable")]
+        t, T = time[d, r][order], temp[d, r][order]
+        if np.all(np.diff(t) > 0):
+            rate[d, r, order] = np.gradient(T, t)
+    return rate
 
 
 def _spread(values, mask):
