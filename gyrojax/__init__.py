@@ -163,6 +163,7 @@ from ._plugins import (  # noqa: E402
     load_effects_module as load_effects_module,
 )
 from ._describe import LeafRecord as LeafRecord, describe as describe  # noqa: E402
+from ._device.file import load_device as load_device  # noqa: E402
 from ._plan import (  # noqa: E402
     CandidateExperiment as CandidateExperiment,
     CandidatePlan as CandidatePlan,

@@ -18,7 +18,8 @@ import jax
 import numpy as np
 
 from . import _presets
-from ._parameters import PARAMETERS, as_model
+from ._device.file import is_device_file, parameter_paths, read_device_file, write_device_file
+from ._parameters import DEFAULT_FREE, PARAMETERS, as_model
 
 
 @dataclasses.dataclass(frozen=True)
@@ -166,19 +167,45 @@ def describe(model="paper-qmg") -> tuple:
     `<effect>.<field>`), in the device's order: a tuple of `LeafRecord` (path, value, unit, description,
     provenance). A preset (by name, or a device whose `name` is a preset's) carries the provenance recorded in
     `gyrojax/_presets.py`. Raises `ValueError` for an unknown preset name and `TypeError` for anything else."""
-    if isinstance(model, str) and model not in _presets.PRESETS:
-        raise ValueError(f"describe: unknown preset {model!r}; expected one of {sorted(_presets.PRESETS)}.")
+    file_provenance = None
+    if isinstance(model, str) and is_device_file(model):
+        device_file = read_device_file(model)
+        model, file_provenance = device_file.device, device_file.provenance
+    elif isinstance(model, str) and model not in _presets.PRESETS:
+        raise ValueError(f"describe: unknown preset {model!r}; expected one of {sorted(_presets.PRESETS)} or a "
+                         "device file (.toml).")
     m = as_model(model)
     leaf = jax.tree_util.tree_leaves(m.device)
     if any(np.ndim(x) > 0 and np.shape(x)[0] > 1 for x in leaf) and _is_lot(m.device):
         raise ValueError("describe: the device is a lot (leaves with a leading device axis); describe one device.")
     preset = getattr(m.device, "name", None)
-    preset = preset if preset in _presets.PRESETS else None
+    preset = preset if preset in _presets.PRESETS and file_provenance is None else None
     comments = _preset_comments()
     records = _records(m.device, "", preset, comments, _named_paths(m.device))
+    if file_provenance is not None:  # a device file's own record, not a preset's
+        records = [dataclasses.replace(r, provenance=file_provenance.get(r.path, "")) for r in records]
     for eff in m.effects:
         records += _records(eff, eff.name, None, comments, {})
     return tuple(records)
+
+
+def write_toml(model, path) -> None:
+    """Write `model` (a preset name, a device file, or one `Gyroscope`) as a device file at `path`: every leaf with
+    its unit, description and provenance (`describe`'s), and `free = true` on the parameters a fit frees by
+    default (`gyrojax.DEFAULT_FREE`, those the device has), or on a device file's own free ones."""
+    records = describe(model)
+    if isinstance(model, str) and is_device_file(model):
+        device_file = read_device_file(model)
+        gyro, free, source = device_file.device, device_file.free, model
+    else:
+        gyro = as_model(model).device
+        if as_model(model).effects:
+            raise ValueError("describe: a model with effects cannot be written as a device file (an effect is "
+                             "fitted from zero, not described); write its device.")
+        free, source = DEFAULT_FREE, (f"preset {model!r} (gyrojax/_presets.py)" if isinstance(model, str) else "")
+    free = tuple(n for n in free if n in parameter_paths(gyro).values())
+    write_device_file(gyro, path, provenance={r.path: r.provenance for r in records}, free=free,
+                      descriptions={r.path: r.description for r in records}, source=source)
 
 
 def _is_lot(gyro) -> bool:

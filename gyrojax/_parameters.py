@@ -133,16 +133,19 @@ class Model(eqx.Module):
 
 
 def as_model(model) -> Model:
-    """`model` as a `Model`: a `Model` as it is, a `Gyroscope` or a preset name without effects."""
+    """`model` as a `Model`: a `Model` as it is, a `Gyroscope`, a preset name or a device file's path (ending in
+    .toml, `gyrojax.load_device`) without effects."""
     if isinstance(model, Model):
         return model
     if isinstance(model, Gyroscope):
         return Model(model)
     if isinstance(model, str):
+        from ._device.file import is_device_file, load_device
         from ._presets import preset
 
-        return Model(preset(model))
-    raise TypeError(f"model must be a gyrojax.Model, a Gyroscope or a preset name, got {type(model).__name__}.")
+        return Model(load_device(model) if is_device_file(model) else preset(model))
+    raise TypeError(f"model must be a gyrojax.Model, a Gyroscope, a preset name or a device file (.toml), got "
+                    f"{type(model).__name__}.")
 
 
 def batched(model: Model, n: int) -> Model:

@@ -149,6 +149,33 @@ def _sweep_list(text):
     return tuple(s.strip() for s in text.split(",") if s.strip())
 
 
+def _model_arg(text):
+    """A --model (or simulate's --preset): a preset's name or the path of an existing device file (.toml)."""
+    from ._device.file import is_device_file
+    from ._presets import PRESETS
+
+    if text in PRESETS:
+        return text
+    if is_device_file(text):
+        if not os.path.isfile(text):
+            raise argparse.ArgumentTypeError(f"no device file {text!r} (write one with gyrojax describe --model "
+                                             "PRESET --toml FILE.toml)")
+        return text
+    raise argparse.ArgumentTypeError(f"expected a preset ({', '.join(sorted(PRESETS))}) or a device file FILE.toml, "
+                                     f"got {text!r}")
+
+
+def _device_and_free(model: str):
+    """The device of a preset or device file, and the file's free parameters (() for a preset)."""
+    from ._device.file import is_device_file, read_device_file
+    from ._presets import preset
+
+    if is_device_file(model):
+        device_file = read_device_file(model)
+        return device_file.device, device_file.free
+    return preset(model), ()
+
+
 def _cmd_simulate(args):
     from ._data.files import table_format
 
@@ -162,7 +189,7 @@ def _cmd_simulate(args):
     from ._data.files import write_table
 
     tiers = {"steady": gj.CAMPAIGN_TIER, "averaged": gj.Averaged(), "full": gj.FullWaveform()}
-    gyro = gj.preset(args.preset)
+    gyro, _ = _device_and_free(args.preset)
     _check_finite_effects(args.effect, gyro)
     for name, scale in args.effect:
         gyro = gj.add_effect(gyro, name, scale)
@@ -394,18 +421,20 @@ def _name_list(text):
 def _cmd_identify(args):
     from ._compare import compare
     from ._data.files import read_table
+    from ._device.check import checked_start
     from ._fitio import save_fit
     from ._fitreport import fit_report
     from ._identify import identify
     from ._parameters import DEFAULT_FREE, Model, zero_effect
-    from ._presets import preset
 
     _check_outputs(("--json", args.json, False), ("--save", args.save, False))
     _load_effects(args)
     table = read_table(args.data)
-    _check_finite_effects([(name, 1.0) for name in dict.fromkeys(args.effect)], preset(args.model))
-    model = Model(preset(args.model), tuple(zero_effect(name) for name in args.effect))
-    fit = identify(model, table, free=args.free or DEFAULT_FREE)
+    device, free = _device_and_free(args.model)
+    device = checked_start(device, table, move=args.start_from_data, label="gyrojax identify")
+    _check_finite_effects([(name, 1.0) for name in dict.fromkeys(args.effect)], device)
+    model = Model(device, tuple(zero_effect(name) for name in args.effect))
+    fit = identify(model, table, free=args.free or free or DEFAULT_FREE)
     names = _names(table)
     print(safe_text(fit.summary(), names))
     print(safe_text(compare(fit).summary(), names))
@@ -436,12 +465,17 @@ def _cmd_demo(args):
 def _cmd_describe(args):
     from ._describe import describe, describe_text
 
-    _check_outputs(("--json", args.json, False))
+    _check_outputs(("--json", args.json, False), ("--toml", args.toml, False))
     records = describe(args.model)
     print(describe_text(records))
     if args.json:
         _write_json([r.to_json() for r in records], args.json)
         print(f"wrote {args.json}")
+    if args.toml:
+        from ._describe import write_toml
+
+        write_toml(args.model, args.toml)
+        print(f"wrote {args.toml}: edit it and give it back as --model {args.toml}")
     return EXIT_OK
 
 
@@ -453,7 +487,6 @@ def _effects_module_option(parser):
 
 
 def build_parser():
-    from ._presets import PRESETS
     from ._sweeps.registry import sweep_names
 
     parser = argparse.ArgumentParser(
@@ -466,8 +499,9 @@ def build_parser():
     sim = sub.add_parser("simulate", help="simulate a lot of devices on rate-table, virtual-Coriolis and DAC sweeps",
                          description="Simulate sweeps of a preset device (or a lot around it) and write "
                                      "them in the tidy data format.")
-    sim.add_argument("--preset", required=True, choices=sorted(PRESETS),
-                     help="paper-qmg: seed 000's closed-loop QMG; vcf-2018: seed 003's open-loop gyro")
+    sim.add_argument("--preset", required=True, type=_model_arg,
+                     help="paper-qmg: seed 000's closed-loop QMG; vcf-2018: seed 003's open-loop gyro; or a "
+                          "device file FILE.toml (docs/own_device.md)")
     sim.add_argument("--devices", type=_positive_int("--devices"), default=1,
                      help="lot size (default 1: the nominal device)")
     sim.add_argument("--runs", type=_positive_int("--runs"), default=1, help="repeated runs per device (default 1)")
@@ -517,8 +551,8 @@ def build_parser():
                                       "rank every candidate effect by a score test, add the significant ones one "
                                       "at a time (likelihood-ratio confirmed) and report the error falling.")
     diag.add_argument("data", help="a tidy data file (.csv or .parquet): rate_table, vcf_static, vcf_dynamic, dac")
-    diag.add_argument("--model", choices=sorted(PRESETS), default="paper-qmg",
-                      help="baseline device preset (default paper-qmg)")
+    diag.add_argument("--model", type=_model_arg, default="paper-qmg",
+                      help="baseline device: a preset or a device file FILE.toml (default paper-qmg)")
     diag.add_argument("--alpha", type=_alpha, default=0.01,
                       help="family-wise significance per step, in (0, 0.5] (default 0.01)")
     diag.add_argument("--json", help="write the diagnosis as JSON here (keys in docs/diagnosis.md)")
@@ -543,8 +577,8 @@ def build_parser():
                                      "VCF points that minimise the scale factor's standard error within "
                                      "--budget-min, against seed 000's 22-rate protocol at equal time. No refits.")
     pln.add_argument("data", help="a tidy data file (.csv or .parquet): the measurements made so far")
-    pln.add_argument("--model", choices=sorted(PRESETS), default="paper-qmg",
-                     help="baseline device preset (default paper-qmg)")
+    pln.add_argument("--model", type=_model_arg, default="paper-qmg",
+                     help="baseline device: a preset or a device file FILE.toml (default paper-qmg)")
     pln.add_argument("--fit", metavar="FIT", help="a fit of this data saved by `gyrojax identify --save`: the "
                                                  "baseline, instead of fitting it here (its preset replaces --model)")
     pln.add_argument("--budget-min", type=_positive_minutes, default=None, metavar="M",
@@ -560,8 +594,9 @@ def build_parser():
                                      "every device jointly, with standard errors; parameters the data cannot "
                                      "fix are named and held. Exit 1 if a fit does not converge.")
     idf.add_argument("data", help="a tidy data file (.csv or .parquet)")
-    idf.add_argument("--model", choices=sorted(PRESETS), default="paper-qmg",
-                     help="the preset the fit starts from (default paper-qmg)")
+    idf.add_argument("--model", type=_model_arg, default="paper-qmg",
+                     help="the device the fit starts from: a preset or a device file FILE.toml (default paper-qmg; "
+                          "the file's free = true parameters are freed unless --free is given)")
     idf.add_argument("--free", type=_name_list, default=None, metavar="LIST",
                      help="comma-separated names of gyrojax.PARAMETERS to fit per device (default: "
                           "k_vf,sense_gain,vcf_gain,dac_gain_error,omega_y,q_y, those the device has)")
@@ -569,6 +604,10 @@ def build_parser():
                      help="add an effect (from zero) and fit its parameters too (repeatable), e.g. dac_inl")
     idf.add_argument("--json", help="write the report (keys in docs/cli.md) as JSON here")
     idf.add_argument("--save", metavar="FIT", help="save the fit here (read back with gyrojax.load_fit)")
+    idf.add_argument("--start-from-data", action="store_true",
+                     help="before the fit, move the device's drive resonance, DAC full scale and scale-factor gain "
+                          "to what the data read directly (the PLL's drive_freq_hz, the DAC sweep's slope, the rate "
+                          "table's slope) where the device is far from them (the check runs and warns without it)")
     _effects_module_option(idf)
     idf.set_defaults(func=_cmd_identify)
 
@@ -591,9 +630,12 @@ def build_parser():
                           description="List every leaf of the preset's device (the path an effect reads or "
                                       "writes, e.g. vcf_electrode.force_per_volt2), with its value, unit, "
                                       "description and where the preset took it from (docs/adding_an_effect.md).")
-    desc.add_argument("--model", choices=sorted(PRESETS), default="paper-qmg",
-                      help="the preset to describe (default paper-qmg)")
+    desc.add_argument("--model", type=_model_arg, default="paper-qmg",
+                      help="the preset or device file FILE.toml to describe (default paper-qmg)")
     desc.add_argument("--json", help="write the records (path, value, unit, description, provenance) as JSON here")
+    desc.add_argument("--toml", metavar="OUT.toml",
+                      help="write the device as a device file here, to edit and give back as --model OUT.toml "
+                           "(docs/own_device.md)")
     desc.set_defaults(func=_cmd_describe)
     return parser
 
