@@ -587,9 +587,11 @@ def _export(fn, static, treedef, leaves, path: str, key: str, secret: bytes) -> 
 
 
 def _write(path: str, data: bytes) -> None:
-    """Write `path` atomically, replacing a symbolic link there rather than writing through it."""
-    if os.path.islink(path):
-        os.remove(path)
+    """Write `path` atomically, replacing whatever is there that is not a regular file (a symbolic link, a FIFO,
+    a device) rather than writing through it or into it."""
+    with contextlib.suppress(FileNotFoundError):
+        if not stat.S_ISREG(os.lstat(path).st_mode):
+            os.remove(path)
     atomic_write_bytes(path, data)
 
 

@@ -71,7 +71,7 @@ PROGRAM = textwrap.dedent("""
 """)
 
 
-def _run(folder, cache, *args, devices=1):
+def _run(folder, cache, *args, devices=1, timeout=600):
     env = {k: v for k, v in os.environ.items()
            if k not in ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS",
                         "JAX_ENABLE_COMPILATION_CACHE", "GYROJAX_CACHE_DIR")}
@@ -81,7 +81,7 @@ def _run(folder, cache, *args, devices=1):
         env["XLA_FLAGS"] = f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={devices}".strip()
     env["PYTHONPATH"] = os.pathsep.join([os.getcwd(), str(folder)] + env.get("PYTHONPATH", "").split(os.pathsep))
     proc = subprocess.run([sys.executable, str(folder / "program.py"), *args], env=env, capture_output=True,
-                          text=True, timeout=600, cwd=folder)
+                          text=True, timeout=timeout, cwd=folder)
     assert proc.returncode == 0, proc.stderr[-3000:]
     line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")][-1]
     return json.loads(line[len("RESULT "):])
@@ -238,6 +238,22 @@ def test_a_symlinked_artifact_is_not_followed(program):
     assert second["y"] == first["y"]
     assert not path.is_symlink() and path.read_bytes() == kept  # ... nor written through
     assert elsewhere.read_bytes() == kept
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="POSIX FIFOs")
+def test_an_artifact_that_is_a_fifo_is_replaced_not_opened(program):
+    """Opening a FIFO blocks until someone opens its other end: an artifact path that is one is neither read
+    nor written into."""
+    cache = program / "cache"
+    first = _run(program, cache)
+    (name,) = _artifacts(cache)
+    path = cache / "gyrojax_export" / name
+    good = path.read_bytes()
+    path.unlink()
+    os.mkfifo(path)
+    second = _run(program, cache, timeout=120)
+    assert "export_response" in second["traces"] and second["y"] == first["y"]
+    assert path.is_file() and path.read_bytes() == good
 
 
 def test_an_export_folder_others_can_write_is_not_used(program):
