@@ -173,7 +173,7 @@ class _Reader:
     def value(self, section: str, cls, field: str, entry, frontend_kind):
         where = f"[{section}] {field}"
         quantity = quantity_of(cls.__name__, field, frontend_kind)
-        unit_hint = f"{canonical_unit(quantity)!r} (a {quantity}; accepted: {accepted_units(quantity)})"
+        unit_hint = f"{canonical_unit(quantity)!r} ({quantity}; accepted: {accepted_units(quantity)})"
         if isinstance(entry, dict):
             for key in entry:
                 if key not in _VALUE_KEYS:
@@ -197,13 +197,14 @@ class _Reader:
             raw, unit = entry, None
         if unit is None:
             if factor_to_si(quantity, "1") != 1.0:
-                self.fail(where, f"no unit: every value of a {quantity} needs one, e.g. {field} = {{ value = "
+                self.fail(where, f"no unit: a value of {quantity} needs one, e.g. {field} = {{ value = "
                                  f"{raw!r}, unit = {canonical_unit(quantity)!r} }} (accepted: "
                                  f"{accepted_units(quantity)})")
             unit = "1"
         factor = factor_to_si(quantity, unit)
         if factor is None:
-            self.fail(where, f"unit {unit!r} is not a unit of a {quantity}; accepted: {accepted_units(quantity)}")
+            self.fail(where, f"unit {unit!r} is not a unit of this leaf's quantity ({quantity}); accepted: "
+                             f"{accepted_units(quantity)}")
         numbers = raw if isinstance(raw, list) else [raw]
         if not numbers or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in numbers):
             self.fail(where, f"the value must be a number{' or a list of numbers' if isinstance(raw, list) else ''}"
@@ -248,7 +249,7 @@ class _Reader:
             if f.name not in table:
                 if not _has_default(f):
                     q = quantity_of(cls.__name__, f.name, kind)
-                    self.fail(f"[{name}]", f"missing {f.name} (a {q}, in {canonical_unit(q)!r}); "
+                    self.fail(f"[{name}]", f"missing {f.name} ({q}, in {canonical_unit(q)!r}); "
                                            "`gyrojax describe --toml` writes every key")
                 continue
             entry = table[f.name]
