@@ -424,7 +424,7 @@ def _cmd_identify(args):
     from ._device.check import checked_start
     from ._fitio import save_fit
     from ._fitreport import fit_report
-    from ._identify import identify
+    from ._identify import PopulationFit, PopulationSolve, identify
     from ._parameters import DEFAULT_FREE, Model, zero_effect
 
     _check_outputs(("--json", args.json, False), ("--save", args.save, False))
@@ -434,12 +434,21 @@ def _cmd_identify(args):
     device = checked_start(device, table, move=args.start_from_data, label="gyrojax identify")
     _check_finite_effects([(name, 1.0) for name in dict.fromkeys(args.effect)], device)
     model = Model(device, tuple(zero_effect(name) for name in args.effect))
-    fit = identify(model, table, free=args.free or free or DEFAULT_FREE)
+    # --population: a population fit (random effects: the lot's mean and spread estimated with the devices).
+    lot_solve = "vmap" if args.population is None else PopulationSolve(random=args.population or None)
+    result = identify(model, table, free=args.free or free or DEFAULT_FREE, lot_solve=lot_solve)
+    population = result if isinstance(result, PopulationFit) else None
+    fit = result.fit if population is not None else result
     names = _names(table)
     print(safe_text(fit.summary(), names))
     print(safe_text(compare(fit).summary(), names))
+    if population is not None:
+        print(safe_text(population.summary(), names))
     if args.json:
-        _write_json(fit_report(fit), args.json)
+        report = fit_report(fit)
+        if population is not None:
+            report["population"] = population.report()
+        _write_json(report, args.json)
         print(f"wrote {args.json}")
     if args.save:
         save_fit(fit, args.save)
@@ -448,6 +457,9 @@ def _cmd_identify(args):
     if bad:
         print("gyrojax identify: " + "; ".join(bad) + " (see the warnings above; the files written say so too)",
               file=sys.stderr)
+    if population is not None and not population.converged:
+        print("gyrojax identify: the population fit did not converge (see its warnings)", file=sys.stderr)
+        return population.exit_status
     return fit.exit_status
 
 
@@ -602,6 +614,11 @@ def build_parser():
                           "k_vf,sense_gain,vcf_gain,dac_gain_error,omega_y,q_y, those the device has)")
     idf.add_argument("--effect", action="append", default=[], metavar="NAME",
                      help="add an effect (from zero) and fit its parameters too (repeatable), e.g. dac_inl")
+    idf.add_argument("--population", type=_name_list, nargs="?", const=(), default=None, metavar="LIST",
+                     help="a population fit: these per-device parameters (comma-separated; without a list, every one "
+                          "the fit leaves free) are random effects whose lot mean and spread are estimated with "
+                          "them; each device is shrunk toward the lot, a device missing sweeps gets a prediction "
+                          "interval (docs/population.md; the JSON gets a 'population' section)")
     idf.add_argument("--json", help="write the report (keys in docs/cli.md) as JSON here")
     idf.add_argument("--save", metavar="FIT", help="save the fit here (read back with gyrojax.load_fit)")
     idf.add_argument("--start-from-data", action="store_true",

@@ -14,6 +14,7 @@ returns a `Fit`. One concept per file:
 - `noise.py`: the noise of data without `output_sigma`, estimated from a first fit's residuals.
 - `plausibility.py`: data no fit can mean anything with (refused), and implausible fitted values (flagged).
 - `assemble.py`: from a solution to a `Fit` (statuses and warnings).
+- `population.py`: the lot as a population (`PopulationSolve`, `PopulationFit`): random effects, empirical Bayes.
 - `fit.py`: `Fit`, `Unidentifiable`, statuses and exit codes.
 - `shortcuts.py`: the strings accepted for strategy objects (`solver="levenberg-marquardt"`), in one place.
 """
@@ -33,6 +34,11 @@ from .lot import (
     JointSolve as JointSolve,
     LoopSolve as LoopSolve,
     VmapSolve as VmapSolve,
+)
+from .population import (
+    PopulationFit as PopulationFit,
+    PopulationParameter as PopulationParameter,
+    PopulationSolve as PopulationSolve,
 )
 from .recovery import (
     AbstractRecovery as AbstractRecovery,

@@ -40,6 +40,7 @@ from .identifiability import hold_unidentifiable
 from .lot import AbstractLotSolve, Lot
 from .noise import estimated_noise, reweighted
 from .plausibility import check_absurd_outputs, check_signs
+from .population import PopulationFit, PopulationSolve, population_fit
 from .problem import make_problem, with_free
 from .recovery import RECOVERY, AbstractRecovery, DecrementCertificate, MultiStart, RetryWithSolver, Solution, Solving
 from .shortcuts import lot_solve_from, solver_from
@@ -50,7 +51,7 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), hold=(), priors=None,
              start: MultiStart = MultiStart(), lot_solve: str | AbstractLotSolve = "vmap",
              recovery: tuple[AbstractRecovery, ...] = RECOVERY, identifiability_threshold: float = 1.0,
              reject_alpha: float = 0.01, estimate_noise: bool | None = None, evaluate_only: bool = False,
-             progress=True) -> Fit:
+             progress=True) -> Fit | PopulationFit:
     r"""Fit the free parameters of `model` to every sweep in `data`, per device (vmapped) or jointly.
 
     **Arguments:**
@@ -75,8 +76,10 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), hold=(), priors=None,
       (all devices' independent fits in one vmapped, compiled solve, in chunks of devices and sharded over
       JAX devices: see `VmapSolve`), `gyrojax.LoopSolve()` (one device after another through one compiled
       single-device solve: less memory) or `gyrojax.JointSolve(shard=...)` (one fit of the whole lot; the
-      only one for `shared` parameters); or a shortcut: `"vmap"` (default: `VmapSolve()`, or `JointSolve()`
-      where parameters are shared), `"loop"`.
+      only one for `shared` parameters), `gyrojax.PopulationSolve(random=(...))` (a population fit: the `random`
+      parameters drawn from a lot distribution estimated with them; `identify` then returns a
+      `gyrojax.PopulationFit`, see docs/population.md); or a shortcut: `"vmap"` (default: `VmapSolve()`, or
+      `JointSolve()` where parameters are shared), `"loop"`.
     - `recovery`: what is tried, in turn, after the first solve (`gyrojax.AbstractRecovery` policies); the
       default is `(DecrementCertificate(tol=1e-6), RetryWithSolver("gauss-newton"), RestartRunoffs())`:
       a solve stopped at `max_steps` where a full Gauss-Newton step would lower chi2 by less than `tol` counts
@@ -101,8 +104,9 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), hold=(), priors=None,
     - `progress`: `True` (default) reports the fit's steps on standard error (what it fits, when it compiles,
       the statuses at the end, the elapsed time), `False` is silent, a callable receives the messages.
 
-    **Returns:** a `Fit`. It never raises on non-convergence: read `fit.status` (or `fit.converged`, or call
-    `fit.check()`). A scale factor the data do not determine is NaN, with the reason in `fit.warnings`.
+    **Returns:** a `Fit` (a `PopulationFit` for `lot_solve=PopulationSolve(...)`). It never raises on
+    non-convergence: read `fit.status` (or `fit.converged`, or call `fit.check()`). A scale factor the data do
+    not determine is NaN, with the reason in `fit.warnings`.
 
     **Raises:** `ValueError` before fitting for data no fit could mean anything with: an output more than
     1e8 times the largest other output of its run, or outputs whose slope has the opposite sign of
@@ -124,6 +128,12 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), hold=(), priors=None,
     if isinstance(recovery, AbstractRecovery) or not all(isinstance(r, AbstractRecovery) for r in recovery):
         raise TypeError(f"recovery must be a tuple of gyrojax.AbstractRecovery policies, got {recovery!r}.")
     check_absurd_outputs(data)
+    if isinstance(lot_solve, PopulationSolve):
+        return population_fit(identify, as_model(model), data, lot_solve, dict(
+            free=free, shared=shared, hold=hold, priors=priors, tier=tier, solver=solver, rtol=rtol, atol=atol,
+            max_steps=max_steps, start=start, recovery=recovery, identifiability_threshold=identifiability_threshold,
+            reject_alpha=reject_alpha, estimate_noise=estimate_noise, evaluate_only=evaluate_only,
+            progress=progress), as_progress(progress, "gyrojax.identify"))
     # The strategies, composed once for every fit below: the solver, the first solve, the recovery policies.
     recoveries = tuple(_with_tolerances(r, rtol, atol) for r in recovery
                        if not (isinstance(r, RetryWithSolver) and not (isinstance(solver, str) and solver != r.solver))
