@@ -8,8 +8,9 @@ The header holds everything static (preset and effect names, parameter names, de
 unidentifiable directions, each device's status and warnings, the data's runs, source and recorded fields,
 the gyrojax version), a description of every leaf (kind, shape, dtype), a SHA-256 of the leaves and a SHA-256 of
 the header itself (`header_digest`); the leaves are `eqx.tree_serialise_leaves` of the `Fit`. Loading rebuilds
-the skeleton from the preset (`gyrojax.preset`) and the effects (`zero_effect`), lays the described leaves into
-it and deserialises: values are bit-for-bit those saved.
+the skeleton from the preset (`gyrojax.preset`), or from the device file's text the header stores for a device
+of no preset's structure, and the effects (`zero_effect`), lays the described leaves into it and deserialises:
+values are bit-for-bit those saved.
 
 Loading reads only a regular file (`_reading.open_regular`), and within bounds: a header of at most
 `MAX_HEADER_BYTES`, no larger than the file; arrays whose described sizes the file holds, and no more than
@@ -70,22 +71,24 @@ def _unbatched_device(model: Model):
     return jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, model.device)
 
 
-def _preset_of(model: Model) -> str:
-    """The preset whose tree structure (static configuration included) the fitted device has."""
+def _preset_of(model: Model) -> str | None:
+    """The preset whose tree structure (static configuration included) the fitted device has; None for another
+    device (one from a device file: the header then stores the device as a device file's text)."""
     from ._presets import PRESETS, preset
 
     target = jax.tree.structure(_unbatched_device(model))
     for name in PRESETS:
         if jax.tree.structure(preset(name)) == target:
             return name
-    raise ValueError(f"save_fit: the fit's device has the structure of none of the presets ({', '.join(PRESETS)}); "
-                     "a fit file rebuilds its model from a preset, so fit a device built from one.")
+    return None
 
 
-def _skeleton_model(preset_name: str, effects: tuple[str, ...], n: int) -> Model:
+def _skeleton_model(preset_name: str | None, effects: tuple[str, ...], n: int, device_file: str | None = None):
+    from ._device.file import device_from_text
     from ._presets import preset
 
-    return batched(Model(preset(preset_name), tuple(zero_effect(e) for e in effects)), n)
+    device = preset(preset_name) if device_file is None else device_from_text(device_file, check_loops=False).device
+    return batched(Model(device, tuple(zero_effect(e) for e in effects)), n)
 
 
 def _leaf_spec(x):
@@ -207,23 +210,32 @@ def save_fit(fit: Fit, path) -> None:
     **Arguments:**
 
     - `fit`: a `gyrojax.Fit` whose device is built from a preset (the file names the preset and rebuilds
-      the model's structure from it and the effects' names).
+      the model's structure from it and the effects' names) or is any other device a device file can hold (the
+      header stores it as a device file's text, `gyrojax.load_device`, and rebuilds the structure from that).
     - `path`: the file to write (any suffix; `.fit` by convention).
     """
     if not isinstance(fit, Fit):
         raise TypeError(f"save_fit: fit must be a gyrojax.Fit, got {type(fit).__name__}.")
     n = len(fit.devices)
     preset_name = _preset_of(fit.model)
+    device_file = None
+    if preset_name is None:  # not a preset's structure: the device's own file rebuilds it (its terms cannot)
+        from ._device.file import device_file_text
+
+        device_file = device_file_text(_unbatched_device(fit.model))
     effects = fit.model.effect_names
-    skeleton = _skeleton_model(preset_name, effects, n)
+    skeleton = _skeleton_model(preset_name, effects, n, device_file)
     if jax.tree.structure(skeleton) != jax.tree.structure(fit.model):
-        raise ValueError(f"save_fit: the fit's model does not have the structure of preset {preset_name!r} with "
+        raise ValueError(f"save_fit: the fit's model does not have the structure of "
+                         f"{'preset ' + repr(preset_name) if preset_name else 'its device file'} with "
                          f"effects {list(effects)}; it cannot be rebuilt on loading.")
     buf = io.BytesIO()
     eqx.tree_serialise_leaves(buf, fit)
     payload = buf.getvalue()
     header = _header(fit, preset_name) | {"leaves": [_leaf_spec(x) for x in jax.tree.leaves(fit)],
                                           "sha256": hashlib.sha256(payload).hexdigest()}
+    if device_file is not None:
+        header["device_file"] = device_file
     header["header_sha256"] = header_digest(header)
     head = json.dumps(header, allow_nan=False).encode()
     atomic_write_bytes(path, MAGIC + struct.pack("<Q", len(head)) + head + payload)
@@ -349,7 +361,8 @@ def load_fit(path) -> Fit:
         raise ValueError(f"{path}: corrupt gyrojax fit file: the stored arrays do not match the header's "
                          "checksum (truncated or modified).")
     try:
-        model = _skeleton_model(header["preset"], tuple(header["effects"]), len(header["devices"]))
+        model = _skeleton_model(header["preset"], tuple(header["effects"]), len(header["devices"]),
+                                header.get("device_file"))
         skeleton = _skeleton_fit(header, model)
         leaves, treedef = jax.tree.flatten(skeleton)
         specs = header["leaves"]

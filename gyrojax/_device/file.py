@@ -285,12 +285,21 @@ def read_device_file(path) -> DeviceFile:
         raise FileNotFoundError(2, "no such device file (write one with `gyrojax describe --model PRESET --toml "
                                    "FILE.toml`)", path)
     with open(path, "rb") as f:
-        try:
-            doc = tomllib.load(f)
-        except tomllib.TOMLDecodeError as e:
-            raise DeviceFileError(f"{path}: not a valid TOML file: {e}") from None
-        except UnicodeDecodeError as e:
-            raise DeviceFileError(f"{path}: not a UTF-8 text file: {e}") from None
+        data = f.read()
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise DeviceFileError(f"{path}: not a UTF-8 text file: {e}") from None
+    return device_from_text(text, path)
+
+
+def device_from_text(text: str, path: str = "<text>", *, check_loops: bool = True) -> DeviceFile:
+    """`read_device_file` of a device file's text (`path` names it in messages). `check_loops=False` skips the
+    loops' lock check (a saved fit rebuilds its device's structure from the text it stored)."""
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise DeviceFileError(f"{path}: not a valid TOML file: {e}") from None
     reader = _Reader(path)
     valid = list(_TOP_KEYS) + [s for s in SECTIONS if "." not in s]
     for key in doc:
@@ -337,7 +346,7 @@ def read_device_file(path) -> DeviceFile:
     except (TypeError, ValueError) as e:
         reader.fail("device", str(e))
     gyro = as_arrays(gyro)
-    problems = lock_problems(gyro)
+    problems = lock_problems(gyro) if check_loops else []
     if problems:
         reader.fail("loops", "; ".join(problems))
     named = parameter_paths(gyro)
