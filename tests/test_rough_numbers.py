@@ -258,3 +258,47 @@ def test_diagnosis_gives_each_devices_fitted_effect_size_with_its_standard_error
     assert "  fitted, B: dac_inl.c[0] = 3.1e-05 +/- 5e-07 (3.1 +/- 0.05 x typical)" in text
     (step,) = diag.to_json()["steps"]
     assert step["sizes"] == sizes
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# identify: the noise-estimated p-value does not depend on the unit of the outputs; a fit astronomically far
+# from its data says so, with the scale of the outputs against the model's.
+
+
+def _rate_lot(factor, keep_sigma, devices=1):
+    table = gj.simulate_table(gj.preset("paper-qmg"), devices=devices, runs=2, sweeps=("rate_table",), seed=5,
+                              progress=False)
+    cols = {c: np.asarray(table[c]) for c in table.column_names if keep_sigma or c != "output_sigma"}
+    cols["output"] = cols["output"] * factor
+    return gj.Table.from_columns(cols, source=f"x{factor:g}.csv")
+
+
+@pytest.mark.slow
+def test_noise_estimated_p_value_does_not_depend_on_the_unit_of_the_outputs():
+    """No output_sigma: outputs x1 and x100 (e.g. another LSB width) gave p = 0.34 and 7.5e-99 (device 0: the
+    first fit's unit weights on outputs 100x the model's stopped it at 0.035 x k_vf's design, far from the 0.01
+    the data want, and the noise estimated from its residuals came out 4.3x too large). Now the same fit, noise
+    and p."""
+    one, hundred = (gj.identify("paper-qmg", _rate_lot(f, keep_sigma=False, devices=2), progress=False)
+                    for f in (1.0, 100.0))
+    np.testing.assert_allclose(np.asarray(hundred.p_value), np.asarray(one.p_value), rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(hundred.chi2), np.asarray(one.chi2), rtol=1e-6)
+    assert np.all(np.asarray(one.p_value) > 0.01)
+    noise = [float(re.search(r"rate_table ([0-9.e+]+) output units", " ".join(f.warnings[0])).group(1))
+             for f in (one, hundred)]
+    assert noise[1] == pytest.approx(100 * noise[0], rel=1e-2)  # printed to 3 digits
+    assert "within 5 % of 10^-2: a unit or scaling error" in " ".join(hundred.warnings[0])
+
+
+@pytest.mark.slow
+def test_a_fit_astronomically_far_from_its_data_says_so_and_names_the_scale():
+    """Outputs x1000 with the old output_sigma: device 0's solve stays at the design k_vf with chi2 8.5e18 and
+    was reported "converged" without a word on units."""
+    fit = gj.identify("paper-qmg", _rate_lot(1000.0, keep_sigma=True, devices=2), progress=False)
+    assert fit.status[0] == "model rejected"
+    assert "but far from the data (chi2_red" in fit.result_message[0]
+    text = " ".join(fit.warnings[0])
+    assert re.search(r"chi2_red [0-9.e+]+: the solve stopped .* standard errors per point from the data: this is no "
+                     r"fit of them; the rate_table outputs are ~[0-9.]+x the model's: check the unit of output and "
+                     r"output_sigma", text), text
+    assert re.search(r"outputs are ~9[0-9]{2}x the model's", text)  # the design k_vf: ~1000x its outputs

@@ -18,7 +18,7 @@ from .._solution import RESULTS, result_code, result_message
 from .covariance import chi2_p_value, covariance, joint_jacobian
 from .fit import Fit, p_text
 from .identifiability import sf_determinacy, undetermined_reason, weak_at_solution
-from .plausibility import implausible_values
+from .plausibility import ASTRONOMICAL_CHI2_RED, implausible_values, scale_hint
 from .problem import Layout, Problem
 from .recovery import Solution
 
@@ -118,11 +118,18 @@ def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index
                            f"freedom has {p_text(p_value[d])} < reject_alpha = {reject_alpha:g}; the standard errors "
                            f"are also given scaled by sqrt(chi2_red) = {math.sqrt(chi2_red[d]):.3g} (stderr_scaled). "
                            "gyrojax.compare shows where the misfit sits")
+        if chi2_red[d] > ASTRONOMICAL_CHI2_RED and status[d] != "not converged":
+            hint = scale_hint(data, final.predictions, d)
+            notes_d.append(f"chi2_red {chi2_red[d]:.3g}: the solve stopped (its steps no longer lowered the chi2) "
+                           f"~{math.sqrt(chi2_red[d]):.2g} standard errors per point from the data: this is no fit "
+                           "of them" + (f"; {hint}" if hint else ": check the units of output and output_sigma"))
         if dof[d] <= 0 and status[d] != "not converged":
             notes_d.append(f"no degrees of freedom are left ({int(dof[d])}): nothing tests the model")
         notes_d += implausible[d] + [w for w in noise_notes[d] if w not in notes_d]
         warnings.append(tuple(notes_d))
     undetermined = np.array([s == "not determined" for s in status])
+    messages = tuple(f"{m}, but far from the data (chi2_red {chi2_red[d]:.3g})"
+                     if m == "converged" and chi2_red[d] > ASTRONOMICAL_CHI2_RED else m for d, m in enumerate(messages))
     scale = np.where(rejected, np.sqrt(np.maximum(chi2_red, 1.0)), 1.0)
     sf = np.where(undetermined, np.nan, np.asarray(final.scale_factor))
     sf_stderr = np.where(undetermined, np.nan, sf_stderr)

@@ -38,7 +38,7 @@ from .assemble import assemble_fit
 from .fit import Fit
 from .identifiability import hold_unidentifiable
 from .lot import AbstractLotSolve, Lot
-from .noise import estimated_noise, reweighted
+from .noise import estimated_noise, first_fit_scale, reweighted
 from .plausibility import check_absurd_outputs, check_signs
 from .population import PopulationFit, PopulationSolve, population_fit
 from .problem import make_problem, with_free
@@ -152,6 +152,11 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), hold=(), priors=None,
     else:
         # The noise from a first fit's residuals; then the points weighted by it and fitted again. The second
         # fit has the first's shapes: it reuses every compiled function.
+        # Its weights are on the scale of the model's outputs, so that a unit of the outputs (mLSB, or Hz for
+        # kHz) does not change the solve: unit weights on outputs 100x the model's make the first fit stop far
+        # from them (the damping is absolute), and the noise estimated from its residuals with it.
+        at_start = _fit_once(model, data, noise=None, **{**options, "first": None, "recoveries": ()})
+        data = first_fit_scale(data, at_start.predictions)
         first_fit = _fit_once(model, data, noise=None, **options)
         say("estimating the noise from the first fit's residuals (the data give no output_sigma); fitting again "
             "with those weights")

@@ -12,6 +12,7 @@ from .._fitdata import FitData
 from .._sweeps.registry import sweep_kind
 from .covariance import mc_p_value, pooled_dof
 from .fit import Fit
+from .plausibility import output_scale_ratio
 
 
 # Inputs of two runs closer than this (relative to the sweep's largest |input|) are the same setting.
@@ -211,8 +212,12 @@ def estimated_noise(fit: Fit, seed: int):
             p_value[d] = mc_p_value(null[0], null[1], dof[d], noise_dof[d])
             nulls.append(null)
         unit = "x the given output_sigma" if data.weighted else "output units"
-        parts = [f"{s} {math.sqrt(k[i]):.3g} {unit} from {nu[i]:.3g} effective degrees of freedom ({methods[i]})"
-                 for i, s in enumerate(sweeps) if ok[i]]
+        # Without output_sigma the first fit's sigmas are a scale (`first_fit_scale`): the noise is k times it.
+        base = [1.0 if data.weighted else float(np.max(np.where(np.asarray(data.blocks[s].mask[d]),
+                                                                 np.asarray(data.blocks[s].sigmas[d]), 0.0)))
+                for s in sweeps]
+        parts = [f"{s} {math.sqrt(k[i]) * base[i]:.3g} {unit} from {nu[i]:.3g} effective degrees of freedom "
+                 f"({methods[i]})" for i, s in enumerate(sweeps) if ok[i]]
         bad = [s for i, s in enumerate(sweeps) if present[i] and not ok[i]]
         text = []
         if parts:
@@ -230,6 +235,22 @@ def estimated_noise(fit: Fit, seed: int):
     p_lot = (mc_p_value(sum(c for c, _ in nulls), sum(dr for _, dr in nulls), int(dof[tested].sum()),
                          pooled_dof(noise_dof[tested], dof[tested])) if nulls else float("nan"))
     return kappa, (noise_dof, notes, determined, p_value, p_lot)
+
+
+def first_fit_scale(data: FitData, predictions) -> FitData:
+    """The data of the first fit of data without `output_sigma`: each device's unit sigmas times the power of 10
+    nearest the ratio of its outputs to the model's predictions at the start (`predictions`; the median over its
+    sweeps, `output_scale_ratio`), so that the fit, the noise estimated from it and the p-value do not depend on
+    the unit of the outputs. 1 (the unit weights) for outputs in the model's units."""
+    ratio = output_scale_ratio(data, predictions)
+    scale = np.ones(len(data.devices))
+    for d in range(len(data.devices)):
+        r = ratio[d][np.isfinite(ratio[d])]
+        if r.size:
+            scale[d] = 10.0 ** round(math.log10(float(np.median(r))))
+    if np.all(scale == 1.0):
+        return data
+    return reweighted(data, np.repeat(scale[:, None] ** 2, len(data.sweeps), axis=1))
 
 
 def reweighted(data: FitData, kappa) -> FitData:

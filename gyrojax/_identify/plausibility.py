@@ -155,3 +155,43 @@ def implausible_values(entries, start, values, lot_values, free, n):
                               f"{ref:.4g}{unit}, beyond the plausible {par.plausible:g}{unit} ({par.plausible_why}): "
                               "the preset may not describe this device, or the data's units differ from its")
     return out
+
+
+# A fit whose chi2_red passes this misses every point by ~1000 standard errors: whatever stopped its steps, it
+# is no fit of the data (a unit or scale error of the outputs or of their sigmas, or another device).
+ASTRONOMICAL_CHI2_RED = 1e6
+
+
+def output_scale_ratio(data: FitData, predictions) -> np.ndarray:
+    """(device, sweep): how many times the model's the data's outputs are, as the ratio of their spreads about
+    each run's mean (a turn-on bias changes neither), over the valid points; NaN where either spread is 0 or not
+    finite (a sweep without `predictions`, a single point per run)."""
+    out = np.full((len(data.devices), len(data.sweeps)), np.nan)
+    for i, s in enumerate(data.sweeps):
+        if s not in predictions:
+            continue
+        block = data.blocks[s]
+        y, m = np.asarray(block.outputs, dtype=float), np.asarray(block.mask, dtype=bool)
+        p = np.asarray(predictions[s], dtype=float)
+        m = m & np.isfinite(p)
+        count = np.maximum(m.sum(axis=-1, keepdims=True), 1)
+
+        def spread(v):
+            centred = np.where(m, v - np.sum(np.where(m, v, 0.0), axis=-1, keepdims=True) / count, 0.0)
+            return np.sqrt(np.sum(centred**2, axis=(1, 2)))
+
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = spread(y) / spread(p)
+        out[:, i] = np.where(np.isfinite(ratio) & (ratio > 0), ratio, np.nan)
+    return out
+
+
+def scale_hint(data: FitData, predictions, d: int) -> str:
+    """For device `d` of a fit that misses its data by far: which sweeps' outputs are on another scale than the
+    model's ("outputs are ~1000x the model's: check the unit of output / output_sigma"), or "" if none is."""
+    ratio = output_scale_ratio(data, predictions)[d]
+    off = [(s, r) for s, r in zip(data.sweeps, ratio) if np.isfinite(r) and not 1 / 3 <= r <= 3]
+    if not off:
+        return ""
+    return ("; ".join(f"the {s} outputs are ~{r:.3g}x the model's" for s, r in off)
+            + ": check the unit of output and output_sigma (or use a model of this device)")
