@@ -527,14 +527,19 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
       `rate_dps` column also `scale_factor_vs_rate`, `bias_vs_rate`, `nonlinearity_max_ppm_vs_rate`,
       `nonlinearity_rms_ppm_vs_rate` (output against the rate the word stands for). For `vcf_dynamic` sweeps
       the linear keys are None and `bandwidth_hz`, `phase_deg_at_bandwidth`, `low_frequency_gain` are given.
-      A sweep whose outputs are all equal has `scale_factor` 0 and None nonlinearities and asymmetry.
-      `not_applicable` maps each key that is None to the reason, in words.
+      A metric that is no measurement on the sweep's kind (`AbstractSweep.applicable_metrics`: e.g. none on
+      `drive_frequency`) is None. A sweep whose outputs are all equal has `scale_factor` 0 and None
+      nonlinearities and asymmetry (a kind whose slope's sign a convention sets refuses it: see below).
+      `not_applicable` maps each key that is None to the reason, in words; `undetermined` lists the keys of
+      metrics that apply to the kind but that the points did not give.
     - `devices`: one record per (device, sweep) with a linear fit: `device`, `sweep`, `n_runs`,
       `scale_factor_mean`, `repeatability_ppm` (None with a single run, or when the mean scale factor is 0),
       and `not_applicable` as above.
     - `conventions`: the choices above and the unit of `scale_factor` per sweep kind.
 
-    Raises [`gyrojax.DataError`][] naming the device, run, sweep and rows when a sweep has too few points
+    Raises [`gyrojax.DataError`][] naming the device, run, sweep and rows when a run of a rate-table, VCF, DAC or
+    drive-amplitude sweep has outputs that are all equal (a dead output, refused as `compensate` refuses it),
+    when a sweep has too few points
     (3 for a linear fit, 2 for a bandwidth), when `rate_dps` is given for some but not all points of a `dac`
     sweep, when a weighted fit lacks a positive `output_sigma`, or when a dynamic sweep never reaches -3 dB.
     """
