@@ -199,3 +199,44 @@ def test_the_checked_start_names_a_design_far_from_the_data_and_moves_it(capsys)
     readings, _ = check_start(gj.preset("vcf-2018"), table)
     texts = " ".join(r.text for r in readings if r.far)
     assert "the data have a dac sweep" in texts and "the file's drive resonance 1803.2 Hz" in texts
+
+
+def test_a_saved_fit_of_a_device_file_reads_back(tmp_path, qmg_text):
+    path = _write(tmp_path, qmg_text.replace('name = "paper-qmg"', 'name = "my-gyro"'))
+    table = gj.simulate_table(gj.load_device(path), devices=1, runs=1, seed=1, progress=False)
+    fit = gj.identify(str(path), table)
+    gj.save_fit(fit, tmp_path / "f.fit")  # no preset has its structure (its name): the header holds the file
+    back = gj.load_fit(tmp_path / "f.fit")
+    assert back.model.device.name == "my-gyro"
+    assert jax.tree.structure(back) == jax.tree.structure(fit)
+    assert all(np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True)
+               for a, b in zip(jax.tree.leaves(back), jax.tree.leaves(fit)))
+
+
+@pytest.mark.slow
+def test_a_lot_from_a_device_file_far_from_both_presets_is_diagnosed_from_it(tmp_path, qmg_text, capsys):
+    # drive resonance 2x paper-qmg's (5.1x vcf-2018's), both Q 0.5x; a hidden DAC INL at its typical size
+    text = qmg_text.replace('name = "paper-qmg"', 'name = "my-gyro"')
+    text = _edit(text, "resonator", "omega_x", '{ value = 9268.0, unit = "Hz", provenance = "FEM rev C" }')
+    text = _edit(text, "resonator", "omega_y", '{ value = 9270.0, unit = "Hz" }')
+    text = _edit(text, "resonator", "q_x", '{ value = 5.1e5, unit = "1" }')
+    text = _edit(text, "resonator", "q_y", '{ value = 1.7e5, unit = "1", free = true }')
+    text = _edit(text, "drive_loop", "center_frequency", '{ value = 9268.0, unit = "Hz" }')
+    device, lot, out = _write(tmp_path, text), tmp_path / "lot.csv", tmp_path / "diag.json"
+    assert main(["simulate", "--preset", str(device), "--devices", "3", "--runs", "2", "--sweeps",
+                 "rate_table,vcf_static,dac", "--effect", "dac_inl", "--seed", "5", "--out", str(lot), "--quiet"]) == 0
+    assert main(["diagnose", str(lot), "--model", str(device), "--json", str(out), "--quiet"]) == 0
+    diag = __import__("json").loads(out.read_text())
+    assert diag["verdict"] == "explained" and diag["selected"] == ["dac_inl"]
+    assert 0.8 < diag["final"]["chi2_red"] < 1.25
+    capsys.readouterr()
+    # from the wrong preset the checked start names the mismatch, and --start-from-data moves it before the fit
+    table = gj.read_table(lot)
+    readings, _ = check_start(gj.preset("paper-qmg"), table)
+    drive = {r.quantity: r for r in readings}["drive resonance"]
+    assert drive.far and drive.text.startswith("the file's drive resonance 4633.7 Hz, the data's 92")
+    assert main(["identify", str(lot), "--model", "paper-qmg", "--effect", "dac_inl", "--start-from-data"]) == 0
+    captured = capsys.readouterr()
+    assert "gyrojax identify: the file's drive resonance 4633.7 Hz, the data's 92" in captured.err
+    assert "moved resonator.omega_x, resonator.omega_y, drive_loop.center_frequency" in captured.err
+    assert "ok: chi2_red" in captured.out and "MODEL REJECTED" not in captured.out
