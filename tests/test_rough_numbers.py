@@ -241,7 +241,7 @@ def test_diagnosis_gives_each_devices_fitted_effect_size_with_its_standard_error
     cov = np.zeros((2, 3, 3))
     cov[:, 1, 1], cov[:, 2, 2] = [0.04**2, 0.05**2], [0.1**2, 0.2**2]
     final = SimpleNamespace(
-        names=names, devices=("A", "B"), free=np.array([True, True, True]), covariance=cov,
+        names=names, devices=("A", "B"), free=np.array([True, True, False]), covariance=cov,
         u=np.array([[0.01, 0.98, -0.3], [0.02, 3.1, 0.1]]),
         values=np.array([[1.0, 9.8e-6, -3e-6], [1.0, 3.1e-5, 1e-6]]),
         stderr=np.array([[1e-3, 4e-7, 1e-6], [1e-3, 5e-7, 2e-6]]), chi2_total=430.0, dof_total=438,
@@ -254,7 +254,9 @@ def test_diagnosis_gives_each_devices_fitted_effect_size_with_its_standard_error
     assert sizes[2]["value"] == 3.1e-5 and sizes[2]["stderr"] == 5e-7
     assert sizes[2]["typical_multiple"] == 3.1 and sizes[2]["typical_multiple_stderr"] == pytest.approx(0.05)
     text = diag.summary(comparisons=False)
-    assert "  fitted, A: dac_inl.c[0] = 9.8e-06 +/- 4e-07 (0.98 +/- 0.04 x typical); dac_inl.c[1]" in text
+    assert ("  fitted, A: dac_inl.c[0] = 9.8e-06 +/- 4e-07 (0.98 +/- 0.04 x typical); held, no standard error: "
+            "dac_inl.c[1]\n") in text
+    assert sizes[1]["stderr"] is None and sizes[1]["typical_multiple_stderr"] is None  # held
     assert "  fitted, B: dac_inl.c[0] = 3.1e-05 +/- 5e-07 (3.1 +/- 0.05 x typical)" in text
     (step,) = diag.to_json()["steps"]
     assert step["sizes"] == sizes

@@ -268,14 +268,18 @@ def sizes_text(sizes: list) -> list:
     def pm(value, se, spec):
         if value is None:
             return "n/a"
-        return format(value, spec) + (f" +/- {se:.2g}" if se is not None else " (held, no standard error)")
+        return format(value, spec) + (f" +/- {se:.2g}" if se is not None else " (no standard error)")
 
     lines, by_device = [], {}
     for s in sizes:
         by_device.setdefault(s["device"], []).append(s)
     for device, items in by_device.items():
         parts = [f"{s['parameter']} = {pm(s['value'], s['stderr'], '.4g')} "
-                 f"({pm(s['typical_multiple'], s['typical_multiple_stderr'], '.3g')} x typical)" for s in items]
+                 f"({pm(s['typical_multiple'], s['typical_multiple_stderr'], '.3g')} x typical)"
+                 for s in items if s["stderr"] is not None]
+        held = [s["parameter"] for s in items if s["stderr"] is None]
+        if held:  # held by the fit: the data do not determine them
+            parts.append(f"held, no standard error: {', '.join(held)}")
         lines.append(f"fitted, {device}: " + "; ".join(parts))
     return lines
 
