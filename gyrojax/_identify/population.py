@@ -11,8 +11,10 @@ for `"linear"` ones), with a diagonal lot covariance Omega = diag(s^2):
    Gaussian likelihood exp(-theta^T J_i theta / 2 + h_i^T theta). A device whose data do not see a parameter (a
    device without a rate table, for the parameters only the rate table fixes) has J_i = 0 there.
 3. mu and s maximise the marginal likelihood prod_i integral N(theta | mu, Omega) exp(...) dtheta (closed-form EM
-   iterations, then the observed information: the Hessian of the log marginal likelihood over (mu, log s) gives
-   their standard errors).
+   iterations); then s maximises the restricted (REML) likelihood, which removes maximum likelihood's downward
+   bias of a spread estimated from few devices, and mu is its generalised-least-squares estimate. Standard errors:
+   mu's from its information sum_i (Omega + C_i)^-1, log s's from the restricted likelihood's observed
+   information.
 4. Every device is fitted again with the prior N(mu, Omega) (from where it stopped): its estimate is then the
    shrunken one (the posterior mode), its covariance the posterior's. Steps 2-4 repeat until mu and s move by
    less than `tol` of their standard errors (for a model linear in the random parameters one refit).
@@ -252,18 +254,41 @@ def _log_marginal(hyper, info, h):
                    - 0.5 * jnp.sum(mu**2 / s2))
 
 
-_hessian = jax.jit(jax.hessian(_log_marginal))
+def _gls(log_s, info, h):
+    """The lot mean given the spread (generalised least squares) and its information sum_i (Omega + C_i)^-1, in
+    the information form that holds for J_i = 0 as well: (Omega + J^-1)^-1 = Omega^-1 - Omega^-1 A^-1 Omega^-1."""
+    oinv = jnp.exp(-2.0 * log_s)
+    a_inv = jnp.linalg.inv(info + jnp.diag(oinv))
+    w = jnp.diag(oinv) - oinv[:, None] * a_inv * oinv[None, :]
+    wb = oinv * jnp.einsum("nij,nj->ni", a_inv, h)
+    w_sum = jnp.sum(w, axis=0)
+    return jnp.linalg.solve(w_sum, jnp.sum(wb, axis=0)), w_sum
+
+
+def _restricted(log_s, info, h):
+    """The restricted (REML) log-likelihood of log s: the marginal likelihood at the GLS mean, less half the log
+    determinant of that mean's information (which removes ML's downward bias of the spread, ~1/n)."""
+    mu, w_sum = _gls(log_s, info, h)
+    return _log_marginal(jnp.concatenate([mu, log_s]), info, h) - 0.5 * jnp.linalg.slogdet(w_sum)[1]
+
+
+_restricted_value_grad = jax.jit(jax.value_and_grad(_restricted))
+_restricted_hessian = jax.jit(jax.hessian(_restricted))
+_gls_jit = jax.jit(_gls)
 _posterior_jacobian = jax.jit(jax.jacfwd(lambda hy, i, h: _posterior(hy, i, h)[0]))
 
 
 def lot_distribution(info, h, hyper0, em_steps: int, floor: float = 1e-12):
-    """(mu, log s) maximising the marginal likelihood (EM in closed form from `hyper0`), their covariance from the
-    observed information, and notes: (hyper, covariance, converged, notes)."""
+    """(mu, log s) of the lot: closed-form EM iterations of the marginal likelihood from `hyper0`, then the
+    restricted likelihood's maximum over log s (Newton from there) with mu its GLS estimate; their covariance
+    (mu's from its information, log s's from the restricted likelihood's observed information). Returns
+    (hyper, covariance, converged, notes)."""
     k = info.shape[-1]
     mu, s2 = np.array(hyper0[:k], dtype=float), np.exp(2.0 * np.asarray(hyper0[k:], dtype=float))
     notes = []
     converged = False
     eye = np.eye(k)
+    step = math.inf
     for _ in range(em_steps):
         cov = np.linalg.inv(info + eye / s2)
         m = np.einsum("nij,nj->ni", cov, h + mu / s2)
@@ -272,25 +297,58 @@ def lot_distribution(info, h, hyper0, em_steps: int, floor: float = 1e-12):
         step = max(float(np.max(np.abs(mu_new - mu) / np.sqrt(s2_new))),
                    float(np.max(np.abs(np.log(s2_new / s2)))))
         mu, s2 = mu_new, s2_new
-        if step < 1e-10:
+        if step < 1e-8:
             converged = True
             break
-    hyper = np.concatenate([mu, 0.5 * np.log(s2)])
     if not converged:
         notes.append(f"the EM iterations for the lot mean and spread did not converge in {em_steps} steps (last "
                      f"change {step:.2g} in units of the spread): the spread may be at zero, or the data inform "
                      "too few devices. Try: PopulationSolve(em_steps=...) larger, fewer random parameters, or more "
                      "devices with the sweeps that fix them")
-    hess = np.asarray(_hessian(jnp.asarray(hyper), jnp.asarray(info), jnp.asarray(h)))
+    info_j, h_j = jnp.asarray(info), jnp.asarray(h)
+
+    def value(x):
+        return float(_restricted_value_grad(jnp.asarray(x), info_j, h_j)[0])
+
+    def hessian(x):
+        return -np.asarray(_restricted_hessian(jnp.asarray(x), info_j, h_j))
+
+    # Newton's method on log s, halving a step that does not raise the restricted likelihood.
+    low = math.log(floor)
+    log_s, maximised = 0.5 * np.log(s2), False
+    for _ in range(100):
+        v, g = _restricted_value_grad(jnp.asarray(log_s), info_j, h_j)
+        neg = hessian(log_s)
+        try:
+            d = np.linalg.solve(neg, np.asarray(g)) if np.all(np.linalg.eigvalsh(neg) > 0) else np.asarray(g)
+        except np.linalg.LinAlgError:
+            d = np.asarray(g)
+        t = 1.0
+        while t > 1e-6 and not value(np.maximum(log_s + t * d, low)) >= float(v) - 1e-12 * abs(float(v)):
+            t /= 2
+        new = np.maximum(log_s + t * d, low)
+        moved, log_s = float(np.max(np.abs(new - log_s))), new
+        if moved < 1e-10:
+            maximised = True
+            break
+    if not maximised:
+        converged = False
+        notes.append("the restricted likelihood of the lot spread was not maximised in 100 Newton steps. Try: more "
+                     "devices with the sweeps that fix the random parameters, or fewer random parameters")
+    mu, w_sum = (np.asarray(x) for x in _gls_jit(jnp.asarray(log_s), info_j, h_j))
+    hyper = np.concatenate([mu, log_s])
+    hcov = np.zeros((2 * k, 2 * k))
     try:
-        hcov = np.linalg.inv(-hess)
-        ok = np.all(np.isfinite(hcov)) and np.all(np.linalg.eigvalsh(-hess) > 0)
+        hcov[:k, :k] = np.linalg.inv(w_sum)
+        neg = hessian(log_s)
+        ok = bool(np.all(np.linalg.eigvalsh(neg) > 0))
+        hcov[k:, k:] = np.linalg.inv(neg) if ok else np.nan
     except np.linalg.LinAlgError:
-        hcov, ok = np.full(hess.shape, np.nan), False
-    if not ok:
-        hcov = np.full(hess.shape, np.nan)
-        notes.append("the marginal likelihood's observed information is not positive definite at the estimate "
-                     "(a spread at zero, or a parameter no device's data fix): the standard errors are NaN")
+        ok = False
+    if not ok or not np.all(np.isfinite(hcov)):
+        hcov[k:, k:] = np.nan
+        notes.append("the lot spread's restricted likelihood has no curvature at the estimate (a spread at zero, or "
+                     "a parameter no device's data fix): the spread's standard error is NaN")
     return hyper, hcov, converged, notes
 
 
