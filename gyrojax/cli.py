@@ -643,10 +643,12 @@ def build_parser():
     demo.add_argument("--quiet", action="store_true", help="only the steps and their results, no progress messages")
     demo.set_defaults(func=_cmd_demo)
 
-    desc = sub.add_parser("describe", help="every leaf of a preset device: its path, value, unit and provenance",
-                          description="List every leaf of the preset's device (the path an effect reads or "
-                                      "writes, e.g. vcf_electrode.force_per_volt2), with its value, unit, "
-                                      "description and where the preset took it from (docs/adding_an_effect.md).")
+    desc = sub.add_parser("describe", help="every leaf of a device (a preset or a device file): its path, value, "
+                                           "unit and provenance; --toml writes it as a device file",
+                          description="List every leaf of the device (the path an effect reads or writes, e.g. "
+                                      "vcf_electrode.force_per_volt2), with its value, unit, description and where "
+                                      "the preset (or the device file) took it from (docs/adding_an_effect.md); "
+                                      "--toml writes it as a device file to edit (docs/own_device.md).")
     desc.add_argument("--model", type=_model_arg, default="paper-qmg",
                       help="the preset or device file FILE.toml to describe (default paper-qmg)")
     desc.add_argument("--json", help="write the records (path, value, unit, description, provenance) as JSON here")
