@@ -169,13 +169,28 @@ def _read_csv(source: str) -> tuple[dict[str, list], list[int]]:
     return columns, lines
 
 
-def _read_parquet(source: str) -> dict[str, Any]:
+def read_parquet_devices(path: str | os.PathLike, devices) -> Table:
+    """The rows of `devices` of a Parquet table file, validated as `read_table` does: only the row groups whose
+    statistics may hold them are read (a file written sorted by device, or in row groups by device, is read a
+    chunk of devices at a time). Its source, for messages, is the path followed by the devices' range; data rows
+    count within those devices' rows."""
+    source = os.fspath(path)
+    table_format(source, "read_parquet_devices")
+    devices = [str(d) for d in devices]
+    if not devices:
+        raise ValueError(f"read_parquet_devices: no devices given to read from {source!r}.")
+    columns = _read_parquet(source, filters=[("device", "in", devices)])
+    where = devices[0] if len(devices) == 1 else f"{devices[0]} .. {devices[-1]}, {len(devices)} devices"
+    return Table._from_file(columns, f"{source} [{where}]", None)
+
+
+def _read_parquet(source: str, filters=None) -> dict[str, Any]:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     try:
         with open_regular(source, _EXPECTED) as f:
-            table = pq.read_table(f)
+            table = pq.read_table(f, filters=filters)
     except (pa.ArrowInvalid, OSError) as e:
         if os.path.exists(source) and os.path.getsize(source) == 0:
             raise DataError(f"{source}: empty file.", source=source) from None

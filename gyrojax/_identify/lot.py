@@ -117,9 +117,9 @@ class LotSpread(eqx.Module):
     multiple: int = eqx.field(static=True)
     sharding: jax.sharding.NamedSharding | None = eqx.field(static=True)
 
-    def __init__(self, n: int, shards: int, chunk: int | None = None, bucket: bool = False):
+    def __init__(self, n: int, shards: int, chunk: int | None = None, bucket: bool = False, pad_to: int | None = None):
         self.n, self.shards = n, shards
-        base = bucket_size(n) if bucket else n
+        base = max(bucket_size(n) if bucket else n, pad_to or 0)
         self.chunk = chunk if chunk is not None and chunk < base else None
         self.multiple = shards * (self.chunk or 1)
         self.size = -(-base // self.multiple) * self.multiple
@@ -178,17 +178,23 @@ class VmapSolve(AbstractLotSolve):
       and dropped), so that lots of nearby sizes share one compiled fit: a refit without one device, or the next
       lot of a notebook, reuses it instead of tracing and compiling again. The fitted values do not depend on
       it beyond round-off (each device is solved on its own).
+    - `pad_to`: pad a smaller lot to this many devices (as `bucket` does), so that every chunk of a lot run
+      in chunks (`gyrojax.DistributedSolve`) shares one compiled fit, the last one included.
     """
 
     chunk: int | None | str = eqx.field(static=True, default="auto")
     shard: bool | None = eqx.field(static=True, default=None)
     bucket: bool = eqx.field(static=True, default=True)
+    pad_to: int | None = eqx.field(static=True, default=None)
     joint: ClassVar[bool] = False
 
     def __check_init__(self):
         if self.chunk not in ("auto", None) and (not isinstance(self.chunk, int) or isinstance(self.chunk, bool)
                                                  or self.chunk < 1):
             raise ValueError(f"VmapSolve: chunk must be 'auto', None or an integer >= 1, got {self.chunk!r}.")
+        if self.pad_to is not None and (not isinstance(self.pad_to, int) or isinstance(self.pad_to, bool)
+                                        or self.pad_to < 1):
+            raise ValueError(f"VmapSolve: pad_to must be None or an integer >= 1, got {self.pad_to!r}.")
 
     def spread(self, n):
         shards, chunk = _shards(self.shard), self.chunk
@@ -198,7 +204,7 @@ class VmapSolve(AbstractLotSolve):
             chunk = (16 if jax.default_backend() == "cpu" else 1024) if shards == 1 else None
         if chunk is not None and shards > 1:
             raise ValueError("VmapSolve: a chunk applies on one JAX device; drop chunk or shard.")
-        return LotSpread(n, shards, chunk, bucket=self.bucket)
+        return LotSpread(n, shards, chunk, bucket=self.bucket, pad_to=self.pad_to)
 
     def solve(self, problem, spread, u0, u_lot0, solver, max_steps):
         u0_s, = spread.pad(jnp.asarray(u0))

@@ -1,0 +1,45 @@
+"""One chunk's fit, run in a worker process: read the chunk's rows, `identify` them with the lot's options,
+write the result (the chunk's identify report with each device's chi2 and dof) atomically; a chunk whose data
+or fit raises writes its failure (the error's type and message) instead, so that the run goes on."""
+
+import os
+import time
+import traceback
+
+from .._io import atomic_write_json
+
+
+def fit_chunk(task: dict) -> dict:
+    """Fit one chunk (`task` from `identify_lot`: `index`, `devices`, `data`, `split_file`, `model`, `options`,
+    `chunk`, `result`, `failure`). Returns a short summary for the progress line."""
+    import numpy as np
+
+    from .._data.chunked import read_chunk
+    from .._fitreport import fit_report
+    from .._identify import VmapSolve, identify
+
+    start = time.perf_counter()
+    try:
+        table = read_chunk(task["data"], task["devices"], task["split_file"])
+        got = set(table["device"].tolist())
+        if got != set(task["devices"]):
+            missing = sorted(set(task["devices"]) - got)
+            raise ValueError(f"{task['data']}: the chunk's rows lack devices {missing[:5]} (or hold others): the "
+                             "file changed since the run was planned; remove the results folder to start again.")
+        fit = identify(task["model"], table, lot_solve=VmapSolve(pad_to=task["chunk"]), progress=False,
+                       **task["options"])
+        report = fit_report(fit)
+        report["chi2"] = [float(x) if np.isfinite(x) else None for x in np.asarray(fit.chi2)]
+        report["dof"] = [int(x) for x in np.asarray(fit.dof)]
+        report["seconds"] = time.perf_counter() - start
+        report["chunk"] = task["index"]
+        atomic_write_json(report, task["result"])
+        if os.path.exists(task["failure"]):
+            os.remove(task["failure"])
+        return {"index": task["index"], "devices": len(task["devices"]), "failed": 0,
+                "seconds": report["seconds"]}
+    except Exception as e:  # a chunk's failure is a result: recorded, reported, retried on a restart
+        atomic_write_json({"chunk": task["index"], "devices": list(task["devices"]), "error": type(e).__name__,
+                           "message": str(e), "traceback": traceback.format_exc(limit=8)}, task["failure"])
+        return {"index": task["index"], "devices": len(task["devices"]), "failed": len(task["devices"]),
+                "seconds": time.perf_counter() - start}
