@@ -429,6 +429,8 @@ def _cmd_identify(args):
 
     _check_outputs(("--json", args.json, False), ("--save", args.save, False))
     _load_effects(args)
+    if args.workers is not None or args.scheduler is not None:
+        return _identify_distributed(args)
     table = read_table(args.data)
     device, free = _device_and_free(args.model)
     device = checked_start(device, table, move=args.start_from_data, label="gyrojax identify")
@@ -461,6 +463,44 @@ def _cmd_identify(args):
         print("gyrojax identify: the population fit did not converge (see its warnings)", file=sys.stderr)
         return population.exit_status
     return fit.exit_status
+
+
+def _identify_distributed(args):
+    """identify --workers/--scheduler: the lot in chunks of devices on Dask (gyrojax/_distributed), resumable
+    from --json's results folder."""
+    from ._distributed import DistributedSolve, identify_lot
+    from ._parameters import DEFAULT_FREE, Model, zero_effect
+
+    option = "--workers" if args.workers is not None else "--scheduler"
+    refused = [(args.workers is not None and args.scheduler is not None, "--scheduler (give one of the two)"),
+               (args.population is not None, "--population (a population fit couples the devices)"),
+               (args.save, "--save (the merged result is --json's report; each chunk's is in its results folder)"),
+               (args.start_from_data, "--start-from-data (it reads the whole file)")]
+    for bad, what in refused:
+        if bad:
+            raise ValueError(f"{option} cannot be combined with {what}.")
+    if not args.json:
+        raise ValueError(f"{option} needs --json OUT.json: the merged report, with each chunk's result in "
+                         "OUT.json.parts (a run started again with the same command continues from it).")
+    device, free = _device_and_free(args.model)
+    _check_finite_effects([(name, 1.0) for name in dict.fromkeys(args.effect)], device)
+    model = Model(device, tuple(zero_effect(name) for name in args.effect))
+    try:
+        strategy = DistributedSolve(workers=args.workers, scheduler=args.scheduler, chunk=args.chunk)
+        report = identify_lot(model, args.data, args.json, strategy, free=args.free or free or DEFAULT_FREE)
+    except ImportError as e:
+        raise ValueError(str(e)) from None
+    counts = {}
+    for d in report["devices"]:
+        counts[d["status"]] = counts.get(d["status"], 0) + 1
+    n_failed = sum(len(f["devices"]) for f in report["failed"])
+    print(f"{len(report['devices']) + n_failed} device(s): " + ", ".join(f"{k} {st}" for st, k in counts.items())
+          + f", {n_failed} failed")
+    for f in report["failed"]:
+        print(safe_text(f"  chunk {f['chunk']} ({len(f['devices'])} devices, {f['devices'][0]} ..): FAILED: "
+                        f"{f['error']}: {f['message']}", f["devices"]), file=sys.stderr)
+    print(f"wrote {args.json} (each chunk's result in {args.json}.parts)")
+    return EXIT_FAILED if n_failed and report["exit_status"] == 0 else report["exit_status"]
 
 
 def _cmd_demo(args):
@@ -625,6 +665,13 @@ def build_parser():
                      help="before the fit, move the device's drive resonance, DAC full scale and scale-factor gain "
                           "to what the data read directly (the PLL's drive_freq_hz, the DAC sweep's slope, the rate "
                           "table's slope) where the device is far from them (the check runs and warns without it)")
+    idf.add_argument("--workers", type=_positive_int("--workers"), default=None, metavar="N",
+                     help="fit the lot in chunks of devices on a local Dask cluster of N worker processes (needs "
+                          "gyrojax[distributed] and --json; resumable: the same command continues a killed run)")
+    idf.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                     help="as --workers, on an existing Dask cluster (tcp://host:8786)")
+    idf.add_argument("--chunk", type=_positive_int("--chunk"), default=16, metavar="C",
+                     help="devices per chunk with --workers/--scheduler (default 16)")
     _effects_module_option(idf)
     idf.set_defaults(func=_cmd_identify)
 
