@@ -4,6 +4,7 @@ start against what the data read directly."""
 import math
 import re
 
+import equinox as eqx
 import jax
 import numpy as np
 import pytest
@@ -240,3 +241,31 @@ def test_a_lot_from_a_device_file_far_from_both_presets_is_diagnosed_from_it(tmp
     assert "gyrojax identify: the file's drive resonance 4633.7 Hz, the data's 92" in captured.err
     assert "moved resonator.omega_x, resonator.omega_y, drive_loop.center_frequency" in captured.err
     assert "ok: chi2_red" in captured.out and "MODEL REJECTED" not in captured.out
+
+
+def test_an_open_loop_file_a_warmup_history_and_what_a_file_cannot_hold(tmp_path):
+    from gyrojax._device.file import write_device_file
+
+    g = eqx.tree_at(lambda g: g.temperature, gj.preset("vcf-2018"),
+                    gj.WarmupTemperature(ambient=22.0, rise=3.5, time_constant=90.0))
+    path = tmp_path / "open.toml"
+    write_device_file(g, path)
+    back = gj.load_device(path)
+    assert jax.tree.structure(back) == jax.tree.structure(g) and _hex_leaves(back) == _hex_leaves(g)
+    assert float(back.temperature.rise) == 3.5 and '[temperature]\nkind = "warmup"' in path.read_text()
+    # a transimpedance front end's gain is in V/A: V/C is refused
+    text = path.read_text().replace('kind = "charge"', 'kind = "transimpedance"', 1)
+    path.write_text(text)
+    with pytest.raises(ValueError, match=r"\[drive_frontend\] gain: unit 'V/C' is not a unit of this leaf's "
+                                         r"quantity \(transimpedance\); accepted: 'V/A', 'V/uA'"):
+        gj.load_device(path)
+    # an open-loop file with feedback combs is refused; a device with terms cannot be written
+    path.write_text(path.read_text().replace("[readout]", '[feedback_electrode]\nv_dc = { value = 5.0, unit = "V" }'
+                                             '\n\n[readout]'))
+    with pytest.raises(ValueError, match=r"\[feedback_electrode\]: an open-loop device \(with \[readout\]\) has no "
+                                         "feedback combs"):
+        gj.load_device(path)
+    with_term = gj.preset("paper-qmg").with_term(gj.TemperatureCoefficient("excitation.dac.full_scale", 1e-5))
+    with pytest.raises(ValueError, match=r"carries 1 term\(s\) \(TemperatureCoefficient\): a term is code"):
+        write_device_file(with_term, tmp_path / "t.toml")
+
