@@ -1,0 +1,212 @@
+"""A lot in chunks of devices (gyrojax/_distributed, gyrojax/_data/chunked.py): the chunked readers, the plan and
+its restart check, the merge's every-device-once check, and (with Dask distributed installed) a lot on a local
+cluster of 2 worker processes: the same fit as one process, a killed worker's chunk run again, a killed run
+continued by the same command."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import gyrojax as gj
+from gyrojax._data.cells import DataError
+from gyrojax._data.chunked import device_order, read_chunk, split_csv
+from gyrojax._data.files import read_parquet_devices
+from gyrojax._distributed import DistributedSolve, identify_lot
+from gyrojax._distributed.plan import Plan
+from gyrojax._distributed.run import merge, progress_line
+from gyrojax._distributed.task import fit_chunk
+
+
+def _write(path, rows, header="device,run,sweep,input,output,output_sigma"):
+    path.write_text(header + "\n" + "".join(r + "\n" for r in rows))
+    return str(path)
+
+
+def _tiny(tmp_path, name="lot.csv"):
+    """Three devices, interleaved, two rate-table points each."""
+    rows = []
+    for x in (1.0, 2.0):
+        for d in ("a", "b", "c"):
+            rows.append(f"{d},0,rate_table,{x},{100 * x + ord(d)},0.1")
+    return _write(tmp_path / name, rows)
+
+
+def test_device_order_and_csv_split_by_device(tmp_path):
+    path = _tiny(tmp_path)
+    assert device_order(path) == ["a", "b", "c"]
+    targets = [str(tmp_path / "c0.csv"), str(tmp_path / "c1.csv")]
+    split_csv(path, [["a", "b"], ["c"]], targets)
+    first, second = gj.read_table(targets[0]), gj.read_table(targets[1])
+    assert first["device"].tolist() == ["a", "b", "a", "b"] and second["device"].tolist() == ["c", "c"]
+    whole = gj.read_table(path)
+    rows = [i for i, d in enumerate(whole["device"].tolist()) if d == "c"]
+    assert np.array_equal(second["output"], whole["output"][rows])
+
+
+def test_a_chunk_error_names_the_input_file_row_and_line(tmp_path):
+    rows = ["a,0,rate_table,1.0,101,0.1", "b,0,rate_table,1.0,102,0.1", "b,0,rate_table,2.0,nan,0.1"]
+    path = _write(tmp_path / "bad.csv", rows)
+    target = str(tmp_path / "c1.csv")
+    split_csv(path, [["a"], ["b"]], [str(tmp_path / "c0.csv"), target])
+    with pytest.raises(DataError, match=r"bad\.csv: data row 3 \(line 4\)") as e:
+        read_chunk(path, ["b"], target)
+    assert e.value.row == 3 and "c1.csv" not in str(e.value)
+
+
+def test_parquet_is_read_by_device(tmp_path):
+    table = gj.read_table(_tiny(tmp_path))
+    path = str(tmp_path / "lot.parquet")
+    gj.write_table(table, path)
+    assert device_order(path) == ["a", "b", "c"]
+    part = read_parquet_devices(path, ["b", "c"])
+    assert sorted(set(part["device"].tolist())) == ["b", "c"] and len(part) == 4
+    assert "[b .. c, 2 devices]" in part.source
+
+
+def test_distributed_solve_arguments_are_checked():
+    with pytest.raises(ValueError, match="exactly one"):
+        DistributedSolve()
+    with pytest.raises(ValueError, match="exactly one"):
+        DistributedSolve(workers=2, scheduler="tcp://h:8786")
+    with pytest.raises(ValueError, match="chunk must be an integer >= 1"):
+        DistributedSolve(workers=2, chunk=0)
+    with pytest.raises(ValueError, match="VmapSolve: pad_to"):
+        gj.VmapSolve(pad_to=0)
+
+
+def test_shared_parameters_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="shared couple the devices"):
+        identify_lot("paper-qmg", _tiny(tmp_path), str(tmp_path / "o.json"), DistributedSolve(workers=1),
+                     shared=("k_vf",))
+
+
+def test_a_restart_with_other_options_is_refused(tmp_path):
+    path = _tiny(tmp_path)
+    out = str(tmp_path / "o.json")
+    plan = Plan(path, out, 2, {"free": "('k_vf',)"})
+    assert plan.groups == [["a", "b"], ["c"]] and not plan.resumed
+    assert Plan(path, out, 2, {"free": "('k_vf',)"}).resumed
+    with pytest.raises(ValueError, match="belongs to another run \\(its options differ"):
+        Plan(path, out, 2, {"free": "('q_y',)"})
+
+
+def test_a_failed_chunk_is_reported_with_its_devices_and_the_merge_holds_every_device_once(tmp_path):
+    rows = ["a,0,rate_table,1.0,101,0.1", "b,0,rate_table,1.0,nan,0.1"]
+    path = _write(tmp_path / "bad.csv", rows)
+    plan = Plan(path, str(tmp_path / "o.json"), 1, {})
+    task = {"index": 1, "devices": ["b"], "data": path, "split_file": plan.split_files[1], "model": "paper-qmg",
+            "options": {}, "chunk": 1, "result": plan.result(1), "failure": plan.failure(1)}
+    assert fit_chunk(task)["failed"] == 1
+    report = merge(plan)  # chunk 0 never ran, chunk 1 failed: both listed, with their devices
+    assert [f["devices"] for f in report["failed"]] == [["a"], ["b"]]
+    assert report["failed"][0]["error"] == "NotRun"
+    assert report["failed"][1]["error"] == "DataError" and "bad.csv: data row 2 (line 3)" in report["failed"][1][
+        "message"]
+    assert report["exit_status"] == 1
+    # A result file of a device the input does not hold breaks the every-device-once check.
+    with open(plan.result(0), "w") as f:
+        json.dump({"devices": [{"device": "z", "noise_dof": None}], "chi2": [1.0], "dof": [1], "unidentifiable": [],
+                   "unidentifiable_directions": [], "compare": {}, "reject_alpha": 0.01}, f)
+    with pytest.raises(RuntimeError, match=r"exactly once \(missing \['a'\], twice \[\], not in the input \['z'\]"):
+        merge(plan)
+
+
+def test_progress_line():
+    assert progress_line(12, 2, 40, 4, 5.0) == "12/40 devices done, 2 failed, 2.00 devices/s, ETA 13 s"
+    assert progress_line(40, 0, 40, 0, 8.0).endswith("ETA 0 s")
+
+
+# -- on a local Dask cluster --------------------------------------------------------------------------------------
+
+FREE = ("k_vf", "sense_gain")
+
+
+@pytest.fixture(scope="module")
+def lot8(tmp_path_factory):
+    pytest.importorskip("distributed")
+    path = str(tmp_path_factory.mktemp("lot") / "lot8.csv")
+    gj.write_table(gj.simulate_table(gj.paper_qmg(), devices=8, sweeps=("rate_table",), seed=3, progress=False), path)
+    return path
+
+
+def _children():
+    import psutil
+
+    return [p for p in psutil.Process().children(recursive=True) if "spawn" in " ".join(p.cmdline())]
+
+
+@pytest.mark.slow
+def test_a_lot_on_two_workers_one_killed_mid_run_matches_the_single_process_fit(lot8, tmp_path):
+    import threading
+
+    out = str(tmp_path / "out.json")
+    killed = {}
+
+    def kill_one_worker():
+        # A worker past its imports (~4 s of CPU) is tracing its first chunk, which takes far longer: killed then,
+        # the chunk it holds is lost with it and must be run again.
+        deadline = time.time() + 300
+        while time.time() < deadline:
+            busy = [p for p in _children() if sum(p.cpu_times()[:2]) > 8.0]
+            if busy:
+                if not any(n.startswith("chunk-") and n.endswith(".json") for n in os.listdir(f"{out}.parts")):
+                    killed["pid"] = busy[0].pid
+                    busy[0].kill()
+                return
+            time.sleep(0.2)
+
+    killer = threading.Thread(target=kill_one_worker, daemon=True)
+    killer.start()
+    report = identify_lot("paper-qmg", lot8, out, DistributedSolve(workers=2, chunk=2), free=FREE, progress=False)
+    killer.join(timeout=60)
+    assert killed, "no worker was killed before the first chunk finished"
+    assert report["failed"] == [] and report["distributed"]["chunks"] == 4
+    fit = gj.identify("paper-qmg", gj.read_table(lot8), free=FREE, progress=False)
+    assert [d["device"] for d in report["devices"]] == list(fit.devices)
+    for i, d in enumerate(report["devices"]):
+        assert d["status"] == fit.status[i]
+        for k, name in enumerate(fit.names):
+            got, want = d["parameters"][name], (float(fit.values[i, k]), float(fit.stderr[i, k]))
+            np.testing.assert_allclose([got["value"], np.nan if got["stderr"] is None else got["stderr"]], want,
+                                       rtol=1e-12)
+    # chi2 is a sum of squared differences of outputs ~1e4 LSB: their round-off, not the state's, shows there.
+    np.testing.assert_allclose(report["chi2_red"], fit.chi2_red_total, rtol=1e-8)
+    np.testing.assert_allclose(report["p_value"], float(fit.p_value_total), rtol=1e-8)
+
+
+@pytest.mark.slow
+def test_a_killed_run_restarted_with_the_same_command_ends_with_every_device_once(lot8, tmp_path):
+    out = str(tmp_path / "out.json")
+    argv = [sys.executable, "-m", "gyrojax.cli", "identify", lot8, "--workers", "2", "--chunk", "1", "--free",
+            ",".join(FREE), "--json", out]
+    first = subprocess.Popen(argv, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                             start_new_session=True)
+    parts = f"{out}.parts"
+    done = []
+    try:
+        deadline = time.time() + 400
+        while time.time() < deadline and first.poll() is None:
+            done = sorted(n for n in os.listdir(parts) if n.startswith("chunk-") and n.endswith(".json")
+                          and "failed" not in n) if os.path.isdir(parts) else []
+            if done:
+                break
+            time.sleep(0.05)
+    finally:
+        os.killpg(first.pid, signal.SIGKILL)  # the run, its local cluster and its workers
+        first.wait()
+    assert done and len(done) < 8, f"the first run was not stopped mid-lot: {done}"
+    stamps = {n: os.stat(os.path.join(parts, n)).st_mtime_ns for n in done}
+    second = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=500)
+    assert second.returncode == 0, second.stderr[-3000:]
+    assert "done by an earlier run, resuming" in second.stderr
+    assert {n: os.stat(os.path.join(parts, n)).st_mtime_ns for n in done} == stamps  # not fitted again
+    with open(out) as f:
+        report = json.load(f)
+    assert [d["device"] for d in report["devices"]] == device_order(lot8) and report["failed"] == []
+    assert "8/8 devices done, 0 failed" in second.stderr
