@@ -96,6 +96,7 @@ from ._fitreport import fit_report as fit_report  # noqa: E402
 from ._identify import (  # noqa: E402
     AbstractLotSolve as AbstractLotSolve,
     AbstractRecovery as AbstractRecovery,
+    Coverage as Coverage,
     DecrementCertificate as DecrementCertificate,
     Fit as Fit,
     JointSolve as JointSolve,
@@ -108,6 +109,7 @@ from ._identify import (  # noqa: E402
     RetryWithSolver as RetryWithSolver,
     Unidentifiable as Unidentifiable,
     VmapSolve as VmapSolve,
+    coverage as coverage,
     identify as identify,
 )
 from ._lot import ProcessSpread as ProcessSpread, make_lot as make_lot  # noqa: E402

@@ -14,12 +14,14 @@ returns a `Fit`. One concept per file:
 - `noise.py`: the noise of data without `output_sigma`, estimated from a first fit's residuals.
 - `plausibility.py`: data no fit can mean anything with (refused), and implausible fitted values (flagged).
 - `assemble.py`: from a solution to a `Fit` (statuses and warnings).
+- `coverage.py`: the coverage audit of a fit's intervals (`coverage`, `Coverage`): simulated draws refitted.
 - `population.py`: the lot as a population (`PopulationSolve`, `PopulationFit`): random effects, empirical Bayes.
 - `fit.py`: `Fit`, `Unidentifiable`, statuses and exit codes.
 - `shortcuts.py`: the strings accepted for strategy objects (`solver="levenberg-marquardt"`), in one place.
 """
 
 from .covariance import chi2_p_value as chi2_p_value
+from .coverage import Coverage as Coverage, coverage as coverage
 from .fit import (
     EXIT_CODES as EXIT_CODES,
     EXIT_PRECEDENCE as EXIT_PRECEDENCE,
