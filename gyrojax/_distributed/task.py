@@ -3,6 +3,7 @@ write the result (the chunk's identify report with each device's chi2 and dof) a
 or fit raises writes its failure (the error's type and message) instead, so that the run goes on."""
 
 import os
+import sys
 import time
 import traceback
 
@@ -33,6 +34,7 @@ def fit_chunk(task: dict) -> dict:
         report["dof"] = [int(x) for x in np.asarray(fit.dof)]
         report["seconds"] = time.perf_counter() - start
         report["chunk"] = task["index"]
+        report["worker"] = {"pid": os.getpid(), "peak_rss_mb": _peak_rss_mb()}
         atomic_write_json(report, task["result"])
         if os.path.exists(task["failure"]):
             os.remove(task["failure"])
@@ -43,3 +45,13 @@ def fit_chunk(task: dict) -> dict:
                            "message": str(e), "traceback": traceback.format_exc(limit=8)}, task["failure"])
         return {"index": task["index"], "devices": len(task["devices"]), "failed": len(task["devices"]),
                 "seconds": time.perf_counter() - start}
+
+
+def _peak_rss_mb() -> float | None:
+    """The worker process's peak resident memory, MB (None where the platform does not say)."""
+    try:
+        import resource
+    except ImportError:
+        return None
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2**20 if sys.platform == "darwin" else peak / 2**10  # bytes on macOS, KiB on Linux
