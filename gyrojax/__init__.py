@@ -92,6 +92,7 @@ from ._diagnose import (  # noqa: E402
     diagnose as diagnose,
 )
 from ._fitio import load_fit as load_fit, save_fit as save_fit  # noqa: E402
+from ._distributed import DistributedSolve as DistributedSolve, identify_lot as identify_lot  # noqa: E402
 from ._fitreport import fit_report as fit_report  # noqa: E402
 from ._identify import (  # noqa: E402
     AbstractLotSolve as AbstractLotSolve,
