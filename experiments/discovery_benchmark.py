@@ -121,14 +121,14 @@ class GyrojaxMethod(Method):
 # ---------------------------------------------------------------------------------------------------------------
 # Shared: the baseline fit with every library candidate present at zero (as diagnose builds it)
 
-def _full_model(preset, data):
+def _full_model(preset):
+    """The preset's device with every effect it supports at zero (as `diagnose` builds its candidates), and their
+    names."""
     import gyrojax as gj
-    from gyrojax._diagnose.candidates import candidate_effects
-    from gyrojax._parameters import as_model, zero_effect
 
-    base = as_model(preset)
-    candidates = candidate_effects(base, None, "refit_ftest")
-    return gj.Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates)), candidates
+    device = gj.preset(preset)
+    candidates = tuple(gj.supported_effects(device))
+    return gj.Model(device, tuple(gj.effect(c, 0.0) for c in candidates)), candidates
 
 
 def _free_count(fit) -> int:
@@ -165,16 +165,13 @@ class RefitFTest(Method):
 
     def run(self, table) -> Outcome:
         import gyrojax as gj
-        from gyrojax._fitdata import fit_data
-        from gyrojax._parameters import DEFAULT_FREE
 
         t0 = time.perf_counter()
-        data = fit_data(table)
-        full, candidates = _full_model(self.preset, data)
+        full, candidates = _full_model(self.preset)
 
-        def fit_with(selected):
+        def fit_with(selected):  # identify's default free parameters: the baseline's, as in diagnose
             held = tuple(c for c in candidates if c not in selected)
-            return gj.identify(full, data, free=DEFAULT_FREE, hold=held, progress=False)
+            return gj.identify(full, table, hold=held, progress=False)
 
         fit = fit_with(())
         selected, remaining, steps = [], list(candidates), []
@@ -184,7 +181,7 @@ class RefitFTest(Method):
                 new = fit_with(tuple(selected) + (c,))
                 if "not converged" in " ".join(new.status):
                     continue
-                df = (_free_count(new) - _free_count(fit)) * len(data.devices)
+                df = (_free_count(new) - _free_count(fit)) * len(fit.devices)
                 p = f_test_p(fit.chi2_total, new.chi2_total, df, int(new.dof_total))
                 if best is None or p < best[1]:
                     best = (c, p, new)
@@ -327,13 +324,10 @@ class PySindy(Method):
         import pysindy as ps
 
         import gyrojax as gj
-        from gyrojax._fitdata import fit_data
-        from gyrojax._parameters import DEFAULT_FREE
 
         t0 = time.perf_counter()
-        data = fit_data(table)
-        full, candidates = _full_model(self.preset, data)
-        fit = gj.identify(full, data, free=DEFAULT_FREE, hold=candidates, progress=False)
+        full, candidates = _full_model(self.preset)
+        fit = gj.identify(full, table, hold=candidates, progress=False)
         explained, proposals = {}, {}
         for s in fit.data.sweeps:
             c = _coords(fit, s)
