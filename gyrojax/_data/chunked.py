@@ -10,7 +10,6 @@ import io
 import os
 import re
 
-from .._io import atomic_write_json
 from .._reading import open_regular
 from .cells import DataError
 from .files import MAX_LINE_CHARS, read_parquet_devices, read_table, table_format
@@ -18,8 +17,9 @@ from .table import Table
 
 
 _EXPECTED = "give a .csv or .parquet file"
-# Rows held in memory before they are appended to their chunk files: bounds the split's memory (~100 MB).
+# Rows and characters held in memory before they are appended to their chunk files: bound the split's memory.
 _FLUSH_ROWS = 200_000
+_FLUSH_CHARS = 64 * 2**20
 
 
 def _csv_rows(source: str):
@@ -86,7 +86,7 @@ def device_order(path: str | os.PathLike) -> list[str]:
 
 def split_csv(path: str | os.PathLike, groups: list[list[str]], targets: list[str]) -> None:
     """Write the rows of each group of devices of the CSV file `path` to its file in `targets` (same header, rows
-    in file order), in one streamed pass; beside each, `TARGET.lines.json` gives every row's data row and line
+    in file order), in one streamed pass; beside each, `TARGET.lines` gives every row's data row and line
     in `path` (`read_chunk` maps messages back with it). Each file is complete when it appears (written beside
     under a temporary name, then renamed)."""
     source = os.fspath(path)
@@ -94,14 +94,17 @@ def split_csv(path: str | os.PathLike, groups: list[list[str]], targets: list[st
     temps = [f"{t}.partial" for t in targets]
     buffers: list[list] = [[] for _ in targets]
     where: list[list] = [[] for _ in targets]
-    held = 0
+    held = chars = 0
 
     def flush():
         for k, rows in enumerate(buffers):
             if rows:
                 with open(temps[k], "a", newline="", encoding="utf-8") as f:
                     csv.writer(f, lineterminator="\n").writerows(rows)
+                with open(f"{temps[k]}.lines", "a", encoding="utf-8") as f:
+                    f.writelines(f"{r} {n}\n" for r, n in where[k])
                 rows.clear()
+                where[k].clear()
 
     rows = _csv_rows(source)
     header = next((row for _, row in rows if any(c.strip() for c in row)), None)
@@ -111,6 +114,7 @@ def split_csv(path: str | os.PathLike, groups: list[list[str]], targets: list[st
     for t in temps:
         with open(t, "w", newline="", encoding="utf-8") as f:
             csv.writer(f, lineterminator="\n").writerow(header)
+        open(f"{t}.lines", "w").close()
     data_row = 0
     for line, row in rows:
         if not any(c.strip() for c in row) and len(row) <= 1:
@@ -125,12 +129,13 @@ def split_csv(path: str | os.PathLike, groups: list[list[str]], targets: list[st
         buffers[k].append(row)
         where[k].append((data_row, line))
         held += 1
-        if held >= _FLUSH_ROWS:
+        chars += sum(len(c) for c in row)
+        if held >= _FLUSH_ROWS or chars >= _FLUSH_CHARS:
             flush()
-            held = 0
+            held = chars = 0
     flush()
     for k, target in enumerate(targets):
-        atomic_write_json({"source": source, "rows": where[k]}, f"{target}.lines.json")
+        os.replace(f"{temps[k]}.lines", f"{target}.lines")
         os.replace(temps[k], target)
 
 
@@ -142,13 +147,11 @@ def read_chunk(path: str | os.PathLike, devices: list[str], split_file: str | No
     `split_csv`; messages name `path` and its data rows and lines) or, for Parquet, from `path` itself."""
     if split_file is None:
         return read_parquet_devices(path, devices)
-    import json
-
     try:
         return read_table(split_file)
     except DataError as e:
-        with open(f"{split_file}.lines.json", encoding="utf-8") as f:
-            rows = json.load(f)["rows"]
+        with open(f"{split_file}.lines", encoding="utf-8") as f:
+            rows = [tuple(int(v) for v in line.split()) for line in f]
 
         def original(m):
             r = int(m.group(1))

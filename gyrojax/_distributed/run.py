@@ -4,6 +4,7 @@ progress line and a merged report in which every device of the input appears exa
 import json
 import os
 import time
+from collections import Counter
 
 import numpy as np
 
@@ -128,11 +129,11 @@ def merge(plan: Plan) -> dict:
             failed.append({"chunk": k, "devices": group, "error": r["error"], "message": r["message"]})
         else:
             failed.append({"chunk": k, "devices": group, "error": "NotRun", "message": "the chunk has no result"})
-    names = [d["device"] for d in devices] + [d for f in failed for d in f["devices"]]
-    if sorted(names) != sorted(plan.devices) or len(set(names)) != len(names):
+    names = Counter([d["device"] for d in devices] + [d for f in failed for d in f["devices"]])
+    if names != Counter(plan.devices) or any(k > 1 for k in names.values()):
         extra = sorted(set(names) - set(plan.devices))
         missing = sorted(set(plan.devices) - set(names))
-        twice = sorted({d for d in names if names.count(d) > 1})
+        twice = sorted(d for d, k in names.items() if k > 1)
         raise RuntimeError(f"{plan.folder}: the merged results do not hold every device of {plan.data} exactly once "
                            f"(missing {missing[:5]}, twice {twice[:5]}, not in the input {extra[:5]}).")
     order = {d: i for i, d in enumerate(plan.devices)}
