@@ -71,12 +71,13 @@ def test_a_zero_rate_tempco_outside_the_library_confirms_nothing_and_is_located(
     assert d.selected == () and d.verdict == "unexplained"
     why = {r.effect: r for r in d.rejected}
     assert why["vref_drift"].kind == "not its shape" and "a bias linear in die temperature" in why["vref_drift"].reason
-    assert "damping_coupling" in why and "only at ~" in why["damping_coupling"].reason
+    # a typical damping coupling changes this lot's chi2 by ~0.002: not testable here (one rule with the planner)
+    assert "damping_coupling" in d.untestable and "damping_coupling" not in why
     top = d.remaining[0]
     assert (top.probe, top.coordinate) == ("bias_vs_temperature", "temperature_c")
     assert top.share > 0.9 and {s for s, _ in top.sweeps} == {"rate_table", "vcf_static"}
     assert top.coefficient == pytest.approx(B_T, rel=0.05)  # measured 0.00204
-    assert top.library.startswith("no effect in the library")  # damping_coupling has it only at ~1200x
+    assert top.library.startswith("no effect in the library")
     text = d.summary()
     assert "verdict: unexplained" in text and "a bias linear in die temperature" in text
     report = json.loads(json.dumps(d.to_json()))

@@ -20,7 +20,7 @@ from .columns import effect_columns
 from .discrepancy import look_alikes, score_probes, with_shapes
 from .encompass import encompassing_guard
 from .fdr import bh_q_values, selection_p
-from .formula import propose, term_size
+from .formula import formula_coordinate, propose, term_size
 from .guards import MAX_TYPICAL_MULTIPLE, Rejection, contradictions, probe_guard, verdict_of
 from .locate import locate
 from .score import cosine, score_candidates, separating_sweep
@@ -136,8 +136,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
                 kind=f"only at ~{best.implied_multiple:.3g}x its typical size"))
             remaining.remove(best.effect)
             continue
-        guard = (probe_guard(fit, best, discrepancy, designs, threshold, alpha)
-                 or encompassing_guard(fit, best, located, threshold, alpha))
+        guard = probe_guard(fit, best, discrepancy, designs, threshold, alpha)
         if guard is not None:
             rejected.append(Rejection(best.effect, guard, kind="not its shape"))
             remaining.remove(best.effect)
@@ -173,6 +172,10 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         if p_lr >= alpha:
             rejected.append(Rejection(best.effect, f"likelihood-ratio p = {p_lr:.3g} >= alpha: the refit does not "
                                                    "confirm what the score promised", kind="refit rejects it"))
+            continue
+        beyond = encompassing_guard(fit, new, best.effect, located, df_total, alpha)
+        if beyond is not None:
+            rejected.append(Rejection(best.effect, beyond, kind="not its shape"))
             continue
         family.append(selection_p(p_lr, n_tried))
         q = float(bh_q_values(family)[-1])
@@ -219,6 +222,12 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
                               max_typical_multiple, alpha)
     formula = propose(fit, discrepancy[0], step_at=located.step_at, period=located.period, alpha=alpha) \
         if discrepancy else None
+    along = formula_coordinate(formula)
+    if along is not None and along != discrepancy[0].coordinate and along in discrepancy[0].confounded_with:
+        # the data cannot tell the coordinates apart; the closed form that explains it all names its own
+        top = discrepancy[0]
+        discrepancy = (dataclasses.replace(top, coordinate=along, confounded_with=tuple(
+            dict.fromkeys((top.coordinate, *(c for c in top.confounded_with if c != along))))),) + discrepancy[1:]
     size = term_size(formula, discrepancy[0]) if discrepancy else None
     if size is not None:  # the misfit's size as the term's coefficient, where one term of its coordinate has it
         discrepancy = (dataclasses.replace(discrepancy[0], size=size),) + discrepancy[1:]

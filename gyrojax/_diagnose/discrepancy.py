@@ -199,7 +199,9 @@ def with_library(fit, discrepancy, designs, scores, rejected, max_multiple, alph
 def with_shapes(fit, locations, discrepancy, designs, scores, rejected, max_multiple, alpha) -> tuple:
     """The `Location`s of `locate` with what the lists know of them: the generic shape (probe) that has a
     location's whole misfit (the location is not significant beyond it, or keeps less than `SHAPE_SHARE_LEFT`
-    of its chi2), with its coefficient, and which library effect has it (`with_library`'s rule)."""
+    of its chi2), with its coefficient (and its coordinate, naming the flexible description's as confounded with
+    it: a shape with fewer degrees of freedom that explains the same misfit is the better description), and which
+    library effect has it (`with_library`'s rule)."""
     if not locations:
         return ()
     space = ResidualSpace(fit)
@@ -207,16 +209,17 @@ def with_shapes(fit, locations, discrepancy, designs, scores, rejected, max_mult
     out = []
     for loc in locations:
         matched = None
-        for d in discrepancy:
+        for d in discrepancy:  # most explanatory first
             if not d.significant or d.within:
-                continue
-            if d.coordinate != loc.coordinate and d.coordinate not in loc.confounded_with:
                 continue
             left = space.with_columns(designs[d.probe]).score(loc.columns)
             if left.p_value >= cut or left.statistic <= SHAPE_SHARE_LEFT * loc.chi2_explained:
                 matched = d
                 break
         if matched is not None:
+            if matched.coordinate != loc.coordinate:  # the shape's coordinate, the flexible one confounded with it
+                loc = dataclasses.replace(loc, coordinate=matched.coordinate, confounded_with=tuple(dict.fromkeys(
+                    (loc.coordinate, *(c for c in loc.confounded_with if c != matched.coordinate)))))
             loc = dataclasses.replace(loc, shape=matched.shape, probe=matched.probe,
                                       coefficient=matched.coefficient, coefficient_spread=matched.coefficient_spread,
                                       unit=matched.unit, same_shape_as=matched.same_shape_as)

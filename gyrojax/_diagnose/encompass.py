@@ -1,46 +1,52 @@
 """Guards that do not depend on the list of shapes: a candidate must stay significant beyond the flexible
-description of the misfit along the coordinates it does not explain (an encompassing test)."""
+description of the misfit it does not explain (an encompassing test).
+
+The test uses the candidate's refit (its real, nonlinear effect) and the flexible descriptions linearly, as the
+score test does: the locations of the misfit before the step (`gyrojax._diagnose.locate`) that are still
+significant after the refit are the misfit the candidate does not explain, F. What the candidate removes beyond F
+is
+
+    D = (chi2_before - S_F(before)) - (chi2_after - S_F(after)) ~ chi2(df of the step)
+
+with S_F(fit) the chi2 that F's columns remove beyond the fit's own span. A candidate that only takes part of a
+misfit of another shape (a bias that jumps partway through a run, taken for a compression of the feedback
+amplifier) removes nothing that F would not."""
 
 import numpy as np
 
 from .._identify import Fit
-from .columns import effect_columns
-from .score import TYPICAL_RANK_TOL, CandidateScore
+from .._stats import chi2_sf
 from .space import ResidualSpace
 
 
-# A candidate "explains" a location when the location's description, beyond the fit and the candidate, keeps
-# less than this share of its chi2 (or nothing significant): the same rule as the probes' (`SHAPE_SHARE_LEFT`),
-# since the candidate's Jacobian is taken at the baseline, not at the truth.
+# A location is taken by the candidate when, after the refit, its description keeps less than this share of its
+# chi2 (or nothing significant): the same rule as the probes' (`SHAPE_SHARE_LEFT`).
 EXPLAINED_SHARE_LEFT = 0.1
 
 
-def encompassing_guard(fit: Fit, candidate: CandidateScore, localisation, candidate_cut: float,
-                       alpha: float) -> str | None:
-    """A reason not to confirm `candidate`, or None: the locations of the misfit it does not explain (their
-    flexible descriptions, `gyrojax._diagnose.locate`), taken into the fit's span, leave it nothing significant
-    (not at `candidate_cut`)."""
+def encompassing_guard(before: Fit, after: Fit, effect: str, localisation, df: int, alpha: float) -> str | None:
+    """A reason not to confirm `effect` (refitted from `before` to `after` with `df` new parameters over the lot),
+    or None: what it removes beyond the locations it leaves (see the module docstring) is not significant at
+    `alpha`."""
     locations = localisation.locations
     if not locations:
         return None
-    je = np.asarray(fit.jacobian)[:, :, effect_columns(fit, candidate.effect)]
-    space = ResidualSpace(fit)
-    with_candidate = space.with_columns(je)
+    space_after = ResidualSpace(after)
     cut = alpha / len(locations)
-    foreign = []
+    left = []
     for loc in locations:
-        left = with_candidate.score(loc.columns)
-        if left.p_value >= cut or left.statistic <= EXPLAINED_SHARE_LEFT * loc.chi2_explained:
-            continue  # the candidate has this misfit's shape
-        foreign.append(loc)
-    if not foreign:
+        now = space_after.score(loc.columns)
+        if now.p_value >= cut or now.statistic <= EXPLAINED_SHARE_LEFT * loc.chi2_explained:
+            continue  # the candidate took this misfit
+        left.append(loc)
+    if not left:
         return None
-    beyond = space.with_columns(np.concatenate([loc.columns for loc in foreign], axis=-1))
-    own = beyond.score(je)
-    # the candidate's directions that carry information at its typical size (as the score test counts them)
-    if own.df and own.p_value < candidate_cut and own.statistic > TYPICAL_RANK_TOL:
+    cols = np.concatenate([loc.columns for loc in left], axis=-1)
+    d = (before.chi2_total - ResidualSpace(before).score(cols).statistic) - (
+        after.chi2_total - space_after.score(cols).statistic)
+    p = chi2_sf(max(d, 0.0), max(df, 1))
+    if p < alpha:
         return None
-    where = "; ".join(f"{loc.shape} on {'+'.join(loc.located_on)}" for loc in foreign)
-    return (f"it is not significant beyond the flexible description of the misfit it does not explain ({where}): "
-            f"S = {own.statistic:.3g}, df {own.df}, p = {own.p_value:.2g} beyond it; what it would take is part of "
-            "a misfit of another shape")
+    where = "; ".join(f"{loc.shape} on {'+'.join(loc.located_on)}" for loc in left)
+    return (f"it is not significant beyond the flexible description of the misfit it leaves ({where}): it removes "
+            f"chi2 {d:.4g} beyond it (df {df}, p = {p:.2g}); what it takes is part of a misfit of another shape")

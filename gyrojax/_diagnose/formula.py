@@ -4,7 +4,8 @@ The dictionary holds, for the sweeps a misfit was located on (each alone and tog
 (`lin`, `sq`, `cube` of its distance from a reference; `abs` and `sign` of the input; a `step` and an exponential
 `relax`ation along the time since power-on; a `periodic` error along the input), each as an offset of the output
 and as a gain (times the model's prediction, written `*model`), the products of the temperature and the time with
-the input, and a gain per run. Each term has one coefficient shared by the lot.
+the input, the square and cube of the model's output itself (a compression of the readout or the amplifier), and
+a gain per run. Each term has a coefficient per device.
 
 Forward selection with the score test: at each step the term that removes the most chi2 beyond the fit's own
 columns and the terms already chosen is kept if its p-value is below `alpha` over the number of terms in the
@@ -22,11 +23,12 @@ import dataclasses
 import numpy as np
 
 from .._sweeps.registry import sweep_kind
-from .locate import coordinates
+from .locate import PREFERENCE, coordinates, spread
 from .space import ResidualSpace
 
 
 MAX_TERMS = 3
+TIE_CHI2, TIE_SHARE = 1.0, 1e-3  # two terms closer than this in the chi2 they remove are a tie
 REFERENCE_C = 25.0  # deg C: where a temperature term is zero (the presets' reference temperature)
 RELAX_TAUS_S = (60.0, 300.0, 900.0, 3600.0)  # time constants tried for an exponential relaxation after power-on
 _POWERS = {"lin": 1, "sq": 2, "cube": 3}
@@ -69,6 +71,7 @@ class Formula:
     left_df: int
     left_p_value: float
     complete: bool  # nothing significant left of the location beyond the formula (at alpha)
+    spread: np.ndarray = None  # the devices' standard deviation of each coefficient
 
     @property
     def description(self) -> str:
@@ -85,6 +88,7 @@ class Formula:
         return {"terms": [{"name": t.name, "sweeps": list(t.sweeps), "gain": t.gain, "expression": t.expression,
                            "unit": t.unit} for t in self.terms],
                 "coefficients": [float(c) for c in self.coefficients], "stderr": [float(s) for s in self.stderr],
+                "device_spread": None if self.spread is None else [float(s) for s in self.spread],
                 "share": self.share, "statistic": self.statistic, "df": self.df,
                 "dictionary_size": self.dictionary_size, "complete": self.complete,
                 "left": {"statistic": self.left_statistic, "df": self.left_df, "p": self.left_p_value},
@@ -120,7 +124,7 @@ def dictionary(fit, sweeps, *, step_at: float | None = None, period: float | Non
         out_unit = sweep_kind(group[0]).output_unit
 
         def add(name, expr, fn, coordinate, *, gain_too=True, offset=True, unit_power=1):
-            cu = _UNITS.get(coordinate) or sweep_kind(group[0]).input_unit
+            cu = out_unit if coordinate == "model" else (_UNITS.get(coordinate) or sweep_kind(group[0]).input_unit)
             per = f"/{cu}" if unit_power == 1 else (f"/{cu}^{unit_power}" if unit_power else "")
             for gain in ((False, True) if gain_too else (False,)):
                 if not gain and not offset:
@@ -162,6 +166,11 @@ def dictionary(fit, sweeps, *, step_at: float | None = None, period: float | Non
                         add("step(time_s)", f"where((run == {r}) & (t >= {step_at:.6g}), 1, 0)",
                             lambda s, r=r: ((x[s] >= step_at) & (np.arange(masks[s].shape[1]) == r)[None, :, None]
                                             ).astype(float), c, unit_power=0)
+        # a nonlinearity of the output itself (a readout's or an amplifier's compression): the same in every device
+        # in output units, whatever its scale factor
+        for basis, k in (("sq", 2), ("cube", 3)):
+            add(f"{basis}(model)", f"output**{k}", lambda s, k=k: preds[s] ** k, "model", gain_too=False,
+                unit_power=k - 1)
         if "input" in names:
             xin = {s: np.asarray(coords[s]["input"], float) for s in group}
             for c in ("temperature_c", "time_s"):
@@ -196,31 +205,71 @@ def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, ma
     cols = {id(t): _columns(space, t) for t in terms}
     cut = alpha / len(terms)
     chosen, current = [], space
+    between = _mostly_between_devices(fit)
     while len(chosen) < max_terms:
-        best = None
-        for t in terms:
-            if t in chosen:
-                continue
-            sc = current.score(cols[id(t)], shared=True)
-            if sc.df and sc.p_value < cut and (best is None or sc.statistic > best[1].statistic):
-                best = (t, sc)
-        if best is None:
+        scored = [(t, current.score(cols[id(t)])) for t in terms if t not in chosen]
+        scored = [(t, sc) for t, sc in scored if sc.df and sc.p_value < cut]
+        if not scored:
             break
+        top = max(sc.statistic for _, sc in scored)
+        # terms the data cannot tell apart (within TIE_CHI2 or TIE_SHARE of the best: a gain along the temperature
+        # and along the drive frequency it moves, or T x input where the output follows the input) go to the
+        # coordinate named first, then to the term listed first (a gain before a product)
+        near = [(t, sc) for t, sc in scored if sc.statistic >= top - max(TIE_CHI2, TIE_SHARE * top)]
+        best = min(near, key=lambda x: (x[0].coordinate in between, _rank(x[0].coordinate)))
         chosen.append(best[0])
         current = current.with_columns(cols[id(best[0])])
     if not chosen:
         return None
-    joint = space.score(np.concatenate([cols[id(t)] for t in chosen], axis=-1), shared=True)
-    coef = joint.coefficients[0]
-    err = np.sqrt(np.clip(np.diag(joint.covariance[0]), 0.0, None))
+    joint = space.score(np.concatenate([cols[id(t)] for t in chosen], axis=-1))
+    coef, err, spread = _lot_mean(joint)
     share = min(max(joint.statistic - joint.df, 0.0) / space.excess, 1.0) if space.excess > 0 else 0.0
     left = current.score(location.columns)
     return Formula(tuple(chosen), coef, err, joint.statistic, joint.df, share, len(terms), left.statistic,
-                   left.df, left.p_value, left.p_value >= alpha)
+                   left.df, left.p_value, left.p_value >= alpha, spread)
+
+
+def _lot_mean(scored):
+    """Each term's lot value from its per-device coefficients: the inverse-variance weighted mean, its standard
+    error, and the devices' spread (standard deviation; 0 for one device)."""
+    coef, cov = scored.coefficients, scored.covariance
+    var = np.stack([np.diag(c) for c in cov])  # (device, k)
+    ok = var > 0
+    w = np.where(ok, 1.0 / np.where(ok, var, 1.0), 0.0)
+    total = np.sum(w, axis=0)
+    mean = np.where(total > 0, np.sum(w * coef, axis=0) / np.where(total > 0, total, 1.0), 0.0)
+    err = np.where(total > 0, 1.0 / np.sqrt(np.where(total > 0, total, 1.0)), np.inf)
+    spread = np.std(coef, axis=0) if coef.shape[0] > 1 else np.zeros(coef.shape[1])
+    return mean, err, spread
+
+
+def _rank(coordinate: str) -> int:
+    return PREFERENCE.index(coordinate) if coordinate in PREFERENCE else len(PREFERENCE)
+
+
+def _mostly_between_devices(fit) -> set:
+    """The recorded coordinates that mostly tell devices apart (within a device less than half their lot span)."""
+    out = set()
+    for sweep in fit.data.sweeps:
+        block = fit.data.blocks[sweep]
+        mask = np.asarray(block.mask)
+        for name, x in coordinates(block).items():
+            _, dev, lot = spread(np.where(mask, np.asarray(x, float), 0.0), mask)
+            if lot > 0 and dev < 0.5 * lot:
+                out.add(name)
+    return out
 
 
 def _columns(space, term: Term) -> np.ndarray:
     return space.columns({s: g[..., None] for s, g in term.changes.items()})
+
+
+def formula_coordinate(formula: Formula | None) -> str | None:
+    """The one recorded coordinate a complete formula runs along (the first factor's for a product), or None."""
+    if formula is None or not formula.complete:
+        return None
+    coords = {t.coordinate for t in formula.terms}
+    return coords.pop() if len(coords) == 1 and "" not in coords else None
 
 
 def term_size(formula: Formula, location) -> dict | None:

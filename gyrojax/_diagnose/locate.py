@@ -42,7 +42,7 @@ WITHIN_DEVICE_SHARE = 0.1
 # A size whose standard error is above this share of its value is not determined by the data.
 SIZE_REL_STDERR = 0.5
 MAX_LOCATIONS = 3
-PERIODS = 24  # periods scanned along the input, log-spaced from 2.5 point spacings to twice the span
+PERIODS = 24  # periods scanned along the input, log-spaced from 2.5 point spacings to half the span
 
 
 @dataclasses.dataclass(frozen=True)
@@ -173,7 +173,7 @@ def _rate_of_change(temp, time, mask):
     return rate
 
 
-def _spread(values, mask):
+def spread(values, mask):
     """(spread within runs, within devices, over the lot): each the largest range over its groups."""
     v = np.where(mask, values, np.nan)
     with np.errstate(all="ignore"):
@@ -217,7 +217,7 @@ def describe(space: ResidualSpace) -> tuple[list, list]:
         pred = np.asarray(fit.predictions[sweep], float)
         for name, x in coordinates(block).items():
             x = np.where(mask, np.asarray(x, float), 0.0)
-            run, dev, lot = _spread(x, mask)
+            run, dev, lot = spread(x, mask)
             if lot <= 0:
                 continue
             if run <= WITHIN_RUN_SHARE * lot:
@@ -229,9 +229,9 @@ def describe(space: ResidualSpace) -> tuple[list, list]:
             hats = _hats(x, mask)
             if hats is None:
                 continue
-            families = [("offset", hats)]
-            if name != "input":  # a gain along the input is an offset along it
-                families.append(("gain", hats * pred[..., None]))
+            # a gain along the input (x g(x), piecewise quadratic) describes an odd curve with fewer knots than
+            # an offset along it: with it the input is not outdone by a coordinate swept with it (time, order)
+            families = [("offset", hats), ("gain", hats * pred[..., None])]
             if name == "time_s" and mask.shape[1] >= 2:
                 # a shape in time that differs from run to run (a jump, a relaxation after one power-on)
                 eye = np.eye(mask.shape[1])[None, :, None, :, None]
@@ -324,7 +324,10 @@ def _periodic_scan(space, sweep, x, mask):
     if span <= 0 or step <= 0:
         return None
     best = None
-    periods = np.geomspace(2.5 * step, 2.0 * span, PERIODS)
+    # at least two periods over the span: a longer one is a smooth trend, which the splines describe
+    if span / 2.0 <= 2.5 * step:
+        return None
+    periods = np.geomspace(2.5 * step, span / 2.0, PERIODS)
     for period in periods:
         w = 2.0 * np.pi * x / period
         g = np.stack([np.sin(w), np.cos(w)], axis=-1) * mask[..., None]
@@ -382,7 +385,7 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS) -> L
         # coordinate that mostly tells devices apart (a drive frequency) is seen here only through its small
         # excursions within a device, which another coordinate (the temperature behind them) explains as well.
         confounded = _confounded(space, best, descs, cut)
-        primary = max([best] + confounded, key=lambda d: d.where.get("within_device", 1.0))
+        primary = min([best] + confounded, key=_preference)
         confounded = tuple(dict.fromkeys(d.coordinate for d in [best] + confounded if d is not primary))
         best = primary
         members, joined = [best], space.with_columns(best.columns)
@@ -408,15 +411,32 @@ def _hints(descs):
     return best_step, best_period
 
 
+# Of coordinates the data cannot tell apart, the one named first: what the experiment sets (the input), then the
+# die's state (temperature, its rate of change), then the clock (time since power-on, the point's order), then
+# the drive frequency (a reading that follows the temperature).
+PREFERENCE = ("input", "temperature_c", "dtemperature_dt", "time_s", "order", "drive_freq_hz")
+
+
+def _preference(d: Description):
+    """Sort key among confounded descriptions: one that moves mostly within each device first (a coordinate that
+    mostly tells devices apart is seen here only through its small excursions, which another coordinate, the
+    temperature behind them, explains as well), then `PREFERENCE`."""
+    mostly_between = d.where.get("within_device", 1.0) < 0.5
+    rank = PREFERENCE.index(d.coordinate) if d.coordinate in PREFERENCE else len(PREFERENCE)
+    return (mostly_between, rank)
+
+
 def _confounded(space, best, descs, cut) -> list:
-    """The descriptions of `best`'s sweep and family along other coordinates that the data cannot tell from it:
-    neither is significant beyond the other."""
+    """The descriptions of `best`'s sweep along other coordinates that the data cannot tell from it: neither is
+    significant beyond the other (of each coordinate, its first such description)."""
     out = []
     if best.family in ("step", "periodic"):
         return out
     beyond_best = space.with_columns(best.columns)
     for d in descs:
-        if d.coordinate == best.coordinate or d.sweep != best.sweep or d.family != best.family:
+        if d.coordinate in {best.coordinate, *(o.coordinate for o in out)} or d.sweep != best.sweep:
+            continue
+        if d.family in ("step", "periodic"):
             continue
         if (beyond_best.score(d.columns).p_value >= cut
                 and space.with_columns(d.columns).score(best.columns).p_value >= cut):

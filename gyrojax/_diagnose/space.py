@@ -57,11 +57,23 @@ class ResidualSpace:
         self._u = _spans(base)
 
     def with_columns(self, cols: np.ndarray) -> "ResidualSpace":
-        """The same fit with `cols` (device, rows, k) added to the absorbable span."""
+        """The same fit with `cols` (device, rows, k) added to the absorbable span: the directions of `cols` beyond
+        it that `score` counts (information above `RANK_TOL` of their own), so that a block taken into the span
+        absorbs what its score says it explains, and no round-off direction besides."""
         out = ResidualSpace.__new__(ResidualSpace)
         out.__dict__.update(self.__dict__)
         out.base = np.concatenate([self.base, cols], axis=-1)
-        out._u = _spans(out.base)
+        scale = np.sqrt(np.sum(cols**2, axis=(0, 1)))
+        cols = cols / np.where(scale > 0, scale, 1.0)
+        pc = self.project(cols)
+        spans = []
+        for d in range(self.devices):
+            own = float(np.linalg.norm(cols[d], 2)) ** 2 if cols.shape[-1] else 0.0
+            evals, evecs = np.linalg.eigh(pc[d].T @ pc[d])
+            keep = evals > RANK_TOL * own
+            q = pc[d] @ evecs[:, keep] / np.sqrt(evals[keep]) if keep.any() else np.zeros((self.rows, 0))
+            spans.append(np.concatenate([self._u[d], q], axis=1))
+        out._u = spans
         return out
 
     # -- columns ------------------------------------------------------------------------------------------
@@ -90,6 +102,11 @@ class ResidualSpace:
         """Fit `cols` (device, rows, k) to the residuals beyond the absorbable span: per device (each device its
         own coefficients) or `shared` (one set for the lot). `rows`: use only these residual rows (the
         projection is still the whole fit's)."""
+        # each column to unit norm over the lot, so that the rank rule does not depend on the columns' units
+        # (a cube of the output, ~1e19 LSB^3, beside a bias in LSB); the coefficients are scaled back below
+        scale = np.sqrt(np.sum(cols**2, axis=(0, 1)))
+        scale = np.where(scale > 0, scale, 1.0)
+        cols = cols / scale
         pc = self.project(cols)
         r = self.residuals
         if rows is not None:
@@ -106,7 +123,8 @@ class ResidualSpace:
             coef = inv @ b
             stat = float(b @ coef)
             fp = np.einsum("drk,k->dr", pc, coef)
-            return Scored(stat, df, chi2_sf(stat, df), coef[None], inv[None], self._full(fp, rows))
+            return Scored(stat, df, chi2_sf(stat, df), (coef / scale)[None], (inv / np.outer(scale, scale))[None],
+                          self._full(fp, rows))
         coefs, covs, stat, df = np.zeros((n, k)), np.zeros((n, k, k)), 0.0, 0
         fp = np.zeros(r.shape)
         for d in range(n):
@@ -118,7 +136,7 @@ class ResidualSpace:
             stat += float(b @ coefs[d])
             df += df_d
             fp[d] = pc[d] @ coefs[d]
-        return Scored(stat, df, chi2_sf(stat, df), coefs, covs, self._full(fp, rows))
+        return Scored(stat, df, chi2_sf(stat, df), coefs / scale, covs / np.outer(scale, scale), self._full(fp, rows))
 
     def _full(self, fp, rows):
         if rows is None:
@@ -155,7 +173,14 @@ def _spans(base: np.ndarray) -> list:
         if base.shape[-1] == 0:
             out.append(np.zeros((base.shape[1], 0)))
             continue
-        u, s, _ = np.linalg.svd(base[d], full_matrices=False)
+        # the span does not depend on the columns' scales: each to unit norm first, so that a column in large
+        # units (a cube of the output) does not push the others below the singular-value cut
+        norms = np.linalg.norm(base[d], axis=0)
+        b = base[d][:, norms > 0] / norms[norms > 0]
+        if b.shape[1] == 0:
+            out.append(np.zeros((base.shape[1], 0)))
+            continue
+        u, s, _ = np.linalg.svd(b, full_matrices=False)
         out.append(u[:, s > 1e-12 * max(float(s[0]), 1e-300)])
     return out
 
