@@ -14,8 +14,9 @@ only, one run, noise on), repeated with new device names up to each size (the fi
 original does). Per size: the single-process `identify` (`VmapSolve`, chunks of 16 on a CPU) twice (the first
 with tracing and compiling), then `identify_lot` with each number of workers from a fresh results folder (its
 wall time includes starting the cluster and each worker's tracing and compiling, from the persistent cache once
-it holds the program): devices/s, each worker's peak resident memory (from the chunk reports), and the mean
-fit time of a chunk inside its worker. `--json` is rewritten after every measurement.
+it holds the program): devices/s, each worker's peak resident memory (from the chunk reports), and the fit time
+of a chunk inside its worker (mean, median, longest: a worker's first chunk traces and compiles). `--json` is
+rewritten after every measurement.
 """
 
 import argparse
@@ -129,11 +130,15 @@ def lots(sizes, workers, chunk, record, save):
                     "wall_s": wall, "devices_per_s": n / wall, "failed": len(report["failed"]),
                     "chunks": len(chunks), "chunk_fit_mean_s": fit_s / max(len(chunks), 1),
                     "chunk_fit_first_s": max((c[0] for c in chunks), default=None),
+                    # without each worker's first chunk (tracing, and compiling or loading the program)
+                    "chunk_fit_median_s": sorted(c[0] for c in chunks)[len(chunks) // 2] if chunks else None,
                     "worker_peak_rss_mb": sorted(peak.values()),
                     # wall x workers not spent inside a chunk's fit: cluster start, imports, waiting, the engine
                     "outside_fits_per_chunk_s": (wall * w - fit_s) / max(len(chunks), 1)}
-                print(f"  {w} worker(s): {wall:.1f} s ({n / wall:.1f} devices/s), {len(chunks)} chunks, mean chunk "
-                      f"fit {fit_s / max(len(chunks), 1):.2f} s, worker peaks {sorted(peak.values())} MB", flush=True)
+                print(f"  {w} worker(s): {wall:.1f} s ({n / wall:.1f} devices/s), {len(chunks)} chunks, chunk fit mean "
+                      f"{fit_s / max(len(chunks), 1):.2f} s, median {entry[f'workers_{w}']['chunk_fit_median_s']:.2f} "
+                      f"s, longest {entry[f'workers_{w}']['chunk_fit_first_s']:.1f} s, worker peaks "
+                      f"{[round(v) for v in sorted(peak.values())]} MB", flush=True)
                 shutil.rmtree(out + ".parts")
             record["lots"].append(entry)
             save()
