@@ -210,3 +210,17 @@ def test_a_killed_run_restarted_with_the_same_command_ends_with_every_device_onc
         report = json.load(f)
     assert [d["device"] for d in report["devices"]] == device_order(lot8) and report["failed"] == []
     assert "8/8 devices done, 0 failed" in second.stderr
+
+
+@pytest.mark.parametrize("extra,message", [
+    ([], "--workers needs --json OUT.json"),
+    (["--json", "o.json", "--save", "o.fit"], "--workers cannot be combined with --save"),
+    (["--json", "o.json", "--population"], "--workers cannot be combined with --population"),
+    (["--json", "o.json", "--scheduler", "tcp://h:8786"], "--workers cannot be combined with --scheduler"),
+])
+def test_identify_workers_refuses_what_needs_the_whole_lot(tmp_path, capsys, monkeypatch, extra, message):
+    from gyrojax.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["identify", _tiny(tmp_path), "--workers", "2", *extra]) == 2
+    assert message in capsys.readouterr().err
