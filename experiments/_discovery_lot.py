@@ -264,10 +264,10 @@ HIDDEN_LIST = [
     _h("vcf_gain_tempco", ("vcf_static",), "temperature_c", None, GAIN_T, "1/K",
        "virtual-Coriolis gain (1 + c (T - 25)) on the VCF rows only (electrode gap thermal expansion)")(
         lambda lot: lot.clean * _dT(lot) * _mask(lot, "vcf_static")),
-    _h("gain_hysteresis", RV, "temperature_c", None, None, "relative gain",
+    _h("gain_hysteresis", RV, "dtemperature_dt", None, None, "relative gain",
        "thermal hysteresis: the gain is 1 + c warming and 1 - c cooling (package stress lags the die)")(
         lambda lot: lot.clean * np.sign(lot.dtdt) * _mask(lot, *RV)),
-    _h("bias_dTdt", RV, "temperature_c", None, None, "deg/s per (K/min)",
+    _h("bias_dTdt", RV, "dtemperature_dt", None, ("lin(dtemperature_dt)",), "deg/s per (K/min)",
        "a zero-rate output proportional to dT/dt (a thermal gradient across the die)")(
         lambda lot: lot.full_scale / OMEGA_FS_DPS * 60.0 * lot.dtdt * _mask(lot, *RV)),
     _h("rate_saturation", ("rate_table",), "input", None, None, "relative gain above 100 deg/s",

@@ -58,7 +58,8 @@ def test_enough_hidden_effects_of_each_class():
 
     assert {h.library for h in lib} <= set(gj.EFFECTS)
     for h in lotgen.HIDDEN_LIST:
-        assert h.coordinate in ("input", "temperature_c", "time_s", "drive_freq_hz", "run", "device", "model")
+        assert h.coordinate in ("input", "temperature_c", "dtemperature_dt", "time_s", "drive_freq_hz", "run", "device",
+                                "model")
         assert h.sweeps <= set(lotgen.SWEEPS)
 
 
@@ -99,22 +100,30 @@ def test_scores_of_hand_made_outcomes():
     O = bench.Outcome  # noqa: E741
     lib = _info("zro_tempco")  # visible on rate_table and vcf_static, coordinate temperature_c
     s = bench.score(O(["zro_tempco"], "explained", set(), None, [], 1.0), lib)
-    assert s == {"found": True, "wrong": False, "localised": True, "formula": False, "explained": None}
+    assert s == {"found": True, "wrong": False, "ambiguous": False, "localised": True, "formula": False,
+                 "explained": None}
     s = bench.score(O(["dac_inl"], "partly explained", {"rate_table"}, "input", ["lin(temperature_c)"], 1.2), lib)
-    assert s == {"found": False, "wrong": True, "localised": False, "formula": True, "explained": None}
+    assert s == {"found": False, "wrong": True, "ambiguous": False, "localised": False, "formula": True,
+                 "explained": None}
+    # the same confirmation, declared by the method as indistinguishable from the hidden effect: ambiguous, not wrong
+    inl = _info("dac_inl_cubic")
+    s = bench.score(O(["feedback_compression"], "explained", set(), None, [], 1.0,
+                      ambiguous={"feedback_compression": {"dac_inl"}}), inl)
+    assert s["wrong"] is False and s["ambiguous"] is True and s["found"] is False
     s = bench.score(O([], "unexplained", {"rate_table", "vcf_static"}, "temperature_c", [], 1.2), lib)
     assert s["localised"] is True and s["found"] is False and s["wrong"] is False
     out = _info("vcf_gain_tempco")  # vcf_static alone
     s = bench.score(O(["vref_drift"], "unexplained", {"rate_table", "vcf_static"}, "temperature_c",
                       ["lin(temperature_c)*model"], 1.3), out)
-    assert s == {"found": None, "wrong": True, "localised": False, "formula": True, "explained": None}
+    assert s == {"found": None, "wrong": True, "ambiguous": False, "localised": False, "formula": True,
+                 "explained": None}
     s = bench.score(O([], "unexplained", {"vcf_static"}, "temperature_c", [], 1.3), out)
     assert s["localised"] is True and s["wrong"] is False and s["formula"] is False
     hyst = _info("gain_hysteresis")  # no formula
     assert bench.score(O([], "unexplained", set(), None, ["sq(input)"], 1.3), hyst)["formula"] is None
     null = _info(None)
     assert bench.score(O([], "explained", set(), None, [], 1.0), null) == {
-        "found": None, "wrong": False, "localised": None, "formula": None, "explained": True}
+        "found": None, "wrong": False, "ambiguous": False, "localised": None, "formula": None, "explained": True}
     assert bench.score(O(["zro_tempco"], "explained", set(), None, [], 1.0), null)["wrong"] is True
 
 
@@ -133,7 +142,7 @@ def test_read_diagnosis_today_and_later_fields():
              "discrepancy": [{"coordinate": "temperature_c", "sweeps": ["rate_table", "vcf_static"]}]}
     r = bench.read_diagnosis(today)
     assert r == {"confirmed": ["zro_tempco"], "verdict": "partly explained", "located": {"rate_table", "vcf_static"},
-                 "coordinate": "temperature_c", "formula": [], "chi2_red": 1.31}
+                 "coordinate": "temperature_c", "formula": [], "chi2_red": 1.31, "ambiguous": {}}
     later = {"selected": [], "verdict": "unexplained", "final": {"chi2_red": 1.4},
              "discrepancy": [{"coordinate": "temperature_c", "sweeps": ["rate_table", "vcf_static"],
                               "sweep_shares": {"vcf_static": 0.93, "rate_table": 0.07},

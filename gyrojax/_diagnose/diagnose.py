@@ -228,7 +228,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         top = discrepancy[0]
         discrepancy = (dataclasses.replace(top, coordinate=along, confounded_with=tuple(
             dict.fromkeys((top.coordinate, *(c for c in top.confounded_with if c != along))))),) + discrepancy[1:]
-    size = term_size(formula, discrepancy[0]) if discrepancy else None
+    # the size as the term's coefficient, unless a generic shape (in physical units) already gives it
+    size = term_size(formula, discrepancy[0]) if discrepancy and not discrepancy[0].probe else None
     if size is not None:  # the misfit's size as the term's coefficient, where one term of its coordinate has it
         discrepancy = (dataclasses.replace(discrepancy[0], size=size),) + discrepancy[1:]
     comparisons = tuple(compare(f, alpha=alpha) for f in fits)

@@ -179,6 +179,10 @@ def dictionary(fit, sweeps, *, step_at: float | None = None, period: float | Non
                           for s in group}
                     add(f"lin({c})*lin(input)", f"{_CODE[c]} * x", lambda s, xc=xc: xc[s] * xin[s], c,
                         gain_too=False)
+                    for basis, fn, code in (("abs", np.abs, "abs(x)"), ("sq", np.square, "x**2"),
+                                            ("cube", lambda v: v**3, "x**3")):
+                        add(f"lin({c})*{basis}(input)", f"{_CODE[c]} * {code}",
+                            lambda s, xc=xc, fn=fn: xc[s] * fn(xin[s]), c, gain_too=False)
         runs = min(m.shape[1] for m in masks.values())
         if runs >= 2:
             for r in range(1, runs):

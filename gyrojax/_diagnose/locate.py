@@ -241,6 +241,12 @@ def describe(space: ResidualSpace) -> tuple[list, list]:
                 sc = space.score(cols)
                 if sc.df:
                     out.append(Description(sweep, name, family, cols, sc, sc.p_value, {"within_device": dev / lot}))
+        g = _interactions(block, mask)
+        for name, cols_g in g.items():
+            cols = space.columns({sweep: cols_g})
+            sc = space.score(cols)
+            if sc.df:
+                out.append(Description(sweep, name, "input x", cols, sc, sc.p_value, {"within_device": 1.0}))
         runs = mask.shape[1]
         if runs >= 2:
             eye = np.eye(runs)[None, :, None, :] * mask[..., None]
@@ -261,6 +267,29 @@ def describe(space: ResidualSpace) -> tuple[list, list]:
         if d is not None:
             out.append(d)
     return out, notes
+
+
+INTERACTING = ("temperature_c", "time_s")  # coordinates whose product with a curve along the input is described
+
+
+def _interactions(block, mask) -> dict:
+    """A curve along the input whose size grows linearly with another coordinate (name -> changes (device, run,
+    point, k)): a term in temperature x |input| is neither along the temperature nor along the input alone."""
+    coords = coordinates(block)
+    hats = _hats(np.where(mask, coords["input"], 0.0), mask)
+    out = {}
+    if hats is None:
+        return out
+    for name in INTERACTING:
+        if name not in coords:
+            continue
+        x = np.where(mask, np.asarray(coords[name], float), 0.0)
+        run, _, lot = spread(x, mask)
+        if lot <= 0 or run <= WITHIN_RUN_SHARE * lot:
+            continue
+        centre = np.sum(x, axis=(1, 2), keepdims=True) / np.maximum(mask.sum(axis=(1, 2), keepdims=True), 1)
+        out[name] = hats * np.where(mask, x - centre, 0.0)[..., None]
+    return out
 
 
 def _step_scan(space, sweep, t, mask):
@@ -461,6 +490,8 @@ def _location(space, fit, members, confounded) -> Location:
 def _shape_words(d: Description) -> str:
     if d.family == "step":
         return "a step of the output partway through a run"
+    if d.family == "input x":
+        return f"an offset along the input whose size changes with {d.coordinate}"
     if d.family == "offset in each run":
         return f"an offset along {d.coordinate} that differs from run to run"
     if d.family == "periodic":
@@ -482,7 +513,11 @@ def _measured_shares(space, fit, best: Description) -> tuple:
         mask = np.asarray(block.mask)
         coords = coordinates(block)
         pred = np.asarray(fit.predictions[sweep], float)
-        if best.coordinate == "run":
+        if best.family == "input x":
+            g = _interactions(block, mask).get(best.coordinate)
+            if g is None:
+                continue
+        elif best.coordinate == "run":
             if mask.shape[1] < 2:
                 continue
             eye = np.eye(mask.shape[1])[None, :, None, :] * mask[..., None]
