@@ -224,3 +224,16 @@ def test_identify_workers_refuses_what_needs_the_whole_lot(tmp_path, capsys, mon
     monkeypatch.chdir(tmp_path)
     assert main(["identify", _tiny(tmp_path), "--workers", "2", *extra]) == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_an_existing_cluster_by_its_scheduler_address(lot8, tmp_path):
+    from distributed import LocalCluster
+
+    out = str(tmp_path / "out.json")
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                      silence_logs=40) as cluster:
+        report = identify_lot("paper-qmg", lot8, out, DistributedSolve(scheduler=cluster.scheduler_address, chunk=4),
+                              free=FREE, progress=False)
+    assert [d["device"] for d in report["devices"]] == device_order(lot8) and report["failed"] == []
+    assert report["distributed"]["scheduler"] == cluster.scheduler_address

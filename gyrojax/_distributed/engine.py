@@ -19,7 +19,8 @@ class DistributedSolve(eqx.Module):
     - `scheduler`: the address of an existing Dask scheduler (`tcp://host:8786`), e.g. one started by
       dask-jobqueue on Slurm or by the Dask Kubernetes operator; its workers must have gyrojax installed.
     - `chunk`: devices per chunk (the last one is padded to it); 16 by default.
-    - `retries`: how many more times a chunk whose worker died is run elsewhere before it counts as failed.
+    - `retries`: how many more times a chunk whose worker died is run elsewhere before it counts as failed (a
+      local cluster's; an existing cluster keeps its scheduler's `distributed.scheduler.allowed-failures`).
     """
 
     workers: int | None = eqx.field(static=True, default=None)
