@@ -369,6 +369,7 @@ def _coordinates(fit: Fit, names):
 
 
 def _theta(values, kinds):
+    """The fit's coordinates of `values` (device, random): log p, or p / scale."""
     return np.stack([np.log(values[:, j]) if t == "log" else values[:, j] / sc for j, (t, sc, _) in enumerate(kinds)],
                     axis=-1)
 
@@ -434,7 +435,7 @@ def population_fit(identify, model, data, strategy: PopulationSolve, options: di
     warnings, converged, refits = [], False, 0
     hcov = np.full((2 * k, 2 * k), np.nan)
     while True:
-        theta_hat = _theta(np.asarray(fit.values), kinds)
+        theta_hat = _theta(np.asarray(fit.values)[:, index], kinds)
         info, grad, finite = local_likelihoods(fit, index, k)
         if not np.all(finite):
             bad = [d for d, f in zip(fit.devices, finite) if not f]
@@ -471,7 +472,7 @@ def population_fit(identify, model, data, strategy: PopulationSolve, options: di
         fit = identify(fit.model, data, priors=_priors(user_priors, random, kinds, hyper), **options)
     # Per device: the shrunken estimates, their standard errors with the lot mean's and spread's added.
     info, grad, finite = local_likelihoods(fit, index, k)
-    theta_hat = _theta(np.asarray(fit.values), kinds)
+    theta_hat = _theta(np.asarray(fit.values)[:, index], kinds)
     ref = theta_hat[finite].mean(0)
     h = np.einsum("nij,nj->ni", info, theta_hat - ref) + grad
     centred = hyper.copy()
