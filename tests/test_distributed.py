@@ -86,6 +86,14 @@ def test_shared_parameters_are_refused(tmp_path):
                      shared=("k_vf",))
 
 
+def test_without_dask_the_error_says_how_to_install_it(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    out = str(tmp_path / "o.json")
+    with pytest.raises(ImportError, match=r"pip install 'gyrojax\[distributed\]'"):
+        identify_lot("paper-qmg", _tiny(tmp_path), out, DistributedSolve(workers=1))
+    assert not os.path.exists(f"{out}.parts")
+
+
 def test_a_restart_with_other_options_is_refused(tmp_path):
     path = _tiny(tmp_path)
     out = str(tmp_path / "o.json")
@@ -227,13 +235,15 @@ def test_identify_workers_refuses_what_needs_the_whole_lot(tmp_path, capsys, mon
 
 
 @pytest.mark.slow
-def test_an_existing_cluster_by_its_scheduler_address(lot8, tmp_path):
+def test_a_parquet_lot_on_an_existing_cluster_by_its_scheduler_address(lot8, tmp_path):
     from distributed import LocalCluster
 
-    out = str(tmp_path / "out.json")
+    out, parquet = str(tmp_path / "out.json"), str(tmp_path / "lot8.parquet")
+    gj.write_table(gj.read_table(lot8), parquet)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                       silence_logs=40) as cluster:
-        report = identify_lot("paper-qmg", lot8, out, DistributedSolve(scheduler=cluster.scheduler_address, chunk=4),
-                              free=FREE, progress=False)
+        report = identify_lot("paper-qmg", parquet, out, DistributedSolve(scheduler=cluster.scheduler_address,
+                                                                          chunk=4), free=FREE, progress=False)
     assert [d["device"] for d in report["devices"]] == device_order(lot8) and report["failed"] == []
+    assert not os.listdir(f"{out}.parts/input")  # read by device from the Parquet file, not split
     assert report["distributed"]["scheduler"] == cluster.scheduler_address

@@ -43,14 +43,22 @@ class DistributedSolve(eqx.Module):
             raise ValueError(f"DistributedSolve: scheduler must be an address like tcp://host:8786, got "
                              f"{self.scheduler!r}.")
 
+    @staticmethod
+    def require():
+        """Raise an ImportError that says how to install Dask distributed where it is missing."""
+        try:
+            import dask  # noqa: F401
+            import distributed  # noqa: F401
+        except ImportError:
+            raise ImportError(f"a distributed lot needs Dask distributed: {INSTALL}") from None
+
     @contextlib.contextmanager
     def client(self):
         """A Dask client of this cluster; a local cluster is started here and closed at the end."""
-        try:
-            import dask
-            import distributed
-        except ImportError:
-            raise ImportError(f"a distributed lot needs Dask distributed: {INSTALL}") from None
+        self.require()
+        import dask
+        import distributed
+
         # A worker that dies mid-chunk: the scheduler runs the chunk elsewhere up to `retries` more times.
         with dask.config.set({"distributed.scheduler.allowed-failures": self.retries,
                               "distributed.worker.multiprocessing-method": "spawn"}):

@@ -48,6 +48,7 @@ def identify_lot(model, data, out, strategy: DistributedSolve, *, free=DEFAULT_F
         raise ValueError(f"identify_lot: {', '.join(coupled)} couple the devices of a lot (one fit of all of them), "
                          "which a lot run in chunks of devices cannot do; fit a shared parameter or a population "
                          "with identify on one process (lot_solve=JointSolve() or PopulationSolve()).")
+    strategy.require()  # before the file is planned and split
     model = as_model(model)
     say = as_progress(progress, "gyrojax identify")
     options = {**options, "free": tuple(free)}
