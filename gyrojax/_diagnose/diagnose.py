@@ -223,8 +223,9 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     formula = propose(fit, discrepancy[0], step_at=located.step_at, period=located.period, alpha=alpha) \
         if discrepancy else None
     along = formula_coordinate(formula)
-    if along is not None and along != discrepancy[0].coordinate and along in discrepancy[0].confounded_with:
-        # the data cannot tell the coordinates apart; the closed form that explains it all names its own
+    if along is not None and along != discrepancy[0].coordinate and along != "model":
+        # a closed form of one coordinate that explains the whole location (fewer degrees of freedom than the
+        # flexible description) names its coordinate; the flexible one is said to describe it as well
         top = discrepancy[0]
         discrepancy = (dataclasses.replace(top, coordinate=along, confounded_with=tuple(
             dict.fromkeys((top.coordinate, *(c for c in top.confounded_with if c != along))))),) + discrepancy[1:]
