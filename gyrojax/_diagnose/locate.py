@@ -602,6 +602,6 @@ def _size(fit, space, members, sc):
                       f"peak ({abs(value):.3g} {unit})")
     # ppm of full scale only where the output is proportional to the input by design (its nonlinearity is a
     # measurement there; a zero-rate output's "full scale" is its own small slope)
-    relative = "nonlinearity_max_ppm" in sweep_kind(sweep).applicable_metrics() and full > 0
+    relative = "nonlinearity" in sweep_kind(sweep).applicable_metrics() and full > 0
     return {"value": abs(value), "unit": unit, "stderr": stderr, "measure": "peak of the fitted description",
             "sweep": sweep, "ppm_of_full_scale": 1e6 * abs(value) / full if relative else None}, ""
