@@ -277,30 +277,32 @@ def sf_log_gradient(fit, temps):
     return out
 
 
-def run(devices=64, rate_devices=4, seed=11, process=None, protocol=None):
-    """Simulate, fit and compare; returns (records, summary, fit)."""
-    if not 2 <= rate_devices < devices:
-        raise ValueError(f"rate_devices must be >= 2 (the seed method needs a scatter) and < devices; got "
-                         f"{rate_devices} of {devices}.")
+def simulate_lot(devices=64, seed=11, process=None, protocol=None):
+    """The lot and its campaign, every device with its rate table: (table, true lot, design, protocol)."""
     process = gj.WaferProcess() if process is None else process
     design = gj.vcf_2018()
     truth_nominal = as_built(design)
     base = gj.Protocol() if protocol is None else protocol
     # The static VCF voltages come from the design values (what the test engineer knows), not the as-built.
     protocol = dataclasses.replace(base, vcf_amplitudes_v=tuple(base.vcf_static_amplitudes(design)))
-    timings = {}
-    t0 = time.perf_counter()
     table = gj.simulate_table(truth_nominal, devices=devices, runs=1, sweeps=SWEEPS, spread=process, seed=seed,
                               device_prefix="lot", protocol=protocol)
     lot = gj.campaign_lot(truth_nominal, devices=devices, seed=seed, spread=process)
-    timings["simulate_s"] = time.perf_counter() - t0
+    return table, lot, design, protocol
+
+
+def with_rate_tables(table, devices, rate_devices):
+    """`table` with the rate table kept on the first `rate_devices` devices only, in lot order; and the names."""
     names = [f"lot-{i:03d}" for i in range(devices)]
     rate_names = set(names[:rate_devices])
     keep = [i for i, (d, s) in enumerate(zip(table["device"].tolist(), table["sweep"].tolist()))
             if s != "rate_table" or d in rate_names]
-    table = _order_by_device(table.select(keep))
+    return _order_by_device(table.select(keep)), names, rate_names
 
-    # --- seed 003: a constant ratio from the rate-table devices ---------------------------------------------
+
+def ratio_method(table, design):
+    """Seed 003's method: (the rate-table devices' mean SF_rate / SF_virtual, its scatter x sqrt(1 + 1/K)
+    relative, {device: SF_virtual})."""
     design_volts_per_rad_s = float(2.0 * design.resonator.mass * design.resonator.angular_gain
                                    * design.drive_amplitude(design.resonator.omega_x) * design.resonator.omega_x
                                    / (design.vcf_electrode.force_per_volt2 * gj.VCF_CARRIER_V))
@@ -310,6 +312,23 @@ def run(devices=64, rate_devices=4, seed=11, process=None, protocol=None):
     ratios = np.array([sf_rate[k] / sf_virtual[d] for k, d in enumerate(rate_devs)])
     ratio_mean = float(np.mean(ratios))
     ratio_rel_sd = float(np.std(ratios, ddof=1) / ratio_mean * math.sqrt(1.0 + 1.0 / len(ratios)))
+    return ratio_mean, ratio_rel_sd, sf_virtual
+
+
+def run(devices=64, rate_devices=4, seed=11, process=None, protocol=None, simulated=None):
+    """Simulate (or take `simulated`, `simulate_lot`'s), fit and compare; returns (records, summary, fit)."""
+    if not 2 <= rate_devices < devices:
+        raise ValueError(f"rate_devices must be >= 2 (the seed method needs a scatter) and < devices; got "
+                         f"{rate_devices} of {devices}.")
+    process = gj.WaferProcess() if process is None else process
+    timings = {}
+    t0 = time.perf_counter()
+    table, lot, design, protocol = simulate_lot(devices, seed, process, protocol) if simulated is None else simulated
+    timings["simulate_s"] = time.perf_counter() - t0
+    table, names, rate_names = with_rate_tables(table, devices, rate_devices)
+
+    # --- seed 003: a constant ratio from the rate-table devices ---------------------------------------------
+    ratio_mean, ratio_rel_sd, sf_virtual = ratio_method(table, design)
 
     # --- gyrojax: one joint fit of the lot ----------------------------------------------------------------
     w_drive, order = measured_drive_frequency(table, design)
@@ -399,6 +418,126 @@ def run(devices=64, rate_devices=4, seed=11, process=None, protocol=None):
     return records, summary, fit
 
 
+POP_FREE = ("vcf_gain", "omega_y", "q_y", "angular_gain")
+"""The population fit's per-device parameters: no lot-shared sense gain (a population fit has no shared ones); the
+sense gain stays at the data-based start (`linear_start`), and the lot mean of Ag absorbs what is left of the
+readout gain."""
+RANDOM = ("angular_gain",)
+"""The random effect: Ag, which stands for the whole rate path G K_yi Ag a that no VCF sweep sees (its lot spread is
+the rate-path mismatch, `WaferProcess.rate_path_sigma`, which the population fit learns instead of assuming)."""
+
+
+def run_population(devices=64, rate_devices=4, seed=11, process=None, protocol=None, simulated=None):
+    """The population fit of the lot (`gyrojax.PopulationSolve(random=RANDOM)`): every device's rate-table SF
+    predicted, with its 95 % interval; returns (records, summary, population fit)."""
+    if not 1 <= rate_devices < devices:
+        raise ValueError(f"rate_devices must be >= 1 and < devices; got {rate_devices} of {devices}.")
+    process = gj.WaferProcess() if process is None else process
+    table, lot, design, protocol = simulate_lot(devices, seed, process, protocol) if simulated is None else simulated
+    table, names, rate_names = with_rate_tables(table, devices, rate_devices)
+    w_drive, order = measured_drive_frequency(table, design)
+    assert list(order) == names, "identify's device order must be the lot order"
+    start = jax.tree.map(lambda x: jnp.broadcast_to(x, (devices,) + jnp.shape(x)), design)
+    split_ratio = design.resonator.omega_y / design.resonator.omega_x
+    start = eqx.tree_at(lambda g: (g.resonator.omega_x, g.resonator.omega_y), start,
+                        (jnp.asarray(w_drive), jnp.asarray(w_drive) * split_ratio))
+    q_prior = {"q_y": (float(design.resonator.q_y), process.q * float(design.resonator.q_y))}
+    joint_options = dict(free=FREE, shared=SHARED, tier=gj.CAMPAIGN_TIER,
+                         priors={"angular_gain": (float(design.resonator.angular_gain), process.rate_path_sigma)}
+                         | q_prior)
+    t0 = time.perf_counter()
+    start = linear_start(start, table, joint_options)
+    pf = gj.identify(gj.Model(start), table, free=POP_FREE, tier=gj.CAMPAIGN_TIER, priors=q_prior,
+                     lot_solve=gj.PopulationSolve(random=RANDOM))
+    seconds = time.perf_counter() - t0
+    t_sf = _sf_temperature(pf.fit.data)
+    sf_true = np.asarray(_zero_rate_sf(lot, jnp.asarray(t_sf)))
+    _, path_true = (np.asarray(x) for x in _lot_physics(lot))
+    records = []
+    for i, d in enumerate(names):
+        records.append({"device": d, "rate_table": d in rate_names, "sf_true": float(sf_true[i]),
+                        "prediction": float(pf.sf[i]), "stderr": float(pf.sf_stderr[i]),
+                        "error_pct": float((pf.sf[i] / sf_true[i] - 1) * 100),
+                        "z": float((pf.sf[i] - sf_true[i]) / pf.sf_stderr[i])})
+    held = [r for r in records if not r["rate_table"]]
+    (ag,) = pf.parameters
+    summary = {"devices": devices, "rate_devices": rate_devices, "seed": seed, "seconds": seconds,
+               "population": _stats([r["error_pct"] / 100 for r in held], [r["z"] for r in held])
+               | _coverage(held, "stderr", "prediction"),
+               "angular_gain": ag.report(), "true_rate_path_spread_pct": float(np.std(path_true) / np.mean(path_true)
+                                                                                 * 100),
+               "converged": pf.converged, "refits": pf.refits, "warnings": list(pf.warnings)}
+    return records, summary, pf
+
+
+def _coverage(rows, stderr_key, value_key):
+    z = np.array([r["z"] if "z" in r else r["model_z"] for r in rows])
+    rel = np.array([r[stderr_key] / r[value_key] for r in rows])
+    return {"coverage_95_pct": float(np.mean(np.abs(z) < 1.959963984540054) * 100),
+            "halfwidth_95_pct": float(np.mean(1.959963984540054 * rel) * 100), "count": len(rows)}
+
+
+def sweep(devices=64, counts=(1, 2, 4, 8, 16), seed=11, process=None, joint=True, out=None):
+    """Per number of rate-tabled devices in `counts`: the held-out devices' prediction error and 95 % coverage of
+    the population fit, seed 003's ratio method and (`joint`) the fixed-prior joint fit, on one simulated lot;
+    with `out` (a folder) the rows so far are written after each method."""
+    simulated = simulate_lot(devices, seed, process)
+    table_all, lot, design, _ = simulated
+    rows = []
+
+    def save():
+        if out:
+            os.makedirs(out, exist_ok=True)
+            gj.atomic_write_json({"rows": rows, "versions": _versions()}, os.path.join(out, "lot_batch_sweep.json"))
+            gj.atomic_write_bytes(os.path.join(out, "lot_batch_sweep.md"),
+                                  sweep_markdown(rows, devices, seed).encode())
+
+    for k in counts:
+        _, summary, _ = run_population(devices, k, seed, process, simulated=simulated)
+        ag = summary["angular_gain"]
+        rows.append({"rate_devices": k, "method": "population fit (Ag random, spread learned)"}
+                    | summary["population"]
+                    | {"seconds": summary["seconds"], "converged": summary["converged"],
+                       "ag_relative_spread_pct": ag["relative_spread"] * 100,
+                       "ag_relative_spread_stderr_pct": ag["spread_stderr"] / ag["mean"] * 100,
+                       "true_rate_path_spread_pct": summary["true_rate_path_spread_pct"],
+                       "warnings": summary["warnings"]})
+        print(f"K = {k}: population {rows[-1]}", flush=True)
+        save()
+        if k < 2:
+            continue
+        table, names, rate_names = with_rate_tables(table_all, devices, k)
+        ratio_mean, ratio_rel_sd, sf_virtual = ratio_method(table, design)
+        t_sf = np.where([d in rate_names for d in names], np.nan, 25.0)
+        sf_true = np.asarray(_zero_rate_sf(lot, jnp.asarray(np.nan_to_num(t_sf, nan=25.0))))
+        held = [{"z": (ratio_mean * sf_virtual[d] / sf_true[i] - 1) / ratio_rel_sd, "s": ratio_rel_sd, "v": 1.0,
+                 "e": ratio_mean * sf_virtual[d] / sf_true[i] - 1} for i, d in enumerate(names) if d not in rate_names]
+        rows.append({"rate_devices": k, "method": "seed 003 ratio"}
+                    | _stats([r["e"] for r in held], [r["z"] for r in held]) | _coverage(held, "s", "v"))
+        print(f"K = {k}: ratio {rows[-1]}", flush=True)
+        save()
+        if not joint:
+            continue
+        t0 = time.perf_counter()
+        recs, summ, _ = run(devices, k, seed, process, simulated=simulated)
+        held = [r for r in recs if not r["rate_table"]]
+        rows.append({"rate_devices": k, "method": "joint fit, fixed Ag prior"} | summ["model"]
+                    | _coverage(held, "model_stderr", "model_prediction") | {"seconds": time.perf_counter() - t0})
+        print(f"K = {k}: joint {rows[-1]}", flush=True)
+        save()
+    return rows
+
+
+def sweep_markdown(rows, devices, seed):
+    lines = [f"| rate-tabled (of {devices}) | method | held-out | RMS error (%) | max error (%) | "
+             "coverage of 95 % (%) | mean 95 % half-width (%) | z RMS |", "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['rate_devices']} | {r['method']} | {r['count']} | {r['rms_pct']:.3f} | "
+                     f"{r['max_pct']:.3f} | {r['coverage_95_pct']:.1f} | {r['halfwidth_95_pct']:.3f} | "
+                     f"{r['z_rms']:.2f} |")
+    return f"Seed {seed}, {devices} vcf-2018 devices\n\n" + "\n".join(lines) + "\n"
+
+
 def _versions():
     out = {"python": platform.python_version()}
     for pkg in ("gyrojax", "jax", "jaxlib", "equinox", "optimistix", "lineax", "numpy"):
@@ -452,8 +591,18 @@ def main(argv=None):
     ap.add_argument("--mismatch", type=float, default=None,
                     help="local mismatch of WaferProcess (default its 5e-4); the model's floor is sqrt(3) x it")
     ap.add_argument("--out", help="folder for lot_batch_calibration.json and .md")
+    ap.add_argument("--sweep", type=int, nargs="+", metavar="K",
+                    help="instead: for each number K of rate-tabled devices, the population fit, the ratio method and "
+                         "the fixed-prior joint fit (e.g. --sweep 1 2 4 8 16); writes lot_batch_sweep.json/.md")
+    ap.add_argument("--no-joint", action="store_true", help="with --sweep: skip the fixed-prior joint fit")
     args = ap.parse_args(argv)
     process = gj.WaferProcess() if args.mismatch is None else gj.WaferProcess(mismatch=args.mismatch)
+    if args.sweep:
+        rows = sweep(args.devices, tuple(args.sweep), args.seed, process, joint=not args.no_joint, out=args.out)
+        print(sweep_markdown(rows, args.devices, args.seed))
+        if args.out:
+            print(f"wrote {args.out}/lot_batch_sweep.json and .md")
+        return {"rows": rows, "versions": _versions(), "argv": list(argv or [])}
     records, summary, _ = run(args.devices, args.rate_devices, args.seed, process)
     print(f"{'device':>8} {'rate':>4} {'SF true':>10} {'seed err%':>9} {'model err%':>10} {'+/- %':>7} {'z':>6}")
     for r in records:
