@@ -223,7 +223,10 @@ def with_shapes(fit, locations, discrepancy, designs, scores, rejected, max_mult
             loc = dataclasses.replace(loc, shape=matched.shape, probe=matched.probe,
                                       coefficient=matched.coefficient, coefficient_spread=matched.coefficient_spread,
                                       unit=matched.unit, same_shape_as=matched.same_shape_as)
-            size = _probe_size(space, designs[matched.probe], matched)
+            # a one-column shape's coefficient is the size in its physical unit; a shape of several columns keeps
+            # the location's peak
+            size = _probe_size(space, designs[matched.probe], matched) if designs[matched.probe].shape[-1] == 1 \
+                else None
             if size is not None:
                 loc = dataclasses.replace(loc, size=size)
         out.append(dataclasses.replace(loc, library=_library_text(fit, loc.columns, loc.chi2_explained, scores,
@@ -233,13 +236,11 @@ def with_shapes(fit, locations, discrepancy, designs, scores, rejected, max_mult
 
 def _probe_size(space, columns, probe) -> dict | None:
     """The size of a location a generic shape has whole: the shape's coefficient, one for the lot, with its
-    standard error (its largest coefficient where it has several); None where the data do not determine it."""
+    standard error; None where the data do not determine it."""
     sc = space.score(columns, shared=True)
     if not sc.df:
         return None
-    coef = sc.coefficients[0]
-    k = int(np.argmax(np.abs(coef)))
-    value, err = float(coef[k]), float(np.sqrt(max(sc.covariance[0][k, k], 0.0)))
+    value, err = float(sc.coefficients[0][0]), float(np.sqrt(max(sc.covariance[0][0, 0], 0.0)))
     if not (math.isfinite(value) and math.isfinite(err)) or err > SIZE_REL_STDERR * abs(value):
         return None
     return {"value": value, "unit": probe.unit, "stderr": err, "measure": f"coefficient of {probe.probe}"}

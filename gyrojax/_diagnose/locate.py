@@ -102,7 +102,10 @@ class Location:
     @property
     def description(self) -> str:
         where = ", ".join(f"{clean(s)} {100 * f:.0f} %" for s, f in self.sweeps) or "no single sweep"
-        text = f"{100 * self.share:.0f} % of the misfit is {self.shape} ({where})"
+        if round(100 * self.share) >= 1:
+            text = f"{100 * self.share:.0f} % of the misfit is {self.shape} ({where})"
+        else:  # significant in a large lot, or at a chi2 at the noise level: no excess misfit to share
+            text = f"{self.shape} ({where}), significant but below 1 % of the misfit"
         loc = _location_text(self.location)
         if loc:
             text += f", {loc}"

@@ -10,6 +10,7 @@ from .._compare import nonlinearity_residual_ppm
 from .._effects.registry import EFFECTS
 from .._identify import Fit
 from .guards import MAX_TYPICAL_MULTIPLE
+from .locate import Location
 from .report import write_report
 
 
@@ -288,7 +289,7 @@ def discrepancy_text(d) -> str:
     """A significant discrepancy in words: its share of the misfit where it has one (1 % or more); else what it
     is, where and how large, with "below 1 % of the misfit" (significant in a large lot, or at a chi2 at the
     noise level, where there is no excess misfit to share) rather than "0 % of the misfit is"."""
-    if round(100 * d.share) >= 1:
+    if round(100 * d.share) >= 1 or isinstance(d, Location):  # a location says it in its own words
         return d.description
     where = ", ".join(f"{s} {100 * f:.0f} %" for s, f in d.sweeps)
     size = f"{d.coefficient:.3g} {d.unit}" + (f" (device spread {d.coefficient_spread:.2g})"
