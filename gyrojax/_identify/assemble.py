@@ -65,8 +65,9 @@ def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index
     values, stderr = _physical(problem_all.start, entries, u_full, cov_full, f, shared=False)
     lot_values, lot_stderr = _physical(problem_all.start, entries, u_lot[None], cov_lot[None],
                                        np.arange(n_lot), shared=True)
-    fitted, residuals = _fitted_and_residuals(problem_all, jnp.asarray(u_full), jnp.asarray(u_lot), data.blocks,
-                                              final.predictions)
+    # Unlabelled: the device names are static, and a lot with new names would trace and keep a program of its own.
+    fitted, residuals = _fitted_and_residuals(problem_all, jnp.asarray(u_full), jnp.asarray(u_lot),
+                                              data.unlabelled().blocks, final.predictions)
     g = np.asarray(final.sf_grad)[:, f]
     g_lot = np.asarray(final.sf_grad_lot)
     var = np.einsum("di,dij,dj->d", g, cov_dev, g)
