@@ -10,6 +10,7 @@ from .._fitdata import FitData
 from .._identify import Fit
 from .._probes import PROBES, design, project_out, score_columns
 from .columns import base_columns, effect_columns, excess_chi2, row_blocks
+from .formula import lot_mean
 from .locate import SIZE_REL_STDERR
 from .space import ResidualSpace
 
@@ -223,10 +224,11 @@ def with_shapes(fit, locations, discrepancy, designs, scores, rejected, max_mult
             loc = dataclasses.replace(loc, shape=matched.shape, probe=matched.probe,
                                       coefficient=matched.coefficient, coefficient_spread=matched.coefficient_spread,
                                       unit=matched.unit, same_shape_as=matched.same_shape_as)
-            # a one-column shape's coefficient is the size in its physical unit; a shape of several columns keeps
-            # the location's peak
-            size = _probe_size(space, designs[matched.probe], matched) if designs[matched.probe].shape[-1] == 1 \
-                else None
+            # a one-column shape along a recorded coordinate (a bias or gain per kelvin, per hour) gives the size in
+            # its physical unit; a shape along the input keeps the location's peak in output units and ppm of the
+            # sweep's full scale (a cubic's coefficient at the DAC's full scale is not what the sweep shows)
+            size = (_probe_size(space, designs[matched.probe], matched)
+                    if designs[matched.probe].shape[-1] == 1 and matched.coordinate != "input" else None)
             if size is not None:
                 loc = dataclasses.replace(loc, size=size)
         out.append(dataclasses.replace(loc, library=_library_text(fit, loc.columns, loc.chi2_explained, scores,
@@ -235,12 +237,13 @@ def with_shapes(fit, locations, discrepancy, designs, scores, rejected, max_mult
 
 
 def _probe_size(space, columns, probe) -> dict | None:
-    """The size of a location a generic shape has whole: the shape's coefficient, one for the lot, with its
-    standard error; None where the data do not determine it."""
-    sc = space.score(columns, shared=True)
+    """The size of a location a one-column generic shape has whole: the shape's coefficient over the lot (the
+    inverse-variance mean of the devices'), with its standard error; None where the data do not determine it."""
+    sc = space.score(columns)
     if not sc.df:
         return None
-    value, err = float(sc.coefficients[0][0]), float(np.sqrt(max(sc.covariance[0][0, 0], 0.0)))
+    mean, stderr, _ = lot_mean(sc)  # per device, as the probe is scored; the lot's inverse-variance mean
+    value, err = float(mean[0]), float(stderr[0])
     if not (math.isfinite(value) and math.isfinite(err)) or err > SIZE_REL_STDERR * abs(value):
         return None
     return {"value": value, "unit": probe.unit, "stderr": err, "measure": f"coefficient of {probe.probe}"}

@@ -226,14 +226,14 @@ def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, ma
     if not chosen:
         return None
     joint = space.score(np.concatenate([cols[id(t)] for t in chosen], axis=-1))
-    coef, err, spread = _lot_mean(joint)
+    coef, err, spread = lot_mean(joint)
     share = min(max(joint.statistic - joint.df, 0.0) / space.excess, 1.0) if space.excess > 0 else 0.0
     left = current.score(location.columns)
     return Formula(tuple(chosen), coef, err, joint.statistic, joint.df, share, len(terms), left.statistic,
                    left.df, left.p_value, left.p_value >= alpha, spread)
 
 
-def _lot_mean(scored):
+def lot_mean(scored):
     """Each term's lot value from its per-device coefficients: the inverse-variance weighted mean, its standard
     error, and the devices' spread (standard deviation; 0 for one device)."""
     coef, cov = scored.coefficients, scored.covariance
