@@ -515,7 +515,8 @@ def population_fit(identify, model, data, strategy: PopulationSolve, options: di
     for p in parameters:
         if not p.resolved:
             warnings.append(f"the lot spread of {p.name} is not resolved from zero ({p.spread:.3g} +/- "
-                            f"{p.spread_stderr:.2g} {p.unit}): the devices' own uncertainties explain their scatter")
+                            f"{p.spread_stderr:.2g} {p.unit}, under 2 standard errors): too few devices fix it, or "
+                            "their own uncertainties explain their scatter; its intervals rest on an uncertain spread")
     parameters = tuple(parameters)
     # The scale factor's lot distribution: the moments of the devices' posteriors (what EM's M-step takes).
     ok = np.isfinite(sf) & np.isfinite(sf_var)
