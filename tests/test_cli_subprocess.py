@@ -192,8 +192,11 @@ def test_two_sigterms_during_diagnose_stop_it_without_output(tmp_path):
     diagnose_data(tmp_path / "base.csv")
     for delay, second in ((2.0, 1.0), (5.0, 1.0), (8.0, 0.3), (6.0, None)):
         out = tmp_path / "s.json"
+        # the compilation cache off, as in the reproduction: every moment above falls inside the run (with a
+        # warm cache this lot's diagnosis can end, its JSON written, before 8 s)
         proc = subprocess.Popen([sys.executable, "-m", "gyrojax.cli", "diagnose", "base.csv", "--json", "s.json",
-                                 "--quiet"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                 "--quiet"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                env={**os.environ, "GYROJAX_CACHE_DIR": "off"})
         try:
             time.sleep(delay)
             assert proc.poll() is None, "diagnose ended before the signal: the test's data are too small"

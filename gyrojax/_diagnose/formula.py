@@ -23,7 +23,8 @@ import dataclasses
 import numpy as np
 
 from .._sweeps.registry import sweep_kind
-from .locate import PREFERENCE, coordinates, spread
+from .descriptions import coordinates, spread
+from .locate import PREFERENCE
 from .space import ResidualSpace
 
 

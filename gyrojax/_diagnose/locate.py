@@ -1,15 +1,8 @@
-r"""Where the misfit lives, without a list of shapes: flexible descriptions of the standardised residuals along
-every recorded coordinate of every sweep, scored beyond what the fit could absorb.
+r"""Where the misfit lives, without a list of shapes: the flexible descriptions of the standardised residuals
+(`gyrojax._diagnose.descriptions`) along every recorded coordinate of every sweep, scored beyond what the fit
+could absorb, and the locations chosen from them.
 
-For each sweep and each coordinate that moves within its runs (`input`, `temperature_c`, `time_s`,
-`drive_freq_hz`, `order`) two flexible descriptions are scored per device: an *offset* along the coordinate and a
-*gain* along it (the same basis times the model's prediction), each a piecewise-linear function on knots at the
-coordinate's quantiles (a linear spline whose effective degrees of freedom are the directions left after the
-fit's own columns are projected out). Beside them: a *gain per run* (and an offset per run on sweeps read
-without a turn-on bias), a *change-point scan* along time in every run (a step in the output at one dwell), and
-a *spectral scan* along the input (a periodic error of the input or the DAC word). Scans carry their own
-look-elsewhere correction (Bonferroni over the positions or periods scanned); every description is significant
-at `alpha` over the number of descriptions.
+Every description is significant at `alpha` over the number of descriptions.
 
 The most significant description (by its tail probability) is a misfit's *location*; the same description on
 the other sweeps joins it when it stays significant beyond it; descriptions along other coordinates that the
@@ -26,41 +19,14 @@ import math
 
 import numpy as np
 
-from .._compare import recorded_coordinates
-from .._stats import chi2_sf
 from .._sweeps.registry import sweep_kind
 from .._text import safe_name as clean
-from .space import ResidualSpace, Scored
+from .descriptions import Description, coordinates, describe, interactions, spline_basis, strength
+from .space import ResidualSpace
 
 
-KNOTS = 6  # the linear spline's knots along a coordinate (quantiles): up to 6 directions per device
-# A coordinate whose spread within the runs is below this share of its spread over the lot is a property of runs
-# (or devices), not something the output can be described along within a run.
-WITHIN_RUN_SHARE = 1e-3
-# Within a device less than this share of the lot's spread: the coordinate mostly tells devices apart.
-WITHIN_DEVICE_SHARE = 0.1
-# A size whose standard error is above this share of its value is not determined by the data.
 SIZE_REL_STDERR = 0.5
 MAX_LOCATIONS = 3
-PERIODS = 24  # periods scanned along the input, log-spaced from 2.5 point spacings to half the span
-
-
-@dataclasses.dataclass(frozen=True)
-class Description:
-    """One flexible description: its sweep, coordinate, family ("offset", "gain", "gain per run", "offset per
-    run", "step", "periodic"), columns (device, rows, k), score and, for scans, where it sits."""
-
-    sweep: str
-    coordinate: str
-    family: str
-    columns: np.ndarray
-    scored: Scored
-    p_value: float  # after the scan's own look-elsewhere correction
-    where: dict = dataclasses.field(default_factory=dict)
-
-    @property
-    def key(self) -> str:
-        return f"{self.sweep}:{self.coordinate}:{self.family}"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -151,238 +117,6 @@ def _location_text(loc: dict) -> str:
     return " ".join(parts)
 
 
-# -- coordinates ---------------------------------------------------------------------------------------------
-def coordinates(block) -> dict:
-    """The coordinates of a sweep block a description can run along: `input`, the recorded ones, and, where
-    both the die temperature and the time are recorded, the rate of change of the temperature
-    (`dtemperature_dt`, K/s, by differences along time within each run): a heating die is not a warm one."""
-    out = {"input": np.asarray(block.inputs, float), **recorded_coordinates(block)}
-    if "temperature_c" in out and "time_s" in out:
-        out["dtemperature_dt"] = _rate_of_change(out["temperature_c"], out["time_s"], np.asarray(block.mask))
-    return out
-
-
-def _rate_of_change(temp, time, mask):
-    rate = np.zeros(mask.shape)
-    for d, r in np.ndindex(mask.shape[:2]):
-        m = mask[d, r]
-        if m.sum() < 2:
-            continue
-        idx = np.flatnonzero(m)
-        order = idx[np.argsort(time[d, r][idx], kind="stable")]
-        t, T = time[d, r][order], temp[d, r][order]
-        if np.all(np.diff(t) > 0):
-            rate[d, r, order] = np.gradient(T, t)
-    return rate
-
-
-def spread(values, mask):
-    """(spread within runs, within devices, over the lot): each the largest range over its groups."""
-    v = np.where(mask, values, np.nan)
-    with np.errstate(all="ignore"):
-        run = np.nanmax(np.nanmax(v, axis=2) - np.nanmin(v, axis=2))
-        dev = np.nanmax(np.nanmax(v, axis=(1, 2)) - np.nanmin(v, axis=(1, 2)))
-        lot = np.nanmax(v) - np.nanmin(v)
-    return float(np.nan_to_num(run)), float(np.nan_to_num(dev)), float(np.nan_to_num(lot))
-
-
-def _hats(x, mask, knots=KNOTS):
-    """Piecewise-linear hat functions of `x` (device, run, point) on knots at the quantiles of the real points:
-    (device, run, point, k); None when `x` takes fewer than three values."""
-    real = x[mask]
-    u = np.unique(real)
-    if u.size < 3:
-        return None
-    k = np.unique(np.quantile(real, np.linspace(0.0, 1.0, min(knots, u.size))))
-    if k.size < 3:
-        return None
-    eye = np.eye(k.size)
-    return np.stack([np.where(mask, np.interp(x, k, eye[j]), 0.0) for j in range(k.size)], axis=-1)
-
-
-def _log_p(stat: float, df: int) -> float:
-    """log of chi2(df)'s tail at `stat`, stable where the probability underflows."""
-    p = chi2_sf(stat, df)
-    if p > 1e-290:
-        return math.log(p)
-    a, x = df / 2.0, stat / 2.0
-    return (a - 1.0) * math.log(x) - x - math.lgamma(a)
-
-
-# -- the descriptions ----------------------------------------------------------------------------------------
-def describe(space: ResidualSpace) -> tuple[list, list]:
-    """Every flexible description of `space`'s residuals: (descriptions, notes on coordinates that were not
-    described along, and why)."""
-    fit, out, notes = space.fit, [], []
-    for sweep in fit.data.sweeps:
-        block = fit.data.blocks[sweep]
-        mask = np.asarray(block.mask)
-        pred = np.asarray(fit.predictions[sweep], float)
-        for name, x in coordinates(block).items():
-            x = np.where(mask, np.asarray(x, float), 0.0)
-            run, dev, lot = spread(x, mask)
-            if lot <= 0:
-                continue
-            if run <= WITHIN_RUN_SHARE * lot:
-                notes.append(f"{name} on {sweep} is constant within runs: a property of runs (see 'run')")
-                continue
-            if dev < WITHIN_DEVICE_SHARE * lot:
-                notes.append(f"{name} on {sweep} varies mostly between devices ({dev:.3g} within a device "
-                             f"of its {lot:.3g} over the lot): described within each device only")
-            hats = _hats(x, mask)
-            if hats is None:
-                continue
-            # a gain along the input (x g(x), piecewise quadratic) describes an odd curve with fewer knots than
-            # an offset along it: with it the input is not outdone by a coordinate swept with it (time, order)
-            families = [("offset", hats), ("gain", hats * pred[..., None])]
-            if name == "time_s" and mask.shape[1] >= 2:
-                # a shape in time that differs from run to run (a jump, a relaxation after one power-on)
-                eye = np.eye(mask.shape[1])[None, :, None, :, None]
-                families.append(("offset in each run", (hats[..., None, :] * eye).reshape(*mask.shape, -1)))
-            for family, g in families:
-                cols = space.columns({sweep: g})
-                sc = space.score(cols)
-                if sc.df:
-                    out.append(Description(sweep, name, family, cols, sc, sc.p_value, {"within_device": dev / lot}))
-        g = _interactions(block, mask)
-        for name, cols_g in g.items():
-            cols = space.columns({sweep: cols_g})
-            sc = space.score(cols)
-            if sc.df:
-                out.append(Description(sweep, name, "input x", cols, sc, sc.p_value, {"within_device": 1.0}))
-        runs = mask.shape[1]
-        if runs >= 2:
-            eye = np.eye(runs)[None, :, None, :] * mask[..., None]
-            per_run = [("gain per run", pred[..., None] * eye)]
-            if not sweep_kind(sweep).biased:
-                per_run.append(("offset per run", eye.astype(float)))
-            for family, g in per_run:
-                cols = space.columns({sweep: g})
-                sc = space.score(cols)
-                if sc.df:
-                    out.append(Description(sweep, "run", family, cols, sc, sc.p_value))
-        coords = coordinates(block)
-        if "time_s" in coords:
-            d = _step_scan(space, sweep, np.where(mask, coords["time_s"], 0.0), mask)
-            if d is not None:
-                out.append(d)
-        d = _periodic_scan(space, sweep, np.asarray(block.inputs, float), mask)
-        if d is not None:
-            out.append(d)
-    return out, notes
-
-
-INTERACTING = ("temperature_c", "time_s")  # coordinates whose product with a curve along the input is described
-
-
-def _interactions(block, mask) -> dict:
-    """A curve along the input whose size grows linearly with another coordinate (name -> changes (device, run,
-    point, k)): a term in temperature x |input| is neither along the temperature nor along the input alone."""
-    coords = coordinates(block)
-    hats = _hats(np.where(mask, coords["input"], 0.0), mask)
-    out = {}
-    if hats is None:
-        return out
-    for name in INTERACTING:
-        if name not in coords:
-            continue
-        x = np.where(mask, np.asarray(coords[name], float), 0.0)
-        run, _, lot = spread(x, mask)
-        if lot <= 0 or run <= WITHIN_RUN_SHARE * lot:
-            continue
-        centre = np.sum(x, axis=(1, 2), keepdims=True) / np.maximum(mask.sum(axis=(1, 2), keepdims=True), 1)
-        out[name] = hats * np.where(mask, x - centre, 0.0)[..., None]
-    return out
-
-
-def _step_scan(space, sweep, t, mask):
-    """The strongest step of the output at one dwell (change point along time): a step at one position (in time
-    order) of one run index, either in every device (each its own height) or in one device; the look-elsewhere
-    correction is the number of positions tried."""
-    n_dev, n_run, n_pt = mask.shape
-    r = space.residuals
-    stats = {}  # (run, position) -> per-device statistics
-    positions = 0
-    for rn in range(n_run):
-        for j in range(2, n_pt - 1):
-            g = np.zeros((n_dev, n_run, n_pt, 1))
-            for dv in range(n_dev):
-                m = mask[dv, rn]
-                if m.sum() < 6 or j >= m.sum() - 1:
-                    continue
-                order = np.argsort(np.where(m, t[dv, rn], np.inf), kind="stable")
-                g[dv, rn, :, 0] = np.where(m & (t[dv, rn] >= t[dv, rn, order[j]]), 1.0, 0.0)
-            if not g.any():
-                continue
-            cols = space.columns({sweep: g})
-            pc = space.project(cols)[..., 0]
-            info = np.einsum("dr,dr->d", pc, pc)
-            own = np.einsum("dr,dr->d", cols[..., 0], cols[..., 0])
-            ok = info > 1e-9 * np.maximum(own, 1e-300)
-            per_dev = np.where(ok, np.einsum("dr,dr->d", pc, r) ** 2 / np.where(ok, info, 1.0), 0.0)
-            if ok.any():
-                stats[(rn, j)] = (per_dev, ok, cols)
-                positions += 1
-    if not stats:
-        return None
-    best = None
-    for (rn, j), (per_dev, ok, cols) in stats.items():
-        all_p = chi2_sf(float(per_dev.sum()), int(ok.sum()))
-        dv = int(np.argmax(per_dev))
-        one_p = chi2_sf(float(per_dev[dv]), 1)
-        for p, devs in ((all_p, np.flatnonzero(ok)), (one_p, np.array([dv]))):
-            if best is None or p < best[0]:
-                best = (p, rn, j, devs, cols)
-    p, rn, j, devs, cols = best
-    keep = np.zeros(n_dev, bool)
-    keep[devs] = True
-    cols = np.where(keep[:, None, None], cols, 0.0)
-    sc = space.score(cols)
-    fit = space.fit
-    at = [float(np.sort(t[dv, rn][mask[dv, rn]])[j]) for dv in devs]
-    where = {"runs": [[fit.devices[dv], fit.data.run_ids(sweep)[dv][rn]] for dv in devs],
-             "at": float(np.median(at)), "run_index": rn}
-    return Description(sweep, "time_s", "step", cols, sc, min(1.0, 2 * positions * p), where)
-
-
-def _periodic_scan(space, sweep, x, mask):
-    """The strongest periodic error along the input (sin and cos of one period, per device); the look-elsewhere
-    correction is the number of periods scanned."""
-    real = np.unique(x[mask])
-    if real.size < 8:
-        return None
-    span = float(real.max() - real.min())
-    step = float(np.median(np.diff(real)))
-    if span <= 0 or step <= 0:
-        return None
-    best = None
-    # at least two periods over the span: a longer one is a smooth trend, which the splines describe
-    if span / 2.0 <= 2.5 * step:
-        return None
-    periods = np.geomspace(2.5 * step, span / 2.0, PERIODS)
-    for period in periods:
-        w = 2.0 * np.pi * x / period
-        g = np.stack([np.sin(w), np.cos(w)], axis=-1) * mask[..., None]
-        cols = space.columns({sweep: g})
-        sc = space.score(cols)
-        if sc.df and (best is None or _log_p(sc.statistic, sc.df) < _log_p(best[0].statistic, best[0].df)):
-            best = (sc, cols, float(period))
-    if best is None:
-        return None
-    sc, cols, period = best
-    return Description(sweep, "input", "periodic", cols, sc, min(1.0, PERIODS * sc.p_value), {"period": period})
-
-
-def _strength(d: Description) -> float:
-    """-log p of a description (with the scan's look-elsewhere correction), for ranking."""
-    lp = _log_p(d.scored.statistic, d.scored.df)
-    if d.family == "step":
-        lp += math.log(max(d.p_value / max(d.scored.p_value, 1e-300), 1.0))
-    elif d.family == "periodic":
-        lp += math.log(PERIODS)
-    return -lp
-
-
 # -- locations -----------------------------------------------------------------------------------------------
 @dataclasses.dataclass(frozen=True)
 class Localisation:
@@ -412,7 +146,7 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS) -> L
         significant = [d for d in descs if d.p_value < cut]
         if not significant:
             break
-        best = max(significant, key=_strength)
+        best = max(significant, key=strength)
         # Of coordinates the data cannot tell apart, name the one that moves most within each device: a
         # coordinate that mostly tells devices apart (a drive frequency) is seen here only through its small
         # excursions within a device, which another coordinate (the temperature behind them) explains as well.
@@ -421,7 +155,7 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS) -> L
         confounded = tuple(dict.fromkeys(d.coordinate for d in [best] + confounded if d is not primary))
         best = primary
         members, joined = [best], space.with_columns(best.columns)
-        for d in sorted(significant, key=_strength, reverse=True):
+        for d in sorted(significant, key=strength, reverse=True):
             if d.sweep in {m.sweep for m in members} or (d.coordinate, d.family) != (best.coordinate, best.family):
                 continue
             if d.family in ("step", "periodic"):
@@ -517,7 +251,7 @@ def _measured_shares(space, fit, best: Description) -> tuple:
         coords = coordinates(block)
         pred = np.asarray(fit.predictions[sweep], float)
         if best.family == "input x":
-            g = _interactions(block, mask).get(best.coordinate)
+            g = interactions(block, mask).get(best.coordinate)
             if g is None:
                 continue
         elif best.coordinate == "run":
@@ -528,7 +262,7 @@ def _measured_shares(space, fit, best: Description) -> tuple:
         else:
             if best.coordinate not in coords:
                 continue
-            hats = _hats(np.where(mask, coords[best.coordinate], 0.0), mask)
+            hats = spline_basis(np.where(mask, coords[best.coordinate], 0.0), mask)
             if hats is None:
                 continue
             g = hats * pred[..., None] if best.family == "gain" else hats
