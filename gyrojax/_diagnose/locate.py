@@ -327,7 +327,7 @@ def _size(fit, space, members, sc):
         value = float(f[dv, row])
         if best is None or abs(value) > abs(best[0]):
             g = pc[dv, i + row]
-            var = float(g @ sc.covariance[dv] @ g) if sc.covariance.shape[0] > 1 else float(g @ sc.covariance[0] @ g)
+            var = float(g @ sc.covariance[dv] @ g)
             full = float(np.max(np.abs(np.asarray(fit.predictions[m.sweep])[dv][np.asarray(block.mask)[dv]])))
             best = (value, math.sqrt(max(var, 0.0)) * float(sig[dv, row]), sweep_kind(m.sweep).output_unit, full,
                     m.sweep)

@@ -26,8 +26,8 @@ class Scored:
     """A block of columns fitted to the residuals beyond the absorbable span.
 
     `statistic`: the chi2 it removes (the score S); `df`: its directions that carry information; `p_value`;
-    `coefficients` (device, k) per device, or (1, k) shared by the lot; `covariance` of the coefficients
-    ((device, k, k) or (1, k, k)); `fingerprint` (device, rows): the residual change it explains."""
+    `coefficients` (device, k) per device; `covariance` of each device's coefficients (device, k, k);
+    `fingerprint` (device, rows): the residual change it explains."""
 
     statistic: float
     df: int
@@ -40,21 +40,18 @@ class Scored:
 class ResidualSpace:
     """A fit's residuals and the span of its free columns, per device, for scoring generic column blocks.
 
-    **Arguments:** `fit` (a `gyrojax.Fit`); `extra` (device, rows, m) further columns to treat as absorbable
-    (e.g. a candidate effect's, or a description already selected)."""
+    **Arguments:** `fit` (a `gyrojax.Fit`); `with_columns` adds further columns to what is absorbable (a
+    candidate effect's, a description already chosen)."""
 
-    def __init__(self, fit: Fit, extra: np.ndarray | None = None):
+    def __init__(self, fit: Fit):
         self.fit = fit
         self.data = fit.data
         self.residuals = np.asarray(fit.residual_vector, float)
         self.devices, self.rows = self.residuals.shape
         self.blocks = {s: (i, j) for s, i, j in row_blocks(fit.data)}
         self.excess = excess_chi2(fit)
-        base = base_columns(fit)
-        if extra is not None and extra.shape[-1]:
-            base = np.concatenate([base, extra], axis=-1)
-        self.base = base
-        self._u = _spans(base)
+        self.base = base_columns(fit)
+        self._u = _spans(self.base)
 
     def with_columns(self, cols: np.ndarray) -> "ResidualSpace":
         """The same fit with `cols` (device, rows, k) added to the absorbable span: the directions of `cols` beyond
@@ -98,10 +95,9 @@ class ResidualSpace:
         return out
 
     # -- scores -------------------------------------------------------------------------------------------
-    def score(self, cols: np.ndarray, *, shared: bool = False, rows: slice | None = None) -> Scored:
-        """Fit `cols` (device, rows, k) to the residuals beyond the absorbable span: per device (each device its
-        own coefficients) or `shared` (one set for the lot). `rows`: use only these residual rows (the
-        projection is still the whole fit's)."""
+    def score(self, cols: np.ndarray) -> Scored:
+        """Fit `cols` (device, rows, k) to the residuals beyond the absorbable span, each device its own
+        coefficients."""
         # each column to unit norm over the lot, so that the rank rule does not depend on the columns' units
         # (a cube of the output, ~1e19 LSB^3, beside a bias in LSB); the coefficients are scaled back below
         scale = np.sqrt(np.sum(cols**2, axis=(0, 1)))
@@ -109,22 +105,10 @@ class ResidualSpace:
         cols = cols / scale
         pc = self.project(cols)
         r = self.residuals
-        if rows is not None:
-            pc, r = pc[:, rows], r[:, rows]
         n, _, k = pc.shape
         if k == 0:
-            return Scored(0.0, 0, 1.0, np.zeros((1 if shared else n, 0)), np.zeros((1 if shared else n, 0, 0)),
-                          np.zeros(self.residuals.shape))
+            return Scored(0.0, 0, 1.0, np.zeros((n, 0)), np.zeros((n, 0, 0)), np.zeros(r.shape))
         own = np.array([float(np.linalg.norm(cols[d], 2)) ** 2 for d in range(n)])
-        if shared:
-            info = np.einsum("drk,drl->kl", pc, pc)
-            b = np.einsum("drk,dr->k", pc, r)
-            inv, df = _pinv(info, RANK_TOL * float(own.max()))
-            coef = inv @ b
-            stat = float(b @ coef)
-            fp = np.einsum("drk,k->dr", pc, coef)
-            return Scored(stat, df, chi2_sf(stat, df), (coef / scale)[None], (inv / np.outer(scale, scale))[None],
-                          self._full(fp, rows))
         coefs, covs, stat, df = np.zeros((n, k)), np.zeros((n, k, k)), 0.0, 0
         fp = np.zeros(r.shape)
         for d in range(n):
@@ -136,14 +120,7 @@ class ResidualSpace:
             stat += float(b @ coefs[d])
             df += df_d
             fp[d] = pc[d] @ coefs[d]
-        return Scored(stat, df, chi2_sf(stat, df), coefs / scale, covs / np.outer(scale, scale), self._full(fp, rows))
-
-    def _full(self, fp, rows):
-        if rows is None:
-            return fp
-        out = np.zeros(self.residuals.shape)
-        out[:, rows] = fp
-        return out
+        return Scored(stat, df, chi2_sf(stat, df), coefs / scale, covs / np.outer(scale, scale), fp)
 
     def sweep_rows(self, sweep: str) -> slice:
         i, j = self.blocks[sweep]
