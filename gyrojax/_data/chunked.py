@@ -6,13 +6,12 @@ chunk is read with `read_table`, whose messages are mapped back to the input's d
 from __future__ import annotations
 
 import csv
-import io
 import os
 import re
 
 from .._reading import open_regular
 from .cells import DataError
-from .files import MAX_LINE_CHARS, read_parquet_devices, read_table, table_format
+from .files import csv_records, read_parquet_devices, read_table, table_format
 from .table import Table
 
 
@@ -20,32 +19,6 @@ _EXPECTED = "give a .csv or .parquet file"
 # Rows and characters held in memory before they are appended to their chunk files: bound the split's memory.
 _FLUSH_ROWS = 200_000
 _FLUSH_CHARS = 64 * 2**20
-
-
-def _csv_rows(source: str):
-    """(first line, fields) of each CSV record of `source`, streamed (UTF-8, a BOM dropped)."""
-    raw = open_regular(source, _EXPECTED)
-    with raw:
-        text = io.TextIOWrapper(raw, encoding="utf-8-sig", newline="")
-
-        def lines():
-            while True:
-                line = text.readline(MAX_LINE_CHARS + 1)
-                if not line:
-                    return
-                if len(line) > MAX_LINE_CHARS:
-                    raise DataError(f"{source}: a line is longer than {MAX_LINE_CHARS} characters; is this a CSV "
-                                    "table?", source=source)
-                yield line
-
-        reader = csv.reader(lines())
-        previous = 0
-        try:
-            for row in reader:
-                yield previous + 1, row
-                previous = reader.line_num
-        except csv.Error as e:
-            raise DataError(f"{source}: line {reader.line_num}: not a readable CSV line: {e}.", source=source) from None
 
 
 def _device_column(source: str, header: list[str]) -> int:
@@ -72,7 +45,7 @@ def device_order(path: str | os.PathLike) -> list[str]:
             for batch in pf.iter_batches(columns=["device"]):
                 seen.update(dict.fromkeys(str(d) for d in batch.column(0).to_pylist()))
             return list(seen)
-    rows = _csv_rows(source)
+    rows = csv_records(source)
     header = next((row for _, row in rows if any(c.strip() for c in row)), None)
     if header is None:
         raise DataError(f"{source}: empty file: no header line.", source=source)
@@ -106,7 +79,7 @@ def split_csv(path: str | os.PathLike, groups: list[list[str]], targets: list[st
                 rows.clear()
                 where[k].clear()
 
-    rows = _csv_rows(source)
+    rows = csv_records(source)
     header = next((row for _, row in rows if any(c.strip() for c in row)), None)
     if header is None:
         raise DataError(f"{source}: empty file: no header line.", source=source)

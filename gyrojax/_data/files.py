@@ -91,39 +91,46 @@ def _utf8_error(source: str) -> DataError:
             final = not chunk
 
 
-def _read_csv(source: str) -> tuple[dict[str, list], list[int]]:
-    """The columns (text cells) and each data row's first line, read line by line: the file is never held
-    whole as one string."""
-    last = ""
-
-    def physical_lines(text):
-        nonlocal last
-        while True:
-            line = text.readline(MAX_LINE_CHARS + 1)
-            if not line:
-                return
-            if len(line) > MAX_LINE_CHARS:
-                raise DataError(f"{source}: a line (after line {reader.line_num}) is longer than {MAX_LINE_CHARS} "
-                                "characters; a tidy table's lines are short: is this a CSV table?", source=source)
-            last = line
-            yield line
-
-    records: list[tuple[int, list[str]]] = []  # (first line, fields)
-    previous = 0
+def csv_records(source: str, tail: list | None = None):
+    """(first line, fields) of each CSV record of `source`, read line by line (UTF-8, a byte order mark dropped;
+    a line over `MAX_LINE_CHARS` refused): the file is never held whole as one string. `tail`, when given,
+    holds the last physical line read (to tell a file cut short)."""
     with open_regular(source, _EXPECTED) as raw:
-        # utf-8-sig: a byte order mark at the start is dropped; newline="": the csv module sees line ends as
-        # they are, and splits lines at \n, \r\n or \r.
+        # newline="": the csv module sees line ends as they are, and splits lines at \n, \r\n or \r.
         text = io.TextIOWrapper(raw, encoding="utf-8-sig", newline="")
-        reader = csv.reader(physical_lines(text))
+
+        def physical_lines():
+            while True:
+                line = text.readline(MAX_LINE_CHARS + 1)
+                if not line:
+                    return
+                if len(line) > MAX_LINE_CHARS:
+                    raise DataError(f"{source}: a line (after line {reader.line_num}) is longer than "
+                                    f"{MAX_LINE_CHARS} characters; a tidy table's lines are short: is this a CSV "
+                                    "table?", source=source)
+                if tail is not None:
+                    tail[:] = [line]
+                yield line
+
+        reader = csv.reader(physical_lines())
+        previous = 0
         try:
             for row in reader:
-                records.append((previous + 1, row))
+                yield previous + 1, row
                 previous = reader.line_num
         except csv.Error as e:
             raise DataError(f"{source}: line {reader.line_num}: not a readable CSV line: {e}.",
                             source=source) from None
-        except UnicodeDecodeError:
-            raise _utf8_error(source) from None
+
+
+def _read_csv(source: str) -> tuple[dict[str, list], list[int]]:
+    """The columns (text cells) and each data row's first line, read line by line (`csv_records`)."""
+    tail = [""]
+    try:
+        records: list[tuple[int, list[str]]] = list(csv_records(source, tail))  # (first line, fields)
+    except UnicodeDecodeError:
+        raise _utf8_error(source) from None
+    last = tail[0]
 
     def blank(row):
         return not any(cell.strip() for cell in row)
