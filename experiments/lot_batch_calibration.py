@@ -144,6 +144,17 @@ def measured_drive_frequency(table, design):
     return np.sum(np.where(mask, w0, 0.0), axis=(1, 2)) / np.sum(mask, axis=(1, 2)), arr.devices
 
 
+
+def measured_start(table, design, names):
+    """The lot's start: the design per device, each with its drive resonance at the drive frequency it reads
+    (and the sense resonance at the design's split ratio)."""
+    w_drive, order = measured_drive_frequency(table, design)
+    assert list(order) == names, "identify's device order must be the lot order"
+    start = jax.tree.map(lambda x: jnp.broadcast_to(x, (len(names),) + jnp.shape(x)), design)
+    split_ratio = design.resonator.omega_y / design.resonator.omega_x
+    return eqx.tree_at(lambda g: (g.resonator.omega_x, g.resonator.omega_y), start,
+                       (jnp.asarray(w_drive), jnp.asarray(w_drive) * split_ratio))
+
 def _sf_temperature(data):
     """The temperature identify reports a scale factor at: the mean rate-table die temperature, else 25 C."""
     b = data.blocks["rate_table"]
@@ -331,12 +342,7 @@ def run(devices=64, rate_devices=4, seed=11, process=None, protocol=None, simula
     ratio_mean, ratio_rel_sd, sf_virtual = ratio_method(table, design)
 
     # --- gyrojax: one joint fit of the lot ----------------------------------------------------------------
-    w_drive, order = measured_drive_frequency(table, design)
-    assert list(order) == names, "identify's device order must be the lot order"
-    start = jax.tree.map(lambda x: jnp.broadcast_to(x, (devices,) + jnp.shape(x)), design)
-    split_ratio = design.resonator.omega_y / design.resonator.omega_x
-    start = eqx.tree_at(lambda g: (g.resonator.omega_x, g.resonator.omega_y), start,
-                        (jnp.asarray(w_drive), jnp.asarray(w_drive) * split_ratio))
+    start = measured_start(table, design, names)
     # Steady at 1e-10 (CAMPAIGN_TIER): identify's default 1e-11 stalls at round-off on open-loop points at
     # high rates (see gyrojax.CAMPAIGN_TIER), and a stalled point's implicit derivative is NaN.
     options = dict(free=FREE, shared=SHARED, tier=gj.CAMPAIGN_TIER,
@@ -435,12 +441,7 @@ def run_population(devices=64, rate_devices=4, seed=11, process=None, protocol=N
     process = gj.WaferProcess() if process is None else process
     table, lot, design, protocol = simulate_lot(devices, seed, process, protocol) if simulated is None else simulated
     table, names, rate_names = with_rate_tables(table, devices, rate_devices)
-    w_drive, order = measured_drive_frequency(table, design)
-    assert list(order) == names, "identify's device order must be the lot order"
-    start = jax.tree.map(lambda x: jnp.broadcast_to(x, (devices,) + jnp.shape(x)), design)
-    split_ratio = design.resonator.omega_y / design.resonator.omega_x
-    start = eqx.tree_at(lambda g: (g.resonator.omega_x, g.resonator.omega_y), start,
-                        (jnp.asarray(w_drive), jnp.asarray(w_drive) * split_ratio))
+    start = measured_start(table, design, names)
     q_prior = {"q_y": (float(design.resonator.q_y), process.q * float(design.resonator.q_y))}
     joint_options = dict(free=FREE, shared=SHARED, tier=gj.CAMPAIGN_TIER,
                          priors={"angular_gain": (float(design.resonator.angular_gain), process.rate_path_sigma)}
