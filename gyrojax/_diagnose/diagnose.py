@@ -112,6 +112,13 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     located = locate(fit, alpha=alpha)
     baseline_discrepancy, baseline_designs, baseline_located = discrepancy, designs, located
     family: list[float] = []  # every refit's selection-corrected p-value, for the false-discovery control
+    compared = {}  # id(fit) -> its comparison: each fit of `fits` is compared once, during the steps or at the end
+
+    def comparison(f):
+        if id(f) not in compared:
+            compared[id(f)] = compare(f, alpha=alpha)
+        return compared[id(f)]
+
     def first_ranking(scores, threshold):
         # one rule (gyrojax._testability): untestable is what score_candidates marks so, whatever its p-value
         return scores, tuple(c.effect for c in scores if not c.testable)
@@ -185,7 +192,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
                 f"{family[-1]:.3g}, has q = {q:.3g} >= alpha over the {len(family)} refits of this diagnosis"),
                 kind="not significant under false-discovery control"))
             continue
-        at_noise = not compare(fit, alpha=alpha).fails and not located.locations
+        at_noise = not comparison(fit).fails and not located.locations
         if at_noise and delta_bic >= 0:
             rejected.append(Rejection(best.effect, (
                 f"the model before it already describes the data at the noise level, and the information "
@@ -233,7 +240,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     size = term_size(formula, discrepancy[0]) if discrepancy and not discrepancy[0].probe else None
     if size is not None:  # the misfit's size as the term's coefficient, where one term of its coordinate has it
         discrepancy = (dataclasses.replace(discrepancy[0], size=size),) + discrepancy[1:]
-    comparisons = tuple(compare(f, alpha=alpha) for f in fits)
+    comparisons = tuple(comparison(f) for f in fits)
     verdict = verdict_of(comparisons[-1], steps)
     if verdict == "explained" and discrepancy:  # a located misfit is a failure the omnibus test missed
         verdict = "partly explained" if steps else "unexplained"
