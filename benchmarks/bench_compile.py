@@ -164,7 +164,7 @@ def _run_worker(entry, data_path, cache_dir, dump_dir=None):
 
 
 def _write_json(path, payload):
-    from gyrojax._io import atomic_write_json
+    from gyrojax._data.io import atomic_write_json
 
     atomic_write_json(payload, path)
 

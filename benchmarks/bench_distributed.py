@@ -160,7 +160,7 @@ def main():
 
     def save():
         if args.json:
-            from gyrojax._io import atomic_write_json
+            from gyrojax._data.io import atomic_write_json
 
             atomic_write_json(record, args.json)
 

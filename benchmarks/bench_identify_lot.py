@@ -50,7 +50,7 @@ def _problems(fit, preset):
 
     from gyrojax import Steady
     from gyrojax._identify.problem import Problem
-    from gyrojax._parameters import as_model, batched, read_values
+    from gyrojax._model.parameters import as_model, batched, read_values
 
     n = len(fit.devices)
     model = batched(as_model(preset), n)
@@ -166,7 +166,7 @@ def main(argv=None):
 
     def write(rows):
         if args.json:
-            from gyrojax._io import atomic_write_json
+            from gyrojax._data.io import atomic_write_json
 
             atomic_write_json({"versions": _versions(), "machine": machine, "rows": rows}, args.json)
 

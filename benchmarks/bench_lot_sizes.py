@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Lots of nearby sizes in one session: identify (or diagnose, or simulate_table) on lots of 3, 4, 2 and 5
 devices, one after another, with the lot padded to the next power of two (the default for a lot of up to 16
-devices) and without it (`gyrojax._lot.BUCKET_MAX = 0`, as `VmapSolve(bucket=False)`; a script, not a test).
+devices) and without it (`gyrojax._lots.stack.BUCKET_MAX = 0`, as `VmapSolve(bucket=False)`; a script, not a test).
 
     python benchmarks/bench_lot_sizes.py [--entry identify|diagnose|simulate_table] [--sizes 3 4 2 5] [--repeats 3]
                                          [--json PATH]
@@ -33,8 +33,7 @@ def _worker(entry, bucket, sizes, repeats, out):
 
     gyro = gj.add_effect(gj.paper_qmg(), "dac_inl") if entry == "diagnose" else gj.paper_qmg()
     if not bucket:  # as VmapSolve(bucket=False), for diagnose's fits and the settle too (nothing compiled yet)
-        from gyrojax import _lot
-
+        from gyrojax._lots import stack as _lot
         _lot.BUCKET_MAX = 0
     if entry != "simulate_table":
         table = gj.simulate_table(gyro, **{**DEMO_LOT, "devices": max(sizes)}, progress=False)

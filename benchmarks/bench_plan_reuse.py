@@ -49,7 +49,7 @@ def main():
 
     jax.monitoring.register_event_duration_secs_listener(duration)
     import gyrojax as gj
-    from gyrojax._parameters import DEFAULT_FREE
+    from gyrojax._model.parameters import DEFAULT_FREE
     from gyrojax._plan.plan import _baseline  # the plan's own baseline fit, timed apart
     from gyrojax._progress import as_progress
 

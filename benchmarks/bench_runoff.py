@@ -11,7 +11,7 @@ it by several widths, so from the preset most devices' first solve runs Q_y off 
 is right; `RestartRunoffs` then solves them again with Q_y held, then released.
 
 Two settings, each in a fresh process with an empty compilation cache of its own (the run-off bound is a
-constant of the compiled solve): the default (`gyrojax._identify.lot.RUNOFF_LOG` = 20: a solve stops, as
+constant of the compiled solve): the default (`gyrojax._identify.strategies.RUNOFF_LOG` = 20: a solve stops, as
 diverged, once a positive parameter passes e^20 times its start) and none (`inf`: it creeps on to `max_steps`
 while the vmapped lot waits for it). Each process simulates the lot, then runs `identify` twice: the first call
 (compile included) and the second (timed: the run). Printed: the run time, the first call, each device's LM steps

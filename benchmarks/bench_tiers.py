@@ -70,7 +70,7 @@ from gyrojax import (  # noqa: E402
     settle,
     units,
 )
-from gyrojax._io import atomic_write_json  # noqa: E402
+from gyrojax._data.io import atomic_write_json  # noqa: E402
 from gyrojax._simulate._model import (  # noqa: E402
     Outputs,
     full_field,

@@ -6,7 +6,7 @@ Run: python experiments/lot_batch_calibration.py [--devices 64] [--rate-devices 
 The lot: `--devices` open-loop vcf-2018 devices (seed 003's own device; see "Why vcf-2018" below) drawn with
 `gyrojax.WaferProcess`: structural thickness, CD loss of the etch and local mismatch generate the mass, the
 resonances, every electrode and pick-off factor and the AGC-held drive amplitude together, the way they co-vary
-physically (every number an ASSUMPTION with its reason in `gyrojax/_process.py`; the thickness/CD/mismatch
+physically (every number an ASSUMPTION with its reason in `gyrojax/_lots/process.py`; the thickness/CD/mismatch
 figures are fixed so that the seed-003 ratio spreads as seed 003 measured: 0.79 % over 13 devices). The
 as-built lot also differs from the design the fits start from: its VCF force is 1.76x the design value (seed
 003's measured SF_rate / SF_virtual = 0.568) and its readout's sense channel gain is 2 % low (ASSUMPTION).

@@ -11,10 +11,10 @@ import jax as _jax
 # raises would make every script start with the same line. Why, and what it means for other JAX code in the
 # process: docs/architecture.md, "Float64 for the whole process".
 _jax.config.update("jax_enable_x64", True)
-from ._cache import compilation_cache as compilation_cache  # noqa: E402  (importing it turns the cache on)
+from ._compile.cache import compilation_cache as compilation_cache  # noqa: E402  (importing it turns the cache on)
 
 from . import _units as units  # noqa: E402, F401  (the public gyrojax.units)
-from ._campaign import (  # noqa: E402
+from ._lots.campaign import (  # noqa: E402
     CAMPAIGN_TIER as CAMPAIGN_TIER,
     SIMULATED_SWEEPS as SIMULATED_SWEEPS,
     campaign_lot as campaign_lot,
@@ -83,7 +83,7 @@ from ._gyroscope import (  # noqa: E402
     design_drive_loop as design_drive_loop,
     design_rebalance_loop as design_rebalance_loop,
 )
-from ._compare import Comparison as Comparison, compare as compare  # noqa: E402
+from ._diagnose.compare import Comparison as Comparison, compare as compare  # noqa: E402
 from ._diagnose import (  # noqa: E402
     Diagnosis as Diagnosis,
     Discrepancy as Discrepancy,
@@ -91,9 +91,9 @@ from ._diagnose import (  # noqa: E402
     Rejection as Rejection,
     diagnose as diagnose,
 )
-from ._fitio import load_fit as load_fit, save_fit as save_fit  # noqa: E402
+from ._identify.fitio import load_fit as load_fit, save_fit as save_fit  # noqa: E402
 from ._distributed import DistributedSolve as DistributedSolve, identify_lot as identify_lot  # noqa: E402
-from ._fitreport import fit_report as fit_report  # noqa: E402
+from ._identify.report import fit_report as fit_report  # noqa: E402
 from ._identify import (  # noqa: E402
     AbstractLotSolve as AbstractLotSolve,
     AbstractRecovery as AbstractRecovery,
@@ -113,8 +113,8 @@ from ._identify import (  # noqa: E402
     coverage as coverage,
     identify as identify,
 )
-from ._lot import ProcessSpread as ProcessSpread, make_lot as make_lot  # noqa: E402
-from ._io import (  # noqa: E402
+from ._lots.stack import ProcessSpread as ProcessSpread, make_lot as make_lot  # noqa: E402
+from ._data.io import (  # noqa: E402
     atomic_directory as atomic_directory,
     atomic_write_bytes as atomic_write_bytes,
     atomic_write_json as atomic_write_json,
@@ -129,9 +129,9 @@ from ._metrics import (  # noqa: E402
     rate_bandwidth as rate_bandwidth,
     repeatability as repeatability,
 )
-from ._noise import RateNoise as RateNoise  # noqa: E402
-from ._process import WaferProcess as WaferProcess  # noqa: E402
-from ._parameters import PARAMETERS as PARAMETERS, Model as Model, Parameter as Parameter  # noqa: E402
+from ._lots.noise import RateNoise as RateNoise  # noqa: E402
+from ._lots.process import WaferProcess as WaferProcess  # noqa: E402
+from ._model.parameters import PARAMETERS as PARAMETERS, Model as Model, Parameter as Parameter  # noqa: E402
 from ._physics.electrodes import (  # noqa: E402
     DriveElectrode as DriveElectrode,
     FeedbackElectrode as FeedbackElectrode,
@@ -178,9 +178,9 @@ from ._plan import (  # noqa: E402
     default_experiments as default_experiments,
     plan as plan,
 )
-from ._probes import PROBES as PROBES, AbstractProbe as AbstractProbe  # noqa: E402
+from ._diagnose.probes import PROBES as PROBES, AbstractProbe as AbstractProbe  # noqa: E402
 from ._solution import RESULTS as RESULTS  # noqa: E402
-from ._stimulus import Stimulus as Stimulus  # noqa: E402
+from ._physics.stimulus import Stimulus as Stimulus  # noqa: E402
 from ._terms import (  # noqa: E402
     AbstractFeedbackTerm as AbstractFeedbackTerm,
     AbstractOutputTerm as AbstractOutputTerm,
@@ -198,7 +198,7 @@ from ._sweeps.branch_voltages import (  # noqa: E402
 from ._sweeps.dac import Dac as Dac, dac_points as dac_points, dac_sweep as dac_sweep  # noqa: E402
 from ._sweeps.drive_amplitude import DriveAmplitude as DriveAmplitude  # noqa: E402
 from ._sweeps.drive_frequency import DriveFrequency as DriveFrequency  # noqa: E402
-from ._sweeps.lot import LotCampaign as LotCampaign  # noqa: E402
+from ._sweeps.lot_campaign import LotCampaign as LotCampaign  # noqa: E402
 from ._sweeps.protocol import (  # noqa: E402
     CHAMBER_PLATEAUS_C as CHAMBER_PLATEAUS_C,
     Protocol as Protocol,

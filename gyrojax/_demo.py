@@ -19,7 +19,7 @@ from importlib import resources
 
 import numpy as np
 
-from ._io import atomic_write_bytes
+from ._data.io import atomic_write_bytes
 
 
 HIDDEN_EFFECT = "dac_inl"

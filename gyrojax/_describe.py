@@ -19,7 +19,7 @@ import numpy as np
 
 from . import _presets
 from ._device.file import is_device_file, parameter_paths, read_device_file, write_device_file
-from ._parameters import DEFAULT_FREE, PARAMETERS, as_model
+from ._model.parameters import DEFAULT_FREE, PARAMETERS, as_model
 
 
 @dataclasses.dataclass(frozen=True)

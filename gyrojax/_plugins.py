@@ -9,8 +9,8 @@ registration); a file that registers nothing is warned about; `sys.exit` while i
 `nonfinite_effect` says when an effect gives a device with NaN or infinite values (the commands refuse such an
 effect by name, `diagnose` drops such a candidate with a note). The source of every user effect module, and of
 the modules it imports from outside the installed packages and the standard library, is hashed when it is
-loaded: `user_code_digest` keys the exported programs (`gyrojax/_export.py`) and `user_effect_code` is recorded
-in a saved fit (`gyrojax/_fitio.py`), so that a helper module edited since is never served from an old program
+loaded: `user_code_digest` keys the exported programs (`gyrojax/_compile/export.py`) and `user_effect_code` is recorded
+in a saved fit (`gyrojax/_identify/fitio.py`), so that a helper module edited since is never served from an old program
 and a fit loaded with other code says so.
 """
 

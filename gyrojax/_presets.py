@@ -14,7 +14,7 @@ from ._electronics.dac import DAC
 from ._electronics.excitation import FTRExcitation
 from ._electronics.frontend import FrontEnd
 from ._gyroscope import Gyroscope, design_drive_loop, design_rebalance_loop
-from ._lot import as_arrays
+from ._lots.stack import as_arrays
 from ._physics.electrodes import DriveElectrode, FeedbackElectrode, VirtualCoriolisElectrode
 from ._physics.resonator import Resonator
 from ._units import DEG, hz_to_rad_s

@@ -34,7 +34,7 @@ import threading
 import warnings
 
 from . import _stop
-from ._io import OutputPathError, atomic_directory, atomic_write_json, check_output_paths
+from ._data.io import OutputPathError, atomic_directory, atomic_write_json, check_output_paths
 from ._text import safe_name, safe_text
 
 
@@ -185,8 +185,8 @@ def _cmd_simulate(args):
 
     import gyrojax as gj
 
-    from ._campaign import simulate_table
     from ._data.files import write_table
+    from ._lots.campaign import simulate_table
 
     tiers = {"steady": gj.CAMPAIGN_TIER, "averaged": gj.Averaged(), "full": gj.FullWaveform()}
     gyro, _ = _device_and_free(args.preset)
@@ -328,7 +328,7 @@ def _table_and_fit(args):
     table = read_table(args.data)
     fit = None
     if args.fit:
-        from ._fitio import load_fit
+        from ._identify.fitio import load_fit
 
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -419,13 +419,13 @@ def _name_list(text):
 
 
 def _cmd_identify(args):
-    from ._compare import compare
     from ._data.files import read_table
     from ._device.check import checked_start
-    from ._fitio import save_fit
-    from ._fitreport import fit_report
+    from ._diagnose.compare import compare
     from ._identify import PopulationFit, PopulationSolve, identify
-    from ._parameters import DEFAULT_FREE, Model, zero_effect
+    from ._identify.fitio import save_fit
+    from ._identify.report import fit_report
+    from ._model.parameters import DEFAULT_FREE, Model, zero_effect
 
     _check_outputs(("--json", args.json, False), ("--save", args.save, False))
     _load_effects(args)
@@ -469,7 +469,7 @@ def _identify_distributed(args):
     """identify --workers/--scheduler: the lot in chunks of devices on Dask (gyrojax/_distributed), resumable
     from --json's results folder."""
     from ._distributed import DistributedSolve, identify_lot
-    from ._parameters import DEFAULT_FREE, Model, zero_effect
+    from ._model.parameters import DEFAULT_FREE, Model, zero_effect
 
     option = "--workers" if args.workers is not None else "--scheduler"
     refused = [(args.workers is not None and args.scheduler is not None, "--scheduler (give one of the two)"),

@@ -9,7 +9,7 @@ import math
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ._compare import nonlinearity_residual_ppm
+from ._diagnose.compare import nonlinearity_residual_ppm
 from ._sweeps.registry import sweep_kind
 
 
@@ -76,7 +76,7 @@ def ranking(scores, *, alpha: float = 0.01, max_typical_multiple: float = 100.0,
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    from ._stats import chi2_isf
+    from ._numerics.stats import chi2_isf
 
     ax = _ax(ax)
     testable = [c for c in scores if c.testable]
@@ -304,7 +304,7 @@ def save(fig_or_ax, path):
     """Save atomically (PNG)."""
     import io
 
-    from ._io import atomic_write_bytes
+    from ._data.io import atomic_write_bytes
 
     if isinstance(fig_or_ax, np.ndarray):
         fig_or_ax = fig_or_ax.flat[0]

@@ -149,3 +149,12 @@ def _script_sources():
 def test_experiments_and_notebooks_use_the_public_api(path, source):
     private = [line.strip() for line in source.splitlines() if PRIVATE_USE.search(line)]
     assert not private, f"{path.relative_to(ROOT)} reaches into private modules: {private}"
+
+
+def test_the_package_root_is_small():
+    """Every wing is a folder named for what it does; the root keeps the entry points and a few shared modules
+    (at most 20 files)."""
+    root_files = sorted(p.name for p in PACKAGE.glob("*.py"))
+    assert len(root_files) <= 20, f"{len(root_files)} files at the package root: {root_files}"
+    lots = sorted(str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*lot.py"))
+    assert not lots, f"files named for a lot without saying what of it: {lots}"

@@ -1,4 +1,4 @@
-"""The persistent compilation cache that gyrojax turns on at import (gyrojax/_cache.py), checked in fresh
+"""The persistent compilation cache that gyrojax turns on at import (gyrojax/_compile/cache.py), checked in fresh
 processes: the suite's own cache (tests/conftest.py sets JAX_COMPILATION_CACHE_DIR) is kept out of them."""
 
 import json

@@ -4,7 +4,7 @@ import pytest
 
 import gyrojax as gj
 from gyrojax._diagnose import candidate_effects
-from gyrojax._parameters import Model, as_model, zero_effect
+from gyrojax._model.parameters import Model, as_model, zero_effect
 
 
 def test_default_candidates_are_the_supported_effects_not_in_the_baseline():

@@ -96,8 +96,9 @@ def no_work(monkeypatch):
     def reached(*args, **kwargs):
         raise AssertionError("work was started before the output paths were checked")
 
-    from gyrojax import _campaign, _demo, _diagnose
+    from gyrojax import _demo, _diagnose
     from gyrojax._data import files as data_files
+    from gyrojax._lots import campaign as _campaign
     monkeypatch.setattr(data_files, "read_table", reached)
     monkeypatch.setattr(_campaign, "simulate_table", reached)
     monkeypatch.setattr(_diagnose, "diagnose", reached)
@@ -188,8 +189,7 @@ def _good_csv(tmp_path):
 
 
 def test_json_through_a_symlink_and_file_modes(tmp_path, capsys):
-    from gyrojax import _io
-
+    from gyrojax._data import io as _io
     data = _good_csv(tmp_path)
     target = tmp_path / "kept.json"
     target.write_text("{}")
@@ -267,7 +267,7 @@ def test_effects_module_end_to_end(tmp_path, user_effects):
     np.testing.assert_allclose(y1[big] / y0[big], 1 / (1 + 2 * 5e-4), rtol=1e-7)  # the documented fingerprint
     assert "user_dac_gain" in gj.supported_effects(gj.paper_qmg())  # a diagnose candidate now
     assert "user_dac_gain" not in gj.supported_effects(gj.vcf_2018())  # open loop: supports says no
-    from gyrojax._parameters import zero_effect
+    from gyrojax._model.parameters import zero_effect
 
     assert zero_effect("user_dac_gain").name == "user_dac_gain"  # what identify --effect builds
 

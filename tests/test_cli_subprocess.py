@@ -59,8 +59,7 @@ def test_bad_inputs_exit_cleanly_without_traceback(tmp_path, argv, code, message
 SLOW_JSON = textwrap.dedent("""
     import sys, time
     import gyrojax.cli as cli
-    from gyrojax import _io
-
+    from gyrojax._data import io as _io
     def slow(obj, path):
         with _io.atomic_open(path, "w") as f:
             f.write("{\\n")
@@ -124,7 +123,7 @@ SLOW_DEMO = textwrap.dedent("""
 
 
 def test_sigterm_while_a_folder_is_built_keeps_the_old_folder(tmp_path):
-    from gyrojax._io import FOLDER_MARKER, atomic_directory
+    from gyrojax._data.io import FOLDER_MARKER, atomic_directory
 
     with atomic_directory(tmp_path / "demo") as folder:  # a complete earlier output
         (open(os.path.join(folder, "report.md"), "w")).write("the old, whole report")

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
-from gyrojax._compare import compare_residuals, runs_test, shape_components, symmetric_parts
+from gyrojax._diagnose.compare import compare_residuals, runs_test, shape_components, symmetric_parts
 
 
 RATES = np.array([-200, -100, -50, -20, -10, -5, -2, -1, -0.5, -0.2, -0.1,

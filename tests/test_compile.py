@@ -1,4 +1,4 @@
-"""gyrojax's compile options (`gyrojax._compile`): set on its top-level programs on the CPU, never on a program
+"""gyrojax's compile options (`gyrojax._compile.jit`): set on its top-level programs on the CPU, never on a program
 called inside another trace (JAX refuses that), and never over an option the user's XLA_FLAGS names."""
 
 import equinox as eqx
@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from gyrojax import _compile
+from gyrojax._compile import jit as _compile
 
 
 def test_options_on_cpu_and_the_users_flag_wins(monkeypatch):

@@ -13,13 +13,12 @@ from gyrojax import (
     DataError,
     SweepArrays,
     Table,
-    _io,
     aggregate_samples,
     decode_dac_word,
     read_table,
     write_table,
 )
-from gyrojax._data import files as data_files, validate as data_validate
+from gyrojax._data import files as data_files, io as _io, validate as data_validate
 
 
 HEADER = "device,run,sweep,input,output"
@@ -370,7 +369,7 @@ def test_arrays_vmap():
 def test_fit_data_holds_sweep_arrays_aligned_on_the_lot():
     """A fit's data is one SweepArrays per sweep kind on the lot's device axis: a device a sweep lacks has
     padding only; `unlabelled()` keeps the arrays and drops the labels."""
-    from gyrojax._fitdata import fit_data
+    from gyrojax._model.fitdata import fit_data
 
     rows = [{"device": d, "run": r, "sweep": "rate_table", "input": x, "output": 2 * x, "output_sigma": 0.1}
             for d, r, xs in (("A", 0, [-1.0, 0.0, 1.0]), ("B", 5, [3.0, 4.0])) for x in xs]

@@ -11,8 +11,8 @@ import pytest
 from _experiments import load_experiment
 
 import gyrojax as gj
-from gyrojax._compare import nonlinearity_residual_ppm
 from gyrojax._demo import DEMO_LOT
+from gyrojax._diagnose.compare import nonlinearity_residual_ppm
 
 
 pytestmark = pytest.mark.slow

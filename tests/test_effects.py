@@ -259,7 +259,7 @@ def test_a_lot_as_large_as_an_effects_coefficients_gets_them_per_device():
     """A DAC INL has 4 coefficients: on a lot of 4 devices (as of 3 or 5) every device starts from all four,
     not device k from the k-th (a leading axis of the lot's size is not the device axis unless the leaf has one
     dimension more than one device's); an effect already per device is kept, and one of another lot refused."""
-    from gyrojax._parameters import Model, batched
+    from gyrojax._model.parameters import Model, batched
 
     inl = gj.DacInl.typical(1.0)
     for n in (3, 4, 5):

@@ -1,4 +1,4 @@
-"""Programs exported beside the compilation cache (gyrojax/_export.py), checked in fresh processes: a second
+"""Programs exported beside the compilation cache (gyrojax/_compile/export.py), checked in fresh processes: a second
 process loads what the first exported and traces nothing; a changed user module, a corrupt file, a host
 callback or a disabled cache take the plain path with the same results."""
 
@@ -37,7 +37,7 @@ PROGRAM = textwrap.dedent("""
     import gyrojax as gj
     import jax.numpy as jnp
     import numpy as np
-    from gyrojax._export import cached_program
+    from gyrojax._compile.export import cached_program
     from plugin import Gain
 
     def response(gain, x, scale):
@@ -54,12 +54,12 @@ PROGRAM = textwrap.dedent("""
         with open("plugin.py", "a") as f:
             f.write("# saved again")
     if "patched" in sys.argv:  # a gyrojax function replaced at run time, as a test's monkeypatch does
-        import gyrojax._residuals
+        import gyrojax._model.residuals
 
         def stand_in(*args):
             return 0.0
 
-        gyrojax._residuals.run_biases = stand_in
+        gyrojax._model.residuals.run_biases = stand_in
     k = jnp.asarray(1.5)
     if "sharded" in sys.argv:  # the gain placed on two CPU devices
         mesh = jax.sharding.Mesh(np.asarray(jax.devices()[:2]), ("lot",))
@@ -275,8 +275,8 @@ FIT = textwrap.dedent("""
         lambda e, d, fun_name="?", **k: traces.append(fun_name) if e.endswith("jaxpr_trace_duration") else None)
     import numpy as np
     import gyrojax as gj
-    from gyrojax import _export
-    from gyrojax._parameters import DEFAULT_FREE
+    from gyrojax._compile import export as _export
+    from gyrojax._model.parameters import DEFAULT_FREE
 
     table_path, out_path = sys.argv[1], sys.argv[2]
     if not os.path.exists(table_path):

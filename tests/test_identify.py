@@ -15,7 +15,7 @@ import pytest
 
 import gyrojax as gj
 from gyrojax import rate_table_points
-from gyrojax._residuals import device_residuals, run_biases
+from gyrojax._model.residuals import device_residuals, run_biases
 
 
 LOT = {"devices": 3, "runs": 2, "sweeps": ("rate_table", "vcf_static", "dac"), "seed": 11}
@@ -250,10 +250,10 @@ def test_a_lot_of_the_same_shapes_reuses_the_traced_fit(rate_only, monkeypatch):
                         lambda *a, **k: traced.append("residuals") or device_residuals(*a, **k))
     monkeypatch.setattr("gyrojax._identify.evaluation.run_biases",
                         lambda *a, **k: traced.append("biases") or run_biases(*a, **k))
-    monkeypatch.setattr("gyrojax._identify.lot.final_evaluation",
+    monkeypatch.setattr("gyrojax._identify.strategies.final_evaluation",
                         lambda *a, **k: traced.append("solve") or final_evaluation(*a, **k))
     # In-process reuse only: a program exported to the cache folder by an earlier run would load untraced.
-    monkeypatch.setattr("gyrojax._export._folder", lambda: None)
+    monkeypatch.setattr("gyrojax._compile.export._folder", lambda: None)
     options = dict(free=("k_vf", "angular_gain"), priors=VAGUE)
     a = gj.identify("paper-qmg", rate_only, **options)  # traced here or by an earlier test
     cols = dict(rate_only.columns)
@@ -434,7 +434,7 @@ def test_chunks_map_like_vmap_with_padding_and_empty_leaves():
     """VmapSolve(chunk=N)'s machinery: the lot padded to a multiple of N (copies of the last device, then
     dropped), jax.lax.map over vmapped chunks, equal to one vmap, with an empty (device, 0) leaf as the
     priors are. (Every identify of more than 16 devices runs chunked on a CPU: the Monte Carlo test's 100.)"""
-    from gyrojax._identify.lot import LotSpread, map_devices
+    from gyrojax._identify.strategies import LotSpread, map_devices
 
     n = 5
     tree = {"a": jnp.arange(n * 3.0).reshape(n, 3), "empty": jnp.zeros((n, 0)), "b": jnp.linspace(1.0, 2.0, n)}
@@ -556,8 +556,8 @@ def test_a_recovery_policy_is_a_small_object_on_the_solution_so_far():
     residuals a Gauss-Newton step cannot lower is certified, with the reason in its note; the one a step still
     improves stays stopped."""
     from gyrojax._identify.evaluation import Evaluation
-    from gyrojax._identify.lot import Lot
     from gyrojax._identify.recovery import DecrementCertificate, Solution, Solving
+    from gyrojax._identify.strategies import Lot
     from gyrojax._solution import RESULTS, result_code
 
     rng = np.random.default_rng(1)

@@ -8,8 +8,8 @@ import threading
 
 import pytest
 
-from gyrojax import _io
-from gyrojax._io import (
+from gyrojax._data import io as _io
+from gyrojax._data.io import (
     FOLDER_MARKER,
     OutputPathError,
     atomic_directory,

@@ -1,4 +1,4 @@
-"""The XLA-only LU (gyrojax/_linsolve.py) against numpy's LAPACK, transposed and batched, inside lineax's
+"""The XLA-only LU (gyrojax/_numerics/linsolve.py) against numpy's LAPACK, transposed and batched, inside lineax's
 differentiable linear_solve, and free of LAPACK custom calls in the compiled program."""
 
 import jax
@@ -7,7 +7,7 @@ import lineax as lx
 import numpy as np
 import pytest
 
-from gyrojax._linsolve import PivotedLU, lu_factor, lu_solve, solve
+from gyrojax._numerics.linsolve import PivotedLU, lu_factor, lu_solve, solve
 
 
 RNG = np.random.default_rng(3)

@@ -1,4 +1,4 @@
-"""The round-off-aware Levenberg-Marquardt of gyrojax/_lm.py."""
+"""The round-off-aware Levenberg-Marquardt of gyrojax/_numerics/lm.py."""
 
 import jax.numpy as jnp
 import lineax as lx
@@ -6,8 +6,8 @@ import numpy as np
 import optimistix as optx
 import pytest
 
-from gyrojax._linsolve import PivotedLU
-from gyrojax._lm import LevenbergMarquardt, RunoffBound
+from gyrojax._numerics.linsolve import PivotedLU
+from gyrojax._numerics.lm import LevenbergMarquardt, RunoffBound
 
 
 RNG = np.random.default_rng(0)
@@ -178,7 +178,7 @@ def test_a_traced_step_budget_ends_the_solve_as_optimistix_max_steps_does():
     optimistix's static budget."""
     import equinox as eqx
 
-    from gyrojax._lm import STEP_CEILING, with_max_steps
+    from gyrojax._numerics.lm import STEP_CEILING, with_max_steps
 
     def rosenbrock(y, _):
         return jnp.stack([10 * (y[1] - y[0] ** 2), 1 - y[0]])

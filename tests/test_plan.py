@@ -11,12 +11,12 @@ from _virtual_rate_sweep import AbstractRateTableWithVirtualRate
 from scipy.stats import chi2 as scipy_chi2, ncx2
 
 import gyrojax as gj
-from gyrojax._parameters import Model, batched, build_entries, zero_effect
+from gyrojax._model.parameters import Model, batched, build_entries, zero_effect
+from gyrojax._numerics.stats import chi2_isf, ncx2_sf
 from gyrojax._plan import experiment as plan_experiment
 from gyrojax._plan.experiment import NoiseLevel, jacobians, predict, weighted_rows, window_correlation
 from gyrojax._plan.plan import Recommendation, _kept, _nuisances, _reduce, _residual_chi2, _run_info, _sf_variance
 from gyrojax._plan.power import power, required_noncentrality
-from gyrojax._stats import chi2_isf, ncx2_sf
 from gyrojax.cli import main
 
 

@@ -10,7 +10,7 @@ import pytest
 
 import gyrojax as gj
 from gyrojax import _plugins, load_effect_entry_points, load_effects_module
-from gyrojax._parameters import zero_effect
+from gyrojax._model.parameters import zero_effect
 from gyrojax._plugins import ENTRY_POINT_GROUP
 
 
@@ -218,8 +218,7 @@ def test_the_cli_refuses_an_effect_giving_nan_by_name(tmp_path, monkeypatch, cap
 
 
 def test_the_user_code_digest_follows_the_modules_an_effect_imports(tmp_path, monkeypatch):
-    from gyrojax import _export
-
+    from gyrojax._compile import export as _export
     # gyrojax's own files are hashed into the key too: held fixed, so that only the user code varies
     monkeypatch.setattr(_export, "_gyrojax_files_hash", lambda: "gyrojax")
     helper = tmp_path / "gjhelper_sign.py"

@@ -1,10 +1,10 @@
-"""The score test shared by candidate effects and shape probes (`gyrojax._probes.score_columns`), against
+"""The score test shared by candidate effects and shape probes (`gyrojax._diagnose.probes.score_columns`), against
 least squares done by hand."""
 
 import numpy as np
 import pytest
 
-from gyrojax._probes import score_columns
+from gyrojax._diagnose.probes import score_columns
 
 
 def test_score_is_the_chi2_a_refit_with_the_columns_removes():
@@ -55,7 +55,7 @@ def test_a_columns_unit_does_not_decide_its_degrees_of_freedom():
 def test_a_column_at_round_off_in_the_base_takes_no_real_direction_with_it():
     """A base column the data do not see (round-off, as an effect's even terms on odd data) must not remove part
     of the real columns' span: the projection equals the one without it."""
-    from gyrojax._probes import project_out
+    from gyrojax._diagnose.probes import project_out
 
     rng = np.random.default_rng(3)
     real = rng.normal(size=(50, 3)) * np.array([1e4, 3e3, 1.0])
@@ -107,7 +107,7 @@ def test_a_look_alike_is_named_with_its_separation_and_the_sweep_that_holds_it()
     the information factor is 9 / separation^2. A probe the data tell apart (> 3 sigma) or the effect's own
     form is not named."""
     from gyrojax._diagnose.discrepancy import look_alikes
-    from gyrojax._probes import project_out
+    from gyrojax._diagnose.probes import project_out
 
     rng = np.random.default_rng(5)
     fit, probe = _linear_fit(rng, c=1.0)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
-from gyrojax._absorb import absorption
+from gyrojax._plan.absorb import absorption
 from gyrojax._sweeps.drive_amplitude import AMPLITUDE_SIGMA_PPM
 from gyrojax._sweeps.drive_frequency import FREQUENCY_SIGMA_PPM
 from gyrojax._sweeps.steady import settled_points

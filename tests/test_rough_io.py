@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
-from gyrojax._fitio import MAGIC, header_digest
+from gyrojax._identify.fitio import MAGIC, header_digest
 from gyrojax.cli import main
 
 
@@ -175,8 +175,8 @@ def _other_data(data, tmp_path, name, device, change):
 @pytest.mark.slow
 def test_a_fit_is_used_only_with_the_data_it_was_fitted_to(saved, tmp_path, capsys):
     """The same device names and point counts were enough: a fit of other data was taken as theirs."""
-    from gyrojax._fitdata import fit_data
-    from gyrojax._fitmatch import check_fit_data
+    from gyrojax._identify.fitmatch import check_fit_data
+    from gyrojax._model.fitdata import fit_data
 
     fit, path, data = saved
     with warnings.catch_warnings():

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
-from gyrojax._fitdata import fit_data
 from gyrojax._identify.plausibility import check_signs
+from gyrojax._model.fitdata import fit_data
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -134,10 +134,10 @@ def test_a_constant_output_is_one_data_error_for_metrics_and_compensate(tmp_path
 def _synthetic_diagnosis(chi2, points, share, flagged=True, verdict="partly explained"):
     from types import SimpleNamespace
 
-    from gyrojax._compare import Finding
+    from gyrojax._diagnose.compare import Finding
     from gyrojax._diagnose.discrepancy import Discrepancy
     from gyrojax._diagnose.solution import Diagnosis, Step
-    from gyrojax._stats import chi2_sf
+    from gyrojax._numerics.stats import chi2_sf
 
     p = chi2_sf(chi2, points)
     finding = Finding("rate_table", "even bow", 40.0, 1, 1e-9, True, "an even (quadratic) shape: a bow")

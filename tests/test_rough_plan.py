@@ -18,8 +18,8 @@ import gyrojax as gj  # noqa: E402
 import gyrojax.plot as gplot  # noqa: E402
 from gyrojax._demo import table2_path  # noqa: E402
 from gyrojax._diagnose.score import score_candidates, separating_sweep  # noqa: E402
+from gyrojax._numerics.testability import MIN_TYPICAL_CHI2, is_testable, separates  # noqa: E402
 from gyrojax._plan.plan import MAX_BUDGET_MIN, _warnings  # noqa: E402
-from gyrojax._testability import MIN_TYPICAL_CHI2, is_testable, separates  # noqa: E402
 from gyrojax.cli import main  # noqa: E402
 
 

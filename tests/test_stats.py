@@ -5,7 +5,7 @@ import math
 import pytest
 from scipy.stats import chi2 as scipy_chi2
 
-from gyrojax._stats import chi2_isf, chi2_sf
+from gyrojax._numerics.stats import chi2_isf, chi2_sf
 
 
 @pytest.mark.parametrize("df", [1, 2, 3, 22, 264, 5280, 100000])

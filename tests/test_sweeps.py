@@ -103,8 +103,7 @@ def test_a_lot_of_a_nearby_size_reuses_the_compiled_settle(monkeypatch):
     those of the unpadded settle bit for bit."""
     import jax
 
-    from gyrojax import _lot
-
+    from gyrojax._lots import stack as _lot
     traces = []
 
     def listen(event, secs, fun_name="", **kw):

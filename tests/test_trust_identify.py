@@ -20,13 +20,12 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
-from gyrojax import _fitio
 from gyrojax._data.arrays import ARRAY_FIELDS
-from gyrojax._fitdata import fit_data
-from gyrojax._identify import EXIT_CODES, HELD_LABEL, chi2_p_value
+from gyrojax._identify import EXIT_CODES, HELD_LABEL, chi2_p_value, fitio as _fitio
 from gyrojax._identify.identifiability import sf_determinacy
 from gyrojax._identify.noise import contrasts, noise_scales
 from gyrojax._identify.plausibility import check_signs
+from gyrojax._model.fitdata import fit_data
 
 
 slow = pytest.mark.slow

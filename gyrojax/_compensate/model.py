@@ -57,7 +57,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
-from .._compile import jit
+from .._compile.jit import jit
 from .base import AbstractCompensation, AbstractCompensator, check_side, require_side
 from .points import RatePoints
 

@@ -9,9 +9,9 @@ import csv
 import os
 import re
 
-from .._reading import open_regular
 from .cells import DataError
 from .files import csv_records, read_parquet_devices, read_table, table_format
+from .reading import open_regular
 from .table import Table
 
 

@@ -11,10 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from .._io import atomic_open, atomic_path
-from .._reading import NotARegularFile, check_regular, open_regular
 from .._sweeps.registry import sweep_kind
 from .cells import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, DataError, show
+from .io import atomic_open, atomic_path
+from .reading import NotARegularFile, check_regular, open_regular
 from .table import Table
 
 

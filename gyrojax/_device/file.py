@@ -44,8 +44,8 @@ from .._electronics.dac import DAC
 from .._electronics.excitation import FTRExcitation
 from .._electronics.frontend import FrontEnd
 from .._gyroscope import Gyroscope
-from .._lot import as_arrays
-from .._parameters import PARAMETERS
+from .._lots.stack import as_arrays
+from .._model.parameters import PARAMETERS
 from .._physics.electrodes import DriveElectrode, FeedbackElectrode, VirtualCoriolisElectrode
 from .._physics.resonator import Resonator
 from .._physics.thermal import ConstantTemperature, PlateauTemperature, WarmupTemperature
@@ -467,7 +467,7 @@ def write_device_file(gyro: Gyroscope, path, *, provenance: dict | None = None, 
     """Write one device as a device file at `path` (atomically): every leaf in its canonical (SI) unit with
     `repr`, so that `read_device_file` gives it back bit for bit; `free` (names of `gyrojax.PARAMETERS`) marked
     `free = true`; `provenance` and `descriptions` ({leaf path: text}) as each value's provenance and comment."""
-    from .._io import atomic_write_bytes
+    from .._data.io import atomic_write_bytes
 
     atomic_write_bytes(path, device_file_text(gyro, provenance=provenance, free=free, descriptions=descriptions,
                                               source=source).encode("utf-8"))

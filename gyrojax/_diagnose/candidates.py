@@ -7,10 +7,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._effects.registry import EFFECTS
-from .._fitdata import FitData
-from .._fitmatch import check_fit_data
 from .._identify import Fit
-from .._parameters import Model
+from .._identify.fitmatch import check_fit_data
+from .._model.fitdata import FitData
+from .._model.parameters import Model
 
 
 def full_key(model: Model, data: FitData):

@@ -3,8 +3,8 @@ of an effect, the baseline's free columns, and the chi2 in excess of the degrees
 
 import numpy as np
 
-from .._fitdata import FitData
 from .._identify import Fit
+from .._model.fitdata import FitData
 
 
 def row_blocks(data: FitData):

@@ -16,9 +16,9 @@ import math
 
 import numpy as np
 
-from .._compare import recorded_coordinates
-from .._stats import chi2_sf
+from .._numerics.stats import chi2_sf
 from .._sweeps.registry import sweep_kind
+from .compare import recorded_coordinates
 from .space import ResidualSpace, Scored
 
 

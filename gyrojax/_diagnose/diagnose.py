@@ -6,23 +6,23 @@ import math
 
 import numpy as np
 
-from .._compare import compare, nonlinearity_residual_ppm
 from .._data.table import Table
-from .._fitdata import fit_data
 from .._identify import Fit, MultiStart, identify
-from .._parameters import DEFAULT_FREE, Model, as_model, zero_effect
+from .._model.fitdata import fit_data
+from .._model.parameters import DEFAULT_FREE, Model, as_model, zero_effect
+from .._numerics.stats import chi2_sf
 from .._plugins import nonfinite_effect
-from .._probes import PROBES
 from .._progress import as_progress
-from .._stats import chi2_sf
 from .candidates import baseline_model, candidate_effects, first_device, full_key, is_lot
 from .columns import effect_columns
+from .compare import compare, nonlinearity_residual_ppm
 from .discrepancy import look_alikes, score_probes, with_shapes
 from .encompass import encompassing_guard
 from .fdr import bh_q_values, selection_p
 from .formula import formula_coordinate, propose, term_size
 from .guards import MAX_TYPICAL_MULTIPLE, Rejection, contradictions, probe_guard, verdict_of
 from .locate import locate
+from .probes import PROBES
 from .score import cosine, score_candidates, separating_sweep
 from .solution import Diagnosis, Step
 
@@ -46,7 +46,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     - `ambiguity`: |cos| between fingerprints above which two candidates are reported as ambiguous.
     - `min_typical_chi2`: a candidate whose typical-size fingerprint, after the baseline took up what it
       could, changes the lot's chi2 by less than this is not testable on this data, whatever its p-value
-      (`gyrojax.plan` applies the same rule, `gyrojax/_testability.py`).
+      (`gyrojax.plan` applies the same rule, `gyrojax/_numerics/testability.py`).
     - `max_typical_multiple`: a candidate whose score implies a size beyond this many times its typical
       size is not confirmed (the reason says so).
     - `probes`: the generic shapes scored beside the candidates (`gyrojax.PROBES`).
@@ -120,7 +120,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         return compared[id(f)]
 
     def first_ranking(scores, threshold):
-        # one rule (gyrojax._testability): untestable is what score_candidates marks so, whatever its p-value
+        # one rule (gyrojax._numerics.testability): untestable is what score_candidates marks so, whatever its p-value
         return scores, tuple(c.effect for c in scores if not c.testable)
 
     if remaining and max_effects == 0:  # rank at the baseline only

@@ -6,12 +6,12 @@ import math
 
 import numpy as np
 
-from .._fitdata import FitData
 from .._identify import Fit
-from .._probes import PROBES, design, project_out, score_columns
+from .._model.fitdata import FitData
 from .columns import base_columns, effect_columns, excess_chi2, row_blocks
 from .formula import lot_mean
 from .locate import SIZE_REL_STDERR
+from .probes import PROBES, design, project_out, score_columns
 from .space import ResidualSpace
 
 

@@ -4,7 +4,7 @@ formula is the diagnosis's, at its fitted size, ready for `--effects-module`."""
 import keyword
 import re
 
-from .._io import atomic_write_bytes
+from .._data.io import atomic_write_bytes
 from .._sweeps.registry import sweep_kind
 from .._sweeps.steady import AbstractSteadySweep
 from .formula import Formula

@@ -15,7 +15,7 @@ amplifier) removes nothing that F would not."""
 import numpy as np
 
 from .._identify import Fit
-from .._stats import chi2_sf
+from .._numerics.stats import chi2_sf
 from .space import ResidualSpace
 
 

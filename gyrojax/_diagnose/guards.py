@@ -6,9 +6,9 @@ import dataclasses
 import numpy as np
 
 from .._identify import Fit
-from .._probes import score_columns
-from .._stats import chi2_isf
+from .._numerics.stats import chi2_isf
 from .columns import base_columns, effect_columns, excess_chi2
+from .probes import score_columns
 from .score import TYPICAL_RANK_TOL, CandidateScore
 
 

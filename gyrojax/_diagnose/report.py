@@ -16,7 +16,7 @@ def write_report(diagnosis: "Diagnosis", out_dir) -> dict:
     import matplotlib.pyplot as plt
 
     from .. import plot
-    from .._io import atomic_directory, atomic_write_bytes, atomic_write_json
+    from .._data.io import atomic_directory, atomic_write_bytes, atomic_write_json
     from .solution import discrepancy_text
 
     with atomic_directory(out_dir) as folder:

@@ -7,11 +7,11 @@ import math
 import numpy as np
 
 from .._effects.registry import EFFECTS
-from .._fitdata import FitData
 from .._identify import Fit
-from .._probes import score_columns
-from .._testability import MIN_TYPICAL_CHI2, is_testable, separates
+from .._model.fitdata import FitData
+from .._numerics.testability import MIN_TYPICAL_CHI2, is_testable, separates
 from .columns import effect_columns, row_blocks
+from .probes import score_columns
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,7 +63,7 @@ TYPICAL_RANK_TOL = 1e-4
 def score_candidates(fit: Fit, candidates, *, rank_tol: float = TYPICAL_RANK_TOL,
                      min_typical_chi2: float = MIN_TYPICAL_CHI2) -> tuple[CandidateScore, ...]:
     """Score test of each candidate (effect name held at zero in `fit.model`) against the fitted model. A
-    candidate is testable by `gyrojax._testability`'s rule: its typical size leaves chi2 `min_typical_chi2`."""
+    candidate is testable by `gyrojax._numerics.testability`'s rule: its typical size leaves chi2 `min_typical_chi2`."""
     jac = np.asarray(fit.jacobian)
     res = np.asarray(fit.residual_vector)
     free = np.asarray(fit.free)
@@ -100,7 +100,7 @@ def cosine(a, b):
 
 def separating_sweep(a, b, data: FitData, ambiguity):
     """The sweep of `data` on whose rows the fingerprints `a` and `b` (at their fitted sizes) differ most, among
-    those that separate them by `gyrojax._testability.separates` (what one leaves after the other is
+    those that separate them by `gyrojax._numerics.testability.separates` (what one leaves after the other is
     testable); None when no sweep does."""
     best, best_cos = None, ambiguity
     for sweep, i, j in row_blocks(data):

@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 
-from .._compare import nonlinearity_residual_ppm
 from .._effects.registry import EFFECTS
 from .._identify import Fit
+from .compare import nonlinearity_residual_ppm
 from .guards import MAX_TYPICAL_MULTIPLE
 from .locate import Location
 from .report import write_report

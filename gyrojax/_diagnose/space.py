@@ -10,13 +10,13 @@ import dataclasses
 import numpy as np
 
 from .._identify import Fit
-from .._probes import standardised
-from .._stats import chi2_sf
+from .._numerics.stats import chi2_sf
 from .columns import base_columns, excess_chi2, row_blocks
+from .probes import standardised
 
 
 # A projected direction carries information when its eigenvalue exceeds this share of the block's own largest
-# (before projection): the same unit-free rule as the probes' score test (`gyrojax._probes.RELATIVE_RANK_TOL`),
+# (before projection): the same unit-free rule as the probes' score test (`gyrojax._diagnose.probes.RELATIVE_RANK_TOL`),
 # a little coarser since flexible bases (hat functions, products) have nearly collinear members.
 RANK_TOL = 1e-9
 
@@ -144,7 +144,7 @@ class ResidualSpace:
 
 def _spans(base: np.ndarray) -> list:
     """Each device's orthonormal basis of the span of `base` (device, rows, m), singular values above 1e-12 of
-    the largest (as `gyrojax._probes.project_out`)."""
+    the largest (as `gyrojax._diagnose.probes.project_out`)."""
     out = []
     for d in range(base.shape[0]):
         if base.shape[-1] == 0:

@@ -9,7 +9,7 @@ import os
 
 from .._data.chunked import device_order, split_csv
 from .._data.files import table_format
-from .._io import atomic_write_json
+from .._data.io import atomic_write_json
 
 
 def parts_folder(out: str) -> str:

@@ -8,10 +8,10 @@ from collections import Counter
 
 import numpy as np
 
+from .._data.io import atomic_write_json
 from .._identify.covariance import chi2_p_value
 from .._identify.fit import EXIT_CODES, EXIT_PRECEDENCE
-from .._io import atomic_write_json
-from .._parameters import DEFAULT_FREE, as_model
+from .._model.parameters import DEFAULT_FREE, as_model
 from .._progress import as_progress
 from .engine import DistributedSolve
 from .plan import Plan

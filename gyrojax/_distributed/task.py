@@ -7,7 +7,7 @@ import sys
 import time
 import traceback
 
-from .._io import atomic_write_json
+from .._data.io import atomic_write_json
 
 
 def fit_chunk(task: dict) -> dict:
@@ -16,8 +16,8 @@ def fit_chunk(task: dict) -> dict:
     import numpy as np
 
     from .._data.chunked import read_chunk
-    from .._fitreport import fit_report
     from .._identify import VmapSolve, identify
+    from .._identify.report import fit_report
 
     start = time.perf_counter()
     try:

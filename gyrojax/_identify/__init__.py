@@ -5,7 +5,7 @@ returns a `Fit`. One concept per file:
 - `problem.py`: the problem of one device (parameters, masks, priors) and its residuals.
 - `evaluation.py`: `Evaluation` (residuals, Jacobian over every entry, the scale factor and its gradient) and the
   residual function the solvers run, which carries it as aux.
-- `lot.py`: how a lot's devices are solved (vmapped in chunks, sharded, one after another, or jointly), in one
+- `strategies.py`: how a lot's devices are solved (vmapped in chunks, sharded, one after another, or jointly), in one
   compiled program per fit that also evaluates at the start (stopped after one step).
 - `recovery.py`: what is tried when a solve ends badly (multi-start, a retry with another solver, the restart of
   a run-off fit, the decrement certificate).
@@ -17,6 +17,7 @@ returns a `Fit`. One concept per file:
 - `coverage.py`: the coverage audit of a fit's intervals (`coverage`, `Coverage`): simulated draws refitted.
 - `population.py`: the lot as a population (`PopulationSolve`, `PopulationFit`): random effects, empirical Bayes.
 - `fit.py`: `Fit`, `Unidentifiable`, statuses and exit codes.
+- `fitio.py`, `fitmatch.py`, `report.py`: fit files, whether a fit belongs to the data it is given, the identify report.
 - `shortcuts.py`: the strings accepted for strategy objects (`solver="levenberg-marquardt"`), in one place.
 """
 
@@ -31,12 +32,6 @@ from .fit import (
     Unidentifiable as Unidentifiable,
 )
 from .identify import identify as identify
-from .lot import (
-    AbstractLotSolve as AbstractLotSolve,
-    JointSolve as JointSolve,
-    LoopSolve as LoopSolve,
-    VmapSolve as VmapSolve,
-)
 from .population import (
     PopulationFit as PopulationFit,
     PopulationParameter as PopulationParameter,
@@ -48,4 +43,10 @@ from .recovery import (
     MultiStart as MultiStart,
     RestartRunoffs as RestartRunoffs,
     RetryWithSolver as RetryWithSolver,
+)
+from .strategies import (
+    AbstractLotSolve as AbstractLotSolve,
+    JointSolve as JointSolve,
+    LoopSolve as LoopSolve,
+    VmapSolve as VmapSolve,
 )

@@ -10,10 +10,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile import jit
-from .._fitdata import FitData
-from .._parameters import apply_u
-from .._residuals import block_residuals, num_biases, num_points
+from .._compile.jit import jit
+from .._model.fitdata import FitData
+from .._model.parameters import apply_u
+from .._model.residuals import block_residuals, num_biases, num_points
 from .._solution import RESULTS, result_code, result_message
 from .covariance import chi2_p_value, covariance, joint_jacobian
 from .fit import Fit, p_text

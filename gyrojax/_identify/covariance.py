@@ -6,7 +6,7 @@ import math
 import numpy as np
 from jax.scipy.special import betainc, gammaincc
 
-from .._stats import chi2_sf
+from .._numerics.stats import chi2_sf
 
 
 def chi2_p_value(chi2, dof, noise_dof):

@@ -15,8 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._lm import LevenbergMarquardt
-from .._residuals import run_biases
+from .._model.residuals import run_biases
+from .._numerics.lm import LevenbergMarquardt
 from .problem import evaluate_at
 
 

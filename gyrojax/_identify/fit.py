@@ -8,8 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from .._fitdata import FitData
-from .._parameters import Entry, Model
+from .._model.fitdata import FitData
+from .._model.parameters import Entry, Model
 
 
 STATUSES = ("ok", "model rejected", "not determined", "not converged")

@@ -5,7 +5,7 @@ along a direction the data leave open (its determinacy)."""
 
 import numpy as np
 
-from .._fitdata import FitData
+from .._model.fitdata import FitData
 from .._sweeps.registry import sweep_kind
 from .covariance import joint_jacobian
 from .fit import Unidentifiable

@@ -1,6 +1,6 @@
 """`identify`: fit a model's free parameters to every sweep of a lot at once, with uncertainties.
 
-The fit minimises chi2 = sum r^2 over all standardised residuals (see `gyrojax/_residuals.py`; the run biases are
+The fit minimises chi2 = sum r^2 over all standardised residuals (see `gyrojax/_model/residuals.py`; the run biases are
 projected out exactly) with optimistix, per device in one vmapped, compiled call, or jointly for the whole lot
 when some parameters are shared. Before solving, the weighted Jacobian at the start is decomposed: a
 direction of parameter space the data cannot fix to better than its natural size (singular value below
@@ -29,21 +29,21 @@ import jax
 import numpy as np
 
 from .._data.table import Table
-from .._fitdata import FitData, fit_data
-from .._parameters import DEFAULT_FREE, as_model
+from .._model.fitdata import FitData, fit_data
+from .._model.parameters import DEFAULT_FREE, as_model
 from .._progress import as_progress
 from .._simulate.tiers import Steady
 from .._solution import RESULTS, result_code
 from .assemble import assemble_fit
 from .fit import Fit
 from .identifiability import hold_unidentifiable
-from .lot import AbstractLotSolve, Lot
 from .noise import estimated_noise, first_fit_scale, reweighted
 from .plausibility import check_absurd_outputs, check_signs
 from .population import PopulationFit, PopulationSolve, population_fit
 from .problem import make_problem, with_free
 from .recovery import RECOVERY, AbstractRecovery, DecrementCertificate, MultiStart, RetryWithSolver, Solution, Solving
 from .shortcuts import lot_solve_from, solver_from
+from .strategies import AbstractLotSolve, Lot
 
 
 def identify(model, data, *, free=DEFAULT_FREE, shared=(), hold=(), priors=None, tier=Steady(),

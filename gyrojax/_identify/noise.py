@@ -8,7 +8,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._fitdata import FitData
+from .._model.fitdata import FitData
 from .._sweeps.registry import sweep_kind
 from .covariance import mc_p_value, pooled_dof
 from .fit import Fit

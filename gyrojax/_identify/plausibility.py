@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
-from .._fitdata import FitData
-from .._parameters import PARAMETERS
+from .._model.fitdata import FitData
+from .._model.parameters import PARAMETERS
 from .._sweeps.registry import sweep_kind
 
 

@@ -33,9 +33,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._parameters import PARAMETERS
+from .._model.parameters import PARAMETERS
 from .fit import Fit
-from .lot import AbstractLotSolve, VmapSolve
+from .strategies import AbstractLotSolve, VmapSolve
 
 
 Z95 = 1.959963984540054

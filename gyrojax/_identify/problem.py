@@ -9,9 +9,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._fitdata import FitData
-from .._parameters import PARAMETERS, Entry, Model, apply_u, batched, build_entries, read_values
-from .._residuals import device_residuals
+from .._model.fitdata import FitData
+from .._model.parameters import PARAMETERS, Entry, Model, apply_u, batched, build_entries, read_values
+from .._model.residuals import device_residuals
 from .._simulate.tiers import Steady
 from .._sweeps.registry import sweep_kind
 

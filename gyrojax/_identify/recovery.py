@@ -17,9 +17,9 @@ from .._solution import RESULTS, result_code
 from .covariance import gauss_newton_decrement
 from .evaluation import Evaluation
 from .identifiability import weak_directions
-from .lot import Lot
 from .problem import Problem
 from .shortcuts import solver_from
+from .strategies import Lot
 
 
 class Solving(eqx.Module):

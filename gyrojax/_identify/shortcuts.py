@@ -3,8 +3,8 @@
 
 import optimistix as optx
 
-from .._lm import LevenbergMarquardt
-from .lot import AbstractLotSolve, JointSolve, LoopSolve, VmapSolve
+from .._numerics.lm import LevenbergMarquardt
+from .strategies import AbstractLotSolve, JointSolve, LoopSolve, VmapSolve
 
 
 SOLVERS = ("levenberg-marquardt", "gauss-newton", "bfgs")

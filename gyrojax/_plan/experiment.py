@@ -15,11 +15,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile import jit
+from .._compile.jit import jit
 from .._gyroscope import Gyroscope
-from .._noise import DAC_VOLTMETER_SIGMA_V, RateNoise
-from .._parameters import apply_u, read_values
-from .._residuals import settle_with_scale_factor
+from .._lots.noise import DAC_VOLTMETER_SIGMA_V, RateNoise
+from .._model.parameters import apply_u, read_values
+from .._model.residuals import settle_with_scale_factor
 from .._simulate.tiers import Steady
 from .._sweeps.base import AbstractSweep
 from .._sweeps.protocol import Protocol
@@ -240,7 +240,7 @@ def window_correlation(noise: RateNoise, n: int, dwell_s: float) -> np.ndarray:
 def weighted_rows(experiment: CandidateExperiment, jac: np.ndarray, sigmas: np.ndarray) -> np.ndarray:
     """One run's rows of the standardised residuals' Jacobian (point, param) for one device: each point
     over its sigma, with the run's turn-on bias projected out (the weighted mean of the run removed, as
-    `gyrojax/_residuals.py` does) when the sweep is biased."""
+    `gyrojax/_model/residuals.py` does) when the sweep is biased."""
     jac = np.asarray(jac, dtype=float)
     if experiment.biased:
         w = 1.0 / sigmas**2

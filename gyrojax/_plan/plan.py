@@ -3,7 +3,7 @@ budget on the scale factor. From the baseline fit's Jacobians and one Jacobian o
 points; no refit.
 
 **Effects.** Identification's residuals are standardised and linear in the parameters near the fit, so a
-candidate effect at its typical size theta (internal units: 1 = typical, `gyrojax/_parameters.py`) leaves an
+candidate effect at its typical size theta (internal units: 1 = typical, `gyrojax/_model/parameters.py`) leaves an
 expected chi2 (the noncentrality of its test) of
 
     lambda = theta^T (I_ee - I_eb I_bb^+ I_be) theta,    I = J_0^T J_0 + sum_k n_k J_k^T (1 - P_k) J_k
@@ -33,15 +33,15 @@ import numpy as np
 from .._data.table import Table
 from .._diagnose import baseline_model, candidate_effects, full_key
 from .._effects.registry import EFFECTS
-from .._fitdata import FitData, fit_data
 from .._identify import Fit, identify
 from .._identify.fit import p_text
 from .._identify.problem import sf_temperature
-from .._noise import RateNoise
-from .._parameters import DEFAULT_FREE, Model, as_model, zero_effect
+from .._lots.noise import RateNoise
+from .._model.fitdata import FitData, fit_data
+from .._model.parameters import DEFAULT_FREE, Model, as_model, zero_effect
+from .._numerics.testability import MIN_TYPICAL_CHI2, is_testable
 from .._progress import as_progress
 from .._sweeps.protocol import Protocol
-from .._testability import MIN_TYPICAL_CHI2, is_testable
 from .experiment import (
     READS,
     CandidateExperiment,
@@ -105,7 +105,7 @@ class CandidatePlan(eqx.Module):
     """What one candidate effect needs: its test on the data given, what one run of each experiment adds,
     and the cheapest set of runs with which its test reaches the target power.
 
-    `testable` is `gyrojax._testability`'s rule, the diagnosis's own: a typical size leaves an expected chi2
+    `testable` is `gyrojax._numerics.testability`'s rule, the diagnosis's own: a typical size leaves an expected chi2
     of at least `MIN_TYPICAL_CHI2` on the data given. `detected` is the stronger demand the plan works to: the
     test's power at the typical size reaches `target_power`; runs are recommended until it does."""
 
@@ -592,7 +592,7 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
             counts = tuple(1 if i == j else 0 for i in range(len(experiments)))
             lj = lam(counts)
             per.append((e.name, e.minutes, lj, power(lj, df, alpha)))
-        testable = is_testable(now)  # the diagnosis's rule (gyrojax/_testability.py)
+        testable = is_testable(now)  # the diagnosis's rule (gyrojax/_numerics/testability.py)
         detected = p_now >= target_power
         recommended, rec_chi2, rec_power, reason = (), now, p_now, ""
         if detected:

@@ -5,11 +5,11 @@ expected chi2 after the nuisance parameters took what they could), noncentral ch
 
     P(X > x) = sum_j Pois(j; lambda / 2) Q(df / 2 + j, x / 2)
 
-with Q the regularised upper incomplete gamma function (`gyrojax/_stats.py`). The power at level alpha is
+with Q the regularised upper incomplete gamma function (`gyrojax/_numerics/stats.py`). The power at level alpha is
 P(X > c) with c the (1 - alpha) quantile of chi2(df).
 """
 
-from .._stats import check_df, chi2_isf, ncx2_sf
+from .._numerics.stats import check_df, chi2_isf, ncx2_sf
 
 
 def power(nc: float, df: int, alpha: float = 0.01) -> float:

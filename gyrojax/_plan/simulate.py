@@ -5,9 +5,9 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from .._campaign import campaign_lot, simulate_table
 from .._data.table import Table
 from .._gyroscope import Gyroscope
+from .._lots.campaign import campaign_lot, simulate_table
 from .._physics.thermal import ConstantTemperature
 
 

@@ -13,7 +13,7 @@ import equinox as eqx
 import jax
 from jax.flatten_util import ravel_pytree
 
-from .._linsolve import lu_factor, lu_solve
+from .._numerics.linsolve import lu_factor, lu_solve
 
 
 @eqx.filter_custom_jvp

@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 
 from .._gyroscope import Gyroscope
-from .._stimulus import Stimulus
+from .._physics.stimulus import Stimulus
 from .._terms import AbstractRateTerm
 
 

@@ -7,10 +7,10 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-from .._compile import jit
+from .._compile.jit import jit
 from .._gyroscope import Gyroscope
-from .._linsolve import solve
-from .._stimulus import Stimulus
+from .._numerics.linsolve import solve
+from .._physics.stimulus import Stimulus
 from ._model import averaged_field, slow_scales
 from .tiers import Steady
 

@@ -15,9 +15,9 @@ from jaxtyping import Array, Float, Int
 
 from .._checks import check_positive
 from .._gyroscope import Gyroscope
-from .._linsolve import PivotedLU, lu_factor, lu_solve
+from .._numerics.linsolve import PivotedLU, lu_factor, lu_solve
+from .._physics.stimulus import Stimulus
 from .._solution import RESULTS, result_code, result_message
-from .._stimulus import Stimulus
 from ._hairer_controller import HairerController
 from ._implicit import implicit_root
 from ._model import (
@@ -270,7 +270,7 @@ def _steady_residual(orders, z, inputs):
 
 def _steady_find(tier, orders, inputs):
     y0 = _steady_start(inputs)
-    # XLA-only linear solves: see gyrojax/_linsolve.py. Not differentiated (see implicit_root).
+    # XLA-only linear solves: see gyrojax/_numerics/linsolve.py. Not differentiated (see implicit_root).
     method = optx.Chord if tier.jacobian == "once" else optx.Newton
     sol = optx.root_find(ft.partial(_steady_residual, orders), method(rtol=tier.rtol, atol=tier.atol,
                          linear_solver=PivotedLU()), y0, inputs, max_steps=tier.max_steps, throw=False,

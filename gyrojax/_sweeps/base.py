@@ -13,8 +13,8 @@ from .._physics.thermal import ConstantTemperature
 
 
 if TYPE_CHECKING:
-    from .._noise import RateNoise
-    from .lot import LotCampaign
+    from .._lots.noise import RateNoise
+    from .lot_campaign import LotCampaign
     from .protocol import Protocol
 
 

@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile import jit
+from .._compile.jit import jit
 from .._gyroscope import Gyroscope
 from .._simulate._model import SlowState, controls, dac_voltage, expj, phase_grid
 from .._simulate.tiers import Steady
@@ -43,7 +43,7 @@ from .steady import per_run, raise_unsettled, settled_points
 
 
 if TYPE_CHECKING:
-    from .lot import LotCampaign
+    from .lot_campaign import LotCampaign
     from .protocol import Protocol
 
 

@@ -8,14 +8,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Real
 
-from .._compile import jit
+from .._compile.jit import jit
 from .._gyroscope import Gyroscope
 from .._units import DEG
 from .base import AbstractSweep
 
 
 if TYPE_CHECKING:
-    from .lot import LotCampaign
+    from .lot_campaign import LotCampaign
     from .protocol import Protocol
 
 

@@ -16,7 +16,7 @@ from .setpoint import AbstractSetpointSweep, SetpointReading
 
 
 if TYPE_CHECKING:
-    from .lot import LotCampaign
+    from .lot_campaign import LotCampaign
     from .protocol import Protocol
 
 

@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .._gyroscope import Gyroscope
-from .._stimulus import Stimulus
+from .._physics.stimulus import Stimulus
 from .steady import AbstractSteadySweep
 from .vcf_static import VCF_CARRIER_V
 

@@ -7,10 +7,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from .._compile import jit
+from .._compile.jit import jit
 from .._gyroscope import Gyroscope
+from .._physics.stimulus import Stimulus
 from .._simulate.tiers import AbstractTier, Settled, Steady
-from .._stimulus import Stimulus
 from .._units import DEG
 from .steady import AbstractSteadySweep, settled_points
 

@@ -33,16 +33,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._gyroscope import Gyroscope
+from .._physics.stimulus import Stimulus
 from .._simulate._model import SlowState, WaveState
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._solution import RESULTS
-from .._stimulus import Stimulus
 from .base import AbstractSweep
 from .steady import AbstractSettledSweep, lot_steady, raise_unsettled, read_out, settled_points
 
 
 if TYPE_CHECKING:
-    from .lot import LotCampaign
+    from .lot_campaign import LotCampaign
     from .protocol import Protocol
 
 

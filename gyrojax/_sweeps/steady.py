@@ -17,18 +17,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile import jit, top_level
+from .._compile.jit import jit, top_level
 from .._gyroscope import Gyroscope
-from .._lot import bucket_size, pad_devices, unpad_devices
+from .._lots.stack import bucket_size, pad_devices, unpad_devices
+from .._physics.stimulus import Stimulus
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._solution import RESULTS, result_code
-from .._stimulus import Stimulus
 from .._terms import AbstractOutputTerm, PointConditions
 from .base import AbstractSweep, at_temperature
 
 
 if TYPE_CHECKING:
-    from .lot import LotCampaign
+    from .lot_campaign import LotCampaign
 
 
 class AbstractSettledSweep(AbstractSweep):
@@ -204,7 +204,7 @@ def lot_steady(lot, requests, tier):
     (device, run, point) and inputs and times (point,) or (run, point) (times NaN: not recorded). Returns what
     each request's kind keeps (a `Settled` or a `SetpointReading`), (device, run, point).
 
-    Called outside a trace, the lot is padded to `gyrojax._lot.bucket_size` devices (copies of its last device,
+    Called outside a trace, the lot is padded to `gyrojax._lots.stack.bucket_size` devices (copies of its last device,
     settled, then dropped), so that a lot of a nearby size reuses the compiled settle."""
     n = np.shape(requests[0][2])[0]
     size = bucket_size(n) if top_level() else n

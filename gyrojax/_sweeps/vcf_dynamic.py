@@ -8,17 +8,17 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from .._compile import jit
+from .._compile.jit import jit
 from .._gyroscope import Gyroscope
+from .._physics.stimulus import Stimulus
 from .._simulate.response import linearise
-from .._stimulus import Stimulus
 from .base import AbstractSweep, at_temperature
 from .steady import per_run
 from .vcf_static import VCF_CARRIER_V
 
 
 if TYPE_CHECKING:
-    from .lot import LotCampaign
+    from .lot_campaign import LotCampaign
     from .protocol import Protocol
 
 

@@ -6,8 +6,8 @@ import numpy as np
 from jaxtyping import ArrayLike, Float
 
 from .._gyroscope import Gyroscope
+from .._physics.stimulus import Stimulus
 from .._simulate.tiers import AbstractTier, Settled, Steady
-from .._stimulus import Stimulus
 from .rate_table import DING_ZHOU_2025_RATES_DPS
 from .steady import AbstractSteadySweep, settled_points
 

@@ -4,7 +4,7 @@ import equinox as eqx
 import numpy as np
 
 from .._gyroscope import Gyroscope
-from .._noise import RateNoise
+from .._lots.noise import RateNoise
 from .._simulate.tiers import AbstractTier
 from .base import AbstractSweep
 from .registry import stream_index

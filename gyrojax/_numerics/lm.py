@@ -28,7 +28,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from ._linsolve import PivotedLU
+from .linsolve import PivotedLU
 
 
 class _RadiusState(eqx.Module):
@@ -93,7 +93,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     def __init__(self, rtol: float, atol: float, linear_solver: lx.AbstractLinearSolver | None = None,
                  roundoff: float = 1e-10, undamped: bool = False):
         if linear_solver is None:
-            # Normal equations through an XLA-only LU, not lineax's LAPACK QR: see gyrojax/_linsolve.py.
+            # Normal equations through an XLA-only LU, not lineax's LAPACK QR: see gyrojax/_numerics/linsolve.py.
             linear_solver = lx.Normal(PivotedLU(zero_pivot_gives_zero=True))
         self.rtol, self.atol = rtol, atol
         self.norm = optx.max_norm

@@ -3,7 +3,7 @@
 import equinox as eqx
 import jax.numpy as jnp
 
-from ._checks import check_finite, check_nonnegative
+from .._checks import check_finite, check_nonnegative
 
 
 class Stimulus(eqx.Module):

@@ -33,7 +33,7 @@ import math
 import equinox as eqx
 import numpy as np
 
-from ._checks import check_nonnegative, check_positive
+from .._checks import check_nonnegative, check_positive
 
 
 def _allan_gm(x):

@@ -72,11 +72,11 @@ import jax
 import numpy as np
 from jax import export
 
-from ._cache import folder_problem, warn_once
-from ._compile import compiler_options, jit, top_level
-from ._io import atomic_write_bytes
-from ._reading import open_regular, read_exactly
-from ._version import __version__
+from .._data.io import atomic_write_bytes
+from .._data.reading import open_regular, read_exactly
+from .._version import __version__
+from .cache import folder_problem, warn_once
+from .jit import compiler_options, jit, top_level
 
 
 FOLDER = "gyrojax_export"
@@ -336,7 +336,7 @@ def _trace_context() -> str:
 def program_key(name: str, args: tuple) -> str:
     """The key of program `name` called with `args` (a hex SHA-256); raises `_Unhashable` when some part of it
     cannot be described deterministically."""
-    from ._plugins import user_code_digest  # user effect modules and the helpers they import
+    from .._plugins import user_code_digest  # user effect modules and the helpers they import
 
     devices = jax.devices()
     out = [name, repr(_versions()), user_code_digest(), _trace_context(), *_replaced(), jax.default_backend(),
@@ -631,7 +631,7 @@ def _path(name: str, key: str) -> str:
 
 
 def cached_program(name: str, fn: Callable) -> Callable:
-    """`gyrojax._compile.jit(fn)` (`equinox.filter_jit` with gyrojax's XLA options), whose traced program is
+    """`gyrojax._compile.jit.jit(fn)` (`equinox.filter_jit` with gyrojax's XLA options), whose traced program is
     kept beside the compilation cache (see the module's docstring) so that a later process with the same
     structure does not trace it again. Called inside another trace, it is `fn` traced into that program.
 

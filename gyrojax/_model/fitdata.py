@@ -6,10 +6,10 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ._data.arrays import COORDINATES, SweepArrays
-from ._data.cells import REQUIRED_COLUMNS, DataError
-from ._data.table import Table
-from ._sweeps.registry import sweep_names
+from .._data.arrays import COORDINATES, SweepArrays
+from .._data.cells import REQUIRED_COLUMNS, DataError
+from .._data.table import Table
+from .._sweeps.registry import sweep_names
 
 
 FIT_COLUMNS = REQUIRED_COLUMNS + ("output_sigma",) + tuple(COORDINATES.values())

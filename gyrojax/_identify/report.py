@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 
-from ._identify import HELD_LABEL, Fit
+from . import HELD_LABEL, Fit
 
 
 def _num(x):
@@ -34,7 +34,7 @@ def fit_report(fit: Fit) -> dict:
     - `chi2_red`, `p_value` (whole lot), `reject_alpha`, `exit_status` (see `Fit.exit_status`), `source`;
     - `compare`: where the model fails (`gyrojax.compare`).
     """
-    from ._compare import compare
+    from .._diagnose.compare import compare
 
     values, stderr = np.asarray(fit.values), np.asarray(fit.stderr)
     scaled = np.asarray(fit.stderr_scaled)

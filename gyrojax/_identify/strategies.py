@@ -12,10 +12,10 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._compile import jit
-from .._export import cached_program
-from .._lm import RunoffBound, with_max_steps
-from .._lot import bucket_size, pad_devices, unpad_devices
+from .._compile.export import cached_program
+from .._compile.jit import jit
+from .._lots.stack import bucket_size, pad_devices, unpad_devices
+from .._numerics.lm import RunoffBound, with_max_steps
 from .._solution import RESULTS, result_code
 from .evaluation import Evaluation, evaluated, evaluation_step, final_evaluation, one_trace
 from .problem import nonfinite_explained
@@ -106,7 +106,7 @@ def _solve_joint(problem_batch, u0, u_lot0, solver, max_steps):
 
 class LotSpread(eqx.Module):
     """Pads the device axis to a multiple of `shards` (placing it across a 1-D mesh of JAX devices) or of
-    `chunk` (for `map_devices`), and with `bucket` to `gyrojax._lot.bucket_size` (a lot of at most 16 devices to
+    `chunk` (for `map_devices`), and with `bucket` to `gyrojax._lots.stack.bucket_size` (a lot of at most 16 devices to
     the next power of two); unpads results. Padding devices are copies of the last one: solved, then dropped.
     With one shard, no chunk and no bucket it does nothing."""
 

@@ -18,9 +18,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._effects.base import AbstractEffect
-from ._effects.registry import EFFECTS
-from ._gyroscope import Gyroscope
+from .._effects.base import AbstractEffect
+from .._effects.registry import EFFECTS
+from .._gyroscope import Gyroscope
 
 
 class Parameter(eqx.Module):
@@ -140,8 +140,8 @@ def as_model(model) -> Model:
     if isinstance(model, Gyroscope):
         return Model(model)
     if isinstance(model, str):
-        from ._device.file import is_device_file, load_device
-        from ._presets import preset
+        from .._device.file import is_device_file, load_device
+        from .._presets import preset
 
         return Model(load_device(model) if is_device_file(model) else preset(model))
     raise TypeError(f"model must be a gyrojax.Model, a Gyroscope, a preset name or a device file (.toml), got "

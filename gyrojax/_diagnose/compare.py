@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from ._stats import chi2_sf
+from .._numerics.stats import chi2_sf
 
 
 def _normal_cdf(z):

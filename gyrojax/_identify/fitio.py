@@ -37,14 +37,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._data.arrays import ARRAY_FIELDS, SweepArrays
-from ._fitdata import FIT_COLUMNS, FitData
-from ._identify import Fit, Unidentifiable, chi2_p_value
-from ._io import atomic_write_bytes
-from ._parameters import Entry, Model, batched, zero_effect
-from ._plugins import user_code_changes, user_effect_code
-from ._reading import open_regular, read_exactly
-from ._version import __version__
+from .._data.arrays import ARRAY_FIELDS, SweepArrays
+from .._data.io import atomic_write_bytes
+from .._data.reading import open_regular, read_exactly
+from .._model.fitdata import FIT_COLUMNS, FitData
+from .._model.parameters import Entry, Model, batched, zero_effect
+from .._plugins import user_code_changes, user_effect_code
+from .._version import __version__
+from . import Fit, Unidentifiable, chi2_p_value
 
 
 MAGIC = b"GYROJAX-FIT\n"
@@ -74,7 +74,7 @@ def _unbatched_device(model: Model):
 def _preset_of(model: Model) -> str | None:
     """The preset whose tree structure (static configuration included) the fitted device has; None for another
     device (one from a device file: the header then stores the device as a device file's text)."""
-    from ._presets import PRESETS, preset
+    from .._presets import PRESETS, preset
 
     target = jax.tree.structure(_unbatched_device(model))
     for name in PRESETS:
@@ -84,8 +84,8 @@ def _preset_of(model: Model) -> str | None:
 
 
 def _skeleton_model(preset_name: str | None, effects: tuple[str, ...], n: int, device_file: str | None = None):
-    from ._device.file import device_from_text
-    from ._presets import preset
+    from .._device.file import device_from_text
+    from .._presets import preset
 
     device = preset(preset_name) if device_file is None else device_from_text(device_file, check_loops=False).device
     return batched(Model(device, tuple(zero_effect(e) for e in effects)), n)
@@ -220,7 +220,7 @@ def save_fit(fit: Fit, path) -> None:
     preset_name = _preset_of(fit.model)
     device_file = None
     if preset_name is None:  # not a preset's structure: the device's own file rebuilds it (its terms cannot)
-        from ._device.file import device_file_text
+        from .._device.file import device_file_text
 
         device_file = device_file_text(_unbatched_device(fit.model))
     effects = fit.model.effect_names

@@ -5,8 +5,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import PRNGKeyArray
 
-from ._checks import check_nonnegative
-from ._gyroscope import Gyroscope
+from .._checks import check_nonnegative
+from .._gyroscope import Gyroscope
 
 
 # Lots of up to this many devices are padded to the next power of two (1, 2, 4, 8, 16) by the compiled programs

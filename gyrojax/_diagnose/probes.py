@@ -24,8 +24,8 @@ from typing import ClassVar
 import equinox as eqx
 import numpy as np
 
-from ._stats import chi2_sf
-from ._sweeps.registry import sweep_kind
+from .._numerics.stats import chi2_sf
+from .._sweeps.registry import sweep_kind
 
 
 # Which sweep kinds a probe acts on, from what the kind reads (`AbstractSweep`'s class attributes), so that a

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._data.arrays import ARRAY_FIELDS, COORDINATES
+from .._data.arrays import ARRAY_FIELDS, COORDINATES
 
 
 COLUMNS = {"inputs": "input", "outputs": "output", "sigmas": "output_sigma", **COORDINATES}

@@ -34,9 +34,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._checks import check_nonnegative, check_positive
-from ._gyroscope import Gyroscope
-from ._lot import as_arrays
+from .._checks import check_nonnegative, check_positive
+from .._gyroscope import Gyroscope
+from .stack import as_arrays
 
 
 class WaferProcess(eqx.Module):

@@ -15,19 +15,19 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
-from ._data.cells import OPTIONAL_COLUMNS
-from ._data.table import Table
-from ._gyroscope import Gyroscope
-from ._lot import ProcessSpread, as_arrays, make_lot
-from ._noise import DAC_VOLTMETER_SIGMA_V, RateNoise
-from ._process import WaferProcess
-from ._progress import as_progress
-from ._simulate.tiers import AbstractTier, Steady
-from ._sweeps.lot import LotCampaign
-from ._sweeps.protocol import Protocol
-from ._sweeps.rate_table import RateTable
-from ._sweeps.registry import SWEEP_KINDS, sweep_kind
-from ._sweeps.steady import AbstractSettledSweep, lot_steady, raise_unsettled
+from .._data.cells import OPTIONAL_COLUMNS
+from .._data.table import Table
+from .._gyroscope import Gyroscope
+from .._progress import as_progress
+from .._simulate.tiers import AbstractTier, Steady
+from .._sweeps.lot_campaign import LotCampaign
+from .._sweeps.protocol import Protocol
+from .._sweeps.rate_table import RateTable
+from .._sweeps.registry import SWEEP_KINDS, sweep_kind
+from .._sweeps.steady import AbstractSettledSweep, lot_steady, raise_unsettled
+from .noise import DAC_VOLTMETER_SIGMA_V, RateNoise
+from .process import WaferProcess
+from .stack import ProcessSpread, as_arrays, make_lot
 
 
 SIMULATED_SWEEPS = tuple(SWEEP_KINDS)

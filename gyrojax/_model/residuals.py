@@ -14,13 +14,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._data.arrays import SweepArrays
-from ._fitdata import FitData
-from ._gyroscope import Gyroscope
-from ._simulate.tiers import Steady
-from ._sweeps.rate_table import RateTable
-from ._sweeps.registry import sweep_kind
-from ._sweeps.steady import AbstractSettledSweep, steady_points
+from .._data.arrays import SweepArrays
+from .._gyroscope import Gyroscope
+from .._simulate.tiers import Steady
+from .._sweeps.rate_table import RateTable
+from .._sweeps.registry import sweep_kind
+from .._sweeps.steady import AbstractSettledSweep, steady_points
+from .fitdata import FitData
 
 
 SF_STEP_DPS = 1.0

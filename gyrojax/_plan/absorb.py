@@ -16,9 +16,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._compile import jit
-from ._gyroscope import Gyroscope
-from ._parameters import PARAMETERS
+from .._compile.jit import jit
+from .._gyroscope import Gyroscope
+from .._model.parameters import PARAMETERS
 
 
 NEGLIGIBLE = 1e-6
