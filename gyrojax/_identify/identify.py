@@ -160,7 +160,7 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), hold=(), priors=None,
         first_fit = _fit_once(model, data, noise=None, **options)
         say("estimating the noise from the first fit's residuals (the data give no output_sigma); fitting again "
             "with those weights")
-        kappa, noise = estimated_noise(first_fit, start.seed)
+        kappa, noise = estimated_noise(first_fit, start.seed, start.first_device)
         fit = _fit_once(model, reweighted(data, kappa), noise=noise, **options)
     counts = {st: fit.status.count(st) for st in dict.fromkeys(fit.status)}
     say("done: " + ", ".join(f"{k} device(s) {st}" for st, k in counts.items()))

@@ -179,10 +179,12 @@ def noise_scales(residual, jac, blocks, *, draws=0, rng=None):
 _NULL_DRAWS = 4000
 
 
-def estimated_noise(fit: Fit, seed: int):
+def estimated_noise(fit: Fit, seed: int, first_device: int = 0):
     """Per device, the noise of each sweep estimated from `fit` (`noise_scales`): `(kappa (device, sweep),
     (noise_dof (device,), warnings per device, determined per device, p-values (device,), the lot's
-    p-value))`, the p-values of the chi2 in units of the estimated noise against its null distribution."""
+    p-value))`, the p-values of the chi2 in units of the estimated noise against its null distribution, drawn
+    per device with `seed` and its position in the lot (`first_device` + its index: a chunk of a lot draws
+    what the whole lot draws for the same devices)."""
     data = fit.data
     sweeps = data.sweeps
     rows = sum(int(np.prod(data.blocks[s].inputs.shape[1:])) for s in sweeps)
@@ -202,7 +204,7 @@ def estimated_noise(fit: Fit, seed: int):
             k, nu, methods, null = np.full(len(sweeps), np.nan), np.full(len(sweeps), np.nan), [""] * len(sweeps), None
         else:
             k, nu, methods, null = noise_scales(res, jac, blocks, draws=_NULL_DRAWS,
-                                                 rng=np.random.default_rng([seed, d]))
+                                                 rng=np.random.default_rng([seed, first_device + d]))
         points = np.array([int(np.sum(b[1])) for b in blocks], dtype=float)
         present = points > 0
         ok = present & np.isfinite(k) & (k > 0) & np.isfinite(nu)

@@ -80,15 +80,20 @@ class MultiStart(eqx.Module):
     """The first solve of `identify(start=...)`: `starts` solves per device, the first from the model, the
     others perturbed by `spread` in internal units (drawn with `seed`); the lowest chi2 wins, per device (for a
     joint fit: the lot's sum). `seed` also seeds the Monte Carlo of the noise estimate of data without
-    `output_sigma`."""
+    `output_sigma`, per device with its position in the lot; `first_device` is the position of the first
+    device where the lot is a chunk of a larger one (`identify_lot`), so that a chunk draws what one fit of the
+    whole lot draws for the same devices."""
 
     starts: int = eqx.field(static=True, default=1)
     spread: float = 0.05
     seed: int = eqx.field(static=True, default=0)
+    first_device: int = eqx.field(static=True, default=0)
 
     def __check_init__(self):
         if not isinstance(self.starts, int) or isinstance(self.starts, bool) or self.starts < 1:
             raise ValueError(f"starts must be an integer >= 1, got {self.starts!r}.")
+        if not isinstance(self.first_device, int) or isinstance(self.first_device, bool) or self.first_device < 0:
+            raise ValueError(f"first_device must be an integer >= 0, got {self.first_device!r}.")
 
     def __call__(self, solving: Solving) -> Solution:
         n, n_dev = solving.problem.free_mask.shape
