@@ -108,8 +108,8 @@ def test_a_failed_chunk_is_reported_with_its_devices_and_the_merge_holds_every_d
     rows = ["a,0,rate_table,1.0,101,0.1", "b,0,rate_table,1.0,nan,0.1"]
     path = _write(tmp_path / "bad.csv", rows)
     plan = Plan(path, str(tmp_path / "o.json"), 1, {})
-    task = {"index": 1, "devices": ["b"], "data": path, "split_file": plan.split_files[1], "model": "paper-qmg",
-            "options": {}, "chunk": 1, "result": plan.result(1), "failure": plan.failure(1)}
+    task = {"index": 1, "devices": ["b"], "first_device": 1, "data": path, "split_file": plan.split_files[1],
+            "model": "paper-qmg", "options": {}, "chunk": 1, "result": plan.result(1), "failure": plan.failure(1)}
     assert fit_chunk(task)["failed"] == 1
     report = merge(plan)  # chunk 0 never ran, chunk 1 failed: both listed, with their devices
     assert [f["devices"] for f in report["failed"]] == [["a"], ["b"]]
@@ -247,3 +247,38 @@ def test_a_parquet_lot_on_an_existing_cluster_by_its_scheduler_address(lot8, tmp
     assert [d["device"] for d in report["devices"]] == device_order(lot8) and report["failed"] == []
     assert not os.listdir(f"{out}.parts/input")  # read by device from the Parquet file, not split
     assert report["distributed"]["scheduler"] == cluster.scheduler_address
+
+
+# -- the same fit whatever the chunking (in this process: fit_chunk on each chunk, as a worker runs it) ----------
+
+def _chunked_in_process(path, out, chunk, model="paper-qmg", **options):
+    from gyrojax._distributed.run import chunk_tasks
+
+    plan = Plan(path, out, chunk, {})
+    for task in chunk_tasks(plan, range(len(plan.groups)), model, {"free": FREE, **options}, chunk):
+        fit_chunk(task)
+    return merge(plan)
+
+
+def _per_chunk_keys_dropped(report):
+    """The merged report without what is per chunk by its name: the residual analysis of each chunk."""
+    return {k: v for k, v in report.items() if k != "compare"}
+
+
+@pytest.mark.slow
+def test_the_estimated_noise_and_the_merged_report_do_not_depend_on_the_chunking(tmp_path):
+    # Data without output_sigma: each device's noise is estimated and its p-value drawn by Monte Carlo, per
+    # device with its position in the lot (not in its chunk); the lot's p-value is the F test of the pooled chi2.
+    # Chunks of 16 and of 64 both solve 16 devices at a time (VmapSolve's chunk on a CPU), as one process does.
+    table = gj.simulate_table(gj.paper_qmg(), devices=64, sweeps=("rate_table",), seed=5, progress=False)
+    path = str(tmp_path / "lot.csv")
+    gj.write_table(gj.Table({k: table[k] for k in table.column_names if k != "output_sigma"}), path)
+    by_16 = _chunked_in_process(path, str(tmp_path / "o16.json"), 16)
+    by_64 = _chunked_in_process(path, str(tmp_path / "o64.json"), 64)
+    assert len(by_16["compare"]["by_chunk"]) == 4 and len(by_64["compare"]["by_chunk"]) == 1
+    assert by_16["failed"] == [] and all(d["noise_dof"] is not None for d in by_16["devices"])
+    assert _per_chunk_keys_dropped(by_16) == _per_chunk_keys_dropped(by_64)
+    fit = gj.identify("paper-qmg", gj.read_table(path), free=FREE, progress=False)
+    np.testing.assert_array_equal([d["p_value"] for d in by_16["devices"]], np.asarray(fit.p_value))
+    np.testing.assert_array_equal([d["chi2_red"] for d in by_16["devices"]], np.asarray(fit.chi2_red))
+    np.testing.assert_array_equal([d["noise_dof"] for d in by_16["devices"]], np.asarray(fit.noise_dof))

@@ -48,6 +48,11 @@ def identify_lot(model, data, out, strategy: DistributedSolve, *, free=DEFAULT_F
         raise ValueError(f"identify_lot: {', '.join(coupled)} couple the devices of a lot (one fit of all of them), "
                          "which a lot run in chunks of devices cannot do; fit a shared parameter or a population "
                          "with identify on one process (lot_solve=JointSolve() or PopulationSolve()).")
+    start = options.get("start")
+    if start is not None and getattr(start, "starts", 1) > 1:
+        raise ValueError(f"identify_lot: start={start!r}: more than one start draws every device's starts from one "
+                         "stream of the whole lot, which a chunk of devices cannot draw; use starts=1 (the "
+                         "default), or identify on one process.")
     strategy.require()  # before the file is planned and split
     model = as_model(model)
     say = as_progress(progress, "gyrojax identify")
@@ -75,9 +80,7 @@ def _run_chunks(plan, todo, model, options, strategy, say, n_done_before, start)
     from distributed import as_completed
 
     total = len(plan.devices)
-    tasks = [{"index": k, "devices": plan.groups[k], "data": plan.data, "split_file": plan.split_files[k],
-              "model": model, "options": options, "chunk": strategy.chunk, "result": plan.result(k),
-              "failure": plan.failure(k)} for k in todo]
+    tasks = chunk_tasks(plan, todo, model, options, strategy.chunk)
     done, failed = n_done_before, 0
     with strategy.client() as client:
         # pure=False: a chunk submitted again (a restart) is a new task, not one the scheduler remembers.
@@ -97,6 +100,15 @@ def _run_chunks(plan, todo, model, options, strategy, say, n_done_before, start)
             say(progress_line(done, failed, total, n_done_before, time.perf_counter() - start))
 
 
+def chunk_tasks(plan: Plan, todo, model, options: dict, chunk: int) -> list[dict]:
+    """The `fit_chunk` task of each chunk of `todo`: its devices and their position in the lot, where its rows
+    are, the fit's options, where its result goes."""
+    first = np.cumsum([0] + [len(g) for g in plan.groups])
+    return [{"index": k, "devices": plan.groups[k], "first_device": int(first[k]), "data": plan.data,
+             "split_file": plan.split_files[k], "model": model, "options": options, "chunk": chunk,
+             "result": plan.result(k), "failure": plan.failure(k)} for k in todo]
+
+
 def progress_line(done: int, failed: int, total: int, done_before: int, seconds: float) -> str:
     """'12/40 devices done, 0 failed, 1.3 devices/s, ETA 22 s': the rate over the devices this run finished."""
     here = done + failed - done_before
@@ -111,7 +123,7 @@ def merge(plan: Plan) -> dict:
     (per failed or unfinished chunk: its devices and the error), lot-level chi2 and p-value from the devices'
     chi2 and dof. Raises `RuntimeError` unless every device of the input is there exactly once."""
     devices, failed, chi2, dof, noise_dof = [], [], [], [], []
-    unidentifiable, directions, compare, alpha = [], [], [], None
+    unidentifiable, directions, compare, alpha, held = [], [], [], None, {}
     for k, group in enumerate(plan.groups):
         if os.path.exists(plan.result(k)):
             with open(plan.result(k), encoding="utf-8") as f:
@@ -121,7 +133,10 @@ def merge(plan: Plan) -> dict:
             dof += r["dof"]
             noise_dof += [np.inf if d["noise_dof"] is None else d["noise_dof"] for d in r["devices"]]
             unidentifiable += [p for p in r["unidentifiable"] if p not in unidentifiable]
-            directions += [u for u in r["unidentifiable_directions"] if u not in directions]
+            held[k] = tuple(sorted({u["held"] for u in r["unidentifiable_directions"]}))
+            # A direction's singular value is its chunk's (each chunk file has it), not the lot's: left out.
+            directions += [u for u in ({**u, "singular_value": None} for u in r["unidentifiable_directions"])
+                           if u not in directions]
             compare.append({"chunk": k, "devices": group, **r["compare"]})
             alpha = r["reject_alpha"]
         elif os.path.exists(plan.failure(k)):
@@ -137,6 +152,7 @@ def merge(plan: Plan) -> dict:
         twice = sorted(d for d, k in names.items() if k > 1)
         raise RuntimeError(f"{plan.folder}: the merged results do not hold every device of {plan.data} exactly once "
                            f"(missing {missing[:5]}, twice {twice[:5]}, not in the input {extra[:5]}).")
+    _check_same_holds(plan, held)
     order = {d: i for i, d in enumerate(plan.devices)}
     by_order = np.argsort([order[d["device"]] for d in devices], kind="stable")
     devices = [devices[i] for i in by_order]
@@ -154,3 +170,25 @@ def merge(plan: Plan) -> dict:
             "reject_alpha": alpha, "exit_status": exit_status, "devices": devices, "lot": {},
             "unidentifiable": unidentifiable, "unidentifiable_directions": directions,
             "compare": {"by_chunk": compare}, "failed": failed}
+
+
+def _check_same_holds(plan: Plan, held: dict) -> None:
+    """What the data cannot fix is decided from the stacked Jacobians of a fit's devices, so each chunk decides
+    it for its own devices. Where no chunk holds anything, neither would one fit of the lot (the lot's mean normal
+    matrix is the chunks' weighted mean: its smallest eigenvalue is at least their weighted mean, each above the
+    threshold); where every chunk holds the same parameters, they are held for every device alike, as a
+    homogeneous lot's structural directions are. Chunks that differ would make the fit depend on the chunking:
+    refused."""
+    kinds: dict[tuple, list[int]] = {}
+    for k, names in held.items():
+        kinds.setdefault(names, []).append(k)
+    if len(kinds) <= 1:
+        return
+    union = sorted({n for names in kinds for n in names})
+    listed = "; ".join(f"chunk{'s' if len(ks) > 1 else ''} {', '.join(map(str, ks[:4]))}{' ..' if len(ks) > 4 else ''}"
+                       f" held {', '.join(names) or 'nothing'}" for names, ks in list(kinds.items())[:4])
+    raise ValueError(f"{plan.folder}: the chunks held different parameters as unidentifiable ({listed}): which "
+                     "parameters a lot's data cannot fix is decided from all the devices of a fit, so this lot's "
+                     "fit would depend on how it is cut into chunks. Hold them for every device (identify_lot(..., "
+                     f"hold={tuple(union)!r}), or gyrojax identify --free without them) in a new results folder, or "
+                     "fit the lot on one process.")

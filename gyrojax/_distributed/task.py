@@ -2,6 +2,7 @@
 write the result (the chunk's identify report with each device's chi2 and dof) atomically; a chunk whose data
 or fit raises writes its failure (the error's type and message) instead, so that the run goes on."""
 
+import dataclasses
 import os
 import sys
 import time
@@ -11,12 +12,13 @@ from .._data.io import atomic_write_json
 
 
 def fit_chunk(task: dict) -> dict:
-    """Fit one chunk (`task` from `identify_lot`: `index`, `devices`, `data`, `split_file`, `model`, `options`,
-    `chunk`, `result`, `failure`). Returns a short summary for the progress line."""
+    """Fit one chunk (`task` from `identify_lot`: `index`, `devices`, `first_device` (the position of its first
+    device in the lot), `data`, `split_file`, `model`, `options`, `chunk`, `result`, `failure`).
+    Returns a short summary for the progress line."""
     import numpy as np
 
     from .._data.chunked import read_chunk
-    from .._identify import VmapSolve, identify
+    from .._identify import MultiStart, VmapSolve, identify
     from .._identify.report import fit_report
 
     start = time.perf_counter()
@@ -27,8 +29,13 @@ def fit_chunk(task: dict) -> dict:
             missing = sorted(set(task["devices"]) - got)
             raise ValueError(f"{task['data']}: the chunk's rows lack devices {missing[:5]} (or hold others): the "
                              "file changed since the run was planned; remove the results folder to start again.")
+        # The noise Monte Carlo of data without output_sigma draws each device with its position in the lot.
+        first = dataclasses.replace(task["options"].get("start", MultiStart()), first_device=task["first_device"])
         fit = identify(task["model"], table, lot_solve=VmapSolve(pad_to=task["chunk"]), progress=False,
-                       **task["options"])
+                       **{**task["options"], "start": first})
+        if list(fit.devices) != list(task["devices"]):
+            raise RuntimeError(f"the chunk's fit holds devices {list(fit.devices)[:5]} in another order than the "
+                               f"plan's {list(task['devices'])[:5]}: their positions in the lot would be wrong.")
         report = fit_report(fit)
         report["chi2"] = [float(x) if np.isfinite(x) else None for x in np.asarray(fit.chi2)]
         report["dof"] = [int(x) for x in np.asarray(fit.dof)]
