@@ -125,6 +125,36 @@ def test_a_failed_chunk_is_reported_with_its_devices_and_the_merge_holds_every_d
         merge(plan)
 
 
+def test_chunks_that_held_different_parameters_are_refused_at_the_merge(tmp_path):
+    plan = Plan(_tiny(tmp_path), str(tmp_path / "o.json"), 2, {})
+
+    def result(k, held):
+        with open(plan.result(k), "w") as f:
+            json.dump({"devices": [{"device": d, "noise_dof": None, "status": "ok"} for d in plan.groups[k]],
+                       "chi2": [1.0] * len(plan.groups[k]), "dof": [1] * len(plan.groups[k]),
+                       "unidentifiable": list(held), "reject_alpha": 0.01, "compare": {},
+                       "unidentifiable_directions": [{"parameters": [h], "held": h, "singular_value": 1e-9 * (k + 1)}
+                                                     for h in held]}, f)
+
+    result(0, ["dac_gain_error"])
+    result(1, ["dac_gain_error"])
+    report = merge(plan)  # the same held in every chunk: merged, without the chunks' singular values
+    assert report["unidentifiable_directions"] == [{"parameters": ["dac_gain_error"], "held": "dac_gain_error",
+                                                    "singular_value": None}]
+    result(1, ["dac_gain_error", "q_y"])
+    with pytest.raises(ValueError, match=r"chunks held different parameters as unidentifiable \(chunk 0 held "
+                                         r"dac_gain_error; chunk 1 held dac_gain_error, q_y\).*"
+                                         r"hold=\('dac_gain_error', 'q_y'\)"):
+        merge(plan)
+
+
+def test_more_than_one_start_is_refused(tmp_path):
+    out = str(tmp_path / "o.json")
+    with pytest.raises(ValueError, match="more than one start draws every device's starts from one stream"):
+        identify_lot("paper-qmg", _tiny(tmp_path), out, DistributedSolve(workers=1), start=gj.MultiStart(starts=2))
+    assert not os.path.exists(f"{out}.parts")
+
+
 def test_progress_line():
     assert progress_line(12, 2, 40, 4, 5.0) == "12/40 devices done, 2 failed, 2.00 devices/s, ETA 13 s"
     assert progress_line(40, 0, 40, 0, 8.0).endswith("ETA 0 s")
