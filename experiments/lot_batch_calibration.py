@@ -84,6 +84,14 @@ off (measured: to 1e243 in a 3-device fit, with LM reporting success). The rate 
 SHARED = ("sense_gain",)
 SWEEPS = ("rate_table", "vcf_static", "vcf_dynamic")
 
+_SMALL_RATES = (-200.0, -100.0, -20.0, -5.0, 5.0, 20.0, 100.0, 200.0)
+SMALL_SWEEPS = (gj.RateTable(rates_dps=_SMALL_RATES), gj.VcfStatic(virtual_rates_dps=_SMALL_RATES),
+                gj.VcfDynamic(frequencies_hz=tuple(10.0 * k for k in range(1, 21))))
+"""`--points small`: 8 table and virtual rates over +/-200 deg/s and the dynamic test on a 10 Hz grid up to 200 Hz
+(the vcf-2018 response peaks at the 62 Hz split and is past its -3 dB point at ~97 Hz): 36 points per device
+instead of 94. The scale factor's prediction error is set by the rate-path mismatch (0.087 %), far above what
+the points' noise leaves, so the coverage statistics need lots, not points."""
+
 
 def as_built(design):
     """The as-built nominal device of the lot (see AS_BUILT_*)."""
@@ -288,18 +296,20 @@ def sf_log_gradient(fit, temps):
     return out
 
 
-def simulate_lot(devices=64, seed=11, process=None, protocol=None):
-    """The lot and its campaign, every device with its rate table: (table, true lot, design, protocol)."""
+def simulate_lot(devices=64, seed=11, process=None, sweeps=None):
+    """The lot and its campaign, every device with its rate table: (table, true lot, design, sweep kinds);
+    `sweeps` the kinds with their points (default `SWEEPS` at their defaults)."""
     process = gj.WaferProcess() if process is None else process
     design = gj.vcf_2018()
     truth_nominal = as_built(design)
-    base = gj.Protocol() if protocol is None else protocol
+    kinds = [gj.sweep_kind(s) for s in (SWEEPS if sweeps is None else sweeps)]
     # The static VCF voltages come from the design values (what the test engineer knows), not the as-built.
-    protocol = dataclasses.replace(base, vcf_amplitudes_v=tuple(base.vcf_static_amplitudes(design)))
-    table = gj.simulate_table(truth_nominal, devices=devices, runs=1, sweeps=SWEEPS, spread=process, seed=seed,
-                              device_prefix="lot", protocol=protocol)
+    kinds = tuple(dataclasses.replace(k, amplitudes_v=tuple(k.inputs(design))) if isinstance(k, gj.VcfStatic) else k
+                  for k in kinds)
+    table = gj.simulate_table(truth_nominal, devices=devices, runs=1, sweeps=kinds, spread=process, seed=seed,
+                              device_prefix="lot")
     lot = gj.campaign_lot(truth_nominal, devices=devices, seed=seed, spread=process)
-    return table, lot, design, protocol
+    return table, lot, design, kinds
 
 
 def with_rate_tables(table, devices, rate_devices):
@@ -322,19 +332,21 @@ def ratio_method(table, design):
     sf_virtual = dict(zip(vcf_devs, sf_volt * design_volts_per_rad_s * DEG))
     ratios = np.array([sf_rate[k] / sf_virtual[d] for k, d in enumerate(rate_devs)])
     ratio_mean = float(np.mean(ratios))
-    ratio_rel_sd = float(np.std(ratios, ddof=1) / ratio_mean * math.sqrt(1.0 + 1.0 / len(ratios)))
+    # one device has no scatter: no uncertainty (NaN)
+    ratio_rel_sd = (float(np.std(ratios, ddof=1) / ratio_mean * math.sqrt(1.0 + 1.0 / len(ratios)))
+                    if len(ratios) > 1 else math.nan)
     return ratio_mean, ratio_rel_sd, sf_virtual
 
 
-def run(devices=64, rate_devices=4, seed=11, process=None, protocol=None, simulated=None):
+def run(devices=64, rate_devices=4, seed=11, process=None, sweeps=None, simulated=None):
     """Simulate (or take `simulated`, `simulate_lot`'s), fit and compare; returns (records, summary, fit)."""
-    if not 2 <= rate_devices < devices:
-        raise ValueError(f"rate_devices must be >= 2 (the seed method needs a scatter) and < devices; got "
+    if not 1 <= rate_devices < devices:
+        raise ValueError(f"rate_devices must be >= 1 (the seed method's uncertainty needs 2) and < devices; got "
                          f"{rate_devices} of {devices}.")
     process = gj.WaferProcess() if process is None else process
     timings = {}
     t0 = time.perf_counter()
-    table, lot, design, protocol = simulate_lot(devices, seed, process, protocol) if simulated is None else simulated
+    table, lot, design, _ = simulate_lot(devices, seed, process, sweeps) if simulated is None else simulated
     timings["simulate_s"] = time.perf_counter() - t0
     table, names, rate_names = with_rate_tables(table, devices, rate_devices)
 
@@ -433,13 +445,14 @@ RANDOM = ("angular_gain",)
 the rate-path mismatch, `WaferProcess.rate_path_sigma`, which the population fit learns instead of assuming)."""
 
 
-def run_population(devices=64, rate_devices=4, seed=11, process=None, protocol=None, simulated=None):
+def run_population(devices=64, rate_devices=4, seed=11, process=None, sweeps=None, simulated=None):
     """The population fit of the lot (`gyrojax.PopulationSolve(random=RANDOM)`): every device's rate-table SF
-    predicted, with its 95 % interval; returns (records, summary, population fit)."""
+    predicted, with its 95 % interval (Student-t, `PopulationFit.interval`); returns (records, summary, population
+    fit)."""
     if not 1 <= rate_devices < devices:
         raise ValueError(f"rate_devices must be >= 1 and < devices; got {rate_devices} of {devices}.")
     process = gj.WaferProcess() if process is None else process
-    table, lot, design, protocol = simulate_lot(devices, seed, process, protocol) if simulated is None else simulated
+    table, lot, design, _ = simulate_lot(devices, seed, process, sweeps) if simulated is None else simulated
     table, names, rate_names = with_rate_tables(table, devices, rate_devices)
     start = measured_start(table, design, names)
     q_prior = {"q_y": (float(design.resonator.q_y), process.q * float(design.resonator.q_y))}
@@ -454,89 +467,147 @@ def run_population(devices=64, rate_devices=4, seed=11, process=None, protocol=N
     t_sf = _sf_temperature(pf.fit.data)
     sf_true = np.asarray(_zero_rate_sf(lot, jnp.asarray(t_sf)))
     _, path_true = (np.asarray(x) for x in _lot_physics(lot))
+    low, high = pf.interval()
     records = []
     for i, d in enumerate(names):
+        z = float((pf.sf[i] - sf_true[i]) / pf.sf_stderr[i])
         records.append({"device": d, "rate_table": d in rate_names, "sf_true": float(sf_true[i]),
                         "prediction": float(pf.sf[i]), "stderr": float(pf.sf_stderr[i]),
-                        "error_pct": float((pf.sf[i] / sf_true[i] - 1) * 100),
-                        "z": float((pf.sf[i] - sf_true[i]) / pf.sf_stderr[i])})
+                        "error_pct": float((pf.sf[i] / sf_true[i] - 1) * 100), "z": z, "dof": float(pf.sf_dof[i]),
+                        "covered": bool(low[i] <= sf_true[i] <= high[i]), "covered_normal": abs(z) < Z95,
+                        "halfwidth_pct": float((high[i] - low[i]) / 2 / pf.sf[i] * 100)})
     held = [r for r in records if not r["rate_table"]]
     (ag,) = pf.parameters
     summary = {"devices": devices, "rate_devices": rate_devices, "seed": seed, "seconds": seconds,
                "population": _stats([r["error_pct"] / 100 for r in held], [r["z"] for r in held])
-               | _coverage(held, "stderr", "prediction"),
+               | _coverage(held),
                "angular_gain": ag.report(), "true_rate_path_spread_pct": float(np.std(path_true) / np.mean(path_true)
                                                                                  * 100),
                "converged": pf.converged, "refits": pf.refits, "warnings": list(pf.warnings)}
     return records, summary, pf
 
 
-def _coverage(rows, stderr_key, value_key):
-    z = np.array([r["z"] if "z" in r else r["model_z"] for r in rows])
-    rel = np.array([r[stderr_key] / r[value_key] for r in rows])
-    return {"coverage_95_pct": float(np.mean(np.abs(z) < 1.959963984540054) * 100),
-            "halfwidth_95_pct": float(np.mean(1.959963984540054 * rel) * 100), "count": len(rows)}
+Z95 = 1.959963984540054
 
 
-def sweep(devices=64, counts=(1, 2, 4, 8, 16), seed=11, process=None, joint=True, out=None):
-    """Per number of rate-tabled devices in `counts`: the held-out devices' prediction error and 95 % coverage of
-    the population fit, seed 003's ratio method and (`joint`) the fixed-prior joint fit, on one simulated lot;
-    with `out` (a folder) the rows so far are written after each method."""
-    simulated = simulate_lot(devices, seed, process)
-    table_all, lot, design, _ = simulated
+def _coverage(rows):
+    """Coverage of the rows' 95 % intervals (`covered`), and with normal intervals (`covered_normal`), percent;
+    the mean half-width; the count."""
+    return {"coverage_95_pct": float(np.mean([r["covered"] for r in rows]) * 100),
+            "coverage_95_normal_pct": float(np.mean([r["covered_normal"] for r in rows]) * 100),
+            "halfwidth_95_pct": float(np.mean([r["halfwidth_pct"] for r in rows])), "count": len(rows)}
+
+
+def _method_rows(k, seed, method, held, **extra):
+    """One row of the sweep: a method's predictions of the held-out devices of one lot (errors, z, covered kept per
+    prediction so that lots pool)."""
+    return ({"rate_devices": k, "seed": seed, "method": method}
+            | _stats([r["error_pct"] / 100 for r in held], [r["z"] for r in held]) | _coverage(held)
+            | {"errors_pct": [r["error_pct"] for r in held], "z": [r["z"] for r in held],
+               "covered": [bool(r["covered"]) for r in held],
+               "covered_normal": [bool(r["covered_normal"]) for r in held],
+               "halfwidths_pct": [r["halfwidth_pct"] for r in held]} | extra)
+
+
+POPULATION = "population fit (Ag random, spread learned)"
+RATIO = "seed 003 ratio"
+JOINT = "joint fit, fixed Ag prior"
+
+
+def sweep(devices=64, counts=(1, 2, 4, 8, 16), seeds=(11,), process=None, joint=True, sweeps=None, out=None):
+    """Per lot (one per seed) and number of rate-tabled devices in `counts`: the held-out devices' prediction errors
+    and 95 % coverage of the population fit, seed 003's ratio method (K >= 2) and (`joint`) the fixed-prior joint
+    fit; with `out` (a folder) the rows so far are written after each method (`lot_batch_sweep.json/.md`)."""
     rows = []
 
     def save():
         if out:
             os.makedirs(out, exist_ok=True)
-            gj.atomic_write_json({"rows": rows, "versions": _versions()}, os.path.join(out, "lot_batch_sweep.json"))
-            gj.atomic_write_bytes(os.path.join(out, "lot_batch_sweep.md"),
-                                  sweep_markdown(rows, devices, seed).encode())
+            gj.atomic_write_json({"rows": rows, "pooled": pooled(rows), "versions": _versions()},
+                                 os.path.join(out, "lot_batch_sweep.json"))
+            gj.atomic_write_bytes(os.path.join(out, "lot_batch_sweep.md"), sweep_markdown(rows, devices).encode())
 
-    for k in counts:
-        _, summary, _ = run_population(devices, k, seed, process, simulated=simulated)
-        ag = summary["angular_gain"]
-        rows.append({"rate_devices": k, "method": "population fit (Ag random, spread learned)"}
-                    | summary["population"]
-                    | {"seconds": summary["seconds"], "converged": summary["converged"],
-                       "ag_relative_spread_pct": ag["relative_spread"] * 100,
-                       "ag_relative_spread_stderr_pct": ag["spread_stderr"] / ag["mean"] * 100,
-                       "true_rate_path_spread_pct": summary["true_rate_path_spread_pct"],
-                       "warnings": summary["warnings"]})
-        print(f"K = {k}: population {rows[-1]}", flush=True)
-        save()
-        if k < 2:
-            continue
-        table, names, rate_names = with_rate_tables(table_all, devices, k)
-        ratio_mean, ratio_rel_sd, sf_virtual = ratio_method(table, design)
-        t_sf = np.where([d in rate_names for d in names], np.nan, 25.0)
-        sf_true = np.asarray(_zero_rate_sf(lot, jnp.asarray(np.nan_to_num(t_sf, nan=25.0))))
-        held = [{"z": (ratio_mean * sf_virtual[d] / sf_true[i] - 1) / ratio_rel_sd, "s": ratio_rel_sd, "v": 1.0,
-                 "e": ratio_mean * sf_virtual[d] / sf_true[i] - 1} for i, d in enumerate(names) if d not in rate_names]
-        rows.append({"rate_devices": k, "method": "seed 003 ratio"}
-                    | _stats([r["e"] for r in held], [r["z"] for r in held]) | _coverage(held, "s", "v"))
-        print(f"K = {k}: ratio {rows[-1]}", flush=True)
-        save()
-        if not joint:
-            continue
-        t0 = time.perf_counter()
-        recs, summ, _ = run(devices, k, seed, process, simulated=simulated)
-        held = [r for r in recs if not r["rate_table"]]
-        rows.append({"rate_devices": k, "method": "joint fit, fixed Ag prior"} | summ["model"]
-                    | _coverage(held, "model_stderr", "model_prediction") | {"seconds": time.perf_counter() - t0})
-        print(f"K = {k}: joint {rows[-1]}", flush=True)
-        save()
+    for seed in seeds:
+        simulated = simulate_lot(devices, seed, process, sweeps)
+        table_all, lot, design, _ = simulated
+        for k in counts:
+            recs, summary, _ = run_population(devices, k, seed, process, simulated=simulated)
+            ag = summary["angular_gain"]
+            rows.append(_method_rows(k, seed, POPULATION, [r for r in recs if not r["rate_table"]],
+                                     seconds=summary["seconds"], converged=summary["converged"],
+                                     ag_relative_spread_pct=ag["relative_spread"] * 100,
+                                     ag_relative_spread_stderr_pct=ag["spread_stderr"] / ag["mean"] * 100,
+                                     true_rate_path_spread_pct=summary["true_rate_path_spread_pct"],
+                                     dof_median=float(np.median([r["dof"] for r in recs if not r["rate_table"]])),
+                                     warnings=summary["warnings"]))
+            print(f"seed {seed} K = {k}: population " + _brief(rows[-1]), flush=True)
+            save()
+            if k >= 2:
+                table, names, rate_names = with_rate_tables(table_all, devices, k)
+                ratio_mean, ratio_rel_sd, sf_virtual = ratio_method(table, design)
+                sf_true = np.asarray(_zero_rate_sf(lot, jnp.full(devices, 25.0)))
+                held = []
+                for i, d in enumerate(names):
+                    if d not in rate_names:
+                        e = ratio_mean * sf_virtual[d] / sf_true[i] - 1
+                        held.append({"error_pct": e * 100, "z": e / ratio_rel_sd,
+                                     "covered": abs(e) < Z95 * ratio_rel_sd,
+                                     "covered_normal": abs(e) < Z95 * ratio_rel_sd,
+                                     "halfwidth_pct": Z95 * ratio_rel_sd * 100})
+                rows.append(_method_rows(k, seed, RATIO, held))
+                print(f"seed {seed} K = {k}: ratio " + _brief(rows[-1]), flush=True)
+                save()
+            if not joint:
+                continue
+            t0 = time.perf_counter()
+            recs, summ, _ = run(devices, k, seed, process, simulated=simulated)
+            held = [{"error_pct": r["model_error_pct"], "z": r["model_z"], "covered": abs(r["model_z"]) < Z95,
+                     "covered_normal": abs(r["model_z"]) < Z95,
+                     "halfwidth_pct": Z95 * r["model_stderr"] / r["model_prediction"] * 100}
+                    for r in recs if not r["rate_table"]]
+            rows.append(_method_rows(k, seed, JOINT, held, seconds=time.perf_counter() - t0,
+                                     converged=summ["fit"]["all_converged"]))
+            print(f"seed {seed} K = {k}: joint " + _brief(rows[-1]), flush=True)
+            save()
     return rows
 
 
-def sweep_markdown(rows, devices, seed):
-    lines = [f"| rate-tabled (of {devices}) | method | held-out | RMS error (%) | max error (%) | "
-             "coverage of 95 % (%) | mean 95 % half-width (%) | z RMS |", "|---|---|---|---|---|---|---|---|"]
-    for r in rows:
-        lines.append(f"| {r['rate_devices']} | {r['method']} | {r['count']} | {r['rms_pct']:.3f} | "
-                     f"{r['max_pct']:.3f} | {r['coverage_95_pct']:.1f} | {r['halfwidth_95_pct']:.3f} | "
-                     f"{r['z_rms']:.2f} |")
-    return f"Seed {seed}, {devices} vcf-2018 devices\n\n" + "\n".join(lines) + "\n"
+def _brief(row):
+    return (f"RMS {row['rms_pct']:.3f} %, coverage {row['coverage_95_pct']:.1f} % of {row['count']} (normal "
+            f"{row['coverage_95_normal_pct']:.1f} %), half-width {row['halfwidth_95_pct']:.3f} %")
+
+
+def pooled(rows):
+    """Per (rate-tabled count, method): every lot's predictions together (coverage, RMS, max error, z RMS), and the
+    per-lot coverages."""
+    out = []
+    for k, method in dict.fromkeys((r["rate_devices"], r["method"]) for r in rows):
+        group = [r for r in rows if r["rate_devices"] == k and r["method"] == method]
+        err = np.concatenate([r["errors_pct"] for r in group])
+        z = np.concatenate([r["z"] for r in group])
+        cov = np.concatenate([r["covered"] for r in group])
+        out.append({"rate_devices": k, "method": method, "lots": len(group), "count": int(err.size),
+                    "rms_pct": float(np.sqrt(np.mean(err**2))), "max_pct": float(np.max(np.abs(err))),
+                    "z_rms": float(np.sqrt(np.mean(z**2))), "coverage_95_pct": float(np.mean(cov) * 100),
+                    "coverage_95_normal_pct": float(np.mean(np.concatenate([r["covered_normal"] for r in group]))
+                                                    * 100),
+                    "coverage_binomial_se_pct": float(math.sqrt(0.95 * 0.05 / err.size) * 100),
+                    "lot_coverages_pct": [r["coverage_95_pct"] for r in group],
+                    "halfwidth_95_pct": float(np.mean(np.concatenate([r["halfwidths_pct"] for r in group])))})
+    return out
+
+
+def sweep_markdown(rows, devices):
+    seeds = sorted({r["seed"] for r in rows})
+    lines = [f"| rate-tabled (of {devices}) | method | lots | predictions | RMS error (%) | max error (%) | "
+             "coverage of 95 % (%) | per lot (%) | normal-interval coverage (%) | mean 95 % half-width (%) | z RMS |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in sorted(pooled(rows), key=lambda r: r["rate_devices"]):
+        lots = ", ".join(f"{c:.0f}" for c in r["lot_coverages_pct"])
+        lines.append(f"| {r['rate_devices']} | {r['method']} | {r['lots']} | {r['count']} | {r['rms_pct']:.3f} | "
+                     f"{r['max_pct']:.3f} | {r['coverage_95_pct']:.1f} | {lots} | {r['coverage_95_normal_pct']:.1f} | "
+                     f"{r['halfwidth_95_pct']:.3f} | {r['z_rms']:.2f} |")
+    return f"Seeds {', '.join(map(str, seeds))}, {devices} vcf-2018 devices per lot\n\n" + "\n".join(lines) + "\n"
 
 
 def _versions():
@@ -596,15 +667,23 @@ def main(argv=None):
                     help="instead: for each number K of rate-tabled devices, the population fit, the ratio method and "
                          "the fixed-prior joint fit (e.g. --sweep 1 2 4 8 16); writes lot_batch_sweep.json/.md")
     ap.add_argument("--no-joint", action="store_true", help="with --sweep: skip the fixed-prior joint fit")
+    ap.add_argument("--lots", type=int, default=1,
+                    help="with --sweep: this many lots, seeds --seed, --seed + 1, ... (coverage pools their "
+                         "predictions)")
+    ap.add_argument("--points", choices=("full", "small"), default="full",
+                    help="the sweeps' points: seed 000/003's (full) or 8 rates and a 20-point dynamic test (small, "
+                         "SMALL_SWEEPS: ~2.6x fewer points, same physics)")
     args = ap.parse_args(argv)
     process = gj.WaferProcess() if args.mismatch is None else gj.WaferProcess(mismatch=args.mismatch)
+    kinds = SMALL_SWEEPS if args.points == "small" else None
     if args.sweep:
-        rows = sweep(args.devices, tuple(args.sweep), args.seed, process, joint=not args.no_joint, out=args.out)
-        print(sweep_markdown(rows, args.devices, args.seed))
+        rows = sweep(args.devices, tuple(args.sweep), tuple(range(args.seed, args.seed + args.lots)), process,
+                     joint=not args.no_joint, sweeps=kinds, out=args.out)
+        print(sweep_markdown(rows, args.devices))
         if args.out:
             print(f"wrote {args.out}/lot_batch_sweep.json and .md")
         return {"rows": rows, "versions": _versions(), "argv": list(argv or [])}
-    records, summary, _ = run(args.devices, args.rate_devices, args.seed, process)
+    records, summary, _ = run(args.devices, args.rate_devices, args.seed, process, sweeps=kinds)
     print(f"{'device':>8} {'rate':>4} {'SF true':>10} {'seed err%':>9} {'model err%':>10} {'+/- %':>7} {'z':>6}")
     for r in records:
         print(f"{r['device']:>8} {'yes' if r['rate_table'] else '':>4} {r['sf_true']:10.5f} "

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
-from gyrojax._identify.population import lot_distribution
+from gyrojax._identify.population import Z95, interval_dof, lot_distribution, t_quantile
 from gyrojax._identify.problem import sf_temperature
 from gyrojax.cli import main
 
@@ -68,6 +68,34 @@ def test_lot_distribution_recovers_a_gaussian_population_with_uninformed_members
     zs = np.asarray(zs)
     assert np.all(np.abs(zs.mean(0)) < 0.3), zs.mean(0)
     assert np.all(np.abs(zs.std(0) - 1) < 0.2), zs.std(0)
+
+
+def test_t_quantile():
+    np.testing.assert_allclose(t_quantile(0.975, [1.0, 3.0, 10.0, np.inf]), [12.7062047, 3.1824463, 2.2281389, Z95],
+                               rtol=1e-6)
+    assert np.isnan(t_quantile(0.975, [np.nan])[0])
+
+
+def test_prediction_interval_covers_with_a_spread_from_four_devices():
+    """300 Gaussian lots, 4 precisely measured members each (the rate-tabled devices), one new member predicted
+    from the lot (a device without a rate table): the Student-t interval with the REML spread's degrees of freedom
+    (~3) covers ~95 %; the normal interval with the same standard error covers ~86 % (P(|t_3| < 1.96))."""
+    rng = np.random.default_rng(1)
+    t_hits, normal_hits, dofs = [], [], []
+    for _ in range(300):
+        c = rng.uniform(0.001, 0.002, 4)
+        b = 3.0 + rng.normal(0, 1.0, 4) + c * rng.normal(size=4)
+        hyper, cov, ok, _ = lot_distribution((1 / c**2)[:, None, None], (b / c**2)[:, None], np.zeros(2), 100_000)
+        assert ok
+        sd = math.sqrt(math.exp(2 * hyper[1]) + cov[0, 0])  # spread and the lot mean's uncertainty
+        dof = interval_dof(np.array([sd**2]), np.ones((1, 1)), hyper, cov)[0]
+        err = abs(3.0 + rng.normal() - hyper[0])
+        t_hits.append(err < t_quantile(0.975, [dof])[0] * sd)
+        normal_hits.append(err < Z95 * sd)
+        dofs.append(dof)
+    assert abs(np.median(dofs) - 3) < 0.1, np.median(dofs)
+    assert 0.92 < np.mean(t_hits) < 0.98, np.mean(t_hits)
+    assert np.mean(normal_hits) < 0.91, np.mean(normal_hits)
 
 
 def test_lot_distribution_says_when_em_does_not_converge():

@@ -23,6 +23,13 @@ The standard errors of each device's estimates and scale factor add the uncertai
 Steffey's first-order correction): for the random parameters through the Gaussian posterior's derivative, for
 the scale factor from refits with each of mu and log s moved by half its standard error. A device's scale factor
 with sweeps missing (a device measured without a rate table) is then a prediction with a prediction interval.
+
+The intervals are Student-t, not normal: the part of a scale factor's variance that the lot spread sets
+(dSF/dmu_j^2 (s_j^2 + var mu_j), all of it for a prediction, ~none for a device whose own data fix it) is known
+only as well as s_j, whose restricted likelihood gives var(log s_j); a variance estimated with nu degrees of
+freedom has var(log s) = 1 / (2 nu), so nu_j = 1 / (2 var(log s_j)) (K - 1 for K devices that fix the parameter
+precisely, which makes the prediction interval the textbook mu +/- t_{K-1} s sqrt(1 + 1/K)); the device's degrees
+of freedom combine the parts by Welch-Satterthwaite. A normal interval with s from 4 devices covers ~86 %.
 """
 
 import math
@@ -127,6 +134,8 @@ class PopulationFit(eqx.Module):
       (the posterior's, plus the uncertainty of the lot mean and spread).
     - `sf`, `sf_stderr`: (device,) each device's scale factor (LSB per deg/s) and its standard error likewise;
       for a device whose data miss the sweeps that fix it, a prediction from the lot.
+    - `sf_dof`: (device,) the degrees of freedom of each scale factor's interval (Student-t; infinite where the
+      lot spread does not enter, see `population_fit`).
     - `missing`: per device the sweeps of the data it has no points in.
     - `hyper`, `hyper_covariance`: (mu, log s) in the fit's coordinates and their covariance.
     - `converged`, `refits`, `warnings` (sentences: non-convergence with what to try, unresolved spreads).
@@ -140,6 +149,7 @@ class PopulationFit(eqx.Module):
     estimates_stderr: np.ndarray
     sf: np.ndarray
     sf_stderr: np.ndarray
+    sf_dof: np.ndarray
     missing: tuple[tuple[str, ...], ...]
     hyper: np.ndarray
     hyper_covariance: np.ndarray
@@ -153,11 +163,11 @@ class PopulationFit(eqx.Module):
 
     def interval(self, level: float = 0.95):
         """(low, high) per device: the scale factor's `level` interval (a prediction interval where sweeps are
-        missing), normal."""
+        missing), Student-t with `sf_dof` degrees of freedom."""
         if not 0.0 < level < 1.0:
             raise ValueError(f"level must be in (0, 1), got {level!r}.")
-        z = Z95 if level == 0.95 else float(jax.scipy.special.ndtri(0.5 + level / 2.0))
-        return self.sf - z * self.sf_stderr, self.sf + z * self.sf_stderr
+        t = t_quantile(0.5 + level / 2.0, self.sf_dof)
+        return self.sf - t * self.sf_stderr, self.sf + t * self.sf_stderr
 
     @property
     def exit_status(self) -> int:
@@ -174,7 +184,7 @@ class PopulationFit(eqx.Module):
                 "estimates": {nm: {"value": _num(self.estimates[i, k]), "stderr": _num(self.estimates_stderr[i, k])}
                               for k, nm in enumerate(self.random)},
                 "scale_factor_lsb_per_dps": _num(self.sf[i]), "scale_factor_stderr": _num(self.sf_stderr[i]),
-                "scale_factor_interval_95": [_num(low[i]), _num(high[i])],
+                "scale_factor_interval_95": [_num(low[i]), _num(high[i])], "interval_dof": _num(self.sf_dof[i]),
                 "prediction": bool(self.missing[i]),
             })
         return {"random": list(self.random), "parameters": [p.report() for p in self.parameters],
@@ -191,8 +201,9 @@ class PopulationFit(eqx.Module):
         low, high = self.interval()
         for i, d in enumerate(self.fit.devices):
             what = f"predicted (no {', '.join(self.missing[i])})" if self.missing[i] else "shrunken"
+            dof = f" (t, {self.sf_dof[i]:.3g} dof)" if math.isfinite(self.sf_dof[i]) else ""
             lines.append(f"  {d}: SF {self.sf[i]:.6f} +/- {self.sf_stderr[i]:.2g} LSB/(deg/s) {what}, 95 % "
-                         f"[{low[i]:.6f}, {high[i]:.6f}]")
+                         f"[{low[i]:.6f}, {high[i]:.6f}]{dof}")
         lines += [f"  warning: {w}" for w in self.warnings]
         return "\n".join(lines)
 
@@ -200,6 +211,31 @@ class PopulationFit(eqx.Module):
 def _num(x):
     x = float(x)
     return x if math.isfinite(x) else None
+
+
+def t_quantile(p: float, dof) -> np.ndarray:
+    """The `p` quantile (p > 0.5) of Student's t with `dof` degrees of freedom (array; inf: the normal's), by
+    bisection of its CDF 1 - I_{nu / (nu + t^2)}(nu / 2, 1 / 2) / 2."""
+    dof = np.asarray(dof, dtype=float)
+    z = float(jax.scipy.special.ndtri(p))
+    out = np.full(dof.shape, z)
+    fin = np.isfinite(dof) & (dof > 0)
+    if fin.any():
+        nu = dof[fin]
+        lo, hi = np.full(nu.shape, z), np.full(nu.shape, z)
+
+        def upper(t):
+            return 0.5 * np.asarray(jax.scipy.special.betainc(nu / 2, 0.5, nu / (nu + t**2)))
+
+        while np.any(grow := upper(hi) > 1 - p):
+            hi = np.where(grow, 2 * hi, hi)
+        for _ in range(80):
+            mid = 0.5 * (lo + hi)
+            above = upper(mid) > 1 - p
+            lo, hi = np.where(above, mid, lo), np.where(above, hi, mid)
+        out[fin] = 0.5 * (lo + hi)
+    out[np.isnan(dof) | (dof <= 0)] = np.nan  # unknown degrees of freedom (a spread without curvature): no interval
+    return out
 
 
 # --- the lot distribution from the devices' local likelihoods ---------------------------------------------------
@@ -352,6 +388,18 @@ def lot_distribution(info, h, hyper0, em_steps: int, floor: float = 1e-12):
     return hyper, hcov, converged, notes
 
 
+def interval_dof(variance, grad_mu, hyper, hcov):
+    """Per device the degrees of freedom of an interval of variance `variance` (device,) whose part
+    grad_mu_j^2 (s_j^2 + var mu_j) (`grad_mu`: (device, k) its derivative by the lot means mu) the lot spreads
+    set: each known with nu_j = 1 / (2 var log s_j), the rest exactly; Welch-Satterthwaite. Infinite where no
+    part depends on a spread."""
+    k = grad_mu.shape[1]
+    diag = np.diagonal(hcov)
+    part = grad_mu**2 * (np.exp(2.0 * hyper[k:]) + diag[:k])
+    denom = np.sum(part**2 * (2.0 * diag[k:]), axis=1)
+    return np.where(denom > 0, variance**2 / np.where(denom > 0, denom, 1.0), np.inf)
+
+
 # --- the population fit -----------------------------------------------------------------------------------------
 
 
@@ -501,6 +549,17 @@ def population_fit(identify, model, data, strategy: PopulationSolve, options: di
         warnings.append("the lot mean's and spread's uncertainty is not in the scale factors' standard errors (their "
                         "standard errors are not finite)")
     sf_stderr = np.sqrt(sf_var)
+    missing = _missing(fit.data)
+    if strategy.propagate and np.all(np.isfinite(hcov)):
+        sf_dof = interval_dof(sf_var, sf_grad[:, :k], hyper, hcov)
+    elif strategy.propagate:
+        sf_dof = np.where([bool(m) for m in missing], np.nan, np.inf)
+        warnings.append("the lot spread's standard error is not finite: the scale factors of devices with missing "
+                        "sweeps get no interval (NaN)")
+    else:
+        sf_dof = np.full(len(sf), np.inf)
+        warnings.append("propagate=False: the intervals are normal, without the lot mean's and spread's uncertainty "
+                        "(too narrow where the spread rests on few devices)")
     parameters = []
     for j, (nm, (t, sc, unit)) in enumerate(zip(random, kinds)):
         mu, ls = hyper[j], hyper[k + j]
@@ -531,7 +590,7 @@ def population_fit(identify, model, data, strategy: PopulationSolve, options: di
         warnings.append("not every device's conditional fit converged: see fit.status and fit.summary()")
     say("population fit: " + ("converged" if converged else "NOT converged") + f" after {refits} refit(s)")
     return PopulationFit(fit, tuple(random), parameters, scale_factor, estimates, estimates_stderr, sf, sf_stderr,
-                         _missing(fit.data), hyper, hcov, bool(converged), refits, tuple(warnings))
+                         sf_dof, missing, hyper, hcov, bool(converged), refits, tuple(warnings))
 
 
 def _per_name_entries(fit):
