@@ -353,6 +353,12 @@ def _escape_markdown(folder: str, names) -> None:
 def _cmd_diagnose(args):
     from ._diagnose import diagnose, write_report
 
+    if args.workers is not None or args.scheduler is not None:
+        raise ValueError(f"{'--workers' if args.workers is not None else '--scheduler'}: a diagnosis is not run in "
+                         "chunks of devices: which effect the lot's residuals show, its significance over every "
+                         "description and candidate, and each step's fit are decided for the lot as a whole. Fit a "
+                         "large lot with gyrojax identify --workers, and diagnose a sample of its devices (a few "
+                         "hundred) in one process.")
     _check_outputs(("--json", args.json, False), ("--report", args.report, True),
                    ("--draft-effect", args.draft_effect, False))
     table, fit = _table_and_fit(args)
@@ -617,6 +623,10 @@ def build_parser():
                       help="write the proposed missing term (the diagnosis's formula) as an effect module here, "
                            "ready for --effects-module")
     diag.add_argument("--quiet", action="store_true", help="no progress messages (on standard error)")
+    diag.add_argument("--workers", type=_positive_int("--workers"), default=None, metavar="N",
+                      help="refused, with the reason: a diagnosis decides for the lot as a whole (see identify "
+                           "--workers)")
+    diag.add_argument("--scheduler", default=None, metavar="ADDRESS", help="refused, as --workers")
     _effects_module_option(diag)
     diag.set_defaults(func=_cmd_diagnose)
 
