@@ -36,8 +36,8 @@ import gyrojax as gj
 DEVICES = 16
 
 
-def spread(protocol, runs, seed):
-    table = gj.simulate_table(gj.preset("paper-qmg"), devices=DEVICES, runs=runs, protocol=protocol, seed=seed,
+def spread(rates_dps, runs, seed):
+    table = gj.simulate_table(gj.preset("paper-qmg"), devices=DEVICES, runs=runs, rates_dps=rates_dps, seed=seed,
                               spread=gj.ProcessSpread(omega=0.0, q=0.0, mass=0.0, electrode=0.0, angular_gain=0.0,
                                                       split=0.0, vcf_electrode=0.0), progress=False)
     fit = gj.identify("paper-qmg", table, progress=False)
@@ -55,10 +55,10 @@ def scale_factor(devices=None, out=None):
     print(plan.summary())
     print(f"[{time.time() - t0:.0f} s] Monte Carlo, {DEVICES} devices per protocol")
     rows = []
-    for name, protocol, runs, predicted in (
-            ("seed 000", gj.Protocol(), design.seed000_runs, float(np.mean(design.seed000_stderr))),
-            ("design", gj.Protocol(rates_dps=design.rates_dps), design.rate_runs, float(np.mean(design.stderr)))):
-        sd, fit_se, status = spread(protocol, runs, seed=11)
+    for name, rates, runs, predicted in (
+            ("seed 000", None, design.seed000_runs, float(np.mean(design.seed000_stderr))),
+            ("design", design.rates_dps, design.rate_runs, float(np.mean(design.stderr)))):
+        sd, fit_se, status = spread(rates, runs, seed=11)
         mc = sd / math.sqrt(2 * (DEVICES - 1))
         rows.append((name, runs, predicted, sd, mc, fit_se))
         print(f"[{time.time() - t0:.0f} s] {name}: {runs} run(s); predicted stderr {predicted:.4g}, Monte Carlo "
@@ -90,9 +90,9 @@ def more_monte_carlo(seed, devices, previous, out):
     draws = prev.get("draws", [{"seed": prev["seed_of_the_monte_carlo"], "devices": prev["devices"],
                                 "mc_std": [r["mc_std"] for r in prev["rows"]]}])
     new = []
-    for row, protocol, runs in zip(prev["rows"], (gj.Protocol(), gj.Protocol(rates_dps=tuple(design["rates_dps"]))),
-                                   (design["seed000"]["runs"], design["rate_runs"])):
-        sd, fit_se, status = spread(protocol, runs, seed=seed)
+    for row, rates, runs in zip(prev["rows"], (None, tuple(design["rates_dps"])),
+                                (design["seed000"]["runs"], design["rate_runs"])):
+        sd, fit_se, status = spread(rates, runs, seed=seed)
         new.append(sd)
         print(f"{row['protocol']}: seed {seed}, {devices} devices: std {sd:.4g}; statuses {sorted(set(status))}")
     draws.append({"seed": seed, "devices": devices, "mc_std": new})

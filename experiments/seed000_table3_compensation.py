@@ -47,10 +47,10 @@ LABELS = {"uncompensated": "Origin", "polynomial": "Tra method", "composite": "C
           "model": "Model-based"}
 
 
-def protocol(rise: float, rates_dps) -> gj.Protocol:
-    """Seed 000 §5's rate-table protocol (1 min warm-up, 2 min per rate) with a warm-up of `rise` K per run,
+def protocol(rise: float) -> gj.Protocol:
+    """Seed 000 §5's rate-table timing (1 min warm-up, 2 min per rate) with a warm-up of `rise` K per run,
     the first run slower."""
-    return gj.Protocol(rates_dps=rates_dps, warmup=gj.RunWarmup(
+    return gj.Protocol(warmup=gj.RunWarmup(
         rise_k=rise, time_constant_s=RUN_TIME_CONSTANT_S, first_rise_k=rise,
         first_time_constant_s=FIRST_RUN_TIME_CONSTANT_S))
 
@@ -58,7 +58,7 @@ def protocol(rise: float, rates_dps) -> gj.Protocol:
 def simulate_runs(*, inl_scale: float, rise: float, seed: int, rates_dps) -> gj.Table:
     """Three runs of the paper-like device as one tidy table (runs 0, 1, 2; each its own power-on)."""
     gyro = gj.add_effect(gj.paper_qmg(), "dac_inl", inl_scale)
-    return gj.simulate_table(gyro, runs=N_RUNS, seed=seed, protocol=protocol(rise, rates_dps))
+    return gj.simulate_table(gyro, runs=N_RUNS, seed=seed, rates_dps=rates_dps, protocol=protocol(rise))
 
 
 def leave_one_out(table: gj.Table, method) -> dict:

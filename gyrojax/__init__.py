@@ -16,7 +16,6 @@ from ._compile.cache import compilation_cache as compilation_cache  # noqa: E402
 from . import _units as units  # noqa: E402, F401  (the public gyrojax.units)
 from ._lots.campaign import (  # noqa: E402
     CAMPAIGN_TIER as CAMPAIGN_TIER,
-    SIMULATED_SWEEPS as SIMULATED_SWEEPS,
     campaign_lot as campaign_lot,
     simulate_table as simulate_table,
 )
@@ -48,7 +47,6 @@ from ._data.cells import (  # noqa: E402
     DAC_WORD_BITS as DAC_WORD_BITS,
     OPTIONAL_COLUMNS as OPTIONAL_COLUMNS,
     REQUIRED_COLUMNS as REQUIRED_COLUMNS,
-    SWEEPS as SWEEPS,
     DataError as DataError,
     decode_dac_word as decode_dac_word,
 )
@@ -189,7 +187,11 @@ from ._terms import (  # noqa: E402
     PointConditions as PointConditions,
     TemperatureCoefficient as TemperatureCoefficient,
 )
-from ._sweeps.base import AbstractSweep as AbstractSweep  # noqa: E402
+from ._sweeps.base import (  # noqa: E402
+    AbstractSweep as AbstractSweep,
+    points_field as points_field,
+    timing_field as timing_field,
+)
 from ._sweeps.branch_voltages import (  # noqa: E402
     BRANCH_RATES_DPS as BRANCH_RATES_DPS,
     BranchRatio as BranchRatio,
@@ -219,7 +221,6 @@ from ._sweeps.registry import (  # noqa: E402
     SWEEP_KINDS as SWEEP_KINDS,
     register_sweep as register_sweep,
     sweep_kind as sweep_kind,
-    sweep_names as sweep_names,
 )
 from ._sweeps.setpoint import (  # noqa: E402
     SETPOINT_RATIOS as SETPOINT_RATIOS,

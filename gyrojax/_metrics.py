@@ -35,7 +35,7 @@ from ._data.arrays import padded_columns
 from ._data.cells import DataError
 from ._data.table import Table
 from ._data.validate import check_outputs_change
-from ._sweeps.registry import SWEEP_KINDS, sweep_kind, sweep_names
+from ._sweeps.registry import SWEEP_KINDS, sweep_kind
 
 
 FULL_SCALE_CONVENTIONS = ("half_range", "span", "output")
@@ -584,7 +584,7 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
 
     records: dict[tuple, dict[str, Any]] = {}
     device_records: list[dict[str, Any]] = []
-    for sweep in sweep_names():
+    for sweep in SWEEP_KINDS:
         if not any(k[2] == sweep for k in groups):
             continue
         arr = SimpleNamespace(**padded_columns(table, sweep))  # NumPy: no compilation for a report

@@ -545,7 +545,7 @@ def _effects_module_option(parser):
 
 
 def build_parser():
-    from ._sweeps.registry import sweep_names
+    from ._sweeps.registry import SWEEP_KINDS
 
     parser = argparse.ArgumentParser(
         prog="gyrojax", epilog=_EXIT_CODES,
@@ -564,9 +564,9 @@ def build_parser():
                      help="lot size (default 1: the nominal device)")
     sim.add_argument("--runs", type=_positive_int("--runs"), default=1, help="repeated runs per device (default 1)")
     sim.add_argument("--sweeps", type=_sweep_list, default=("rate_table",),
-                     help=f"comma-separated, any of {', '.join(sweep_names())} (default rate_table); "
-                          "the protocols are seed 000 §5's rate table and seed 003's virtual-Coriolis tests, see "
-                          "gyrojax.Protocol")
+                     help=f"comma-separated, any of {', '.join(SWEEP_KINDS)} (default rate_table); "
+                          "each with its default settings (seed 000 §5's rate table, seed 003's virtual-Coriolis "
+                          "tests), see gyrojax.Protocol and the sweep kinds")
     sim.add_argument("--tier", choices=("steady", "averaged", "full"), default="steady",
                      help="simulation tier for settled points (default steady; full is the slow ground truth)")
     sim.add_argument("--effect", type=_parse_effect, action="append", default=[], metavar="NAME[=SCALE]",

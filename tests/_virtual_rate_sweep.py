@@ -21,7 +21,7 @@ class AbstractRateTableWithVirtualRate(gj.AbstractSteadySweep):
     output_meaning = "the gyro's rate output, LSB"
     rate_input = True
 
-    def check_device(self, gyro, protocol):
+    def check_device(self, gyro):
         if float(np.asarray(gyro.vcf_electrode.force_per_volt2)) == 0.0:
             raise ValueError(f"{self.name} needs a virtual-Coriolis electrode; {gyro.name!r} has none.")
 
@@ -31,12 +31,15 @@ class AbstractRateTableWithVirtualRate(gj.AbstractSteadySweep):
 
 
 class RateTableWithVirtualRate(AbstractRateTableWithVirtualRate):
-    """At the protocol's table rates, dwell and sampling."""
+    """At its own table rates (default seed 000's 22), the protocol's dwell and sampling."""
+
+    rates_dps: tuple = gj.points_field(gj.DING_ZHOU_2025_RATES_DPS, "table rates (deg/s)")
 
     name = "rate_table_vcf_offset"
+    stream = 101
 
-    def inputs(self, protocol, gyro=None):
-        return np.asarray(protocol.rates_dps)
+    def inputs(self, gyro=None):
+        return np.asarray(self.rates_dps)
 
-    def n_points(self, protocol):
-        return len(protocol.rates_dps)
+    def n_points(self):
+        return len(self.rates_dps)

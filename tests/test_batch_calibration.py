@@ -20,12 +20,13 @@ def _load():
 # Few points, same physics: 8 table rates / virtual rates over +/-200 deg/s and the dynamic test on a 10 Hz grid
 # up to 200 Hz (the vcf-2018 response peaks at the 62 Hz split and is past its -3 dB point at ~97 Hz).
 RATES = (-200.0, -100.0, -20.0, -5.0, 5.0, 20.0, 100.0, 200.0)
-SMALL = gj.Protocol(rates_dps=RATES, vcf_rates_dps=RATES, vcf_frequencies_hz=tuple(10.0 * k for k in range(1, 21)))
+SMALL = (gj.RateTable(rates_dps=RATES), gj.VcfStatic(virtual_rates_dps=RATES),
+         gj.VcfDynamic(frequencies_hz=tuple(10.0 * k for k in range(1, 21))))
 
 
 def test_batch_calibration_small():
     mod = _load()
-    records, s, fit = mod.run(devices=6, rate_devices=2, seed=11, protocol=SMALL)
+    records, s, fit = mod.run(devices=6, rate_devices=2, seed=11, sweeps=SMALL)
     # The measurement model is the simulator's (each dynamic-VCF point at its own die temperature; one mean
     # temperature per sweep had left chi2_red ~80 and LM at max_steps); the bound catches a fit gone wrong.
     assert fit.all_converged, fit.summary()

@@ -36,7 +36,7 @@ def warmup_table():
     slowly (it sweeps through its warm-up). The same device and protocol as the Table 3 experiment, so the
     compiled sweep is shared."""
     gyro = gj.add_effect(gj.paper_qmg(), "dac_inl", 1.0)
-    protocol = EXPERIMENT.protocol(EXPERIMENT.WARMUP_RISE_K, gj.DING_ZHOU_2025_RATES_DPS)
+    protocol = EXPERIMENT.protocol(EXPERIMENT.WARMUP_RISE_K)
     table = gj.simulate_table(gyro, runs=3, noise_free=True, protocol=protocol)
     return gj.Table(table.columns, source="warmup.csv")
 

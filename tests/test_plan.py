@@ -95,7 +95,7 @@ def test_default_experiments_minutes_follow_the_protocol():
     exps = {e.name: e for e in gj.default_experiments(gj.preset("paper-qmg"))}
     # one run of every registered kind the device allows, in registry order, and the warmer rate table
     assert list(exps)[:5] == ["rate_table", "rate_table_hot", "vcf_static", "vcf_dynamic", "dac"]
-    assert set(exps) == {"rate_table_hot"} | set(gj.sweep_names())
+    assert set(exps) == {"rate_table_hot"} | set(gj.SWEEP_KINDS)
     assert exps["rate_table"].minutes == pytest.approx(1 + 22 * 2)  # seed 000: 1 min warm-up, 2 min per rate
     assert exps["rate_table_hot"].minutes == pytest.approx(45 + 30)
     assert exps["vcf_dynamic"].minutes == pytest.approx((60 + 50 * 10) / 60)
@@ -112,11 +112,12 @@ class _OffsetRateTable(AbstractRateTableWithVirtualRate):
     virtual-Coriolis electrode, at 3 rates and a dwell of its own."""
 
     name = "plan_test_offset_rate_table"
+    stream = 102
 
-    def inputs(self, protocol, gyro=None):
+    def inputs(self, gyro=None):
         return np.asarray((-100.0, 0.0, 100.0))
 
-    def n_points(self, protocol):
+    def n_points(self):
         return 3
 
     def dwell_s(self, protocol):
@@ -300,8 +301,8 @@ def test_diagnose_max_effects_is_a_count():
             gj.diagnose(None, "paper-qmg", max_effects=bad)
 
 
-SMALL = gj.Protocol(rates_dps=(-200.0, -50.0, -5.0, 5.0, 50.0, 200.0),
-                    vcf_rates_dps=(-200.0, -50.0, -5.0, 5.0, 50.0, 200.0))
+SMALL_RATES = (-200.0, -50.0, -5.0, 5.0, 50.0, 200.0)
+SMALL = (gj.RateTable(rates_dps=SMALL_RATES), gj.VcfStatic(virtual_rates_dps=SMALL_RATES))
 
 
 def _join(table, extra, runs_before):
@@ -320,21 +321,20 @@ def test_a_hidden_quadrature_phase_is_found_with_the_recommended_run():
     quadrature injection; simulated for the same device (another noise seed) and added, the diagnosis selects
     it, its test sees about the chi2 the plan promised, and the final fit is within the chi2 band."""
     gyro = gj.add_effect(gj.paper_qmg(), gj.QuadraturePhase.typical(1.0))
-    table = gj.simulate_table(gyro, runs=2, protocol=SMALL, seed=3, progress=False,
-                              sweeps=("rate_table", "vcf_static"))
+    table = gj.simulate_table(gyro, runs=2, seed=3, progress=False, sweeps=SMALL)
     cands = ("quadrature_phase", "damping_coupling")
     d = gj.diagnose(table, "paper-qmg", candidates=cands, progress=False)
     assert "quadrature_phase" in d.untestable and not d.selected
-    exps = tuple(e for e in gj.default_experiments(gj.paper_qmg(), SMALL)
+    exps = tuple(e for e in gj.default_experiments(gj.paper_qmg(), kinds=SMALL)
                  if e.name in ("rate_table", "vcf_static", "quadrature_injection"))
-    p = gj.plan(fit=d.baseline, experiments=exps, max_repeats=2, protocol=SMALL, progress=False)
+    p = gj.plan(fit=d.baseline, experiments=exps, max_repeats=2, progress=False)
     c = p.candidate("quadrature_phase")
     assert not c.testable and c.expected_chi2 < 1e-3
     assert [r.experiment.name for r in c.recommended] == ["quadrature_injection"]
     runs = c.recommended[0].runs
     # the run biases take damping_coupling up whatever is added: no recommendation, a reason
     assert not p.candidate("damping_coupling").recommended
-    extra = gj.simulate_table(gyro, runs=runs, protocol=SMALL, seed=4, progress=False,
+    extra = gj.simulate_table(gyro, runs=runs, seed=4, progress=False,
                               sweeps=("quadrature_injection",))
     d2 = gj.diagnose(_join(table, extra, 2), "paper-qmg", candidates=cands, progress=False)
     assert d2.selected == ("quadrature_phase",)

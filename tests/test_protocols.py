@@ -84,7 +84,7 @@ def test_every_sweep_for_both_presets(qmg, vcf):
     design = 2 * 9.740e-8 * 0.206 / (2.14e-5 * 1.0) * 200 * DEG
     assert float(v_vcf[-1]) == pytest.approx(design, rel=1e-10) == pytest.approx(6.546e-3, abs=1e-6)
     assert float(qmg["noisy"].to_arrays("vcf_static").inputs[0, 0, -1]) == pytest.approx(2.0, rel=1e-12)
-    assert p.n_samples("vcf_dynamic") == 10 * 10_000
+    assert p.n_samples(gj.VcfDynamic()) == 10 * 10_000
 
 
 # --- the measurement model ------------------------------------------------------------------------------------
@@ -205,12 +205,12 @@ def test_protocol_warmup_none_keeps_the_device_history():
     hot = gj.ConstantTemperature(31.0)
     g = eqx.tree_at(lambda g: g.temperature, gj.paper_qmg(), hot)
     p = gj.Protocol(warmup=None)
-    np.testing.assert_array_equal(p.temperatures(g, 2, "rate_table"), np.full((2, 22), 31.0))
+    np.testing.assert_array_equal(p.temperatures(g, 2, gj.RateTable()), np.full((2, 22), 31.0))
     g2 = eqx.tree_at(lambda g: g.temperature, g, gj.WarmupTemperature(20.0, 5.0, 100.0))
-    temp = gj.Protocol(warmup=None).temperatures(g2, 1, "vcf_dynamic")[0]
+    temp = gj.Protocol(warmup=None).temperatures(g2, 1, gj.VcfDynamic())[0]
     np.testing.assert_allclose(temp, 20.0 + 5.0 * (1 - np.exp(-(60.0 + (np.arange(50) + 0.5) * 10.0) / 100.0)))
     # the default warm-up starts from the device's own temperature at power-on
-    temp = gj.Protocol().temperatures(g2, 2, "rate_table")
+    temp = gj.Protocol().temperatures(g2, 2, gj.RateTable())
     assert temp[0, 0] == pytest.approx(20.0 + 2.0 * (1 - math.exp(-120.0 / 600.0)), rel=1e-12)
 
 
@@ -307,18 +307,29 @@ def test_round_trip_csv_and_parquet(qmg, tmp_path):
 
 
 @pytest.mark.parametrize("kwargs,message", [
-    (dict(rates_dps=(1.0,)), r"Protocol.rates_dps must hold at least 2 finite table rates"),
-    (dict(rates_dps=(1.0, 2.0, 1.0)), r"Protocol.rates_dps repeats \[1.0\]"),
-    (dict(vcf_frequencies_hz=(10.0, -5.0)), r"vcf_frequencies_hz must be > 0 Hz"),
-    (dict(vcf_frequencies_hz=(10.0, 6000.0)), r"does not sample the highest modulation frequency 6000.0 Hz"),
     (dict(dwell_s=0.0), r"Protocol.dwell_s must be positive"),
     (dict(sample_rate_hz=0.001, dwell_s=100.0), r"dwell_s x sample_rate_hz = 0.1 gives no sample"),
-    (dict(vcf_dynamic_amplitude_v=0.0), r"vcf_dynamic_amplitude_v must be finite and non-zero"),
     (dict(warmup=3.0), r"Protocol.warmup must be a RunWarmup or None"),
 ])
 def test_protocol_refuses_bad_settings(kwargs, message):
     with pytest.raises(ValueError, match=message):
         gj.Protocol(**kwargs)
+
+
+@pytest.mark.parametrize("kind,kwargs,message", [
+    (gj.RateTable, dict(rates_dps=(1.0,)), r"RateTable.rates_dps must hold at least 2 finite table rates"),
+    (gj.RateTable, dict(rates_dps=(1.0, 2.0, 1.0)), r"RateTable.rates_dps repeats \[1.0\]"),
+    (gj.VcfStatic, dict(amplitudes_v=(0.1, np.nan)), r"VcfStatic.amplitudes_v must hold at least 2 finite voltages"),
+    (gj.VcfDynamic, dict(frequencies_hz=(10.0, -5.0)), r"frequencies_hz must be > 0 Hz"),
+    (gj.VcfDynamic, dict(frequencies_hz=(10.0, 6000.0)), r"does not sample the highest modulation frequency 6000.0"),
+    (gj.VcfDynamic, dict(amplitude_v=0.0), r"VcfDynamic.amplitude_v must be finite and non-zero"),
+    (gj.VcfDynamic, dict(lockin_dwell_s=0.0), r"lockin_dwell_s x lockin_sample_rate_hz = 0 gives no sample"),
+    (gj.DriveFrequency, dict(register_dwell_s=-1.0), r"DriveFrequency.register_dwell_s must be finite and > 0"),
+])
+def test_a_sweep_kind_refuses_bad_settings(kind, kwargs, message):
+    """A kind's settings are its fields, checked where they are given."""
+    with pytest.raises(ValueError, match=message):
+        kind(**kwargs)
 
 
 def test_simulate_table_refuses_bad_arguments():
@@ -336,9 +347,11 @@ def test_simulate_table_refuses_bad_arguments():
             gj.simulate_table(bare, sweeps=(sweep,))
     with pytest.raises(ValueError, match="runs must be an integer >= 1, got 0"):
         gj.simulate_table(g, runs=0)
-    # rates_dps is shorthand for the protocol's rates
-    p = gj.Protocol(rates_dps=(-3.0, 3.0))
-    assert p.point_times("rate_table").tolist() == [120.0, 240.0]
+    # a kind's points are its own: the protocol times them
+    assert gj.Protocol().point_times(gj.RateTable((-3.0, 3.0))).tolist() == [120.0, 240.0]
+    # rates_dps is shorthand for the rate table's and the DAC sweep's rates
+    t = gj.simulate_table(gj.paper_qmg(), sweeps=("dac",), rates_dps=(-3.0, 3.0), noise_free=True, progress=False)
+    assert np.asarray(t["rate_dps"]).tolist() == [-3.0, 3.0]
 
 
 # --- command line ---------------------------------------------------------------------------------------------

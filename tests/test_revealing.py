@@ -31,7 +31,7 @@ def _sf(gyro):
 
 
 def _setpoints(gyro, ratios=gj.SETPOINT_RATIOS):
-    return gj.DriveAmplitude().inputs(gj.Protocol(setpoint_ratios=ratios), gyro)
+    return gj.DriveAmplitude(setpoint_ratios=ratios).inputs(gyro)
 
 
 def _points(gyro, setpoints, tier=gj.Steady()):
@@ -77,7 +77,7 @@ def test_quadrature_injection_reads_tan_phi(qmg):
     """Closed loop, the rate output moves with the injected quadrature by tan(phi) of the quadrature word's
     change; at phi = 0 it does not move (to round-off), so a run bias cannot take the slope."""
     kind = gj.QuadratureInjection()
-    volts = kind.inputs(gj.Protocol(), qmg)
+    volts = kind.inputs(qmg)
     sf = _sf(qmg)
 
     def settle(gyro):
@@ -112,7 +112,7 @@ def test_branch_ratio(qmg):
     with pytest.raises(ValueError, match="closed-loop device"):
         gj.branch_ratio_points(gj.vcf_2018(), rates, NAN)
     with pytest.raises(ValueError, match="needs a closed-loop device"):
-        gj.BranchRatio().check_device(gj.vcf_2018(), gj.Protocol())
+        gj.BranchRatio().check_device(gj.vcf_2018())
 
 
 def test_zero_rate_scales_with_the_setpoint(qmg):
@@ -131,37 +131,39 @@ def test_zero_rate_scales_with_the_setpoint(qmg):
 def test_simulate_and_csv_round_trip(qmg, tmp_path):
     """Every revealing kind through simulate_table (noise-free: the readings are the measurement model's) and the
     CSV; a device without a VCF electrode is refused by name before anything is simulated."""
-    kinds = ("quadrature_injection", "drive_amplitude", "drive_frequency", "setpoint_zero_rate", "branch_ratio")
-    protocol = gj.Protocol(rates_dps=(-100.0, 100.0), setpoint_ratios=(0.5, 1.0), branch_rates_dps=(-100.0, 100.0),
-                           quadrature_rates_dps=(-100.0, 100.0))
+    names = ("quadrature_injection", "drive_amplitude", "drive_frequency", "setpoint_zero_rate", "branch_ratio")
+    two = (-100.0, 100.0)
+    kinds = (gj.QuadratureInjection(quadrature_rates_dps=two), gj.DriveAmplitude(setpoint_ratios=(0.5, 1.0)),
+             gj.DriveFrequency(setpoint_ratios=(0.5, 1.0)), gj.SetpointZeroRate(setpoint_ratios=(0.5, 1.0)),
+             gj.BranchRatio(rates_dps=two))
     gyro = gj.add_effect(qmg, gj.QuadraturePhase.typical(1.0))
-    table = gj.simulate_table(gyro, sweeps=kinds, protocol=protocol, noise_free=True, progress=False)
+    table = gj.simulate_table(gyro, sweeps=kinds, rates_dps=two, noise_free=True, progress=False)
     gj.write_table(table, tmp_path / "revealing.csv")
     back = gj.read_table(tmp_path / "revealing.csv")
     assert back.equals(table)
-    assert tuple(dict.fromkeys(back["sweep"].tolist())) == kinds
+    assert tuple(dict.fromkeys(back["sweep"].tolist())) == names
     rows = np.asarray(back["sweep"]) == "drive_amplitude"
     np.testing.assert_array_equal(back["input"][rows], _setpoints(qmg, (0.5, 1.0)))
     np.testing.assert_allclose(back["output"][rows], back["input"][rows], rtol=1e-12)  # an ideal AGC
-    volts = gj.QuadratureInjection().inputs(protocol, gyro)
+    volts = kinds[0].inputs(gyro)
     rows = np.asarray(back["sweep"]) == "quadrature_injection"
     np.testing.assert_array_equal(back["input"][rows], volts)
     pred = gj.QuadratureInjection().predict(gyro, volts, back["temperature_c"][rows], back["time_s"][rows])[0]
     np.testing.assert_allclose(back["output"][rows], pred, rtol=1e-6)
     no_vcf = eqx.tree_at(lambda g: g.vcf_electrode.force_per_volt2, qmg, 0.0)
     with pytest.raises(ValueError, match="quadrature_injection sweep needs a virtual-Coriolis electrode"):
-        gj.simulate_table(no_vcf, sweeps=("quadrature_injection",), protocol=protocol, progress=False)
+        gj.simulate_table(no_vcf, sweeps=kinds[:1], progress=False)
 
 
 def test_plateau_run_history_and_vref(qmg):
     """A plateau run (`Protocol.chamber_plateaus_c`): every listed point once per plateau within the run, the die
     at each plateau (plus its self-heating) after the soak, and vref_drift scaling the static VCF output by
     1 / (1 + tc dT) between plateaus."""
-    protocol = gj.Protocol(vcf_rates_dps=(-100.0, 100.0), chamber_plateaus_c=gj.CHAMBER_PLATEAUS_C,
-                           warmup=gj.RunWarmup(first_time_constant_s=120.0))
-    assert protocol.n_points("vcf_static") == 6 and protocol.n_points("dac") == len(protocol.rates_dps)
-    np.testing.assert_array_equal(protocol.inputs("vcf_static", qmg), np.tile(protocol.vcf_static_amplitudes(qmg), 3))
-    tables = [gj.simulate_table(gj.add_effect(qmg, gj.VrefDrift.typical(k)), sweeps=("vcf_static",),
+    protocol = gj.Protocol(chamber_plateaus_c=gj.CHAMBER_PLATEAUS_C, warmup=gj.RunWarmup(first_time_constant_s=120.0))
+    vcf = gj.VcfStatic(virtual_rates_dps=(-100.0, 100.0))
+    assert protocol.n_points(vcf) == 6 and protocol.n_points(gj.Dac()) == len(gj.Dac().rates_dps)
+    np.testing.assert_array_equal(protocol.inputs(vcf, qmg), np.tile(vcf.inputs(qmg), 3))
+    tables = [gj.simulate_table(gj.add_effect(qmg, gj.VrefDrift.typical(k)), sweeps=(vcf,),
                                 protocol=protocol, noise_free=True, progress=False) for k in (0.0, 1.0)]
     temps = np.asarray(tables[1]["temperature_c"])
     np.testing.assert_allclose(temps[::2], np.asarray(gj.CHAMBER_PLATEAUS_C) + 2.0, atol=0.05)
@@ -172,17 +174,17 @@ def test_plateau_run_history_and_vref(qmg):
 
 
 def test_settings_errors(qmg):
-    with pytest.raises(ValueError, match="setpoint_ratios must be > 0"):
-        gj.Protocol(setpoint_ratios=[1.0, -0.5])
-    with pytest.raises(ValueError, match="setpoint_ratios repeats"):
-        gj.Protocol(setpoint_ratios=[1.0, 1.0])
+    with pytest.raises(ValueError, match="DriveAmplitude.setpoint_ratios must be > 0"):
+        gj.DriveAmplitude(setpoint_ratios=[1.0, -0.5])
+    with pytest.raises(ValueError, match="SetpointZeroRate.setpoint_ratios repeats"):
+        gj.SetpointZeroRate(setpoint_ratios=[1.0, 1.0])
     with pytest.raises(ValueError, match="chamber_plateaus_c must hold at least 2"):
         gj.Protocol(chamber_plateaus_c=(25.0,))
     no_vcf = eqx.tree_at(lambda g: g.vcf_electrode.force_per_volt2, qmg, 0.0)
     with pytest.raises(ValueError, match="virtual-Coriolis electrode"):
-        gj.QuadratureInjection().inputs(gj.Protocol(), no_vcf)
+        gj.QuadratureInjection().inputs(no_vcf)
     with pytest.raises(ValueError, match="needs the device"):
-        gj.DriveAmplitude().inputs(gj.Protocol())
+        gj.DriveAmplitude().inputs()
     with pytest.raises(ValueError, match="starts_s must be >= 0 and increasing"):
         gj.PlateauTemperature((10.0, 20.0), (100.0, 50.0), 25.0, 300.0, 2.0, 120.0)
 
@@ -203,7 +205,7 @@ def test_full_waveform_agrees(qmg):
     assert abs(shift_f - shift_s) < 0.3e-6  # of a 49 ppm shift
 
     kind = gj.QuadratureInjection()
-    q = kind.inputs(gj.Protocol(quadrature_rates_dps=(-100.0, 100.0)), qmg)
+    q = gj.QuadratureInjection(quadrature_rates_dps=(-100.0, 100.0)).inputs(qmg)
     phase = gj.add_effect(qmg, gj.QuadraturePhase.typical(1.0))
     qs, qf = kind.predict(phase, q, NAN, None)[0], kind.predict(phase, q, NAN, None, full)[0]
     sf = _sf(qmg)
@@ -230,7 +232,7 @@ def test_baseline_leaves_the_fingerprints(qmg):
     assert absorption(drive, base, base, 1.0, free=free + ("omega_x",)).residual_sigmas == 0.0
 
     kind = gj.QuadratureInjection()
-    q = kind.inputs(gj.Protocol(), qmg)
+    q = kind.inputs(qmg)
     sf = _sf(qmg)
     phase = absorption(lambda d: kind.predict(d, q, NAN, None)[0], gj.add_effect(qmg, gj.QuadraturePhase.typical(0.0)),
                        gj.add_effect(qmg, gj.QuadraturePhase.typical(1.0)), SIGMA_DPS * sf, free=free,

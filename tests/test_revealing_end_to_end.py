@@ -10,8 +10,7 @@ import gyrojax as gj
 
 pytestmark = pytest.mark.slow
 
-PROTOCOL = gj.Protocol(rates_dps=(-200.0, -50.0, -5.0, 5.0, 50.0, 200.0),
-                       vcf_rates_dps=(-200.0, -50.0, -5.0, 5.0, 50.0, 200.0))
+RATES = (-200.0, -50.0, -5.0, 5.0, 50.0, 200.0)
 CANDIDATES = ("quadrature_phase", "damping_coupling")
 
 
@@ -19,8 +18,8 @@ CANDIDATES = ("quadrature_phase", "damping_coupling")
 def hidden():
     effect = gj.QuadraturePhase.typical(1.0)
     gyro = gj.add_effect(gj.paper_qmg(), effect)
-    table = gj.simulate_table(gyro, devices=1, runs=2, protocol=PROTOCOL, seed=3, progress=False,
-                              sweeps=("rate_table", "vcf_static", "quadrature_injection"))
+    table = gj.simulate_table(gyro, devices=1, runs=2, seed=3, progress=False,
+                              sweeps=(gj.RateTable(RATES), gj.VcfStatic(RATES), "quadrature_injection"))
     return float(effect.phase), table
 
 

@@ -23,16 +23,22 @@ def registered():
 
 
 def test_registry_holds_the_data_formats_kinds_in_order():
-    assert gj.sweep_names() == gj.SWEEPS == gj.SIMULATED_SWEEPS == (
+    assert tuple(gj.SWEEP_KINDS) == (
         "rate_table", "vcf_static", "vcf_dynamic", "dac", "quadrature_injection", "drive_amplitude",
         "drive_frequency", "setpoint_zero_rate", "branch_ratio")
-    kinds = [gj.sweep_kind(name) for name in gj.SWEEPS]
+    for gone in ("SWEEPS", "SIMULATED_SWEEPS", "sweep_names"):  # one list of the kinds, not four
+        assert not hasattr(gj, gone)
+    kinds = [gj.sweep_kind(name) for name in gj.SWEEP_KINDS]
     assert [type(k) for k in kinds] == [gj.RateTable, gj.VcfStatic, gj.VcfDynamic, gj.Dac, gj.QuadratureInjection,
                                         gj.DriveAmplitude, gj.DriveFrequency, gj.SetpointZeroRate, gj.BranchRatio]
     assert [k.biased for k in kinds] == [True, True, False, False, True, False, False, True, False]
     assert [k.scale_factor_unit for k in kinds] == ["LSB/(deg/s)", "LSB/V", None, "V/LSB", "LSB/V", "LSB/LSB",
                                                     "Hz/LSB", "LSB/LSB", "(V/V)/(deg/s)"]
     assert gj.sweep_kind(kinds[1]) is kinds[1]
+    # each kind's random stream is its own number (the registry's positions when streams were positions, so
+    # simulated tables did not change), not where it stands in a list
+    assert [k.stream for k in kinds] == list(range(9))
+    assert [k.reads for k in kinds] == [()] * 6 + [("omega_x",)] + [()] * 2
     with pytest.raises(ValueError, match="unknown sweep 'rate-table' \\(did you mean 'rate_table'\\?\\)"):
         gj.sweep_kind("rate-table")
 
@@ -52,6 +58,18 @@ def test_register_sweep_refuses_a_bad_class():
 
     with pytest.raises(ValueError, match="sweep name 'dac' is already registered by Dac"):
         gj.register_sweep(Taken)
+
+    class SameStream(RateTableWithVirtualRate):
+        stream = 3
+
+    with pytest.raises(ValueError, match="stream 3 is already the random stream of 'dac'"):
+        gj.register_sweep(SameStream)
+
+    class NoStream(RateTableWithVirtualRate):
+        stream = -1
+
+    with pytest.raises(ValueError, match="'stream' must be a non-negative integer"):
+        gj.register_sweep(NoStream)
     assert "rate_table_vcf_offset" not in gj.SWEEP_KINDS
 
 
@@ -61,7 +79,7 @@ def test_the_data_format_page_is_the_sweep_classes():
 
     page = (pathlib.Path(__file__).resolve().parents[1] / "docs" / "data_format.md").read_text(encoding="utf-8")
     rows = dict(re.findall(r"^\| `(\w+)` \| (.+ \| .+) \|$", page, flags=re.M))
-    for name in gj.SWEEPS:
+    for name in gj.SWEEP_KINDS:
         kind = gj.sweep_kind(name)
         assert rows[name] == f"{kind.input_meaning} | {kind.output_meaning}", name
 
@@ -70,9 +88,9 @@ def test_a_new_experiment_is_one_file(registered, tmp_path):
     """Register the new kind, simulate it beside the rate table, write and read the CSV, and get it back
     through the data layer: the virtual rate shows as an offset of the rate output by the rate it stands
     for, the scale factor stays the rate table's."""
-    protocol = gj.Protocol(rates_dps=(-100.0, -10.0, 10.0, 100.0))
-    table = gj.simulate_table(gj.paper_qmg(), sweeps=("rate_table", registered.name), noise_free=True,
-                              protocol=protocol, progress=False)
+    rates = (-100.0, -10.0, 10.0, 100.0)
+    table = gj.simulate_table(gj.paper_qmg(), sweeps=(gj.RateTable(rates), registered(rates)), noise_free=True,
+                              progress=False)
     path = tmp_path / "offset.csv"
     gj.write_table(table, path)
     back = gj.read_table(path)
@@ -110,7 +128,7 @@ def test_a_lot_of_a_nearby_size_reuses_the_compiled_settle(monkeypatch):
         if event.endswith("jaxpr_trace_duration") and "_lot_steady" in str(fun_name):
             traces.append(fun_name)
 
-    small = dict(runs=1, seed=5, protocol=gj.Protocol(rates_dps=(-100.0, -10.0, 10.0, 100.0)), progress=False)
+    small = dict(runs=1, seed=5, rates_dps=(-100.0, -10.0, 10.0, 100.0), progress=False)
     jax.monitoring.register_event_duration_secs_listener(listen)
     try:
         three = gj.simulate_table(gj.paper_qmg(), devices=3, **small)

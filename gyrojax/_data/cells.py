@@ -18,12 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from .._sweeps.registry import sweep_names
+from .._sweeps.registry import SWEEP_KINDS
 
-
-SWEEPS = sweep_names()
-"""The built-in sweep kinds of the data format (docs/data_format.md); a table may also hold any sweep kind
-registered later (`gyrojax.register_sweep`, `gyrojax.sweep_names`)."""
 
 REQUIRED_COLUMNS = ("device", "run", "sweep", "input", "output")
 """Columns every table must have."""
@@ -163,7 +159,7 @@ def parse_str(cell: Any, where: Where, i: int, column: str) -> str:
 
 def parse_sweep(cell: Any, where: Where, i: int, column: str) -> str:
     text = parse_str(cell, where, i, column)
-    names = sweep_names()
+    names = tuple(SWEEP_KINDS)
     if text not in names:
         close = difflib.get_close_matches(text.lower(), names, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
@@ -242,5 +238,5 @@ def parse_dac_word(cell: Any, where: Where, i: int, column: str) -> tuple[int, s
 
 
 def check_sweep_name(sweep: str):
-    if sweep not in sweep_names():
-        raise ValueError(f"sweep must be one of {', '.join(sweep_names())}, got {sweep!r}.")
+    if sweep not in SWEEP_KINDS:
+        raise ValueError(f"sweep must be one of {', '.join(SWEEP_KINDS)}, got {sweep!r}.")

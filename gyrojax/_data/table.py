@@ -1,7 +1,7 @@
 """`Table`: the validated, immutable tidy table of settled points (docs/data_format.md).
 
 One row is one settled point of one sweep. Required columns are `device` (str), `run` (int), `sweep` (one of
-[`SWEEPS`][]), `input` and `output`; the optional columns are [`OPTIONAL_COLUMNS`][]; any other column is kept
+[`SWEEP_KINDS`][]), `input` and `output`; the optional columns are [`OPTIONAL_COLUMNS`][]; any other column is kept
 (and written back) but ignored.
 """
 
@@ -160,7 +160,7 @@ class Table:
 
         **Arguments:**
 
-        - `sweep`: one of [`SWEEPS`][].
+        - `sweep`: one of [`SWEEP_KINDS`][].
 
         **Returns:**
 

@@ -20,6 +20,7 @@ from .._data.table import Table
 from .._gyroscope import Gyroscope
 from .._progress import as_progress
 from .._simulate.tiers import AbstractTier, Steady
+from .._sweeps.dac import Dac
 from .._sweeps.lot_campaign import LotCampaign
 from .._sweeps.protocol import Protocol
 from .._sweeps.rate_table import RateTable
@@ -29,10 +30,6 @@ from .noise import DAC_VOLTMETER_SIGMA_V, RateNoise
 from .process import WaferProcess
 from .stack import ProcessSpread, as_arrays, make_lot
 
-
-SIMULATED_SWEEPS = tuple(SWEEP_KINDS)
-"""The built-in sweeps `simulate_table` can produce (the data format, docs/data_format.md); a registered
-sweep kind (`gyrojax.register_sweep`) is simulated too."""
 
 CAMPAIGN_TIER = Steady(rtol=1e-10, atol=1e-10)
 """The default tier of `simulate_table`: `Steady` at 1e-10 (1e-4 ppm of the O(1)-scaled states). Measured:
@@ -82,12 +79,14 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     - `devices`: lot size; with more than one, devices are drawn around `gyro` with `spread`.
     - `runs`: repeated runs per device; each (run, sweep) is a power-on session with its own warm-up,
       turn-on bias and noise.
-    - `sweeps`: any of `SIMULATED_SWEEPS` (a sequence, or one comma-separated string), in the order the
-      table lists them.
+    - `sweeps`: the sweep kinds, in the order the table lists them: `gyrojax.AbstractSweep`s with their
+      settings (`gyrojax.RateTable(rates_dps=...)`), or names of `gyrojax.SWEEP_KINDS` for a kind with its
+      default settings (a sequence, or one comma-separated string of names).
     - `tier`: simulation tier of the settled sweeps (`rate_table`, `vcf_static`), default `CAMPAIGN_TIER`
       (`Steady` at 1e-10); the dynamic sweep is the averaged model linearised at rest, the DAC sweep the
       DAC's describing function.
-    - `rates_dps`: table rates, deg/s; shorthand for `protocol` with these `rates_dps`.
+    - `rates_dps`: table rates, deg/s; shorthand for these `rates_dps` in the rate table and the DAC sweep
+      (the rates its words stand for).
     - `noise`: the rate-output noise (`RateNoise`, in deg/s); each device's share in LSB is its noise-free
       rate-table scale factor (least-squares slope of run 0) times the noise in deg/s.
     - `noise_free`: no noise, no turn-on bias (then `output_sigma` is 0).
@@ -96,7 +95,7 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     - `spread`: process spread of the lot: a `ProcessSpread` (independent leaves) or a `WaferProcess`
       (thickness, etch and mismatch generate the leaves together).
     - `device_prefix`: device ids are `{prefix}-{i:03d}` (default the device's name).
-    - `protocol`: inputs, timing and warm-up of each sweep kind (`gyrojax.Protocol`).
+    - `protocol`: the timing of the runs: warm-up, dwell, order, chamber plateaus (`gyrojax.Protocol`).
     - `voltmeter_sigma_v`: reading noise of the DAC sweep's AC voltmeter, V.
     - `progress`: `True` (default) reports each sweep on standard error, `False` is silent, a callable gets
       the messages (see `gyrojax.identify`).
@@ -114,6 +113,8 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
             kinds.append(sweep_kind(s))
         except ValueError:
             raise ValueError(f"cannot simulate sweep {s!r}; choose from {', '.join(SWEEP_KINDS)}.") from None
+    if rates_dps is not None:  # the shorthand: these table rates for the rate table and the DAC sweep's words
+        kinds = [dataclasses.replace(k, rates_dps=rates_dps) if isinstance(k, (RateTable, Dac)) else k for k in kinds]
     names = [k.name for k in kinds]
     repeated = sorted({s for s in names if names.count(s) > 1})
     if repeated:
@@ -131,10 +132,8 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
         raise ValueError(f"noise must be a gyrojax.RateNoise, got {noise!r}.")
     if not voltmeter_sigma_v >= 0:
         raise ValueError(f"voltmeter_sigma_v must be >= 0 V, got {voltmeter_sigma_v!r}.")
-    if rates_dps is not None:
-        protocol = dataclasses.replace(protocol, rates_dps=rates_dps)
     for kind in kinds:
-        kind.check_device(gyro, protocol)
+        kind.check_device(gyro)
 
     say = as_progress(progress, "gyrojax.simulate_table")
     lot = campaign_lot(gyro, devices=devices, seed=seed, spread=spread)
@@ -150,7 +149,9 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
             say.compiling(("simulate", kind, structure, devices, runs, protocol.n_points(kind), tier),
                           f"the {kind.name} measurement model")
 
-    rate = RateTable()
+    # The rate table of the campaign (a noise-free one for the scale factor when the table is not simulated).
+    rate = next((k for k in kinds if isinstance(k, RateTable)),
+                RateTable() if rates_dps is None else RateTable(rates_dps=rates_dps))
     if rate in kinds or (not noise_free and any(k.rate_noise for k in kinds)):
         # The rate-table sweep: an output, and each device's scale factor for the noise in LSB. The other
         # settled sweeps (steady and set-point kinds) settle in the same call (one compiled program) when they

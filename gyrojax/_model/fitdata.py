@@ -9,7 +9,7 @@ import numpy as np
 from .._data.arrays import COORDINATES, SweepArrays
 from .._data.cells import REQUIRED_COLUMNS, DataError
 from .._data.table import Table
-from .._sweeps.registry import sweep_names
+from .._sweeps.registry import SWEEP_KINDS
 
 
 FIT_COLUMNS = REQUIRED_COLUMNS + ("output_sigma",) + tuple(COORDINATES.values())
@@ -36,7 +36,7 @@ class FitData(eqx.Module):
 
     @property
     def sweeps(self) -> tuple[str, ...]:
-        return tuple(s for s in sweep_names() if s in self.blocks)
+        return tuple(s for s in SWEEP_KINDS if s in self.blocks)
 
     @property
     def devices(self) -> tuple[str, ...] | None:
@@ -67,7 +67,7 @@ class FitData(eqx.Module):
 
 def fit_data(table: Table, sweeps=None) -> FitData:
     """Convert a validated `Table` to `FitData` (only the sweeps named, default all present)."""
-    present = [s for s in sweep_names() if s in set(table["sweep"].tolist())]
+    present = [s for s in SWEEP_KINDS if s in set(table["sweep"].tolist())]
     if sweeps is None:
         sweeps = present
     missing = [s for s in sweeps if s not in present]

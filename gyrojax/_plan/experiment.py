@@ -23,7 +23,7 @@ from .._model.residuals import settle_with_scale_factor
 from .._simulate.tiers import Steady
 from .._sweeps.base import AbstractSweep
 from .._sweeps.protocol import Protocol
-from .._sweeps.registry import SWEEP_KINDS
+from .._sweeps.registry import SWEEP_KINDS, sweep_kind
 from .._sweeps.steady import AbstractSettledSweep, AbstractSteadySweep
 
 
@@ -35,13 +35,6 @@ usual -40 to 85 deg C qualification range and moves the die well beyond its ~2 K
 CHAMBER_SOAK_S = 1800.0
 """s, ASSUMPTION: soak of a temperature chamber at a new plateau before power-on (a packaged die on a rate
 table's fixture settles within tens of minutes; not printed by the seeds)."""
-
-
-READS = {"drive_frequency": ("omega_x",)}
-"""Physical parameters a sweep kind reads that a baseline of the standard sweeps holds, by kind: a fit of data
-with runs of the kind frees them (`CandidateExperiment.reads`, `Plan.free`). The drive frequency (the PLL's
-reading) gives the drive resonance to ~1 ppm, far inside a lot's spread of `omega_x`, which the rate table,
-VCF and DAC sweeps do not see; held, the spread would be taken for the `duffing_drive` frequency pull."""
 
 
 def _floats(values):
@@ -81,7 +74,7 @@ class CandidateExperiment(eqx.Module):
             if sweep not in SWEEP_KINDS:
                 raise ValueError(f"CandidateExperiment {name!r}: sweep must be a registered sweep kind "
                                  f"({', '.join(SWEEP_KINDS)}) or an AbstractSweep, got {sweep!r}.")
-            sweep = SWEEP_KINDS[sweep]()
+            sweep = sweep_kind(sweep)
         if not isinstance(sweep, AbstractSweep):
             raise ValueError(f"CandidateExperiment {name!r}: sweep must be an AbstractSweep or a registered name, "
                              f"got {sweep!r}.")
@@ -116,8 +109,8 @@ class CandidateExperiment(eqx.Module):
     @property
     def reads(self) -> tuple:
         """Physical parameters (names of `gyrojax.PARAMETERS`) its runs determine that a baseline of the
-        standard sweeps holds (`READS`): a fit of data with these runs frees them."""
-        return READS.get(self.kind, ())
+        standard sweeps holds (the kind's `AbstractSweep.reads`): a fit of data with these runs frees them."""
+        return tuple(self.sweep.reads)
 
     def to_json(self) -> dict:
         return {"sweep": self.name, "kind": self.kind, "settings": dict(self.settings), "minutes": self.minutes,
@@ -249,10 +242,10 @@ def weighted_rows(experiment: CandidateExperiment, jac: np.ndarray, sigmas: np.n
 
 
 def default_experiments(gyro: Gyroscope, protocol: Protocol = Protocol(), ambient_c: float | None = None,
-                        chamber_kinds=("rate_table",)) -> tuple:
-    """One run of every registered sweep kind that `gyro` can be measured with under `protocol`
-    (`gyrojax.sweep_names()`, each kind with its default settings; a kind whose `check_device` refuses the
-    device is left out), plus each kind of `chamber_kinds` again at a chamber `CHAMBER_STEP_K` warmer after a
+                        chamber_kinds=("rate_table",), kinds=()) -> tuple:
+    """One run of every registered sweep kind that `gyrojax.SWEEP_KINDS` holds, each with its default settings
+    unless `kinds` gives it others (a kind whose `check_device` refuses `gyro` is left out), timed by
+    `protocol`, plus each kind of `chamber_kinds` again at a chamber `CHAMBER_STEP_K` warmer after a
     `CHAMBER_SOAK_S` soak (named `<kind>_hot`). A run's inputs, minutes, settings and noise are the kind's own
     (`AbstractSweep.run_inputs`, `run_minutes`, `run_settings`, `point_sigmas`); a timed run is not the
     session's first (its die warms up as runs 1, 2, ... of `protocol`).
@@ -261,9 +254,11 @@ def default_experiments(gyro: Gyroscope, protocol: Protocol = Protocol(), ambien
 
     - `gyro`: the nominal device (a single one): its design values set inputs such as VCF voltages and DAC
       words.
-    - `protocol`: the inputs and timing (`gyrojax.Protocol`, default seed 000's and seed 003's).
+    - `protocol`: the timing (`gyrojax.Protocol`, default seed 000's).
     - `ambient_c`: the chamber temperature at power-on, deg C (default the device's own at power-on).
     - `chamber_kinds`: sweep names also proposed at the warmer plateau.
+    - `kinds`: sweep kinds with their own settings (`gyrojax.RateTable(rates_dps=...)`), each replacing the
+      registered kind of its name.
 
     **Returns:** a tuple of `CandidateExperiment`, in registry order.
     """
@@ -272,16 +267,22 @@ def default_experiments(gyro: Gyroscope, protocol: Protocol = Protocol(), ambien
     for k in chamber_kinds:
         if k not in SWEEP_KINDS:
             raise ValueError(f"chamber_kinds: unknown sweep {k!r}; expected names of {', '.join(SWEEP_KINDS)}.")
+    given = {}
+    for k in kinds:
+        if not isinstance(k, AbstractSweep) or k.name not in SWEEP_KINDS:
+            raise ValueError(f"kinds: expected sweep kinds registered in gyrojax.SWEEP_KINDS "
+                             f"({', '.join(SWEEP_KINDS)}), got {k!r}.")
+        given[k.name] = k
     own = float(np.asarray(gyro.temperature(0.0)))
     ambient = own if ambient_c is None else float(ambient_c)
     out = []
-    for name, cls in SWEEP_KINDS.items():
-        kind = cls()
+    for name in SWEEP_KINDS:
+        kind = given.get(name) or sweep_kind(name)
         try:
-            kind.check_device(gyro, protocol)
+            kind.check_device(gyro)
         except ValueError:
             continue
-        inputs = kind.run_inputs(protocol, gyro)
+        inputs = kind.run_inputs(gyro)
         n = inputs.size
         if kind.timed:
             times = np.asarray(protocol.point_times(kind), dtype=float)
@@ -325,7 +326,7 @@ def noise_levels(data, lsb_per_dps: np.ndarray, protocol: Protocol = Protocol(),
         for sweep in data.blocks:
             cls = SWEEP_KINDS.get(sweep)
             if cls is not None and issubclass(cls, AbstractSteadySweep) and sweep in measured:
-                dwell = cls().dwell_s(protocol)
+                dwell = sweep_kind(sweep).dwell_s(protocol)
                 scale = measured[sweep] / (rate_noise.point_sigma_dps(dwell) * lsb)
                 break
         volt = measured.get("dac", DAC_VOLTMETER_SIGMA_V)

@@ -42,8 +42,9 @@ from .._model.parameters import DEFAULT_FREE, Model, as_model, zero_effect
 from .._numerics.testability import MIN_TYPICAL_CHI2, is_testable
 from .._progress import as_progress
 from .._sweeps.protocol import Protocol
+from .._sweeps.rate_table import RateTable
+from .._sweeps.registry import SWEEP_KINDS
 from .experiment import (
-    READS,
     CandidateExperiment,
     default_experiments,
     jacobians,
@@ -164,10 +165,9 @@ class ScaleFactorDesign(eqx.Module):
         """The design's stderr over seed 000's, mean over devices (below 1: the design is better)."""
         return float(np.mean(np.asarray(self.stderr) / np.asarray(self.seed000_stderr)))
 
-    def protocol(self) -> Protocol:
-        """The design as a `gyrojax.Protocol` (simulate it with `runs=rate_runs`)."""
-        kw = {"rates_dps": self.rates_dps}
-        return Protocol(**kw)
+    def rate_table(self) -> RateTable:
+        """The design's rate table, `gyrojax.RateTable` at its rates (simulate it with `runs=rate_runs`)."""
+        return RateTable(rates_dps=self.rates_dps)
 
     def to_json(self) -> dict:
         return {"budget_min": self.budget_min, "rates_dps": list(self.rates_dps), "rate_runs": self.rate_runs,
@@ -465,7 +465,8 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     - `alpha`, `target_power`: an effect is testable when its test at level `alpha` (df = its parameters x
       devices) rejects with probability `target_power` at its typical size.
     - `max_repeats`: the search tries 0 to `max_repeats` runs of each experiment.
-    - `protocol`: timing and inputs of the default experiments and of seed 000's reference.
+    - `protocol`: timing of the default experiments and of seed 000's reference (its rate table: the
+      `experiments`' own `rate_table`, else seed 000's 22 rates).
     - `free`: the baseline's free parameters when it is fitted here.
     - `identifiability_threshold`: identification's threshold (what a joint fit would hold).
     - `scale_factor`: False to plan the effects only (`Plan.scale_factor` is then None; the design's greedy
@@ -482,7 +483,11 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
         raise ValueError(f"max_repeats must be an integer in 1..8, got {max_repeats!r}.")
     if not isinstance(protocol, Protocol):
         raise ValueError(f"protocol must be a gyrojax.Protocol, got {protocol!r}.")
-    seed_run_min = (protocol.warmup_s + len(protocol.rates_dps) * protocol.dwell_s) / 60.0
+    experiments = None if experiments is None else tuple(experiments)
+    # seed 000's reference: runs of the rate table planned (the experiments' own, else the default 22 rates)
+    reference = next((e.sweep for e in experiments or () if isinstance(e, CandidateExperiment)
+                      and e.name == "rate_table" and isinstance(e.sweep, RateTable)), RateTable())
+    seed_run_min = reference.run_minutes(protocol)
     if budget_min is None:
         budget_min = 3 * seed_run_min
     if not (isinstance(budget_min, (int, float)) and math.isfinite(budget_min) and budget_min >= seed_run_min):
@@ -496,9 +501,8 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     if data is not None and not isinstance(data, (Table, FitData)):
         raise TypeError(f"data must be a gyrojax.Table or FitData, got {type(data).__name__}.")
     say = as_progress(progress, "gyrojax.plan")
-    experiments = None if experiments is None else tuple(experiments)
     # what the experiments read beyond the baseline (default experiments: whatever a kind may read)
-    reads = tuple(dict.fromkeys(p for names in READS.values() for p in names)) if experiments is None else \
+    reads = tuple(dict.fromkeys(p for cls in SWEEP_KINDS.values() for p in cls.reads)) if experiments is None else \
         tuple(dict.fromkeys(p for e in experiments if isinstance(e, CandidateExperiment) for p in e.reads))
     fit, candidates, added = _baseline(data, model, fit, candidates, free, reads, say)
     one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, fit.model.device)
@@ -723,12 +727,12 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
     by_name = {e.name: k for k, e in enumerate(exps)}
     warm, dwell = protocol.warmup_s / 60.0, protocol.dwell_s / 60.0
     rate = exps[by_name["rate_table"]]
-    levels = {"rate_table": np.asarray(protocol.rates_dps)}
+    levels = {"rate_table": np.asarray(rate.sweep.rates_dps)}
     rows = {"rate_table": [jac_e[by_name["rate_table"]][d] for d in range(n_dev)]}
     sigs = {"rate_table": [rate.sigmas(noise[d]) for d in range(n_dev)]}
     if "vcf_static" in by_name:
         v = exps[by_name["vcf_static"]]
-        levels["vcf_static"] = np.asarray(protocol.vcf_rates_dps)
+        levels["vcf_static"] = np.asarray(v.sweep.virtual_rates_dps)
         rows["vcf_static"] = [jac_e[by_name["vcf_static"]][d] for d in range(n_dev)]
         sigs["vcf_static"] = [v.sigmas(noise[d]) for d in range(n_dev)]
     cols = list(pool)
@@ -744,7 +748,8 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
     def variance(sets, runs):
         return float(np.mean([per_device(sets, runs, d) for d in range(n_dev)]))
 
-    seed_runs = int(budget // ((protocol.warmup_s + len(protocol.rates_dps) * protocol.dwell_s) / 60.0))
+    seed_run_min = (protocol.warmup_s + len(levels["rate_table"]) * protocol.dwell_s) / 60.0
+    seed_runs = int(budget // seed_run_min)
     seed_sets = {"rate_table": tuple(range(len(levels["rate_table"])))}
     seed_var = [per_device(seed_sets, {"rate_table": seed_runs}, d) for d in range(n_dev)]
     best = None
@@ -810,7 +815,7 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
     vcf = tuple(float(levels["vcf_static"][i]) for i in sets.get("vcf_static", ())) if runs.get("vcf_static") else ()
     return ScaleFactorDesign(float(budget), rates, runs["rate_table"], vcf, runs.get("vcf_static", 0), float(used),
                              tuple(stderr), seed_runs,
-                             seed_runs * (protocol.warmup_s + len(protocol.rates_dps) * protocol.dwell_s) / 60.0,
+                             seed_runs * (protocol.warmup_s + len(levels["rate_table"]) * protocol.dwell_s) / 60.0,
                              tuple(math.sqrt(v) for v in seed_var), tuple(data_se),
                              tuple(float(x) for x in np.asarray(sf)), tuple(undetermined))
 

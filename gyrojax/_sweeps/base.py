@@ -2,37 +2,65 @@
 
 import abc
 import dataclasses
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from .._gyroscope import Gyroscope
+from .._lots.noise import RateNoise
 from .._physics.thermal import ConstantTemperature
-
-
-if TYPE_CHECKING:
-    from .._lots.noise import RateNoise
-    from .lot_campaign import LotCampaign
-    from .protocol import Protocol
+from .lot_campaign import LotCampaign
+from .protocol import Protocol
 
 
 LINE_METRICS = ("scale_factor", "bias", "nonlinearity", "asymmetry", "repeatability")
 """The metrics of a straight-line fit, as `AbstractSweep.applicable_metrics` names them."""
 
 
+def float_tuple(values) -> tuple:
+    """`values` (a number or a sequence) as a flat tuple of floats: a kind's listed points, hashable."""
+    return tuple(float(v) for v in np.ravel(np.asarray(values, dtype=float)))
+
+
+def _optional_float_tuple(values):
+    return None if values is None else float_tuple(values)
+
+
+def points_field(default, what: str, *, optional: bool = False):
+    """A field of a sweep kind that lists its points (`what`: their quantity and unit, for messages), a tuple of
+    floats; None allowed where `optional`. `AbstractSweep` checks that it holds at least 2 finite distinct
+    values, and `run_settings` leaves it out (a run lists its inputs)."""
+    return eqx.field(default=default, converter=_optional_float_tuple if optional else float_tuple,
+                     metadata={"points": what, "run_setting": False})
+
+
+def timing_field(default):
+    """A field of a sweep kind's own timing (a dwell, a sampling rate), > 0; reported by `run_settings` through
+    `dwell_s`, not as itself."""
+    return eqx.field(default=default, metadata={"timing": True, "run_setting": False})
+
+
 class AbstractSweep(eqx.Module):
     """One kind of experiment: the `sweep` value of the tidy data format (docs/data_format.md).
 
-    A sweep kind owns what the data format, the simulator, identification, the metrics and the plots need to
-    know about it, so that a new experiment is one file (a final subclass) plus `gyrojax.register_sweep`. Its
-    fields, if any, are settings of the measurement model with the protocol's defaults (the carrier of a
-    virtual-Coriolis sweep); `gyrojax.sweep_kind(name)` gives the instance with the defaults.
+    A sweep kind owns what the data format, the simulator, identification, the metrics, the planner and the
+    plots need to know about it, so that a new experiment is one file (a final subclass) plus
+    `gyrojax.register_sweep`. Its fields are its settings: the points it applies (`points_field`: the table
+    rates, the VCF voltages, the set-points ...), its own timing where it has one (`timing_field`) and the
+    settings of its measurement model (the carrier of a virtual-Coriolis sweep), each with a default;
+    `gyrojax.sweep_kind(name)` gives the instance with the defaults. The run timing every kind shares (warm-up,
+    dwell, order, chamber plateaus) is the `Protocol`'s.
 
     **Class attributes:**
 
     - `name`: the `sweep` value in files (the registry key).
+    - `stream`: the number of the kind's random streams in `gyrojax.simulate_table` (its noise and a shuffled
+      order), unique among the registered kinds: a kind's draws do not depend on which other kinds exist or
+      are simulated with it.
+    - `reads`: physical parameters (names of `gyrojax.PARAMETERS`) this kind determines that a baseline of the
+      standard sweeps holds; a fit of data with runs of the kind frees them (the planner's `Plan.free`).
     - `title`: the kind in words, for messages ("rate-table").
     - `input_quantity`, `input_unit`: what the `input` column holds, e.g. "table rate", "deg/s" (plot labels
       and the scale factor's unit).
@@ -62,6 +90,7 @@ class AbstractSweep(eqx.Module):
     """
 
     name: ClassVar[str]
+    stream: ClassVar[int]
     title: ClassVar[str]
     input_quantity: ClassVar[str]
     input_unit: ClassVar[str]
@@ -77,6 +106,22 @@ class AbstractSweep(eqx.Module):
     rate_noise: ClassVar[bool] = False
     fit_against_rate: ClassVar[bool] = False
     sign_definite: ClassVar[bool] = True
+    reads: ClassVar[tuple[str, ...]] = ()
+
+    def __check_init__(self):
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if "points" in f.metadata and value is not None:
+                values = np.asarray(value)
+                if values.size < 2 or not np.all(np.isfinite(values)):
+                    raise ValueError(f"{type(self).__name__}.{f.name} must hold at least 2 finite "
+                                     f"{f.metadata['points']}, got {values.tolist()}.")
+                if np.unique(values).size != values.size:
+                    dup = sorted({v for v in values.tolist() if values.tolist().count(v) > 1})
+                    raise ValueError(f"{type(self).__name__}.{f.name} repeats {dup}; each point is applied once "
+                                     "(give repeats as more runs).")
+            elif "timing" in f.metadata and not (float(value) > 0 and np.isfinite(float(value))):
+                raise ValueError(f"{type(self).__name__}.{f.name} must be finite and > 0, got {value!r}.")
 
     @property
     def input_label(self) -> str:
@@ -109,26 +154,26 @@ class AbstractSweep(eqx.Module):
     # -- protocol ------------------------------------------------------------------------------------------------
 
     @abc.abstractmethod
-    def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:
-        """The listed inputs of this sweep under `protocol`, in the data unit, in the order listed (the
-        nominal single device `gyro` where the inputs are set from its design values)."""
+    def inputs(self, gyro: Gyroscope | None = None) -> np.ndarray:
+        """The listed inputs of this sweep (its settings), in the data unit, in the order listed (the nominal
+        single device `gyro` where the inputs are set from its design values)."""
 
     @abc.abstractmethod
-    def n_points(self, protocol: "Protocol") -> int:
-        """Number of points of this sweep under `protocol` (without a device)."""
+    def n_points(self) -> int:
+        """Number of listed points of this sweep (without a device)."""
 
-    def dwell_s(self, protocol: "Protocol") -> float:
+    def dwell_s(self, protocol: Protocol) -> float:
         """Averaging time of one point, s. Default: the protocol's `dwell_s`."""
         return protocol.dwell_s
 
-    def sample_rate_hz(self, protocol: "Protocol") -> float:
+    def sample_rate_hz(self, protocol: Protocol) -> float:
         """Output sampling rate of one point, Hz. Default: the protocol's `sample_rate_hz`."""
         return protocol.sample_rate_hz
 
     @abc.abstractmethod
-    def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
+    def check_device(self, gyro: Gyroscope) -> None:
         """Raise a `ValueError` naming the device when this sweep cannot be measured on `gyro` (a single
-        nominal device) under `protocol`, before anything is simulated."""
+        nominal device), before anything is simulated."""
 
     # -- measurement model ---------------------------------------------------------------------------------------
 
@@ -150,7 +195,7 @@ class AbstractSweep(eqx.Module):
     # -- simulation ----------------------------------------------------------------------------------------------
 
     @abc.abstractmethod
-    def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
+    def simulate(self, lot: Gyroscope, campaign: LotCampaign) -> dict[str, np.ndarray]:
         """This sweep of every device and run of `lot` (leaves with a leading device axis), with its noise.
 
         **Returns:** columns of shape (device, run, point): `input`, `output`, `output_sigma`, `n_samples`,
@@ -162,27 +207,28 @@ class AbstractSweep(eqx.Module):
     # What a measurement planner needs to propose one run of this kind; the defaults fit a timed sweep of rate
     # noise, and a kind overrides what differs.
 
-    def run_inputs(self, protocol: "Protocol", gyro: Gyroscope) -> np.ndarray:
+    def run_inputs(self, gyro: Gyroscope) -> np.ndarray:
         """The `input` column of one run on the nominal single device `gyro`, as listed (what `predict`
         takes). Default: `inputs`."""
-        return np.asarray(self.inputs(protocol, gyro), dtype=float)
+        return np.asarray(self.inputs(gyro), dtype=float)
 
-    def run_minutes(self, protocol: "Protocol") -> float:
+    def run_minutes(self, protocol: Protocol) -> float:
         """Test time of one run under `protocol`, minutes. Default: the warm-up of a timed sweep plus one
         dwell per point."""
         warmup = protocol.warmup_s if self.timed else 0.0
-        return (warmup + self.n_points(protocol) * self.dwell_s(protocol)) / 60.0
+        return (warmup + self.n_points() * self.dwell_s(protocol)) / 60.0
 
-    def run_settings(self, protocol: "Protocol") -> dict:
+    def run_settings(self, protocol: Protocol) -> dict:
         """What one run applies besides its inputs, for people and JSON: the kind's own settings (its fields)
-        and its timing. Default: every field, the dwell and, for a timed sweep, the warm-up."""
-        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        and its timing. Default: every field but the listed points and the kind's own timing (`points_field`,
+        `timing_field`), the dwell and, for a timed sweep, the warm-up."""
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.metadata.get("run_setting", True)}
         out["dwell_s"] = float(self.dwell_s(protocol))
         if self.timed:
             out["warmup_s"] = float(protocol.warmup_s)
         return out
 
-    def point_sigmas(self, inputs, protocol: "Protocol", noise: "RateNoise", lsb_per_dps: float,
+    def point_sigmas(self, inputs, protocol: Protocol, noise: RateNoise, lsb_per_dps: float,
                      voltmeter_sigma_v: float) -> np.ndarray | None:
         """Standard uncertainty of each point of one run, in the output unit, as the simulator draws it.
 
@@ -203,7 +249,7 @@ class AbstractSweep(eqx.Module):
         sigma = noise.point_sigma_dps(self.dwell_s(protocol)) * abs(float(lsb_per_dps))
         return np.full(np.shape(inputs), sigma)
 
-    def relative_sigma(self, protocol: "Protocol") -> float | None:
+    def relative_sigma(self, protocol: Protocol) -> float | None:
         """Standard uncertainty of each point relative to its reading (a ratio, e.g. 1e-6 for 1 ppm), for a kind
         whose noise is a fraction of what it reads (`point_sigmas` gives None for it): a planner multiplies it
         by the predicted reading. Default None (not relative)."""

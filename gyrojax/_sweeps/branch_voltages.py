@@ -25,8 +25,6 @@ ppm off, ~200 sigma of a 14 ppm ratio per point. A share of a branch's gain erro
 area) rather than its amplifier acts on the force, not on the voltage: a voltmeter cannot see it.
 """
 
-from typing import TYPE_CHECKING
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -37,14 +35,11 @@ from .._gyroscope import Gyroscope
 from .._simulate._model import SlowState, controls, dac_voltage, expj, phase_grid
 from .._simulate.tiers import Steady
 from .._solution import RESULTS
-from .base import AbstractSweep, at_temperature
+from .base import AbstractSweep, at_temperature, points_field
+from .lot_campaign import LotCampaign
+from .protocol import Protocol
 from .rate_table import RateTable
 from .steady import per_run, raise_unsettled, settled_points
-
-
-if TYPE_CHECKING:
-    from .lot_campaign import LotCampaign
-    from .protocol import Protocol
 
 
 BRANCH_RATES_DPS = (-200.0, -100.0, -50.0, 50.0, 100.0, 200.0)
@@ -109,10 +104,18 @@ def _lot_branch_ratio(lot, rates, temperatures, times, tier):
 
 class BranchRatio(AbstractSweep):
     """The ratio V_f+ / V_f- of the push-pull feedback branches' carrier amplitudes at rate-table points
-    (closed loop). Inputs `Protocol.branch_rates_dps`; the rate table's timing; no turn-on bias reaches a
-    lock-in ratio; noise sqrt(2) `BRANCH_SIGMA_PPM` of the ratio, independent per point."""
+    (closed loop). The rate table's timing; no turn-on bias reaches a lock-in ratio; noise sqrt(2)
+    `BRANCH_SIGMA_PPM` of the ratio, independent per point.
+
+    **Arguments:**
+
+    - `rates_dps`: the table rates read by the lock-in, deg/s, in order.
+    """
+
+    rates_dps: tuple = points_field(BRANCH_RATES_DPS, "table rates (deg/s)")
 
     name = "branch_ratio"
+    stream = 8
     title = "branch-ratio"
     input_quantity = "table rate"
     input_unit = "deg/s"
@@ -133,13 +136,13 @@ class BranchRatio(AbstractSweep):
                 "changes with the rate only by small effects (fitted by identify and diagnose); its bias, the "
                 "ratio at zero rate, is the branches' mismatch")
 
-    def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:
-        return np.asarray(protocol.branch_rates_dps)
+    def inputs(self, gyro: Gyroscope | None = None) -> np.ndarray:
+        return np.asarray(self.rates_dps)
 
-    def n_points(self, protocol: "Protocol") -> int:
-        return len(protocol.branch_rates_dps)
+    def n_points(self) -> int:
+        return len(self.rates_dps)
 
-    def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
+    def check_device(self, gyro: Gyroscope) -> None:
         if not gyro.closed_loop:
             raise ValueError(f"a branch_ratio sweep needs a closed-loop device (push-pull feedback combs); "
                              f"{gyro.name!r} is open loop.")
@@ -148,10 +151,10 @@ class BranchRatio(AbstractSweep):
         ratio, settled = branch_ratio_points(gyro, inputs, temperatures, times, tier)
         return ratio, (settled.result != RESULTS.successful) | ~jnp.isfinite(ratio)
 
-    def relative_sigma(self, protocol: "Protocol") -> float:
+    def relative_sigma(self, protocol: Protocol) -> float:
         return float(np.sqrt(2.0) * BRANCH_SIGMA_PPM * 1e-6)
 
-    def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
+    def simulate(self, lot: Gyroscope, campaign: LotCampaign) -> dict[str, np.ndarray]:
         inputs = campaign.applied(self, campaign.protocol.inputs(self))
         temps, times, full = campaign.temperatures(self), campaign.times(self), campaign.shape(self)
         ratio, settled = _lot_branch_ratio(lot, jnp.asarray(inputs), jnp.asarray(temps), jnp.asarray(times),

@@ -1,7 +1,5 @@
 """The DAC sweep (seed 000 Table 2): the FTR DAC alone, fed with carrier sines of given word amplitudes."""
 
-from typing import TYPE_CHECKING
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -11,12 +9,10 @@ from jaxtyping import Array, ArrayLike, Float, Real
 from .._compile.jit import jit
 from .._gyroscope import Gyroscope
 from .._units import DEG
-from .base import AbstractSweep
-
-
-if TYPE_CHECKING:
-    from .lot_campaign import LotCampaign
-    from .protocol import Protocol
+from .base import AbstractSweep, points_field
+from .lot_campaign import LotCampaign
+from .protocol import Protocol
+from .rate_table import DING_ZHOU_2025_RATES_DPS
 
 
 DAC_READING_S = 10.0
@@ -27,10 +23,18 @@ seed 000 Table 2 prints the readings, not the time they took): the test time of 
 class Dac(AbstractSweep):
     """The DAC sweep: the FTR DAC fed with carrier sines of given word amplitudes, the signed carrier
     fundamental read at its output by an AC voltmeter (seed 000 Table 2). A bench measurement of the DAC
-    alone: no time axis, no die temperature, no turn-on bias; the noise is the voltmeter's. The words stand
-    for `Protocol.rates_dps` (word = -SF x rate with each device's ideal scale factor, seed 000 Table 2)."""
+    alone: no time axis, no die temperature, no turn-on bias; the noise is the voltmeter's.
+
+    **Arguments:**
+
+    - `rates_dps`: the rates the words stand for, deg/s, in order (word = -SF x rate with each device's ideal
+      scale factor, seed 000 Table 2; default seed 000's 22, as the rate table's).
+    """
+
+    rates_dps: tuple = points_field(DING_ZHOU_2025_RATES_DPS, "rates (deg/s)")
 
     name = "dac"
+    stream = 3
     title = "DAC"
     input_quantity = "DAC word"
     input_unit = "LSB"
@@ -43,26 +47,26 @@ class Dac(AbstractSweep):
     timed = False
     fit_against_rate = True
 
-    def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:
+    def inputs(self, gyro: Gyroscope | None = None) -> np.ndarray:
         # The rates the words stand for, deg/s: the words themselves depend on each device's scale factor.
-        return np.asarray(protocol.rates_dps)
+        return np.asarray(self.rates_dps)
 
-    def n_points(self, protocol: "Protocol") -> int:
-        return len(protocol.rates_dps)
+    def n_points(self) -> int:
+        return len(self.rates_dps)
 
-    def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
+    def check_device(self, gyro: Gyroscope) -> None:
         if not gyro.closed_loop:
             raise ValueError(f"a dac sweep needs a closed-loop device; {gyro.name!r} is open loop.")
 
-    def run_inputs(self, protocol: "Protocol", gyro: Gyroscope) -> np.ndarray:
+    def run_inputs(self, gyro: Gyroscope) -> np.ndarray:
         # The words for the listed rates with the device's ideal scale factor (seed 000 Table 2).
         sf_ideal = float(np.asarray(gyro.ideal_scale_factor()))
-        return np.round(-np.asarray(protocol.rates_dps, dtype=float) * DEG * sf_ideal)
+        return np.round(-np.asarray(self.rates_dps, dtype=float) * DEG * sf_ideal)
 
-    def run_minutes(self, protocol: "Protocol") -> float:
-        return self.n_points(protocol) * DAC_READING_S / 60.0
+    def run_minutes(self, protocol: Protocol) -> float:
+        return self.n_points() * DAC_READING_S / 60.0
 
-    def run_settings(self, protocol: "Protocol") -> dict:
+    def run_settings(self, protocol: Protocol) -> dict:
         return {"reading_s": DAC_READING_S}
 
     def point_sigmas(self, inputs, protocol, noise, lsb_per_dps, voltmeter_sigma_v):
@@ -72,9 +76,9 @@ class Dac(AbstractSweep):
         pred = dac_points(gyro, inputs)
         return pred, ~jnp.isfinite(pred)
 
-    def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
+    def simulate(self, lot: Gyroscope, campaign: LotCampaign) -> dict[str, np.ndarray]:
         full = campaign.shape(self)
-        rates = self.inputs(campaign.protocol)
+        rates = self.inputs()
         sf_ideal = np.asarray(_lot_ideal_sf(lot), dtype=float)  # LSB per rad/s
         words = np.round(-rates[None, :] * DEG * sf_ideal[:, None])  # seed 000 Table 2: word = -SF x rate
         volts = np.asarray(_lot_dac(lot, jnp.asarray(words)), dtype=float)

@@ -8,16 +8,12 @@ integrator is the only source of one, a fixed fraction beta / (1 + beta) of ever
 gain change.
 """
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-from .setpoint import AbstractSetpointSweep, SetpointReading
-
-
-if TYPE_CHECKING:
-    from .lot_campaign import LotCampaign
-    from .protocol import Protocol
+from .base import timing_field
+from .lot_campaign import LotCampaign
+from .protocol import Protocol
+from .setpoint import DRIVE_REGISTER_DWELL_S, AbstractSetpointSweep, SetpointReading
 
 
 AMPLITUDE_SIGMA_PPM = 1.0
@@ -28,10 +24,13 @@ averaged over the dwell (a 24-bit ADC at ~4e6 LSB of signal)."""
 
 class DriveAmplitude(AbstractSetpointSweep):
     """The AGC's demodulated pick-off amplitude |e_d| read at each AGC set-point, zero table rate. Inputs
-    `Protocol.setpoint_ratios` times the device's nominal set-point (LSB); dwell `Protocol.drive_dwell_s`
+    `setpoint_ratios` times the device's nominal set-point (LSB); dwell `register_dwell_s`
     (default `DRIVE_REGISTER_DWELL_S`); noise `AMPLITUDE_SIGMA_PPM` of the reading, independent per point."""
 
+    register_dwell_s: float = timing_field(DRIVE_REGISTER_DWELL_S)
+
     name = "drive_amplitude"
+    stream = 5
     title = "drive-amplitude"
     output_unit = "LSB"
     input_meaning = ("the AGC set-point, drive ADC LSB (the amplitude the AGC regulates the demodulated drive "
@@ -40,16 +39,16 @@ class DriveAmplitude(AbstractSetpointSweep):
                       "the drive loop; equal to the set-point for an ideal AGC)")
     biased = False
 
-    def dwell_s(self, protocol: "Protocol") -> float:
-        return protocol.drive_dwell_s
+    def dwell_s(self, protocol: Protocol) -> float:
+        return self.register_dwell_s
 
     def reading(self, points: SetpointReading):
         return points.amplitude_lsb
 
-    def relative_sigma(self, protocol: "Protocol") -> float:
+    def relative_sigma(self, protocol: Protocol) -> float:
         return float(AMPLITUDE_SIGMA_PPM * 1e-6)
 
-    def add_noise(self, out: np.ndarray, campaign: "LotCampaign") -> tuple[np.ndarray, np.ndarray]:
+    def add_noise(self, out: np.ndarray, campaign: LotCampaign) -> tuple[np.ndarray, np.ndarray]:
         sigma = AMPLITUDE_SIGMA_PPM * 1e-6 * np.abs(out)
         return out + sigma * campaign.rng(self).standard_normal(out.shape), sigma
 

@@ -34,44 +34,45 @@ gain-bandwidth amplifier) keeps delta well below the 5 mrad to be found; `Quadra
 models any other delta.
 """
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from .._gyroscope import Gyroscope
 from .._physics.stimulus import Stimulus
+from .base import points_field
 from .steady import AbstractSteadySweep
-from .vcf_static import VCF_CARRIER_V
-
-
-if TYPE_CHECKING:
-    from .protocol import Protocol
+from .vcf_static import VCF_CARRIER_V, virtual_rate_volts
 
 
 INJECTED_QUADRATURE_DPS = (-100.0, -50.0, 0.0, 50.0, 100.0)
 """Injected quadrature as the rate its force equals, deg/s, ASSUMPTION: half the rate full scale, so that the
 rebalance word (quadrature and rate together) stays within the DAC range of the +/-200 deg/s sweep, and ten
 times paper-qmg's residual quadrature. The voltages follow from seed 003 Eq. (7) with the design values, as
-for the static VCF sweep (`Protocol.virtual_rate_volts`)."""
+for the static VCF sweep (`virtual_rate_volts`)."""
 
 
 class QuadratureInjection(AbstractSteadySweep):
     """A quadrature injection: V_ac on the virtual-Coriolis electrode with its carrier in phase with the drive
-    displacement, the settled rate output read, zero table rate. Inputs `Protocol.quadrature_rates_dps`
-    through the device's design values (or `Protocol.quadrature_amplitudes_v`); the rate table's timing; the
-    output carries the run's turn-on bias and rate noise, as a static VCF point.
+    displacement, the settled rate output read, zero table rate. The rate table's timing; the output carries
+    the run's turn-on bias and rate noise, as a static VCF point.
 
     **Arguments:**
 
+    - `quadrature_rates_dps`: the injected quadrature as the rate its force equals, deg/s, in order: V_ac is
+      set from them with the device's design values (`virtual_rate_volts`).
+    - `amplitudes_v`: explicit injection voltages V_ac, V, in order; when given they replace
+      `quadrature_rates_dps`.
     - `carrier_v`: the fixed carrier V_fc, V.
     - `carrier_phase`: phase of the injection carrier, rad: pi/2 (default) is in phase with the drive
       displacement; anything else adds a virtual rate of Q_v cos(carrier_phase).
     """
 
+    quadrature_rates_dps: tuple = points_field(INJECTED_QUADRATURE_DPS, "virtual quadratures (deg/s)")
+    amplitudes_v: tuple | None = points_field(None, "voltages (V)", optional=True)
     carrier_v: float = VCF_CARRIER_V
     carrier_phase: float = np.pi / 2
 
     name = "quadrature_injection"
+    stream = 4
     title = "quadrature-injection"
     input_quantity = "injection voltage V_ac"
     input_unit = "V"
@@ -84,19 +85,18 @@ class QuadratureInjection(AbstractSteadySweep):
     def applicable_metrics(self) -> tuple[str, ...]:
         return ("scale_factor", "bias")  # the rate output per injected quadrature volt: the quadrature leakage
 
-    def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:
-        if protocol.quadrature_amplitudes_v is not None:
-            return np.asarray(protocol.quadrature_amplitudes_v)
+    def inputs(self, gyro: Gyroscope | None = None) -> np.ndarray:
+        if self.amplitudes_v is not None:
+            return np.asarray(self.amplitudes_v)
         if gyro is None:
-            raise ValueError("Protocol.inputs('quadrature_injection') needs the device to turn "
-                             "quadrature_rates_dps into volts; pass gyro=.")
-        return protocol.virtual_rate_volts(gyro, protocol.quadrature_rates_dps, self.carrier_v)
+            raise ValueError("QuadratureInjection.inputs needs the device to turn quadrature_rates_dps into volts; "
+                             "pass gyro=.")
+        return virtual_rate_volts(gyro, self.quadrature_rates_dps, self.carrier_v)
 
-    def n_points(self, protocol: "Protocol") -> int:
-        given = protocol.quadrature_amplitudes_v
-        return len(given if given is not None else protocol.quadrature_rates_dps)
+    def n_points(self) -> int:
+        return len(self.amplitudes_v if self.amplitudes_v is not None else self.quadrature_rates_dps)
 
-    def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
+    def check_device(self, gyro: Gyroscope) -> None:
         if float(np.asarray(gyro.vcf_electrode.force_per_volt2)) == 0.0:
             raise ValueError(f"a quadrature_injection sweep needs a virtual-Coriolis electrode; {gyro.name!r} has "
                              "vcf_electrode.force_per_volt2 = 0.")

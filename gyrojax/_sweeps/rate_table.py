@@ -1,7 +1,5 @@
 """The rate table (seed 000 §5): the device on a turntable at a constant rate per point."""
 
-from typing import TYPE_CHECKING
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -12,32 +10,27 @@ from .._gyroscope import Gyroscope
 from .._physics.stimulus import Stimulus
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._units import DEG
+from .base import points_field
 from .steady import AbstractSteadySweep, settled_points
-
-
-if TYPE_CHECKING:
-    from .protocol import Protocol
 
 
 DING_ZHOU_2025_RATES_DPS = (-200.0, -100.0, -50.0, -20.0, -10.0, -5.0, -2.0, -1.0, -0.5, -0.2, -0.1,
                      0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0)
 """The 22 table rates of the rate-table protocol of Ding & Zhou 2025 (seed 000 §5), deg/s, in sweep order."""
 
-RATE_TABLE_WARMUP_S = 60.0
-"""s, seed 000 §5: "after powering the gyroscope and allowing a 1 min warm-up"."""
-
-RATE_TABLE_DWELL_S = 120.0
-"""s, seed 000 §5: "data were collected continuously for 2 min" per rate."""
-
-RATE_TABLE_SAMPLE_RATE_HZ = 100.0
-"""Hz, seed 000 §5: "at a sampling rate of 100 Hz"."""
-
-
 class RateTable(AbstractSteadySweep):
     """A rate table: the device turned at a constant table rate per point, its settled rate output read
-    (seed 000 §5). Inputs `Protocol.rates_dps`; timing `Protocol.dwell_s` at `Protocol.sample_rate_hz`."""
+    (seed 000 §5). Timing `Protocol.dwell_s` at `Protocol.sample_rate_hz`.
+
+    **Arguments:**
+
+    - `rates_dps`: the table rates, deg/s, in the order listed (default seed 000's 22).
+    """
+
+    rates_dps: tuple = points_field(DING_ZHOU_2025_RATES_DPS, "table rates (deg/s)")
 
     name = "rate_table"
+    stream = 0
     title = "rate-table"
     input_quantity = "table rate"
     input_unit = "deg/s"
@@ -48,13 +41,13 @@ class RateTable(AbstractSteadySweep):
     rate_output = True
     rate_input = True
 
-    def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:
-        return np.asarray(protocol.rates_dps)
+    def inputs(self, gyro: Gyroscope | None = None) -> np.ndarray:
+        return np.asarray(self.rates_dps)
 
-    def n_points(self, protocol: "Protocol") -> int:
-        return len(protocol.rates_dps)
+    def n_points(self) -> int:
+        return len(self.rates_dps)
 
-    def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
+    def check_device(self, gyro: Gyroscope) -> None:
         pass
 
     def stimulus(self, value, time) -> Stimulus:

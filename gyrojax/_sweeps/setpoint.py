@@ -25,7 +25,6 @@ the full-waveform tier keeps the carrier (the cubic spring's 3w harmonic, the de
 """
 
 import abc
-from typing import TYPE_CHECKING
 
 import equinox as eqx
 import jax
@@ -37,13 +36,9 @@ from .._physics.stimulus import Stimulus
 from .._simulate._model import SlowState, WaveState
 from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._solution import RESULTS
-from .base import AbstractSweep
+from .base import AbstractSweep, points_field
+from .lot_campaign import LotCampaign
 from .steady import AbstractSettledSweep, lot_steady, raise_unsettled, read_out, settled_points
-
-
-if TYPE_CHECKING:
-    from .lot_campaign import LotCampaign
-    from .protocol import Protocol
 
 
 SETPOINT_RATIOS = (0.5, 0.625, 0.75, 0.875, 1.0, 1.125, 1.25)
@@ -115,10 +110,16 @@ def setpoint_points(gyro: Gyroscope, sweep: AbstractSweep, setpoints_lsb, temper
 
 class AbstractSetpointSweep(AbstractSettledSweep):
     """A sweep of the AGC set-point at zero table rate, one reading of the settled loops per point (see the
-    module's docstring). Inputs: the set-point in drive ADC LSB, `Protocol.setpoint_ratios` times the nominal
-    device's set-point. A kind says which reading it takes (`reading`), its dwell and its noise. Its points
-    settle in one call with the device's other settled sweeps (`steady_points`), from a chord Jacobian of
-    their own."""
+    module's docstring). Inputs: the set-point in drive ADC LSB, `setpoint_ratios` times the nominal device's
+    set-point. A kind says which reading it takes (`reading`), its dwell and its noise. Its points settle in
+    one call with the device's other settled sweeps (`steady_points`), from a chord Jacobian of their own.
+
+    **Arguments:**
+
+    - `setpoint_ratios`: the AGC set-points relative to the nominal device's, in order (> 0).
+    """
+
+    setpoint_ratios: tuple = points_field(SETPOINT_RATIOS, "set-point ratios")
 
     input_quantity = "AGC set-point"
     input_unit = "LSB"
@@ -129,20 +130,24 @@ class AbstractSetpointSweep(AbstractSettledSweep):
         """The reading this kind takes from the settled points."""
 
     @abc.abstractmethod
-    def add_noise(self, out: np.ndarray, campaign: "LotCampaign") -> tuple[np.ndarray, np.ndarray]:
+    def add_noise(self, out: np.ndarray, campaign: LotCampaign) -> tuple[np.ndarray, np.ndarray]:
         """The noisy readings and their standard uncertainties, both shaped like `out` (device, run, point)."""
 
-    def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:
+    def __check_init__(self):
+        if not all(r > 0 for r in self.setpoint_ratios):
+            raise ValueError(f"{type(self).__name__}.setpoint_ratios must be > 0, got {list(self.setpoint_ratios)}.")
+
+    def inputs(self, gyro: Gyroscope | None = None) -> np.ndarray:
         if gyro is None:
-            raise ValueError(f"Protocol.inputs({self.name!r}) needs the device to turn setpoint_ratios into LSB; "
+            raise ValueError(f"{type(self).__name__}.inputs needs the device to turn setpoint_ratios into LSB; "
                              "pass gyro=.")
         nominal = float(np.asarray(gyro.drive_loop.amplitude_setpoint))
-        return np.asarray([float(f"{r * nominal:.12g}") for r in protocol.setpoint_ratios])
+        return np.asarray([float(f"{r * nominal:.12g}") for r in self.setpoint_ratios])
 
-    def n_points(self, protocol: "Protocol") -> int:
-        return len(protocol.setpoint_ratios)
+    def n_points(self) -> int:
+        return len(self.setpoint_ratios)
 
-    def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
+    def check_device(self, gyro: Gyroscope) -> None:
         if not float(np.asarray(gyro.drive_loop.amplitude_setpoint)) > 0:
             raise ValueError(f"a {self.name} sweep needs a positive AGC set-point; {gyro.name!r} has "
                              f"drive_loop.amplitude_setpoint = {gyro.drive_loop.amplitude_setpoint!r}.")
@@ -160,7 +165,7 @@ class AbstractSetpointSweep(AbstractSettledSweep):
         out = self.reading(points)
         return out, (points.settled.result != RESULTS.successful) | ~jnp.isfinite(out)
 
-    def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
+    def simulate(self, lot: Gyroscope, campaign: LotCampaign) -> dict[str, np.ndarray]:
         inputs = campaign.applied(self, campaign.protocol.inputs(self, campaign.gyro))
         temps, times, full = campaign.temperatures(self), campaign.times(self), campaign.shape(self)
         points = campaign.settled.get(self.name)

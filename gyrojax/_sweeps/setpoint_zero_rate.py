@@ -24,24 +24,20 @@ zero-rate output is 0 at every amplitude, and one run bias takes only the mean: 
 leave the same fingerprint here; the quadrature injection sees phi alone.
 """
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
+from .lot_campaign import LotCampaign
 from .setpoint import AbstractSetpointSweep, SetpointReading
-
-
-if TYPE_CHECKING:
-    from .lot_campaign import LotCampaign
 
 
 class SetpointZeroRate(AbstractSetpointSweep):
     """The rate output at zero table rate read at each AGC set-point, within one power-on run. Inputs
-    `Protocol.setpoint_ratios` times the device's nominal set-point (LSB); the rate table's dwell and sampling
+    `setpoint_ratios` times the device's nominal set-point (LSB); the rate table's dwell and sampling
     (`Protocol.dwell_s`, `sample_rate_hz`); the output carries the run's turn-on bias and rate noise, as a
     rate-table point."""
 
     name = "setpoint_zero_rate"
+    stream = 7
     title = "set-point zero-rate"
     output_unit = "LSB"
     input_meaning = "the AGC set-point, drive ADC LSB, at zero table rate (as for `drive_amplitude`)"
@@ -52,12 +48,12 @@ class SetpointZeroRate(AbstractSetpointSweep):
 
     def applicable_metrics(self) -> tuple[str, ...]:
         return ("scale_factor", "bias")  # the zero-rate output per set-point LSB, and the run's turn-on bias
-    # dwell_s: the protocol's rate-output dwell (AbstractSweep's default), not the drive registers' drive_dwell_s
+    # dwell_s: the protocol's rate-output dwell (AbstractSweep's default), not the drive registers' register_dwell_s
 
     def reading(self, points: SetpointReading):
         return points.rate_lsb
 
-    def add_noise(self, out: np.ndarray, campaign: "LotCampaign") -> tuple[np.ndarray, np.ndarray]:
+    def add_noise(self, out: np.ndarray, campaign: LotCampaign) -> tuple[np.ndarray, np.ndarray]:
         full, dwell, lsb = out.shape, self.dwell_s(campaign.protocol), campaign.lsb_per_dps
         bias, wobble = campaign.noise.sample_point_means(campaign.rng(self), full[:2], full[2], dwell)
         sigma = np.broadcast_to((campaign.noise.point_sigma_dps(dwell) * lsb)[:, None, None], full)

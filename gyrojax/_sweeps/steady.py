@@ -10,7 +10,7 @@ depend on it (`gyrojax.AbstractRateTerm`, `AbstractOutputTerm`); the device's re
 """
 
 import abc
-from typing import TYPE_CHECKING
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -25,10 +25,7 @@ from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._solution import RESULTS, result_code
 from .._terms import AbstractOutputTerm, PointConditions
 from .base import AbstractSweep, at_temperature
-
-
-if TYPE_CHECKING:
-    from .lot_campaign import LotCampaign
+from .lot_campaign import LotCampaign
 
 
 class AbstractSettledSweep(AbstractSweep):
@@ -37,7 +34,7 @@ class AbstractSettledSweep(AbstractSweep):
     settle, `steady_points`): a kind says what a point is (`point`), what it reads from the settled points
     (`finish`, `read`) and which points share a chord Jacobian of the steady tier (`chord_group`)."""
 
-    chord_group: str | None = None
+    chord_group: ClassVar[str | None] = None
     """The steady tier's chord Jacobian is formed at the centre of each group: the points of every kind of
     one named group share it, a kind without a group (None) has its own. The grouping only moves where the
     root find starts its Broyden updates, not the roots (within its tolerance)."""
@@ -91,7 +88,7 @@ class AbstractSteadySweep(AbstractSettledSweep):
     def read(self, points):
         return points.rate, points.result != RESULTS.successful
 
-    def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
+    def simulate(self, lot: Gyroscope, campaign: LotCampaign) -> dict[str, np.ndarray]:
         inputs = campaign.applied(self, campaign.protocol.inputs(self, campaign.gyro))
         temps, times, full = campaign.temperatures(self), campaign.times(self), campaign.shape(self)
         settled = campaign.settled.get(self.name)

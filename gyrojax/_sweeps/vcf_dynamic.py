@@ -1,7 +1,5 @@
 """The dynamic virtual-Coriolis test (seed 003 Eq. 6): the rate output's response to a modulated virtual rate."""
 
-from typing import TYPE_CHECKING
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -12,14 +10,11 @@ from .._compile.jit import jit
 from .._gyroscope import Gyroscope
 from .._physics.stimulus import Stimulus
 from .._simulate.response import linearise
-from .base import AbstractSweep, at_temperature
+from .base import AbstractSweep, at_temperature, points_field, timing_field
+from .lot_campaign import LotCampaign
+from .protocol import Protocol
 from .steady import per_run
 from .vcf_static import VCF_CARRIER_V
-
-
-if TYPE_CHECKING:
-    from .lot_campaign import LotCampaign
-    from .protocol import Protocol
 
 
 VCF_DYNAMIC_AMPLITUDE_V = 0.02
@@ -41,20 +36,24 @@ samples with an NI-DAQ 6366 (up to 2 MS/s), its rate is not printed."""
 class VcfDynamic(AbstractSweep):
     """The dynamic virtual-Coriolis test: V_ac modulated at each frequency, the rate output's amplitude and
     phase read by a lock-in (seed 003 Eq. 6). No turn-on bias reaches a lock-in reading; the noise is the
-    rate noise at the modulation frequency. Inputs `Protocol.vcf_frequencies_hz`, timing
-    `Protocol.dynamic_dwell_s` at `Protocol.dynamic_sample_rate_hz`; the simulator applies
-    `Protocol.vcf_dynamic_amplitude_v`.
+    rate noise at the modulation frequency.
 
     **Arguments:**
 
-    - `amplitude_v`: V_ac of the fitted measurement model, V.
+    - `frequencies_hz`: the modulation frequencies, Hz, in order.
+    - `amplitude_v`: V_ac, V (seed 003: 20 mV), applied by the simulator and the fitted measurement model.
     - `carrier_v`: the fixed carrier V_fc, V.
+    - `lockin_dwell_s`, `lockin_sample_rate_hz`: averaging time and output sampling of one lock-in point.
     """
 
+    frequencies_hz: tuple = points_field(VCF_DYNAMIC_FREQUENCIES_HZ, "frequencies (Hz)")
     amplitude_v: float = VCF_DYNAMIC_AMPLITUDE_V
     carrier_v: float = VCF_CARRIER_V
+    lockin_dwell_s: float = timing_field(VCF_DYNAMIC_DWELL_S)
+    lockin_sample_rate_hz: float = timing_field(VCF_DYNAMIC_SAMPLE_RATE_HZ)
 
     name = "vcf_dynamic"
+    stream = 2
     title = "dynamic-VCF"
     input_quantity = "modulation frequency"
     input_unit = "Hz"
@@ -67,19 +66,32 @@ class VcfDynamic(AbstractSweep):
     straight_line = False
     rate_noise = True
 
-    def inputs(self, protocol: "Protocol", gyro: Gyroscope | None = None) -> np.ndarray:
-        return np.asarray(protocol.vcf_frequencies_hz)
+    def __check_init__(self):
+        f = np.asarray(self.frequencies_hz)
+        if np.any(f <= 0):
+            raise ValueError(f"VcfDynamic.frequencies_hz must be > 0 Hz, got {f.tolist()}.")
+        if self.amplitude_v == 0 or not np.isfinite(self.amplitude_v):
+            raise ValueError(f"VcfDynamic.amplitude_v must be finite and non-zero, got {self.amplitude_v!r}.")
+        if f.max() >= self.lockin_sample_rate_hz / 2:
+            raise ValueError(f"VcfDynamic.lockin_sample_rate_hz = {self.lockin_sample_rate_hz} Hz does not sample the "
+                             f"highest modulation frequency {f.max()} Hz (Nyquist: more than 2x).")
+        if round(self.lockin_dwell_s * self.lockin_sample_rate_hz) < 1:
+            raise ValueError(f"VcfDynamic: lockin_dwell_s x lockin_sample_rate_hz = "
+                             f"{self.lockin_dwell_s * self.lockin_sample_rate_hz:g} gives no sample per point.")
 
-    def n_points(self, protocol: "Protocol") -> int:
-        return len(protocol.vcf_frequencies_hz)
+    def inputs(self, gyro: Gyroscope | None = None) -> np.ndarray:
+        return np.asarray(self.frequencies_hz)
 
-    def dwell_s(self, protocol: "Protocol") -> float:
-        return protocol.dynamic_dwell_s
+    def n_points(self) -> int:
+        return len(self.frequencies_hz)
 
-    def sample_rate_hz(self, protocol: "Protocol") -> float:
-        return protocol.dynamic_sample_rate_hz
+    def dwell_s(self, protocol: Protocol) -> float:
+        return self.lockin_dwell_s
 
-    def check_device(self, gyro: Gyroscope, protocol: "Protocol") -> None:
+    def sample_rate_hz(self, protocol: Protocol) -> float:
+        return self.lockin_sample_rate_hz
+
+    def check_device(self, gyro: Gyroscope) -> None:
         if float(np.asarray(gyro.vcf_electrode.force_per_volt2)) == 0.0:
             raise ValueError(f"a vcf_dynamic sweep needs a virtual-Coriolis electrode; {gyro.name!r} has "
                              "vcf_electrode.force_per_volt2 = 0.")
@@ -95,12 +107,12 @@ class VcfDynamic(AbstractSweep):
         return np.asarray(noise.amplitude_sigma_dps(np.asarray(inputs, dtype=float), self.dwell_s(protocol)),
                           dtype=float) * abs(float(lsb_per_dps))
 
-    def simulate(self, lot: Gyroscope, campaign: "LotCampaign") -> dict[str, np.ndarray]:
+    def simulate(self, lot: Gyroscope, campaign: LotCampaign) -> dict[str, np.ndarray]:
         protocol = campaign.protocol
         inputs = campaign.applied(self, protocol.inputs(self))
         temps, full = campaign.temperatures(self), campaign.shape(self)
-        amp, phase = _lot_vcf_dynamic(lot, jnp.asarray(inputs), jnp.asarray(temps),
-                                      float(protocol.vcf_dynamic_amplitude_v))
+        amp, phase = _lot_vcf_dynamic(lot, jnp.asarray(inputs), jnp.asarray(temps), float(self.amplitude_v),
+                                      float(self.carrier_v))
         amp, phase = np.asarray(amp, dtype=float), np.asarray(phase, dtype=float)
         if not (np.all(np.isfinite(amp)) and np.all(np.isfinite(phase))):
             raise RuntimeError("the vcf-dynamic response is not finite for some points; the device has no "
@@ -110,7 +122,7 @@ class VcfDynamic(AbstractSweep):
             sigma = np.zeros(full)
         else:
             # Lock-in over whole cycles: each quadrature component carries sqrt(G(f) / T) (see RateNoise).
-            sigma = (campaign.noise.amplitude_sigma_dps(inputs, protocol.dynamic_dwell_s)[None, :, :]
+            sigma = (campaign.noise.amplitude_sigma_dps(inputs, self.lockin_dwell_s)[None, :, :]
                      * campaign.lsb_per_dps[:, None, None]) * np.ones(full)
             z = campaign.rng(self).standard_normal(full + (2,))
             reading = 1.0 + sigma * (z[..., 0] + 1j * z[..., 1]) / amp
@@ -143,12 +155,12 @@ def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz: Float[ArrayLike, " point
 
 
 @jit
-def _lot_vcf_dynamic(lot, frequencies_hz, temperatures, amplitude_v):
+def _lot_vcf_dynamic(lot, frequencies_hz, temperatures, amplitude_v, carrier_v):
     """`vcf_dynamic_points` for every device, run and point, each point at its own temperature; frequencies
     (point,) or (run, point)."""
     freqs = per_run(frequencies_hz, temperatures)
 
     def device(g, temps):
-        return jax.vmap(lambda f, t_run: vcf_dynamic_points(g, f, t_run, amplitude_v))(freqs, temps)
+        return jax.vmap(lambda f, t_run: vcf_dynamic_points(g, f, t_run, amplitude_v, carrier_v))(freqs, temps)
 
     return eqx.filter_vmap(device)(lot, temperatures)
