@@ -1,23 +1,22 @@
 """The diagnosis's report folder: Markdown, JSON and PNG plots."""
 
-from typing import TYPE_CHECKING
+import numpy as np
+
+from .._identify import Fit
+from .locate import Location
 
 
-if TYPE_CHECKING:
-    from .solution import Diagnosis
-
-
-def write_report(diagnosis: "Diagnosis", out_dir) -> dict:
-    """A report folder: `diagnosis.md`, `diagnosis.json` and PNG plots (residuals before and after, where the
-    misfit lives, the ranking, the fingerprints, the error falling). The folder appears whole or not at all
-    (`out_dir` may be new, empty, or a folder gyrojax wrote before, which is replaced). Returns the JSON."""
+def write_report(diagnosis, out_dir) -> dict:
+    """A report folder of a `gyrojax.Diagnosis`: `diagnosis.md`, `diagnosis.json` and PNG plots (residuals before
+    and after, where the misfit lives, the ranking, the fingerprints, the error falling). The folder appears whole
+    or not at all (`out_dir` may be new, empty, or a folder gyrojax wrote before, which is replaced). Returns the
+    JSON."""
     import os
 
     import matplotlib.pyplot as plt
 
     from .. import plot
     from .._data.io import atomic_directory, atomic_write_bytes, atomic_write_json
-    from .solution import discrepancy_text
 
     with atomic_directory(out_dir) as folder:
         sweeps = diagnosis.baseline.data.sweeps
@@ -96,6 +95,29 @@ def _ppm_cell(value: float, fit) -> str:
     """A nonlinearity for the step table: the number, or n/a with the reason."""
     import math
 
-    from .solution import nonlinearity_not_determined
-
     return f"{value:.2f}" if math.isfinite(value) else f"n/a ({nonlinearity_not_determined(fit)})"
+
+
+def discrepancy_text(d) -> str:
+    """A significant discrepancy in words: its share of the misfit where it has one (1 % or more); else what it
+    is, where and how large, with "below 1 % of the misfit" (significant in a large lot, or at a chi2 at the
+    noise level, where there is no excess misfit to share) rather than "0 % of the misfit is"."""
+    if round(100 * d.share) >= 1 or isinstance(d, Location):  # a location says it in its own words
+        return d.description
+    where = ", ".join(f"{s} {100 * f:.0f} %" for s, f in d.sweeps)
+    size = f"{d.coefficient:.3g} {d.unit}" + (f" (device spread {d.coefficient_spread:.2g})"
+                                               if d.coefficient_spread > 0 else "")
+    text = f"{d.shape} ({where}): about {size}, significant but below 1 % of the misfit"
+    if d.same_shape_as:
+        text += f"; this data cannot tell it from {', '.join(d.same_shape_as)}"
+    return text + (f"; {d.library}" if d.library else "")
+
+
+def nonlinearity_not_determined(fit: Fit) -> str:
+    """Why the model-vs-measurement nonlinearity of `fit` (`nonlinearity_residual_ppm`) is not a number."""
+    if "rate_table" not in fit.residuals:
+        return ("no rate_table sweep: the nonlinearity is that of the rate-table points, as ppm of the scale "
+                "factor's full scale")
+    if not np.all(np.isfinite(np.asarray(fit.scale_factor))):
+        return "the data do not determine the scale factor (as identify says): there is no full scale to divide by"
+    return "not determined by this fit"

@@ -10,8 +10,7 @@ from .._effects.registry import EFFECTS
 from .._identify import Fit
 from .compare import nonlinearity_residual_ppm
 from .guards import MAX_TYPICAL_MULTIPLE
-from .locate import Location
-from .report import write_report
+from .report import discrepancy_text, nonlinearity_not_determined, write_report
 
 
 # ASSUMPTION: each effect's `typical(1.0)` is a realistic size with a provenance; a device more than 20 times
@@ -283,31 +282,6 @@ def sizes_text(sizes: list) -> list:
             parts.append(f"held, no standard error: {', '.join(held)}")
         lines.append(f"fitted, {device}: " + "; ".join(parts))
     return lines
-
-
-def discrepancy_text(d) -> str:
-    """A significant discrepancy in words: its share of the misfit where it has one (1 % or more); else what it
-    is, where and how large, with "below 1 % of the misfit" (significant in a large lot, or at a chi2 at the
-    noise level, where there is no excess misfit to share) rather than "0 % of the misfit is"."""
-    if round(100 * d.share) >= 1 or isinstance(d, Location):  # a location says it in its own words
-        return d.description
-    where = ", ".join(f"{s} {100 * f:.0f} %" for s, f in d.sweeps)
-    size = f"{d.coefficient:.3g} {d.unit}" + (f" (device spread {d.coefficient_spread:.2g})"
-                                               if d.coefficient_spread > 0 else "")
-    text = f"{d.shape} ({where}): about {size}, significant but below 1 % of the misfit"
-    if d.same_shape_as:
-        text += f"; this data cannot tell it from {', '.join(d.same_shape_as)}"
-    return text + (f"; {d.library}" if d.library else "")
-
-
-def nonlinearity_not_determined(fit: Fit) -> str:
-    """Why the model-vs-measurement nonlinearity of `fit` (`nonlinearity_residual_ppm`) is not a number."""
-    if "rate_table" not in fit.residuals:
-        return ("no rate_table sweep: the nonlinearity is that of the rate-table points, as ppm of the scale "
-                "factor's full scale")
-    if not np.all(np.isfinite(np.asarray(fit.scale_factor))):
-        return "the data do not determine the scale factor (as identify says): there is no full scale to divide by"
-    return "not determined by this fit"
 
 
 def ppm_text(value: float, fit: Fit) -> str:
