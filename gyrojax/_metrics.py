@@ -31,9 +31,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from ._data.arrays import padded_columns
 from ._data.cells import DataError
-from ._data.table import Table
+from ._data.table import Table, padded_columns
 from ._data.validate import check_outputs_change
 from ._sweeps.registry import SWEEP_KINDS, sweep_kind
 

@@ -120,6 +120,41 @@ def test_no_import_cycles():
     assert not cycles, f"modules that import each other (directly or around a circle): {cycles}"
 
 
+def _every_import(module: str, path: pathlib.Path):
+    """(target module, line) of every import in `module`: at the top level, inside functions (lazy imports) and
+    under `if TYPE_CHECKING:` alike."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    is_package = path.name == "__init__.py"
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            target = _resolve(module, is_package, node)
+            for alias in node.names:
+                sub = f"{target}.{alias.name}"
+                yield (sub if sub in MODULES else target), node.lineno
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name, node.lineno
+
+
+def _full_graph():
+    graph = {m: set() for m in MODULES}
+    for module, path in MODULES.items():
+        for target, _ in _every_import(module, path):
+            if target in MODULES and target != module:
+                graph[module].add(target)
+    return graph
+
+
+def test_no_import_cycles_even_through_lazy_or_type_checking_imports():
+    """A cycle hidden in a function's import or under TYPE_CHECKING is still two modules that need each other:
+    the layering holds for every import, and no module needs `TYPE_CHECKING` to break one."""
+    assert "gyrojax._data.table" in _full_graph()["gyrojax._metrics"]  # it sees the imports of every kind
+    cycles = _cycles(_full_graph())
+    assert not cycles, f"modules that import each other, counting lazy and TYPE_CHECKING imports: {cycles}"
+    guarded = [str(p.relative_to(ROOT)) for p in MODULES.values() if "TYPE_CHECKING" in p.read_text()]
+    assert not guarded, f"modules that import under TYPE_CHECKING: {guarded}"
+
+
 def _is_private(name: str) -> bool:
     return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
 

@@ -348,11 +348,11 @@ def test_to_arrays_layout():
 def test_arrays_round_trip_exact():
     table = ragged_table()
     arrays = table.to_arrays("rate_table")
-    back = arrays.to_table()
+    back = Table.from_arrays(arrays)
     expected = table.select([i for i in range(len(table)) if table["sweep"][i] == "rate_table"])
     assert back.column_names == expected.column_names
     assert back.equals(expected)
-    assert back.to_arrays("rate_table").to_table().equals(back)
+    assert Table.from_arrays(back.to_arrays("rate_table")).equals(back)
 
 
 def test_arrays_vmap():
@@ -386,7 +386,7 @@ def test_fit_data_holds_sweep_arrays_aligned_on_the_lot():
     np.testing.assert_array_equal(vcf.sigmas[0], [[1.0, 1.0]])  # padding
     np.testing.assert_array_equal(vcf.temperatures[0], [[25.0, 25.0]])  # padding
     assert np.all(np.isnan(vcf.temperatures[1])) and np.all(np.isnan(vcf.times[0]))  # not recorded; padding
-    back = vcf.to_table()
+    back = Table.from_arrays(vcf)
     np.testing.assert_array_equal(back["time_s"], [20.0, 10.0])
     bare = data.unlabelled()
     assert bare.devices is None and bare.weighted is None and bare.source is None

@@ -3,15 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from .cells import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, DataError, check_sweep_name
-from .table import Table
+from .cells import REQUIRED_COLUMNS, check_sweep_name
 
 
 COORDINATES = {"temperatures": "temperature_c", "times": "time_s", "drive_freqs": "drive_freq_hz"}
@@ -30,7 +28,7 @@ class SweepArrays(eqx.Module):
 
     Ragged lots (devices with different numbers of runs, runs with different numbers of points) are padded;
     `mask` is True on real points. Padding holds values that keep masked sums and their gradients finite (see
-    below). Build with `Table.to_arrays(sweep)`; `to_table()` inverts it. It is also the form the fit takes:
+    below). Build with `Table.to_arrays(sweep)`; `Table.from_arrays` inverts it. It is also the form the fit takes:
     every sweep of a fit's data (`Fit.data.blocks`, a `FitData`) is one, aligned on the lot's devices.
 
     **Fields** (float64 unless said; see the data format, docs/data_format.md, for units per sweep kind):
@@ -46,7 +44,7 @@ class SweepArrays(eqx.Module):
     - `aux`: the other optional columns the table had (`n_samples`, `rate_dps`, ...), NaN where a value was
       not given, padding 0 (`FitData` keeps none).
     - `sweep`: the sweep kind; `devices`, `runs` (run ids per device), `column_order`: labels for reports and
-      `to_table`, static. `FitData.unlabelled()` sets `devices` and `runs` to None, so that compiled fits see
+      `Table.from_arrays`, static. `FitData.unlabelled()` sets `devices` and `runs` to None, so that compiled fits see
       only arrays and shapes.
 
     `temperatures`, `times`, `drive_freqs` and `order` are None only in a fit read from a file of an early
@@ -116,34 +114,6 @@ class SweepArrays(eqx.Module):
                                    aux={c: align(v, 0.0) for c, v in self.aux.items()}, devices=tuple(devices),
                                    runs=tuple(self.runs[i] if i >= 0 else () for i in index))
 
-    def to_table(self, *, source: str | None = None) -> Table:
-        """The real (unmasked) points back as a [`gyrojax.Table`][], grouped by device then run."""
-        if self.devices is None:
-            raise ValueError("SweepArrays.to_table: these arrays have no device and run labels (unlabelled).")
-        mask = np.asarray(self.mask)
-        values = {"input": self.inputs, "output": self.outputs, "output_sigma": self.sigmas,
-                  **{c: getattr(self, f) for f, c in COORDINATES.items()}, **self.aux}
-        order = list(self.column_order)
-        order += [c for c in REQUIRED_COLUMNS if c not in order]
-        order += [c for c in values if c not in order and c in self.aux]
-        if self.sigmas is not None and "output_sigma" not in order:
-            order.append("output_sigma")
-        order = [c for c in order if c not in values or values[c] is not None]
-        cols: dict[str, list] = {c: [] for c in order}
-        for d, dev in enumerate(self.devices):
-            for k, r in enumerate(self.runs[d]):
-                sel = mask[d, k]
-                m = int(sel.sum())
-                cols["device"] += [dev] * m
-                cols["run"] += [r] * m
-                cols["sweep"] += [self.sweep] * m
-                for c in order:
-                    if c not in ("device", "run", "sweep"):
-                        cols[c] += np.asarray(values[c])[d, k][sel].tolist()
-        return Table({c: np.asarray(v, dtype=np.float64) if c not in ("device", "run", "sweep")
-                      else np.asarray(v) for c, v in cols.items()},
-                     source=source or f"<SweepArrays {self.sweep}>")
-
 
 def time_order(times, mask):
     """Each real point's position in its run in time order: by `times` where every point of the run has one,
@@ -155,50 +125,3 @@ def time_order(times, mask):
         rank = np.argsort(np.argsort(t, kind="stable"), kind="stable") if np.all(np.isfinite(t)) else np.arange(t.size)
         order[d, k][m] = rank
     return order
-
-
-def padded_columns(table: Table, sweep: str) -> dict[str, Any]:
-    """The padded NumPy arrays and labels of one sweep kind of `table`, by `SweepArrays` field (behind
-    `Table.to_arrays`; the metrics report uses them as they are: NumPy, no compilation)."""
-    columns = table.columns
-    check_sweep_name(sweep)
-    groups = table.groups(sweep)
-    if not groups:
-        present = sorted(set(columns["sweep"].tolist()))
-        raise DataError(f"{table.source}: no rows with sweep {sweep!r}; the table has {', '.join(present)}.",
-                        source=table.source, column="sweep")
-    devices: list[str] = []
-    runs: dict[str, list[int]] = {}
-    for dev, r, _ in groups:
-        if dev not in runs:
-            devices.append(dev)
-            runs[dev] = []
-        runs[dev].append(r)
-    n_dev, n_run = len(devices), max(len(v) for v in runs.values())
-    n_pt = max(len(v) for v in groups.values())
-    shape = (n_dev, n_run, n_pt)
-    sources = {"inputs": "input", "outputs": "output", "sigmas": "output_sigma", **COORDINATES}
-    arrays = {f: np.full(shape, PADDING[f]) for f in sources}
-    mask = np.zeros(shape, dtype=bool)
-    aux_names = [c for c in columns if c in OPTIONAL_COLUMNS and c not in sources.values()]
-    aux = {c: np.zeros(shape) for c in aux_names}
-    for (dev, r, _), rows in groups.items():
-        d, k, m = devices.index(dev), runs[dev].index(r), len(rows)
-        mask[d, k, :m] = True
-        for f, c in sources.items():
-            arrays[f][d, k, :m] = columns[c][rows] if c in columns else np.nan
-        for c in aux_names:
-            aux[c][d, k, :m] = columns[c][rows]
-    if "output_sigma" not in columns:
-        arrays["sigmas"] = None
-    return {**arrays, "mask": mask, "order": time_order(arrays["times"], mask), "aux": aux, "sweep": sweep,
-            "devices": tuple(devices), "runs": tuple(tuple(runs[d]) for d in devices),
-            "column_order": tuple(c for c in columns if c in REQUIRED_COLUMNS or c in OPTIONAL_COLUMNS)}
-
-
-def sweep_arrays(table: Table, sweep: str) -> SweepArrays:
-    """`table.to_arrays(sweep)`: the padded arrays of `padded_columns` as a `SweepArrays`."""
-    p = padded_columns(table, sweep)
-    return SweepArrays(**{f: None if p[f] is None else jnp.asarray(p[f]) for f in ARRAY_FIELDS},
-                       aux={c: jnp.asarray(v) for c, v in p["aux"].items()}, sweep=sweep, devices=p["devices"],
-                       runs=p["runs"], column_order=p["column_order"])

@@ -8,16 +8,14 @@ One row is one settled point of one sweep. Required columns are `device` (str), 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any, final
+from typing import Any, final
 
+import jax.numpy as jnp
 import numpy as np
 
-from .cells import Where, check_sweep_name
+from .arrays import ARRAY_FIELDS, COORDINATES, PADDING, SweepArrays, time_order
+from .cells import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, DataError, Where, check_sweep_name
 from .validate import group_rows, validate_columns
-
-
-if TYPE_CHECKING:
-    from .arrays import SweepArrays
 
 
 @final
@@ -152,7 +150,37 @@ class Table:
 
     # -- array form ----------------------------------------------------------------------------------------------
 
-    def to_arrays(self, sweep: str) -> "SweepArrays":
+    @classmethod
+    def from_arrays(cls, arrays: SweepArrays, *, source: str | None = None) -> Table:
+        """The real (unmasked) points of `arrays` back as a table, grouped by device then run (the inverse of
+        `to_arrays`)."""
+        if arrays.devices is None:
+            raise ValueError("Table.from_arrays: these arrays have no device and run labels (unlabelled).")
+        mask = np.asarray(arrays.mask)
+        values = {"input": arrays.inputs, "output": arrays.outputs, "output_sigma": arrays.sigmas,
+                  **{c: getattr(arrays, f) for f, c in COORDINATES.items()}, **arrays.aux}
+        order = list(arrays.column_order)
+        order += [c for c in REQUIRED_COLUMNS if c not in order]
+        order += [c for c in values if c not in order and c in arrays.aux]
+        if arrays.sigmas is not None and "output_sigma" not in order:
+            order.append("output_sigma")
+        order = [c for c in order if c not in values or values[c] is not None]
+        cols: dict[str, list] = {c: [] for c in order}
+        for d, dev in enumerate(arrays.devices):
+            for k, r in enumerate(arrays.runs[d]):
+                sel = mask[d, k]
+                m = int(sel.sum())
+                cols["device"] += [dev] * m
+                cols["run"] += [r] * m
+                cols["sweep"] += [arrays.sweep] * m
+                for c in order:
+                    if c not in ("device", "run", "sweep"):
+                        cols[c] += np.asarray(values[c])[d, k][sel].tolist()
+        return cls({c: np.asarray(v, dtype=np.float64) if c not in ("device", "run", "sweep")
+                      else np.asarray(v) for c, v in cols.items()},
+                     source=source or f"<SweepArrays {arrays.sweep}>")
+
+    def to_arrays(self, sweep: str) -> SweepArrays:
         """The rows of one sweep kind as padded (device, run, point) arrays with a mask, for vmapping lots.
 
         Devices and, within a device, runs are in order of first appearance; points keep file order (the order
@@ -164,11 +192,54 @@ class Table:
 
         **Returns:**
 
-        A [`gyrojax.SweepArrays`][]. `SweepArrays.to_table()` gives back exactly these rows (same column
+        A [`gyrojax.SweepArrays`][]. `Table.from_arrays` gives back exactly these rows (same column
         order, values and, for a table grouped by device and run, row order).
         """
-        # The array form is built from the table; imported here, not at the top, because
-        # `SweepArrays.to_table()` builds a Table (the two are each other's inverse).
-        from .arrays import sweep_arrays
-
         return sweep_arrays(self, sweep)
+
+
+def padded_columns(table: Table, sweep: str) -> dict[str, Any]:
+    """The padded NumPy arrays and labels of one sweep kind of `table`, by `SweepArrays` field (behind
+    `Table.to_arrays`; the metrics report uses them as they are: NumPy, no compilation)."""
+    columns = table.columns
+    check_sweep_name(sweep)
+    groups = table.groups(sweep)
+    if not groups:
+        present = sorted(set(columns["sweep"].tolist()))
+        raise DataError(f"{table.source}: no rows with sweep {sweep!r}; the table has {', '.join(present)}.",
+                        source=table.source, column="sweep")
+    devices: list[str] = []
+    runs: dict[str, list[int]] = {}
+    for dev, r, _ in groups:
+        if dev not in runs:
+            devices.append(dev)
+            runs[dev] = []
+        runs[dev].append(r)
+    n_dev, n_run = len(devices), max(len(v) for v in runs.values())
+    n_pt = max(len(v) for v in groups.values())
+    shape = (n_dev, n_run, n_pt)
+    sources = {"inputs": "input", "outputs": "output", "sigmas": "output_sigma", **COORDINATES}
+    arrays = {f: np.full(shape, PADDING[f]) for f in sources}
+    mask = np.zeros(shape, dtype=bool)
+    aux_names = [c for c in columns if c in OPTIONAL_COLUMNS and c not in sources.values()]
+    aux = {c: np.zeros(shape) for c in aux_names}
+    for (dev, r, _), rows in groups.items():
+        d, k, m = devices.index(dev), runs[dev].index(r), len(rows)
+        mask[d, k, :m] = True
+        for f, c in sources.items():
+            arrays[f][d, k, :m] = columns[c][rows] if c in columns else np.nan
+        for c in aux_names:
+            aux[c][d, k, :m] = columns[c][rows]
+    if "output_sigma" not in columns:
+        arrays["sigmas"] = None
+    return {**arrays, "mask": mask, "order": time_order(arrays["times"], mask), "aux": aux, "sweep": sweep,
+            "devices": tuple(devices), "runs": tuple(tuple(runs[d]) for d in devices),
+            "column_order": tuple(c for c in columns if c in REQUIRED_COLUMNS or c in OPTIONAL_COLUMNS)}
+
+
+def sweep_arrays(table: Table, sweep: str) -> SweepArrays:
+    """`table.to_arrays(sweep)`: the padded arrays of `padded_columns` as a `SweepArrays`."""
+    p = padded_columns(table, sweep)
+    return SweepArrays(**{f: None if p[f] is None else jnp.asarray(p[f]) for f in ARRAY_FIELDS},
+                       aux={c: jnp.asarray(v) for c, v in p["aux"].items()}, sweep=sweep, devices=p["devices"],
+                       runs=p["runs"], column_order=p["column_order"])

@@ -45,7 +45,7 @@ from .._electronics.excitation import FTRExcitation
 from .._electronics.frontend import FrontEnd
 from .._gyroscope import Gyroscope
 from .._lots.stack import as_arrays
-from .._model.parameters import PARAMETERS
+from .._model.catalog import PARAMETERS
 from .._physics.electrodes import DriveElectrode, FeedbackElectrode, VirtualCoriolisElectrode
 from .._physics.resonator import Resonator
 from .._physics.thermal import ConstantTemperature, PlateauTemperature, WarmupTemperature
