@@ -6,6 +6,7 @@ import os
 import time
 from collections import Counter
 
+import jax.numpy as jnp
 import numpy as np
 
 from .._data.io import atomic_write_json
@@ -156,16 +157,19 @@ def merge(plan: Plan) -> dict:
     order = {d: i for i, d in enumerate(plan.devices)}
     by_order = np.argsort([order[d["device"]] for d in devices], kind="stable")
     devices = [devices[i] for i in by_order]
-    chi2_all, dof_all = np.asarray(chi2, dtype=float), np.asarray(dof, dtype=float)
-    nu = np.asarray(noise_dof, dtype=float)
-    chi2_total, dof_total = float(np.nansum(chi2_all)), int(dof_all.sum())
+    chi2_all = np.asarray(chi2, dtype=float)[by_order]
+    dof_all, nu = np.asarray(dof, dtype=int)[by_order], np.asarray(noise_dof, dtype=float)[by_order]
+    dof_total = int(dof_all.sum())
+    # Summed as identify sums them (Fit.chi2_total in XLA, its p-value in numpy), in the lot's order: the same bits.
+    chi2_total = float(jnp.sum(jnp.asarray(chi2_all)))
     # Known sigmas: the lot's chi2 test, as identify's. An estimated noise: the F test against the pooled
     # noise degrees of freedom (identify's Monte Carlo null of the lot is not split by chunk).
     pooled = float(np.sum(nu)) if np.all(np.isfinite(nu)) else np.inf
-    p_lot = float(chi2_p_value(np.asarray(chi2_total), np.asarray(dof_total), np.asarray(pooled)))
+    p_lot = float(chi2_p_value(np.asarray(chi2_all.sum()), np.asarray(dof_total), np.asarray(pooled)))
     statuses = [d["status"] for d in devices] + ["not converged"] * sum(len(f["devices"]) for f in failed)
     exit_status = next((EXIT_CODES[s] for s in EXIT_PRECEDENCE if s in statuses), 0)
-    return {"source": plan.data, "chi2_red": chi2_total / max(dof_total, 1) if devices else None,
+    chi2_red = chi2_total / max(dof_total, 1)
+    return {"source": plan.data, "chi2_red": chi2_red if devices and np.isfinite(chi2_red) else None,
             "p_value": p_lot if np.isfinite(p_lot) else None,
             "reject_alpha": alpha, "exit_status": exit_status, "devices": devices, "lot": {},
             "unidentifiable": unidentifiable, "unidentifiable_directions": directions,
