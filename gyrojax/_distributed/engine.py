@@ -18,7 +18,9 @@ class DistributedSolve(eqx.Module):
     - `workers`: start a local cluster of this many worker processes (one thread each) on this machine.
     - `scheduler`: the address of an existing Dask scheduler (`tcp://host:8786`), e.g. one started by
       dask-jobqueue on Slurm or by the Dask Kubernetes operator; its workers must have gyrojax installed.
-    - `chunk`: devices per chunk (the last one is padded to it); 16 by default.
+    - `chunk`: devices per chunk (the last one is padded to it); 16 by default. On a CPU a multiple of 16 solves
+      16 devices at a time, as one process does, and gives its fit bit for bit; another size solves another
+      number at once and agrees to round-off.
     - `retries`: how many more times a chunk whose worker died is run elsewhere before it counts as failed (a
       local cluster's; an existing cluster keeps its scheduler's `distributed.scheduler.allowed-failures`).
     """
