@@ -2,7 +2,7 @@ r"""AGC set-point sweeps: the drive amplitude stepped at zero table rate, the dr
 rate output read at each set-point.
 
 **Protocol.** At zero table rate the AGC set-point is stepped to s_k = rho_k s_0 (s_0 the device's nominal
-set-point, `DriveLoop.amplitude_setpoint`; the ratios are `Protocol.setpoint_ratios`); after the loops settle,
+set-point, `DriveLoop.amplitude_setpoint`; the ratios are the kind's `setpoint_ratios`); after the loops settle,
 a reading is averaged over the point's dwell. Three readings are taken per set-point, each its own sweep kind
 so that a row of the data format is one settled reading with one unit: the PLL frequency (`drive_frequency`,
 Hz), the AGC's demodulated pick-off amplitude |e_d| (`drive_amplitude`, drive ADC LSB) and the rate output
