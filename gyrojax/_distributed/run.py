@@ -37,8 +37,10 @@ def identify_lot(model, data, out, strategy: DistributedSolve, *, free=DEFAULT_F
 
     **Arguments:** `model` as for `identify` (one device: the start of every device); `free` and `options`
     (`hold`, `priors`, `tier`, `solver`, `rtol`, `atol`, `max_steps`, `start`, `recovery`,
-    `identifiability_threshold`, `reject_alpha`, `estimate_noise`) as for `identify`. `shared` parameters and
-    `lot_solve` are refused: they couple the devices of a lot, which chunks fit apart.
+    `identifiability_threshold`, `reject_alpha`, `estimate_noise`) as for `identify`. `shared` parameters,
+    `lot_solve` and `start` with more than one start are refused: they couple the devices of a lot, which chunks
+    fit apart; so are chunks that held different parameters as unidentifiable (raised by the merge). The fit is
+    one process's `identify` bit for bit on a CPU for chunks of a multiple of 16 (docs/performance.md).
 
     **Returns:** the report (a dict), also written to `out`.
     """
@@ -49,10 +51,10 @@ def identify_lot(model, data, out, strategy: DistributedSolve, *, free=DEFAULT_F
         raise ValueError(f"identify_lot: {', '.join(coupled)} couple the devices of a lot (one fit of all of them), "
                          "which a lot run in chunks of devices cannot do; fit a shared parameter or a population "
                          "with identify on one process (lot_solve=JointSolve() or PopulationSolve()).")
-    start = options.get("start")
-    if start is not None and getattr(start, "starts", 1) > 1:
-        raise ValueError(f"identify_lot: start={start!r}: more than one start draws every device's starts from one "
-                         "stream of the whole lot, which a chunk of devices cannot draw; use starts=1 (the "
+    first_solve = options.get("start")
+    if first_solve is not None and getattr(first_solve, "starts", 1) > 1:
+        raise ValueError(f"identify_lot: start={first_solve!r}: more than one start draws every device's starts "
+                         "from one stream of the whole lot, which a chunk of devices cannot draw; use starts=1 (the "
                          "default), or identify on one process.")
     strategy.require()  # before the file is planned and split
     model = as_model(model)
