@@ -60,3 +60,30 @@ def test_batch_calibration_small():
     # The lot's rate-table SF spreads by percent (the split), which the model carries: no constant ratio could.
     assert s["rate_sf_spread_pct"] > 1.0
     assert math.isfinite(s["seed_method"]["rms_pct"])
+
+
+def test_population_predictions_small():
+    """The population fit of the batch calibration (issue 38) on 10 devices, 4 rate-tabled, 8-point sweeps: the
+    learned rate-path spread within 3 of its standard errors of the draw's, the 6 predictions within the
+    model's floor, and their 95 % intervals Student-t with the REML spread's ~K - 1 = 3 degrees of freedom
+    (the normal interval with a spread from 4 devices covers ~86 %: experiments/lot_batch_calibration.py,
+    docs/results.md)."""
+    from gyrojax._identify.population import t_quantile
+
+    mod = _load()
+    records, s, pf = mod.run_population(devices=10, rate_devices=4, seed=11, sweeps=SMALL)
+    assert pf.converged, pf.warnings
+    held = [r for r in records if not r["rate_table"]]
+    assert len(held) == 6 and s["population"]["count"] == 6
+    ag = s["angular_gain"]
+    spread_se_pct = ag["spread_stderr"] / ag["mean"] * 100
+    assert abs(ag["relative_spread"] * 100 - s["true_rate_path_spread_pct"]) < 3 * spread_se_pct, ag
+    assert s["population"]["rms_pct"] < 0.25, s["population"]
+    dof = np.array([r["dof"] for r in held])
+    assert np.all((dof > 2.0) & (dof < 4.5)), dof
+    low, high = pf.interval()
+    predicted = np.array([bool(m) for m in pf.missing])
+    np.testing.assert_allclose((high - low)[predicted] / 2, t_quantile(0.975, pf.sf_dof[predicted])
+                               * pf.sf_stderr[predicted], rtol=1e-9)
+    # the rate-tabled devices' own scale factors: no spread in them, a normal interval
+    assert np.all(pf.sf_dof[~predicted] > 1e3)

@@ -40,7 +40,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._model.parameters import PARAMETERS
+from .._model.parameters import PARAMETERS, apply_u, read_values
 from .fit import Fit
 from .strategies import AbstractLotSolve, VmapSolve
 
@@ -201,7 +201,7 @@ class PopulationFit(eqx.Module):
         low, high = self.interval()
         for i, d in enumerate(self.fit.devices):
             what = f"predicted (no {', '.join(self.missing[i])})" if self.missing[i] else "shrunken"
-            dof = f" (t, {self.sf_dof[i]:.3g} dof)" if math.isfinite(self.sf_dof[i]) else ""
+            dof = f" (t, {self.sf_dof[i]:.3g} dof)" if self.sf_dof[i] < 1e6 else ""
             lines.append(f"  {d}: SF {self.sf[i]:.6f} +/- {self.sf_stderr[i]:.2g} LSB/(deg/s) {what}, 95 % "
                          f"[{low[i]:.6f}, {high[i]:.6f}]{dof}")
         lines += [f"  warning: {w}" for w in self.warnings]
@@ -219,7 +219,8 @@ def t_quantile(p: float, dof) -> np.ndarray:
     dof = np.asarray(dof, dtype=float)
     z = float(jax.scipy.special.ndtri(p))
     out = np.full(dof.shape, z)
-    fin = np.isfinite(dof) & (dof > 0)
+    # past 1e6 degrees of freedom the quantile is the normal's to 1e-6 (and the incomplete beta loses precision)
+    fin = np.isfinite(dof) & (dof > 0) & (dof < 1e6)
     if fin.any():
         nu = dof[fin]
         lo, hi = np.full(nu.shape, z), np.full(nu.shape, z)
@@ -537,13 +538,9 @@ def population_fit(identify, model, data, strategy: PopulationSolve, options: di
     sf_var = np.asarray(fit.scale_factor_stderr, dtype=float) ** 2
     sf_grad = np.zeros((len(sf), 2 * k))
     if strategy.propagate and np.all(np.isfinite(se := np.sqrt(np.diagonal(hcov)))):
-        for j in range(2 * k):
-            moved = hyper.copy()
-            moved[j] += 0.5 * se[j]
-            say(f"population fit: the scale factor's sensitivity to the lot {'mean' if j < k else 'spread'} of "
-                f"{random[j % k]}")
-            other = identify(fit.model, data, priors=_priors(user_priors, random, kinds, moved), **options)
-            sf_grad[:, j] = (np.asarray(other.scale_factor) - sf) / (0.5 * se[j])
+        say("population fit: the scale factors' sensitivity to the lot mean and spread")
+        sf_grad = _sf_hyper_gradient(identify, fit, data, index, kinds, hyper, 0.5 * se,
+                                     _priors(user_priors, random, kinds, hyper), options)
         sf_var = sf_var + np.einsum("na,ab,nb->n", sf_grad, hcov, sf_grad)
     elif strategy.propagate:
         warnings.append("the lot mean's and spread's uncertainty is not in the scale factors' standard errors (their "
@@ -591,6 +588,29 @@ def population_fit(identify, model, data, strategy: PopulationSolve, options: di
     say("population fit: " + ("converged" if converged else "NOT converged") + f" after {refits} refit(s)")
     return PopulationFit(fit, tuple(random), parameters, scale_factor, estimates, estimates_stderr, sf, sf_stderr,
                          sf_dof, missing, hyper, hcov, bool(converged), refits, tuple(warnings))
+
+
+def _sf_hyper_gradient(identify, fit, data, index, kinds, hyper, steps, priors, options):
+    """(device, 2k) d SF / d (mu, log s): each device's solution moved to first order (the implicit function of
+    its normal equations J^T r + e_j (theta_j - mu_j) / s_j^2 = 0: du/dmu_j = C e_j / s_j^2, du/dlog s_j =
+    2 C e_j (theta_j - mu_j) / s_j^2, C the posterior covariance) by `steps` of each, and its scale factor
+    evaluated there (one `evaluate_only` pass per hyperparameter instead of a refit)."""
+    k = len(index)
+    cov = np.asarray(fit.covariance, dtype=float)
+    theta = _theta(np.asarray(fit.values)[:, index], kinds)
+    s2 = np.exp(2.0 * hyper[k:])
+    sf = np.asarray(fit.scale_factor, dtype=float)
+    out = np.zeros((len(sf), 2 * k))
+    n_lot = len(fit.lot_names)
+    for a in range(2 * k):
+        j = a % k
+        col = cov[:, :, index[j]] / s2[j]
+        du = steps[a] * (col if a < k else 2.0 * col * (theta[:, j] - hyper[j])[:, None])
+        moved = eqx.filter_vmap(lambda m, d: apply_u(m, fit.entries, read_values(m, fit.entries), d,
+                                                     jnp.zeros(n_lot)))(fit.model, jnp.asarray(du))
+        other = identify(moved, data, **(options | {"priors": priors, "evaluate_only": True}))
+        out[:, a] = (np.asarray(other.scale_factor, dtype=float) - sf) / steps[a]
+    return out
 
 
 def _per_name_entries(fit):
