@@ -36,8 +36,9 @@ class AbstractSettledSweep(AbstractSweep):
 
     chord_group: ClassVar[str | None] = None
     """The steady tier's chord Jacobian is formed at the centre of each group: the points of every kind of
-    one named group share it, a kind without a group (None) has its own. The grouping only moves where the
-    root find starts its Broyden updates, not the roots (within its tolerance)."""
+    one named group share it, a kind without a group (None, every built-in kind) has its own. The grouping only
+    moves where the root find starts its Broyden updates, not the roots (within its tolerance: a shared one
+    moves simulated outputs in their last bits)."""
 
     @abc.abstractmethod
     def point(self, gyro: Gyroscope, value, time) -> tuple[Gyroscope, Stimulus]:
@@ -64,14 +65,13 @@ class AbstractSettledSweep(AbstractSweep):
 
 class AbstractSteadySweep(AbstractSettledSweep):
     """A sweep read from the settled rate output of the steady tier: a point is a `Stimulus` held until the
-    device settles. Every steady sweep of a device settles in one call of the tier (one compiled settle, one
-    chord Jacobian), so a kind only says what it applies (`stimulus`). The output carries the run's turn-on
+    device settles. Every steady sweep of a device settles in one call of the tier (one compiled settle, a chord
+    Jacobian per kind), so a kind only says what it applies (`stimulus`). The output carries the run's turn-on
     bias; the noise is rate noise averaged over the dwell."""
 
     biased = True
     straight_line = True
     rate_noise = True
-    chord_group = "steady"
 
     @abc.abstractmethod
     def stimulus(self, value, time) -> Stimulus:
