@@ -173,8 +173,10 @@ from ._plan import (  # noqa: E402
     CandidatePlan as CandidatePlan,
     Plan as Plan,
     ScaleFactorDesign as ScaleFactorDesign,
+    RateTablePlan as RateTablePlan,
     default_experiments as default_experiments,
     plan as plan,
+    rate_table_plan as rate_table_plan,
 )
 from ._diagnose.probes import PROBES as PROBES, AbstractProbe as AbstractProbe  # noqa: E402
 from ._solution import RESULTS as RESULTS  # noqa: E402

@@ -14,3 +14,4 @@ from .plan import (
     plan as plan,
 )
 from .power import ncx2_sf as ncx2_sf, power as power, required_noncentrality as required_noncentrality
+from .rate_table import RateTablePlan as RateTablePlan, rate_table_plan as rate_table_plan
