@@ -89,8 +89,8 @@ def test_a_new_experiment_is_one_file(registered, tmp_path):
     through the data layer: the virtual rate shows as an offset of the rate output by the rate it stands
     for, the scale factor stays the rate table's."""
     rates = (-100.0, -10.0, 10.0, 100.0)
-    table = gj.simulate_table(gj.paper_qmg(), sweeps=(gj.RateTable(rates), registered(rates)), noise_free=True,
-                              progress=False)
+    table = gj.simulate_table(gj.paper_qmg(), sweeps=(gj.RateTable(rates), registered(rates_dps=rates)),
+                              noise_free=True, progress=False)
     path = tmp_path / "offset.csv"
     gj.write_table(table, path)
     back = gj.read_table(path)
