@@ -88,6 +88,7 @@ class Lot:
     dev: np.ndarray  # device index per row
     sf: np.ndarray  # the row's local gain: LSB per deg/s (rate), LSB per V (vcf), V per word (dac)
     full_scale: np.ndarray  # the row's output at full-scale input (LSB or V), per device
+    fs_rate: np.ndarray  # the device's rate output at the full-scale rate (LSB): the word range of the force path
     dtdt: np.ndarray  # dT/dt, K/s (0 for the DAC)
     phase: np.ndarray  # the drive-frequency deviation from the device's own F0, relative
     clean: np.ndarray  # the noise-free output without bias or hidden effect
@@ -99,7 +100,7 @@ def _rows(design, n_devices, n_runs, rng):
     t = WARMUP_S + DWELL_S * (np.arange(n) + 0.5)  # the middle of each dwell
     t_end = WARMUP_S + DWELL_S * n
     out = {k: [] for k in ("device", "run", "sweep", "input", "clean", "bias", "sigma", "temperature_c", "time_s",
-                           "drive_freq_hz", "n_samples", "dev", "sf", "full_scale", "dtdt", "phase")}
+                           "drive_freq_hz", "n_samples", "dev", "sf", "full_scale", "fs_rate", "dtdt", "phase")}
     sigma_dps = NOISE_DENSITY_DPS_RTHZ * np.sqrt(OUTPUT_RATE_HZ / 2.0) / np.sqrt(DWELL_S * OUTPUT_RATE_HZ)
 
     def add(**kw):
@@ -125,12 +126,13 @@ def _rows(design, n_devices, n_runs, rng):
                 b = sf * (bias_dev + TURN_ON_BIAS_SIGMA_DPS * rng.normal())
                 add(device=name, run=r, sweep=sweep, input=x, clean=gain * x, bias=b, sigma=sf * sigma_dps,
                     temperature_c=temp, time_s=t, drive_freq_hz=f, n_samples=DWELL_S * OUTPUT_RATE_HZ, dev=d,
-                    sf=gain, full_scale=np.abs(gain * x).max(), dtdt=dtdt, phase=f / f0 - 1.0)
+                    sf=gain, full_scale=np.abs(gain * x).max(), fs_rate=sf * OMEGA_FS_DPS, dtdt=dtdt,
+                    phase=f / f0 - 1.0)
             # the DAC bench sweep: seed 000 Table 2's words for the protocol's rates, word = -SF x rate
             words = np.round(-RATES_DPS * design.sf_lsb_per_dps)
             add(device=name, run=r, sweep="dac", input=words, clean=g_dac * words, bias=0.0, sigma=VOLTMETER_SIGMA_V,
                 temperature_c=np.nan, time_s=np.nan, drive_freq_hz=np.nan, n_samples=np.nan, dev=d, sf=g_dac,
-                full_scale=np.abs(g_dac * words).max(), dtdt=0.0, phase=0.0)
+                full_scale=np.abs(g_dac * words).max(), fs_rate=sf * OMEGA_FS_DPS, dtdt=0.0, phase=0.0)
     return {k: np.concatenate(v) for k, v in out.items()}
 
 
@@ -147,12 +149,16 @@ def _x(lot):
 
 
 def _s(lot):
-    """The input relative to its sweep's full scale (rate, VCF and DAC all reach +-1)."""
+    """Where a row sits in the force path's word range, -1 to 1: the DAC word over its largest on the DAC bench;
+    on rate and VCF rows the output over the device's rate output at the full-scale rate (a VCF sweep whose
+    electrode stands for fewer deg/s per volt than the table reaches uses less of the range, and a nonlinearity
+    of the words sees it there)."""
     x = _x(lot)
     out = np.zeros_like(x)
-    for sw in SWEEPS:
-        m = _mask(lot, sw)
-        out[m] = x[m] / np.abs(x[m]).max()
+    dac = _mask(lot, "dac")
+    out[dac] = x[dac] / np.abs(x[dac]).max()
+    rv = _mask(lot, *RV)
+    out[rv] = lot.clean[rv] / lot.fs_rate[rv]
     return out
 
 
@@ -183,17 +189,17 @@ def _inl(lot, a3, a5):
     s = _s(lot)
     shape = a3 * s**3 + a5 * s**5
     dac = _mask(lot, "dac")
-    return np.where(dac, lot.full_scale * shape, -lot.full_scale * shape * _mask(lot, "rate_table", "vcf_static"))
+    return np.where(dac, lot.full_scale * shape, -lot.fs_rate * shape * _mask(lot, "rate_table", "vcf_static"))
 
 
 def _compression(lot, per_device=1.0):
     s = _s(lot)
-    return -per_device * lot.full_scale * s**3 * _mask(lot, "rate_table", "vcf_static")
+    return -per_device * lot.fs_rate * s**3 * _mask(lot, "rate_table", "vcf_static")
 
 
 def _zro(lot, per_device=1.0):
     # a zero-rate output in deg/s per K, read through the device's rate scale factor
-    sf_rate = lot.full_scale / OMEGA_FS_DPS
+    sf_rate = lot.fs_rate / OMEGA_FS_DPS  # on VCF rows too: the loop balances it like a rate
     return per_device * sf_rate * _dT(lot) * _mask(lot, "rate_table", "vcf_static")
 
 
@@ -269,14 +275,14 @@ HIDDEN_LIST = [
         lambda lot: lot.clean * np.sign(lot.dtdt) * _mask(lot, *RV)),
     _h("bias_dTdt", RV, "dtemperature_dt", None, ("lin(dtemperature_dt)",), "deg/s per (K/min)",
        "a zero-rate output proportional to dT/dt (a thermal gradient across the die)")(
-        lambda lot: lot.full_scale / OMEGA_FS_DPS * 60.0 * lot.dtdt * _mask(lot, *RV)),
+        lambda lot: lot.fs_rate / OMEGA_FS_DPS * 60.0 * lot.dtdt * _mask(lot, *RV)),
     _h("rate_saturation", ("rate_table",), "input", None, None, "relative gain above 100 deg/s",
        "table-rate saturation: the output loses c of each deg/s above 100 deg/s")(
         lambda lot: -lot.sf * np.sign(_x(lot)) * np.clip(np.abs(_x(lot)) - 100.0, 0, None)
         * _mask(lot, "rate_table")),
     _h("temp_x_abs_input", RV, "temperature_c", None, ("lin(temperature_c)*abs(input)",), "fraction of FS per K",
        "an even gain that grows with temperature: c (T - 25) |s| W")(
-        lambda lot: lot.full_scale * _dT(lot) * np.abs(_s(lot)) * _mask(lot, *RV)),
+        lambda lot: lot.fs_rate * _dT(lot) * np.abs(_s(lot)) * _mask(lot, *RV)),
     _h("dac_periodic", ("dac",), "input", None, ("periodic(input)",), "fraction of full scale",
        "a code-dependent error of the DAC's amplitude register, periodic in the word (period 2^18 codes)")(
         lambda lot: lot.full_scale * np.sin(2 * np.pi * _x(lot) / 2.0**18) * _mask(lot, "dac")),
@@ -285,14 +291,14 @@ HIDDEN_LIST = [
         lambda lot: lot.full_scale * (_x(lot) >= 2.0**20) * _mask(lot, "dac")),
     _h("bias_step", ("rate_table",), "time_s", None, ("step(time_s)",), "deg/s",
        "a bias jump at t = 1500 s in run 0 of the first device's rate table (a charging event)")(
-        lambda lot: lot.full_scale / OMEGA_FS_DPS * (_t(lot) > 1500.0)
+        lambda lot: lot.fs_rate / OMEGA_FS_DPS * (_t(lot) > 1500.0)
         * _mask(lot, "rate_table") * (lot.dev == 0) * (lot.columns["run"] == 0)),
     _h("bias_relaxation", RV, "time_s", None, ("relax(time_s)",), "deg/s",
        "a bias relaxing exp(-t / 600 s) after power-on (dielectric charging)")(
-        lambda lot: lot.full_scale / OMEGA_FS_DPS * np.exp(-_t(lot) / 600.0) * _mask(lot, *RV)),
+        lambda lot: lot.fs_rate / OMEGA_FS_DPS * np.exp(-_t(lot) / 600.0) * _mask(lot, *RV)),
     _h("even_gain_vcf", ("vcf_static",), "input", None, ("abs(input)",), "fraction of full scale",
        "an even |V| term on the VCF rows (electrode asymmetry, V_ac^2-like)")(
-        lambda lot: lot.full_scale * np.abs(_s(lot)) * _mask(lot, "vcf_static")),
+        lambda lot: lot.fs_rate * np.abs(_s(lot)) * _mask(lot, "vcf_static")),
     _h("sign_gain_rate", ("rate_table",), "input", None, ("abs(input)", "sign(input)*lin(input)"),
        "relative gain", "a gain 1 + c for positive table rates only (K+ != K-)")(
         lambda lot: lot.clean * (_x(lot) > 0) * _mask(lot, "rate_table")),
@@ -304,7 +310,7 @@ HIDDEN_LIST = [
         lambda lot: lot.clean * lot.phase * 1e6 * _mask(lot, "rate_table")),
     _h("time_quadratic", RV, "time_s", None, ("sq(time_s)",), "deg/s at t = 1 h",
        "a bias growing as (t / 1 h)^2 since power-on")(
-        lambda lot: lot.full_scale / OMEGA_FS_DPS * (_t(lot) / 3600.0) ** 2 * _mask(lot, *RV)),
+        lambda lot: lot.fs_rate / OMEGA_FS_DPS * (_t(lot) / 3600.0) ** 2 * _mask(lot, *RV)),
 ]
 HIDDEN = {h.name: h for h in HIDDEN_LIST}
 
@@ -360,8 +366,8 @@ def discovery_lot(hidden: str | None = None, *, snr: str = "mid", design: str = 
     columns = {k: rows[k] for k in ("device", "run", "sweep", "input", "temperature_c", "time_s", "drive_freq_hz",
                                     "n_samples")}
     columns["output_sigma"] = rows["sigma"]
-    lot = Lot(DESIGNS[design], columns, rows["dev"], rows["sf"], rows["full_scale"], rows["dtdt"], rows["phase"],
-              rows["clean"])
+    lot = Lot(DESIGNS[design], columns, rows["dev"], rows["sf"], rows["full_scale"], rows["fs_rate"], rows["dtdt"],
+              rows["phase"], rows["clean"])
     info = {"hidden": hidden, "snr": snr, "design": design, "seed": seed, "devices": n_devices, "runs": n_runs}
     delta = np.zeros_like(rows["clean"])
     if hidden is not None:
