@@ -19,10 +19,11 @@ from .compare import compare, nonlinearity_residual_ppm
 from .discrepancy import look_alikes, score_probes, with_shapes
 from .encompass import encompassing_guard
 from .fdr import bh_q_values, selection_p
-from .formula import formula_coordinate, propose, term_size
+from .formula import formula_coordinate, propose_along, term_size
 from .guards import MAX_TYPICAL_MULTIPLE, Rejection, contradictions, probe_guard, verdict_of
 from .locate import locate
 from .probes import PROBES
+from .rival import rival_guard
 from .score import cosine, score_candidates, separating_sweep
 from .solution import Diagnosis, Step
 
@@ -184,6 +185,10 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         if beyond is not None:
             rejected.append(Rejection(best.effect, beyond, kind="not its shape"))
             continue
+        against, rival_alike = rival_guard(fit, new, best.effect, df_total, located, alpha=alpha)
+        if against is not None:
+            rejected.append(Rejection(best.effect, against, kind="a closed form of another shape as good"))
+            continue
         family.append(selection_p(p_lr, n_tried))
         q = float(bh_q_values(family)[-1])
         if q >= alpha:
@@ -208,7 +213,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         if group:
             ambiguous.append((best.effect,) + group)
         selected.append(best.effect)
-        alike = look_alikes(fit, best.effect, discrepancy, designs, alpha)
+        alike = look_alikes(fit, best.effect, discrepancy, designs, alpha) + (
+            (rival_alike,) if rival_alike is not None else ())
         fit = new
         fits.append(fit)
         cols = effect_columns(fit, best.effect)
@@ -227,7 +233,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
                                        ranking0, rejected, max_typical_multiple, alpha)
     discrepancy = with_shapes(fit, located.locations, discrepancy, designs, final_scores, rejected,
                               max_typical_multiple, alpha)
-    formula = propose(fit, discrepancy[0], step_at=located.step_at, period=located.period, alpha=alpha) \
+    formula = propose_along(fit, discrepancy[0], step_at=located.step_at, period=located.period, alpha=alpha) \
         if discrepancy else None
     along = formula_coordinate(formula)
     if along is not None and along != discrepancy[0].coordinate and along != "model":

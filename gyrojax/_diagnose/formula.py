@@ -195,10 +195,11 @@ def dictionary(fit, sweeps, *, step_at: float | None = None, period: float | Non
 
 
 def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, max_terms: int = MAX_TERMS,
-            space: ResidualSpace | None = None):
+            space: ResidualSpace | None = None, allowed=None):
     """A sparse formula for the misfit at `location` (a `Location` of `locate`; `step_at`, `period`: where its
     scans found a step and a period), or None when no term of the dictionary is significant. The formula is
-    `complete` when the location's flexible description is not significant beyond it."""
+    `complete` when the location's flexible description is not significant beyond it. `allowed(term, columns)`,
+    where given, says which terms (a `Term` and its standardised columns) the dictionary keeps."""
     space = space or ResidualSpace(fit)
     groups = [(s,) for s in location.located_on]
     if len(location.located_on) > 1:
@@ -209,6 +210,10 @@ def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, ma
         return None
     cols = {id(t): _columns(space, t) for t in terms}
     cut = alpha / len(terms)
+    if allowed is not None:
+        terms = [t for t in terms if allowed(t, cols[id(t)])]
+        if not terms:
+            return None
     chosen, current = [], space
     between = _mostly_between_devices(fit)
     while len(chosen) < max_terms:
@@ -291,3 +296,25 @@ def term_size(formula: Formula, location) -> dict | None:
         value, err = 1e6 * value, 1e6 * err
         unit = "ppm" + unit[1:] if unit.startswith("1") else "ppm"
     return {"value": value, "unit": unit, "stderr": err, "measure": f"coefficient of {t.name}"}
+
+
+def formula_columns(space: ResidualSpace, formula: Formula) -> np.ndarray:
+    """The formula's terms as standardised-residual columns of `space` (device, rows, terms)."""
+    return np.concatenate([_columns(space, t) for t in formula.terms], axis=-1)
+
+
+def propose_along(fit, location, **kw):
+    """The formula of `location` in terms of its own coordinate when such a formula is complete (a curve along
+    the input may be a power of the output itself, a change from run to run a gain per run), else in terms of
+    the coordinates the data confound with it, else over the whole dictionary (see `propose`): the closed form
+    agrees with where the flexible descriptions placed the misfit unless it cannot say all of it there."""
+    own = {location.coordinate} | ({"model"} if location.coordinate == "input" else set()) | (
+        {""} if location.coordinate == "run" else set())
+    tried = None
+    for along in (own, own | set(location.confounded_with), None):
+        allowed = None if along is None else (lambda t, _, along=along: t.coordinate in along)
+        f = propose(fit, location, allowed=allowed, **kw)
+        if f is not None and f.complete:
+            return f
+        tried = tried or f
+    return tried

@@ -1,0 +1,122 @@
+r"""A guard that does not depend on the list of shapes: a library effect is compared with the closed form the
+data themselves propose for the misfit it takes (`gyrojax._diagnose.formula`), a rival outside the library.
+
+The two explanations are not nested, so neither likelihood-ratio test decides between them. As in Vuong's and
+Cox's tests, the difference of their chi2 (each with an information-criterion penalty of 2 per parameter),
+
+    Delta = (chi2_effect + 2 k_effect) - (chi2_formula + 2 k_formula),
+
+is compared with its own noise: if the effect's refit changes the standardised predictions by f_E and the
+formula (fitted to the residuals beyond the same baseline) by f_F, noise moves Delta by 2 |f_E - f_F| (one
+standard deviation), so z = Delta / (2 |f_E - f_F|) ~ N(0, 1) when both describe the data equally well.
+
+- The formula is the effect's own shape in the dictionary's words (the effect's change lies in the span of the
+  formula's terms to `SAME_SHAPE` of its norm squared): no rival, the effect stands.
+- z above 0: a shape outside the library fits the data as well or better, after paying for its choice among
+  the dictionary's terms (2 ln N per term: the risk inflation of a best-of-N selection); the effect is not
+  confirmed.
+- z between -`Z_CRIT` and 0: the effect fits better, but not by `Z_CRIT` standard deviations: it is confirmed,
+  and the closed form is reported as a look-alike the data cannot tell from it.
+- z below -`Z_CRIT`: the effect fits better than every closed form the dictionary offers.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+
+from .._identify import Fit
+from .discrepancy import LookAlike
+from .formula import formula_columns, propose
+from .space import ResidualSpace
+
+
+SAME_SHAPE = 0.99  # share of the effect's change (norm squared) inside the formula's span: the same shape
+Z_CRIT = 1.96  # a rival closer than this many standard deviations is a look-alike
+
+
+@dataclasses.dataclass(frozen=True)
+class Rivalry:
+    """The comparison of an effect's refit with the formula of the misfit it takes."""
+
+    formula: object  # the rival `Formula`
+    z: float  # > 0: the formula fits better
+    delta: float  # the penalised chi2 difference (effect - formula)
+    distance: float  # |f_E - f_F|, standardised
+    inside: float  # share of the effect's change inside the formula's span
+
+    @property
+    def verdict(self) -> str:
+        if self.inside >= SAME_SHAPE:
+            return "same shape"
+        if self.z > 0.0:
+            return "rival fits as well"
+        if self.z > -Z_CRIT:
+            return "look-alike"
+        return "effect fits better"
+
+
+def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float) -> Rivalry | None:
+    """The closed form of the misfit that the refit from `before` to `after` (`df_effect` new parameters over
+    the lot) takes most of, compared with the refit (see the module docstring); None when no location of
+    `localisation` (at `before`) loses chi2 in the refit or no term is significant there."""
+    if not localisation.locations:
+        return None
+    space_b, space_a = ResidualSpace(before), ResidualSpace(after)
+    taken = [(space_b.score(loc.columns).statistic - space_a.score(loc.columns).statistic, loc)
+             for loc in localisation.locations]
+    gain, loc = max(taken, key=lambda x: x[0])
+    if gain <= 0:
+        return None
+    f_effect = np.asarray(before.residual_vector, float) - np.asarray(after.residual_vector, float)
+    # the rival is the best closed form of another shape: terms that alone reproduce the effect's change are
+    # its own shape in the dictionary's words, not a rival
+    formula = propose(before, loc, step_at=localisation.step_at, period=localisation.period, alpha=alpha,
+                      space=space_b, allowed=lambda _, c: _inside(space_b, c, f_effect) < SAME_SHAPE)
+    if formula is None:
+        return None
+    cols = formula_columns(space_b, formula)
+    sc = space_b.score(cols)
+    f_formula = sc.fingerprint
+    inside = _inside(space_b, cols, f_effect)
+    chi2_effect = float(after.chi2_total) + 2.0 * df_effect
+    # the formula's terms were chosen among the dictionary's: each pays 2 ln(size) for that choice (the risk
+    # inflation of a best-of-N selection), beside 2 per coefficient
+    chi2_formula = (float(before.chi2_total) - sc.statistic + 2.0 * sc.df
+                    + 2.0 * math.log(max(formula.dictionary_size, 1)) * len(formula.terms))
+    delta = chi2_effect - chi2_formula
+    distance = float(np.sqrt(np.sum((f_effect - f_formula) ** 2)))
+    z = delta / (2.0 * distance) if distance > 0 else (math.inf if delta > 0 else -math.inf if delta < 0 else 0.0)
+    return Rivalry(formula, float(z), float(delta), distance, float(inside))
+
+
+def _inside(space, cols, f):
+    """The share of `f` (device, rows; norm squared) inside the span of `cols` beyond the fit's own span, each
+    device its own coefficients."""
+    within = space.project(cols)
+    num, norm = 0.0, float(np.sum(f**2))
+    for d in range(within.shape[0]):
+        if not np.any(within[d]):
+            continue
+        u, sv, _ = np.linalg.svd(within[d], full_matrices=False)
+        u = u[:, sv > 1e-9 * sv.max()]
+        num += float(np.sum((u.T @ f[d]) ** 2))
+    return num / norm if norm > 0 else 1.0
+
+
+def rival_guard(before: Fit, after: Fit, effect: str, df_effect: int, localisation, *, alpha: float):
+    """(a reason not to confirm `effect`, or None; a `LookAlike` naming the rival the data cannot tell from it,
+    or None)."""
+    r = rival(before, after, df_effect, localisation, alpha=alpha)
+    if r is None or r.verdict in ("same shape", "effect fits better"):
+        return None, None
+    terms = " + ".join(f"{t.name} on {'+'.join(t.sweeps)}" for t in r.formula.terms)
+    if r.verdict == "rival fits as well":
+        return (f"a closed form of another shape outside the library fits the misfit it takes as well or better: "
+                f"{terms} (chi2 + 2k, the closed form also paying 2 ln {r.formula.dictionary_size} per term chosen "
+                f"from the dictionary: {effect} {r.delta:+.4g} against it, z = {r.z:.2g}; the two differ by "
+                f"{r.distance:.3g} sigma in the predictions)"), None
+    factor = (Z_CRIT / abs(r.z)) ** 2 if r.z != 0 else math.inf
+    return None, LookAlike(" + ".join(t.name for t in r.formula.terms),
+                           f"a closed form outside the library ({terms}), which fits {-r.delta:.3g} worse in chi2 + "
+                           f"2k (z = {r.z:.2g})", (), r.distance, factor)
