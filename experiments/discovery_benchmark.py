@@ -15,7 +15,9 @@ cases of library effects). Each method is a plug-in (`Method`: `name`, `run(tabl
 
 Scores per method, by effect class (library / outside / null) and SNR (`score_rows`): library effects found,
 wrong confirmations, localisation right (the located sweep set equals the sweeps carrying >= 20 % of the hidden
-effect's visible chi2, and the coordinate is right; a library effect found counts as localised), formula
+effect's visible chi2, and the coordinate is right; a library effect found counts as localised; a second column
+also counts the hidden coordinate named among those the diagnosis says the data confound with the one it gives,
+as where the sweep order follows the input), formula
 recovered, null lots explained, median final chi2_red, median seconds per lot. DIR/discovery.json and
 DIR/discovery.md are rewritten (atomically) after every lot.
 """
@@ -56,6 +58,7 @@ class Outcome:
     seconds: float = math.nan
     note: str = ""
     ambiguous: dict = dataclasses.field(default_factory=dict)  # confirmed -> names it declares it cannot tell apart
+    confounded: list = dataclasses.field(default_factory=list)  # coordinates it says the data confound with it
 
 
 class Method(abc.ABC):
@@ -107,6 +110,7 @@ def read_diagnosis(j: dict) -> dict:
     return {"confirmed": list(j.get("selected") or ()), "verdict": j.get("verdict", "unknown"),
             "ambiguous": ambiguous,
             "located": located, "coordinate": top.get("coordinate") if top else None,
+            "confounded": [c for c in (top.get("confounded_with") or ()) if isinstance(c, str)],
             "formula": [n for n in (_term_name(t) for t in terms) if n],
             "chi2_red": float(final.get("chi2_red", math.nan))}
 
@@ -395,16 +399,19 @@ def score(outcome: Outcome, info: dict) -> dict:
     # apart ("ambiguous"), not as wrong: the diagnosis said it could not tell them apart
     ambiguous = any(c != lib and lib in outcome.ambiguous.get(c, ()) for c in outcome.confirmed)
     wrong = any(c != lib and lib not in outcome.ambiguous.get(c, ()) for c in outcome.confirmed)
-    localised = None
+    localised = confounded = None
     if cls != "null":
         expected = set(info["visible_sweeps"])
         localised = bool(found) or (set(outcome.located) == expected and outcome.coordinate == info["coordinate"])
+        # the right sweeps, and the hidden coordinate named with the one given, as confounded with it on this data
+        confounded = localised or (set(outcome.located) == expected
+                                   and info["coordinate"] in (outcome.confounded or ()))
     formula = None
     if hidden and info.get("formula"):
         formula = bool(set(info["formula"]) & set(outcome.formula))
     explained = (outcome.verdict == "explained") if cls == "null" else None
-    return {"found": found, "wrong": wrong, "ambiguous": ambiguous, "localised": localised, "formula": formula,
-            "explained": explained}
+    return {"found": found, "wrong": wrong, "ambiguous": ambiguous, "localised": localised,
+            "localised_or_confounded": confounded, "formula": formula, "explained": explained}
 
 
 def _rate(values):
@@ -426,6 +433,7 @@ def score_rows(records: list) -> list:
                      "wrong": _rate(x["scores"]["wrong"] for x in rs),
                      "ambiguous": _rate(x["scores"].get("ambiguous") for x in rs),
                      "localised": _rate(x["scores"]["localised"] for x in rs),
+                     "confounded": _rate(x["scores"].get("localised_or_confounded") for x in rs),
                      "formula": _rate(x["scores"]["formula"] for x in rs),
                      "explained": _rate(x["scores"]["explained"] for x in rs),
                      "chi2_red": float(np.median([x["outcome"]["chi2_red"] for x in rs])),
@@ -440,12 +448,13 @@ def _cell(kn):
 
 def markdown(rows: list) -> str:
     lines = ["| method | class | SNR | lots | library effect found | wrong confirmation | confirmed as declared "
-             "ambiguous | localised | formula | null explained | chi2_red (median) | s per lot (median) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "ambiguous | localised | localised or named as confounded | formula | null explained | "
+             "chi2_red (median) | s per lot (median) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['method']} | {r['class']} | {r['snr']} | {r['lots']} | {_cell(r['found'])} | "
                      f"{_cell(r['wrong'])} | {_cell(r.get('ambiguous', (0, 0)))} | {_cell(r['localised'])} | "
-                     f"{_cell(r['formula'])} | "
+                     f"{_cell(r.get('confounded', (0, 0)))} | {_cell(r['formula'])} | "
                      f"{_cell(r['explained'])} | {r['chi2_red']:.3f} | {r['seconds']:.1f} |")
     return "\n".join(lines) + "\n"
 

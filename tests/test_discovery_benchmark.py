@@ -76,8 +76,8 @@ def test_hidden_effect_changes_only_its_sweeps(name):
     lot_rows = lotgen._rows(lotgen.DESIGNS["a"], 3, 2, np.random.default_rng(4))
     lot = lotgen.Lot(lotgen.DESIGNS["a"], {k: lot_rows[k] for k in ("device", "run", "sweep", "input", "temperature_c",
                                                                    "time_s", "drive_freq_hz")},
-                     lot_rows["dev"], lot_rows["sf"], lot_rows["full_scale"], lot_rows["dtdt"], lot_rows["phase"],
-                     lot_rows["clean"])
+                     lot_rows["dev"], lot_rows["sf"], lot_rows["full_scale"], lot_rows["fs_rate"], lot_rows["dtdt"],
+                     lot_rows["phase"], lot_rows["clean"])
     chi2, _ = lotgen.visible_chi2(lot, diff, lot_rows["sigma"])
     assert chi2 == pytest.approx(lotgen.TARGET_CHI2["mid"], rel=1e-6)
 
@@ -100,11 +100,11 @@ def test_scores_of_hand_made_outcomes():
     O = bench.Outcome  # noqa: E741
     lib = _info("zro_tempco")  # visible on rate_table and vcf_static, coordinate temperature_c
     s = bench.score(O(["zro_tempco"], "explained", set(), None, [], 1.0), lib)
-    assert s == {"found": True, "wrong": False, "ambiguous": False, "localised": True, "formula": False,
-                 "explained": None}
+    assert s == {"found": True, "wrong": False, "ambiguous": False, "localised": True,
+                 "localised_or_confounded": True, "formula": False, "explained": None}
     s = bench.score(O(["dac_inl"], "partly explained", {"rate_table"}, "input", ["lin(temperature_c)"], 1.2), lib)
-    assert s == {"found": False, "wrong": True, "ambiguous": False, "localised": False, "formula": True,
-                 "explained": None}
+    assert s == {"found": False, "wrong": True, "ambiguous": False, "localised": False,
+                 "localised_or_confounded": False, "formula": True, "explained": None}
     # the same confirmation, declared by the method as indistinguishable from the hidden effect: ambiguous, not wrong
     inl = _info("dac_inl_cubic")
     s = bench.score(O(["feedback_compression"], "explained", set(), None, [], 1.0,
@@ -115,15 +115,22 @@ def test_scores_of_hand_made_outcomes():
     out = _info("vcf_gain_tempco")  # vcf_static alone
     s = bench.score(O(["vref_drift"], "unexplained", {"rate_table", "vcf_static"}, "temperature_c",
                       ["lin(temperature_c)*model"], 1.3), out)
-    assert s == {"found": None, "wrong": True, "ambiguous": False, "localised": False, "formula": True,
-                 "explained": None}
+    assert s == {"found": None, "wrong": True, "ambiguous": False, "localised": False,
+                 "localised_or_confounded": False, "formula": True, "explained": None}
     s = bench.score(O([], "unexplained", {"vcf_static"}, "temperature_c", [], 1.3), out)
     assert s["localised"] is True and s["wrong"] is False and s["formula"] is False
+    # the right sweep, the coordinate named as confounded with the one given: counted in the second column only
+    s = bench.score(O([], "unexplained", {"vcf_static"}, "time_s", [], 1.3, confounded=["temperature_c"]), out)
+    assert s["localised"] is False and s["localised_or_confounded"] is True
+    s = bench.score(O([], "unexplained", {"vcf_static", "rate_table"}, "time_s", [], 1.3,
+                      confounded=["temperature_c"]), out)
+    assert s["localised_or_confounded"] is False
     hyst = _info("gain_hysteresis")  # no formula
     assert bench.score(O([], "unexplained", set(), None, ["sq(input)"], 1.3), hyst)["formula"] is None
     null = _info(None)
     assert bench.score(O([], "explained", set(), None, [], 1.0), null) == {
-        "found": None, "wrong": False, "ambiguous": False, "localised": None, "formula": None, "explained": True}
+        "found": None, "wrong": False, "ambiguous": False, "localised": None, "localised_or_confounded": None,
+        "formula": None, "explained": True}
     assert bench.score(O(["zro_tempco"], "explained", set(), None, [], 1.0), null)["wrong"] is True
 
 
@@ -142,13 +149,15 @@ def test_read_diagnosis_today_and_later_fields():
              "discrepancy": [{"coordinate": "temperature_c", "sweeps": ["rate_table", "vcf_static"]}]}
     r = bench.read_diagnosis(today)
     assert r == {"confirmed": ["zro_tempco"], "verdict": "partly explained", "located": {"rate_table", "vcf_static"},
-                 "coordinate": "temperature_c", "formula": [], "chi2_red": 1.31, "ambiguous": {}}
+                 "coordinate": "temperature_c", "formula": [], "chi2_red": 1.31, "ambiguous": {}, "confounded": []}
     later = {"selected": [], "verdict": "unexplained", "final": {"chi2_red": 1.4},
              "discrepancy": [{"coordinate": "temperature_c", "sweeps": ["rate_table", "vcf_static"],
                               "sweep_shares": {"vcf_static": 0.93, "rate_table": 0.07},
+                              "confounded_with": ["time_s", 3],
                               "formula": {"terms": [{"name": "lin(temperature_c)*model"}, "lin(time_s)"]}}]}
     r = bench.read_diagnosis(later)
     assert r["located"] == {"vcf_static"} and r["formula"] == ["lin(temperature_c)*model", "lin(time_s)"]
+    assert r["confounded"] == ["time_s"]
     top_level_formula = {"verdict": "explained", "discrepancy": [], "formula": {"terms": ["step(time_s)"]}}
     r = bench.read_diagnosis(top_level_formula)
     assert r["located"] == set() and r["coordinate"] is None and r["formula"] == ["step(time_s)"]
@@ -175,3 +184,21 @@ def test_gyrojax_method_on_a_null_and_a_library_lot(hidden):
         assert out.verdict == "explained" and 0.8 < out.chi2_red < 1.25 and not s["wrong"]
     else:
         assert s["found"] and not s["wrong"]
+
+
+@pytest.mark.parametrize("design", ["a", "b"])
+def test_word_domain_effects_read_one_word_range_on_rate_and_vcf_rows(design):
+    """A nonlinearity of the force path's words is one function of the word on every sweep that drives it: at the
+    same output, rate-table and VCF rows change by the same amount (design b's VCF reaches half the range)."""
+    lot_rows = lotgen._rows(lotgen.DESIGNS[design], 2, 1, np.random.default_rng(0))
+    cols = {k: lot_rows[k] for k in ("device", "run", "sweep", "input", "temperature_c", "time_s", "drive_freq_hz")}
+    lot = lotgen.Lot(lotgen.DESIGNS[design], cols, lot_rows["dev"], lot_rows["sf"], lot_rows["full_scale"],
+                     lot_rows["fs_rate"], lot_rows["dtdt"], lot_rows["phase"], lot_rows["clean"])
+    change = lotgen.HIDDEN["feedback_compression"].fn(lot)
+    out = lot_rows["clean"]
+    for dev in range(2):
+        rate = (lot_rows["dev"] == dev) & (cols["sweep"] == "rate_table")
+        vcf = (lot_rows["dev"] == dev) & (cols["sweep"] == "vcf_static")
+        # the cubic as a function of the output, from the rate rows, predicts the VCF rows
+        c = np.polyfit(out[rate], change[rate], 3)
+        assert np.allclose(np.polyval(c, out[vcf]), change[vcf], rtol=1e-3, atol=1e-9 * np.abs(change).max())

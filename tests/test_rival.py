@@ -1,0 +1,53 @@
+"""The rival guard (`gyrojax/_diagnose/rival.py`): a library effect is compared with the closed form the data
+propose for the misfit it takes, and the formula of a misfit is written along the coordinate it was located on.
+
+Lots from the discovery benchmark's independent generator (`experiments/_discovery_lot.py`, plain NumPy, middle
+SNR: the hidden effect's visible chi2 is 300): a zero-rate output proportional to dT/dt (outside the library,
+which `vref_drift` took on c46d262..cfed775 with LR p ~ 1e-20), the library's own reference drift (which must
+still be confirmed), and a gain on positive table rates only (placed on time since power-on before, whose sweep
+order follows the input).
+"""
+
+import os
+import sys
+
+import pytest
+
+import gyrojax as gj
+
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "experiments"))
+from _discovery_lot import discovery_lot  # noqa: E402
+
+
+pytestmark = pytest.mark.slow
+
+
+def _diagnose(hidden):
+    table, info = discovery_lot(hidden, snr="mid", design="a", seed=0)
+    return gj.diagnose(table, "paper-qmg", progress=False), info
+
+
+def test_a_bias_following_dT_dt_is_not_taken_for_a_reference_drift():
+    d, _ = _diagnose("bias_dTdt")
+    assert d.selected == ()
+    reasons = {r.effect: r.reason for r in d.rejected}
+    assert "vref_drift" in reasons
+    assert "closed form of another shape" in reasons["vref_drift"] and "lin(dtemperature_dt)" in reasons["vref_drift"]
+    top = d.discrepancy[0]
+    assert top.coordinate == "dtemperature_dt"
+    assert [t.name for t in d.formula.terms] == ["lin(dtemperature_dt)"]
+
+
+def test_a_true_reference_drift_is_still_confirmed():
+    d, _ = _diagnose("vref_drift")
+    assert d.selected == ("vref_drift",)
+    assert d.verdict == "explained"
+
+
+def test_a_gain_of_positive_rates_is_placed_on_the_input():
+    d, info = _diagnose("sign_gain_rate")
+    top = d.discrepancy[0]
+    assert top.coordinate == "input" and {s for s, _ in top.sweeps} == {"rate_table"}
+    assert [t.name for t in d.formula.terms] == ["abs(input)"]
+    assert "time_s" in top.confounded_with  # the sweep's order follows the input: said, not hidden
