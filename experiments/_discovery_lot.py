@@ -302,7 +302,8 @@ HIDDEN_LIST = [
     _h("sign_gain_rate", ("rate_table",), "input", None, ("abs(input)", "sign(input)*lin(input)"),
        "relative gain", "a gain 1 + c for positive table rates only (K+ != K-)")(
         lambda lot: lot.clean * (_x(lot) > 0) * _mask(lot, "rate_table")),
-    _h("per_run_gain", RV, "run", None, ("lin(run)*model",), "relative gain",
+    # with two runs a gain linear in the run index and a gain of the second run are one function
+    _h("per_run_gain", RV, "run", None, ("lin(run)*model", "per_run(1)*model"), "relative gain",
        "a gain that changes from power-on to power-on: 1 + c (run - mean) on each device")(
         lambda lot: lot.clean * (lot.columns["run"] - 0.5) * _mask(lot, *RV) * _device_sign(lot, 6)),
     _h("drive_freq_gain", ("rate_table",), "drive_freq_hz", None, ("lin(drive_freq_hz)*model",), "1/ppm",

@@ -1,15 +1,16 @@
 r"""The missing term's formula: a sparse closed form over a dictionary of terms in the recorded coordinates.
-
 The dictionary holds, for the sweeps a misfit was located on (each alone and together), terms of one coordinate
-(`lin`, `sq`, `cube` of its distance from a reference; `abs` and `sign` of the input; a `step` and an exponential
-`relax`ation along the time since power-on; a `periodic` error along the input), each as an offset of the output
-and as a gain (times the model's prediction, written `*model`), the products of the temperature and the time with
-the input, the square and cube of the model's output itself (a compression of the readout or the amplifier), and
-a gain per run. Each term has a coefficient per device.
+(`lin`, `sq`, `cube` of its distance from a reference; `abs` and `sign` of the input, and a `step` between two of
+its set points; a `step` and an exponential `relax`ation along the time since power-on; a `periodic` error along
+the input), each as an offset of the output and as a gain (times the model's prediction, written `*model`), the
+products of the temperature and the time with the input, the square and cube of the model's output itself (a
+compression of the readout or the amplifier), and a gain per run. Each term has a coefficient per device.
 
 Forward selection with the score test: at each step the term that removes the most chi2 beyond the fit's own
 columns and the terms already chosen is kept if its p-value is below `alpha` over the number of terms in the
-dictionary (Bonferroni: the family-wise rate of a spurious term is at most `alpha`), up to `MAX_TERMS`. The
+dictionary (Bonferroni: the family-wise rate of a spurious term is at most `alpha`), up to `MAX_TERMS`. Where
+the selection needed several terms to describe the location completely but one term alone does, that one is
+kept (greedy selection can take a term that a second one then mends). The
 chosen terms are then fitted together; their coefficients come with standard errors from the projected
 information, and `share` is the part of the fit's excess chi2 the formula removes.
 
@@ -29,9 +30,10 @@ from .space import ResidualSpace
 
 
 MAX_TERMS = 3
+MAX_STEP_LEVELS = 64  # a sweep of at most this many set points is scanned for a step along its input
 TIE_CHI2, TIE_SHARE = 1.0, 1e-3  # two terms closer than this in the chi2 they remove are a tie
 REFERENCE_C = 25.0  # deg C: where a temperature term is zero (the presets' reference temperature)
-RELAX_TAUS_S = (60.0, 300.0, 900.0, 3600.0)  # time constants tried for an exponential relaxation after power-on
+RELAX_TAUS_S = tuple(60.0 * 2.0**k for k in range(7))  # 60 s to 64 min, a factor 2 apart: an exponential relaxation
 _POWERS = {"lin": 1, "sq": 2, "cube": 3}
 _UNITS = {"input": None, "temperature_c": "K", "time_s": "s", "drive_freq_hz": "Hz", "order": "point",
           "dtemperature_dt": "(K/s)"}
@@ -151,6 +153,13 @@ def dictionary(fit, sweeps, *, step_at: float | None = None, period: float | Non
             if c == "input":
                 add("abs(input)", "abs(x)", lambda s: np.abs(x[s]), c)
                 add("sign(input)", "sign(x)", lambda s: np.sign(x[s]), c, unit_power=0)
+                # a step between two set points (a missing code, a range switch): every position of a short sweep,
+                # each a term of the dictionary (its Bonferroni count is the scan's look-elsewhere correction)
+                levels = np.unique(np.concatenate([x[s][masks[s]] for s in group]))
+                if 3 <= levels.size <= MAX_STEP_LEVELS:
+                    for at in (levels[1:] + levels[:-1]) / 2.0:
+                        add("step(input)", f"where(x >= {at:.8g}, 1, 0)",
+                            lambda s, at=at: (x[s] >= at).astype(float), c, gain_too=False, unit_power=0)
                 if period:
                     for fn, nm in ((np.sin, "sin"), (np.cos, "cos")):
                         add("periodic(input)", f"{nm}(2 pi x / {period:.6g})",
@@ -231,6 +240,16 @@ def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, ma
         current = current.with_columns(cols[id(best[0])])
     if not chosen:
         return None
+    if len(chosen) > 1 and current.score(location.columns).p_value >= alpha:
+        # greedy selection can need a second term to mend its first choice: one term that says it all is simpler
+        whole = [(t, sc) for t in terms
+                 if (sc := space.score(cols[id(t)])).df and sc.p_value < cut
+                 and space.with_columns(cols[id(t)]).score(location.columns).p_value >= alpha]
+        if whole:
+            top = max(sc.statistic for _, sc in whole)
+            near = [(t, sc) for t, sc in whole if sc.statistic >= top - max(TIE_CHI2, TIE_SHARE * top)]
+            best = min(near, key=lambda x: (x[0].coordinate in between, _rank(x[0].coordinate)))
+            chosen, current = [best[0]], space.with_columns(cols[id(best[0])])
     joint = space.score(np.concatenate([cols[id(t)] for t in chosen], axis=-1))
     coef, err, spread = lot_mean(joint)
     share = min(max(joint.statistic - joint.df, 0.0) / space.excess, 1.0) if space.excess > 0 else 0.0
@@ -304,17 +323,21 @@ def formula_columns(space: ResidualSpace, formula: Formula) -> np.ndarray:
 
 
 def propose_along(fit, location, **kw):
-    """The formula of `location` in terms of its own coordinate when such a formula is complete (a curve along
-    the input may be a power of the output itself, a change from run to run a gain per run), else in terms of
-    the coordinates the data confound with it, else over the whole dictionary (see `propose`): the closed form
-    agrees with where the flexible descriptions placed the misfit unless it cannot say all of it there."""
+    """The formula of `location` (see `propose`) sought in three dictionaries: the terms of the location's own
+    coordinate (a curve along the input may be a power of the output itself, a change from run to run a gain per
+    run), those of the coordinates the data confound with it, and every term. Of the complete formulas the one
+    with the fewest terms is kept, the narrower dictionary on a tie: the closed form agrees with where the
+    flexible descriptions placed the misfit unless a simpler one elsewhere says all of it. Without a complete
+    one, the first formula found."""
     own = {location.coordinate} | ({"model"} if location.coordinate == "input" else set()) | (
         {""} if location.coordinate == "run" else set())
-    tried = None
+    found = []
     for along in (own, own | set(location.confounded_with), None):
         allowed = None if along is None else (lambda t, _, along=along: t.coordinate in along)
         f = propose(fit, location, allowed=allowed, **kw)
-        if f is not None and f.complete:
-            return f
-        tried = tried or f
-    return tried
+        if f is not None:
+            found.append(f)
+    complete = [f for f in found if f.complete]
+    if complete:
+        return min(complete, key=lambda f: len(f.terms))  # min keeps the first of equals: the narrower dictionary
+    return found[0] if found else None
