@@ -1,4 +1,5 @@
 r"""The missing term's formula: a sparse closed form over a dictionary of terms in the recorded coordinates.
+
 The dictionary holds, for the sweeps a misfit was located on (each alone and together), terms of one coordinate
 (`lin`, `sq`, `cube` of its distance from a reference; `abs` and `sign` of the input, and a `step` between two of
 its set points; a `step` and an exponential `relax`ation along the time since power-on; a `periodic` error along
