@@ -219,7 +219,8 @@ def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, ma
     if not terms:
         return None
     cols = {id(t): _columns(space, t) for t in terms}
-    cut = alpha / len(terms)
+    size = len(terms)  # the family the Bonferroni cut counts, whatever `allowed` keeps
+    cut = alpha / size
     if allowed is not None:
         terms = [t for t in terms if allowed(t, cols[id(t)])]
         if not terms:
@@ -255,7 +256,7 @@ def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, ma
     coef, err, spread = lot_mean(joint)
     share = min(max(joint.statistic - joint.df, 0.0) / space.excess, 1.0) if space.excess > 0 else 0.0
     left = current.score(location.columns)
-    return Formula(tuple(chosen), coef, err, joint.statistic, joint.df, share, len(terms), left.statistic,
+    return Formula(tuple(chosen), coef, err, joint.statistic, joint.df, share, size, left.statistic,
                    left.df, left.p_value, left.p_value >= alpha, spread)
 
 
