@@ -44,6 +44,7 @@ from .._progress import as_progress
 from .._sweeps.protocol import Protocol
 from .._sweeps.rate_table import RateTable
 from .._sweeps.registry import SWEEP_KINDS
+from .._sweeps.vcf_static import VcfStatic
 from .experiment import (
     CandidateExperiment,
     default_experiments,
@@ -55,6 +56,9 @@ from .experiment import (
 from .power import power, required_noncentrality
 from .simulate import simulate_runs
 
+
+_RATE, _VCF = RateTable.name, VcfStatic.name
+"""The scale-factor design's kinds (their default experiments' names)."""
 
 SF_HELD_TOL = 0.1
 """A design determines the scale factor when the part of its gradient along directions the design cannot fix
@@ -486,7 +490,7 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     experiments = None if experiments is None else tuple(experiments)
     # seed 000's reference: runs of the rate table planned (the experiments' own, else the default 22 rates)
     reference = next((e.sweep for e in experiments or () if isinstance(e, CandidateExperiment)
-                      and e.name == "rate_table" and isinstance(e.sweep, RateTable)), RateTable())
+                      and e.name == _RATE and isinstance(e.sweep, RateTable)), RateTable())
     seed_run_min = reference.run_minutes(protocol)
     if budget_min is None:
         budget_min = 3 * seed_run_min
@@ -526,7 +530,7 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     if len(set(names)) != len(names) or not names:
         raise ValueError(f"experiments need distinct names, at least one; got {names}.")
     # The scale-factor design picks its points among the rate table's (and static VCF's) of the default kinds.
-    design_exps = tuple(e for e in default_experiments(one, protocol) if e.name in ("rate_table", "vcf_static"))
+    design_exps = tuple(e for e in default_experiments(one, protocol) if e.name in (_RATE, _VCF))
     all_exps = experiments + tuple(e for e in design_exps if e.name not in names)
     say(f"Jacobians of {len(all_exps)} experiments' points ({sum(e.points for e in all_exps)} points per device) "
         f"at the baseline, {len(fit.devices)} device(s)")
@@ -726,15 +730,15 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
     prior = [jac0[d, n_rows:].T @ jac0[d, n_rows:] for d in range(n_dev)]
     by_name = {e.name: k for k, e in enumerate(exps)}
     warm, dwell = protocol.warmup_s / 60.0, protocol.dwell_s / 60.0
-    rate = exps[by_name["rate_table"]]
-    levels = {"rate_table": np.asarray(rate.sweep.rates_dps)}
-    rows = {"rate_table": [jac_e[by_name["rate_table"]][d] for d in range(n_dev)]}
-    sigs = {"rate_table": [rate.sigmas(noise[d]) for d in range(n_dev)]}
-    if "vcf_static" in by_name:
-        v = exps[by_name["vcf_static"]]
-        levels["vcf_static"] = np.asarray(v.sweep.virtual_rates_dps)
-        rows["vcf_static"] = [jac_e[by_name["vcf_static"]][d] for d in range(n_dev)]
-        sigs["vcf_static"] = [v.sigmas(noise[d]) for d in range(n_dev)]
+    rate = exps[by_name[_RATE]]
+    levels = {_RATE: np.asarray(rate.sweep.rates_dps)}
+    rows = {_RATE: [jac_e[by_name[_RATE]][d] for d in range(n_dev)]}
+    sigs = {_RATE: [rate.sigmas(noise[d]) for d in range(n_dev)]}
+    if _VCF in by_name:
+        v = exps[by_name[_VCF]]
+        levels[_VCF] = np.asarray(v.sweep.virtual_rates_dps)
+        rows[_VCF] = [jac_e[by_name[_VCF]][d] for d in range(n_dev)]
+        sigs[_VCF] = [v.sigmas(noise[d]) for d in range(n_dev)]
     cols = list(pool)
     # Both kinds' points are settled means over back-to-back windows of the protocol's dwell: their noise
     # shares the bias wander between neighbours (window_correlation); the fit weighs them as independent.
@@ -748,10 +752,10 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
     def variance(sets, runs):
         return float(np.mean([per_device(sets, runs, d) for d in range(n_dev)]))
 
-    seed_run_min = (protocol.warmup_s + len(levels["rate_table"]) * protocol.dwell_s) / 60.0
+    seed_run_min = (protocol.warmup_s + len(levels[_RATE]) * protocol.dwell_s) / 60.0
     seed_runs = int(budget // seed_run_min)
-    seed_sets = {"rate_table": tuple(range(len(levels["rate_table"])))}
-    seed_var = [per_device(seed_sets, {"rate_table": seed_runs}, d) for d in range(n_dev)]
+    seed_sets = {_RATE: tuple(range(len(levels[_RATE])))}
+    seed_var = [per_device(seed_sets, {_RATE: seed_runs}, d) for d in range(n_dev)]
     best = None
     max_rate_runs = int(budget // (warm + 2 * dwell))
     kinds = list(levels)
@@ -761,8 +765,8 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
     grid = sorted({r for r in range(1, max_rate_runs + 1) if r <= 4 or r == max_rate_runs
                    or int(round(1.25 ** round(math.log(r, 1.25)))) == r})
     for r_runs in grid:
-        for q_runs in range(0, 2 if "vcf_static" in levels else 1):
-            runs = {"rate_table": r_runs, "vcf_static": q_runs}
+        for q_runs in range(0, 2 if _VCF in levels else 1):
+            runs = {_RATE: r_runs, _VCF: q_runs}
             used = (r_runs + q_runs) * warm
             if used + 2 * dwell * (r_runs + q_runs) > budget:
                 continue
@@ -811,11 +815,11 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
             continue
         data_se.append(math.sqrt(_sf_variance(info, g[d], data_free, 0.0)) if data_free else math.inf)
         undetermined.append("")
-    rates = tuple(float(levels["rate_table"][i]) for i in sets["rate_table"])
-    vcf = tuple(float(levels["vcf_static"][i]) for i in sets.get("vcf_static", ())) if runs.get("vcf_static") else ()
-    return ScaleFactorDesign(float(budget), rates, runs["rate_table"], vcf, runs.get("vcf_static", 0), float(used),
+    rates = tuple(float(levels[_RATE][i]) for i in sets[_RATE])
+    vcf = tuple(float(levels[_VCF][i]) for i in sets.get(_VCF, ())) if runs.get(_VCF) else ()
+    return ScaleFactorDesign(float(budget), rates, runs[_RATE], vcf, runs.get(_VCF, 0), float(used),
                              tuple(stderr), seed_runs,
-                             seed_runs * (protocol.warmup_s + len(levels["rate_table"]) * protocol.dwell_s) / 60.0,
+                             seed_runs * (protocol.warmup_s + len(levels[_RATE]) * protocol.dwell_s) / 60.0,
                              tuple(math.sqrt(v) for v in seed_var), tuple(data_se),
                              tuple(float(x) for x in np.asarray(sf)), tuple(undetermined))
 
