@@ -85,14 +85,22 @@ def spread(values, mask):
     return float(np.nan_to_num(run)), float(np.nan_to_num(dev)), float(np.nan_to_num(lot))
 
 
-def spline_basis(x, mask, knots=KNOTS):
-    """Piecewise-linear hat functions of `x` (device, run, point) on knots at the quantiles of the real points:
-    (device, run, point, k); None when `x` takes fewer than three values."""
+# Coordinates whose sign is physics (the direction of the rate or force; warming or cooling): their splines also
+# have knots at the values next to zero, so that a change of behaviour at zero is a shape they can describe.
+SIGNED = ("input", "dtemperature_dt")
+
+
+def spline_basis(x, mask, knots=KNOTS, signed=False):
+    """Piecewise-linear hat functions of `x` (device, run, point) on knots at the quantiles of the real points
+    (and, where `signed` and `x` takes both signs, at the values next to zero on either side): (device, run,
+    point, k); None when `x` takes fewer than three values."""
     real = x[mask]
     u = np.unique(real)
     if u.size < 3:
         return None
     k = np.unique(np.quantile(real, np.linspace(0.0, 1.0, min(knots, u.size))))
+    if signed and u[0] < 0 < u[-1]:
+        k = np.unique(np.concatenate([k, [u[u < 0].max(), u[u > 0].min()]]))
     if k.size < 3:
         return None
     eye = np.eye(k.size)
@@ -128,7 +136,7 @@ def describe(space: ResidualSpace) -> tuple[list, list]:
             if dev < WITHIN_DEVICE_SHARE * lot:
                 notes.append(f"{name} on {sweep} varies mostly between devices ({dev:.3g} within a device "
                              f"of its {lot:.3g} over the lot): described within each device only")
-            hats = spline_basis(x, mask)
+            hats = spline_basis(x, mask, signed=name in SIGNED)
             if hats is None:
                 continue
             # a gain along the input (x g(x), piecewise quadratic) describes an odd curve with fewer knots than
@@ -178,7 +186,7 @@ def interactions(block, mask) -> dict:
     """A curve along the input whose size grows linearly with another coordinate (name -> changes (device, run,
     point, k)): a term in temperature x |input| is neither along the temperature nor along the input alone."""
     coords = coordinates(block)
-    hats = spline_basis(np.where(mask, coords["input"], 0.0), mask)
+    hats = spline_basis(np.where(mask, coords["input"], 0.0), mask, signed=True)
     out = {}
     if hats is None:
         return out

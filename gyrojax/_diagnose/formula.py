@@ -1,8 +1,8 @@
 r"""The missing term's formula: a sparse closed form over a dictionary of terms in the recorded coordinates.
 
 The dictionary holds, for the sweeps a misfit was located on (each alone and together), terms of one coordinate
-(`lin`, `sq`, `cube` of its distance from a reference; `abs` and `sign` of the input, and a `step` between two of
-its set points; a `step` and an exponential `relax`ation along the time since power-on; a `periodic` error along
+(`lin`, `sq`, `cube` of its distance from a reference; `abs` and `sign` of the input and of dT/dt, and a `step`
+between two set points of the input; a `step` and an exponential `relax`ation along the time since power-on; a `periodic` error along
 the input), each as an offset of the output and as a gain (times the model's prediction, written `*model`), the
 products of the temperature and the time with the input, the square and cube of the model's output itself (a
 compression of the readout or the amplifier), and a gain per run. Each term has a coefficient per device.
@@ -25,7 +25,7 @@ import dataclasses
 import numpy as np
 
 from .._sweeps.registry import sweep_kind
-from .descriptions import coordinates, spread
+from .descriptions import SIGNED, coordinates, spread
 from .locate import PREFERENCE
 from .space import ResidualSpace
 
@@ -151,9 +151,10 @@ def dictionary(fit, sweeps, *, step_at: float | None = None, period: float | Non
             for basis, k in _POWERS.items():
                 add(f"{basis}({c})", code if k == 1 else f"{code}**{k}",
                     lambda s, k=k: (x[s] - ref[s]) ** k, c, gain_too=c != "input", unit_power=k)
+            if c in SIGNED:  # where the sign is physics: even and sign-dependent terms
+                add(f"abs({c})", f"abs({code})", lambda s: np.abs(x[s]), c)
+                add(f"sign({c})", f"sign({code})", lambda s: np.sign(x[s]), c, unit_power=0)
             if c == "input":
-                add("abs(input)", "abs(x)", lambda s: np.abs(x[s]), c)
-                add("sign(input)", "sign(x)", lambda s: np.sign(x[s]), c, unit_power=0)
                 # a step between two set points (a missing code, a range switch): every position of a short sweep,
                 # each a term of the dictionary (its Bonferroni count is the scan's look-elsewhere correction)
                 levels = np.unique(np.concatenate([x[s][masks[s]] for s in group]))

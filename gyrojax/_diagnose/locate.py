@@ -21,7 +21,7 @@ import numpy as np
 
 from .._sweeps.registry import sweep_kind
 from .._text import safe_name as clean
-from .descriptions import Description, coordinates, describe, interactions, spline_basis, strength
+from .descriptions import SIGNED, Description, coordinates, describe, interactions, spline_basis, strength
 from .space import ResidualSpace
 
 
@@ -262,7 +262,7 @@ def _measured_shares(space, fit, best: Description) -> tuple:
         else:
             if best.coordinate not in coords:
                 continue
-            hats = spline_basis(np.where(mask, coords[best.coordinate], 0.0), mask)
+            hats = spline_basis(np.where(mask, coords[best.coordinate], 0.0), mask, signed=best.coordinate in SIGNED)
             if hats is None:
                 continue
             g = hats * pred[..., None] if best.family == "gain" else hats
