@@ -2,10 +2,11 @@ r"""The missing term's formula: a sparse closed form over a dictionary of terms 
 
 The dictionary holds, for the sweeps a misfit was located on (each alone and together), terms of one coordinate
 (`lin`, `sq`, `cube` of its distance from a reference; `abs` and `sign` of the input and of dT/dt, and a `step`
-between two set points of the input; a `step` and an exponential `relax`ation along the time since power-on; a `periodic` error along
-the input), each as an offset of the output and as a gain (times the model's prediction, written `*model`), the
-products of the temperature and the time with the input, the square and cube of the model's output itself (a
-compression of the readout or the amplifier), and a gain per run. Each term has a coefficient per device.
+between two set points of the input; a `step` and an exponential `relax`ation along the time since power-on; a
+`periodic` error along the input), each as an offset of the output and as a gain (times the model's prediction,
+written `*model`), the products of the temperature and the time with the input, the square and cube of the model's
+output itself (a compression of the readout or the amplifier), and a gain per run. Each term has a coefficient per
+device.
 
 Forward selection with the score test: at each step the term that removes the most chi2 beyond the fit's own
 columns and the terms already chosen is kept if its p-value is below `alpha` over the number of terms in the
