@@ -1,5 +1,6 @@
-"""The diagnosis's baseline and its candidates: a given fit as the baseline, a lot's first device, the
-candidate effects checked against the device, and what decides a new compile of the fit with all of them."""
+"""The baseline and its candidates, shared by `diagnose` and `plan`: a given fit as the baseline, a lot's first
+device, the candidate effects checked against the device, the baseline fit with every candidate at zero, and what
+decides a new compile of the fit with all of them."""
 
 import equinox as eqx
 import jax
@@ -7,10 +8,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._effects.registry import EFFECTS
-from .._identify import Fit
+from .._identify import Fit, MultiStart, identify
 from .._identify.fitmatch import check_fit_data
 from .._model.fitdata import FitData
-from .._model.parameters import Model
+from .._model.parameters import Model, zero_effect
 
 
 def full_key(model: Model, data: FitData):
@@ -20,11 +21,13 @@ def full_key(model: Model, data: FitData):
     return jax.tree.structure(eqx.filter(model, eqx.is_array)), shapes
 
 
-def baseline_model(fit: Fit, data: FitData) -> Model:
-    """The fitted model of `fit` as the diagnosis's baseline, after checking that it was fitted to `data`."""
+def baseline_model(fit: Fit, data: FitData | None) -> Model:
+    """The fitted model of `fit` as the baseline, after checking that it was fitted to `data` (None: the fit's
+    own data, nothing to check)."""
     if not isinstance(fit, Fit):
         raise TypeError(f"fit must be a gyrojax.Fit (from identify or load_fit), got {type(fit).__name__}.")
-    check_fit_data(fit, data)
+    if data is not None:
+        check_fit_data(fit, data)
     # Effects held at exactly zero (a previous diagnosis's candidates) were never fitted: candidates again.
     kept = tuple(e for e in fit.model.effects
                  if any(np.any(np.asarray(x) != 0) for x in jax.tree.leaves(e)))
@@ -66,3 +69,20 @@ def candidate_effects(base: Model, candidates, who: str) -> tuple[str, ...]:
     if not candidates:
         raise ValueError(f"{who} needs at least one candidate effect not already in the model.")
     return candidates
+
+
+def baseline_fit(base: Model, data: FitData, candidates: tuple[str, ...], *, free, also_held: tuple[str, ...] = (),
+                 start: MultiStart = MultiStart(), evaluate_only: bool = False, estimate_noise: bool | None = None,
+                 say) -> tuple[Model, Fit]:
+    """The baseline with every candidate at zero, as `diagnose` and `plan` fit it: `base` with each of
+    `candidates` added at zero (the model every later fit of the diagnosis starts from) and its fit to `data`
+    with `free` free and the candidates (and `also_held`) held, or with `evaluate_only` evaluated where its
+    parameters are. `say` is the caller's progress. Returns (that model, its fit)."""
+    full = Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates))
+    if not evaluate_only:
+        say(f"fitting the baseline: {len(data.devices)} device(s), {data.num_points()} points, every one of "
+            f"{len(candidates)} candidate effects held at zero")
+        say.compiling(("identify", full_key(full, data)), "the lot's fit with every candidate")
+    fit = identify(full, data, free=free, hold=tuple(candidates) + tuple(also_held), start=start,
+                   evaluate_only=evaluate_only, estimate_noise=estimate_noise, progress=False)
+    return full, fit

@@ -9,11 +9,11 @@ import numpy as np
 from .._data.table import Table
 from .._identify import Fit, MultiStart, identify
 from .._model.fitdata import fit_data
-from .._model.parameters import DEFAULT_FREE, Model, as_model, zero_effect
+from .._model.parameters import DEFAULT_FREE, as_model
 from .._numerics.stats import chi2_sf
 from .._plugins import nonfinite_effect
 from .._progress import as_progress
-from .candidates import baseline_model, candidate_effects, first_device, full_key, is_lot
+from .candidates import baseline_fit, baseline_model, candidate_effects, first_device, is_lot
 from .columns import effect_columns
 from .compare import compare, nonlinearity_residual_ppm
 from .discrepancy import look_alikes, score_probes, with_shapes
@@ -81,24 +81,18 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     broken = [Rejection(c, f"{why}: dropped from the candidates", kind="non-finite model")
               for c in candidates if (why := nonfinite_effect(c, one)) is not None]
     candidates = tuple(c for c in candidates if c not in {r.effect for r in broken})
-    full = Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates))
     say = as_progress(progress, "gyrojax.diagnose")
 
     weights = {"data": data, "estimate_noise": None}
 
-    def fit_with(selected, evaluate_only=False):
+    def fit_with(selected):
         held = tuple(c for c in candidates if c not in selected)
         return identify(full, weights["data"], free=free, hold=held, start=start,
-                        evaluate_only=evaluate_only, estimate_noise=weights["estimate_noise"], progress=False)
+                        estimate_noise=weights["estimate_noise"], progress=False)
 
-    if fit is None:
-        say(f"fitting the baseline: {len(data.devices)} device(s), {data.num_points()} points, every one of "
-            f"{len(candidates)} candidate effects held at zero")
-        say.compiling(("identify", full_key(full, data)), "the lot's fit with every candidate")
-        fit = fit_with(())
-    else:  # the saved fit is the baseline: evaluated where it ended, with the candidates at zero
+    if fit is not None:  # the saved fit is the baseline: evaluated where it ended, with the candidates at zero
         say("evaluating the given baseline fit with every candidate at zero")
-        fit = fit_with((), evaluate_only=True)
+    full, fit = baseline_fit(base, data, candidates, free=free, start=start, evaluate_only=fit is not None, say=say)
     baseline = fit
     if not data.weighted:
         # The noise was estimated from the baseline's residuals: every refit keeps those weights, so that the

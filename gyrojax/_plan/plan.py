@@ -31,14 +31,14 @@ import jax
 import numpy as np
 
 from .._data.table import Table
-from .._diagnose import baseline_model, candidate_effects, full_key
+from .._diagnose.candidates import baseline_fit, baseline_model, candidate_effects
 from .._effects.registry import EFFECTS
-from .._identify import Fit, identify
+from .._identify import Fit
 from .._identify.fit import p_text
 from .._identify.problem import sf_temperature
 from .._lots.noise import RateNoise
 from .._model.fitdata import FitData, fit_data
-from .._model.parameters import DEFAULT_FREE, Model, as_model, zero_effect
+from .._model.parameters import DEFAULT_FREE, as_model
 from .._numerics.testability import MIN_TYPICAL_CHI2, is_testable
 from .._progress import as_progress
 from .._sweeps.protocol import Protocol
@@ -383,13 +383,8 @@ def _baseline(data, model, fit, candidates, free, reads, say):
     if fit is not None:
         if data is not None:
             data = data if isinstance(data, FitData) else fit_data(data)
-            base = baseline_model(fit, data)
-        else:
-            if not isinstance(fit, Fit):
-                raise TypeError(f"fit must be a gyrojax.Fit (from identify or load_fit), got {type(fit).__name__}.")
-            data = fit.data
-            base = Model(fit.model.device, tuple(e for e in fit.model.effects
-                                                 if any(np.any(np.asarray(x) != 0) for x in jax.tree.leaves(e))))
+        base = baseline_model(fit, data)
+        data = fit.data if data is None else data
     else:
         if data is None:
             raise ValueError("plan needs data (a gyrojax.Table or FitData) or a fit of it; got neither.")
@@ -406,13 +401,9 @@ def _baseline(data, model, fit, candidates, free, reads, say):
             return fit, candidates, ()
         say("evaluating the given fit with every candidate effect at zero" + (f" and {', '.join(added)} held"
             if added else "") + f" (its Jacobian lacks {', '.join(missing + list(added))})")
-    full = Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates))
-    if fit is None:
-        say(f"fitting the baseline: {len(data.devices)} device(s), {data.num_points()} points, every one of "
-            f"{len(candidates)} candidate effects held at zero")
-        say.compiling(("identify", full_key(full, data)), "the lot's fit with every candidate")
-    fit = identify(full, data if fit is None else fit.data, free=tuple(free) + added, hold=candidates + added,
-                   evaluate_only=fit is not None, estimate_noise=None if fit is None else False, progress=False)
+    _, fit = baseline_fit(base, data if fit is None else fit.data, candidates, free=tuple(free) + added,
+                          also_held=added, evaluate_only=fit is not None,
+                          estimate_noise=None if fit is None else False, say=say)
     return fit, candidates, added
 
 
