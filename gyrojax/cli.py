@@ -545,14 +545,26 @@ def _effects_module_option(parser):
 
 
 def build_parser():
-    from ._sweeps.registry import SWEEP_KINDS
-
     parser = argparse.ArgumentParser(
         prog="gyrojax", epilog=_EXIT_CODES,
         description="Differentiable simulation and identification of MEMS Coriolis vibratory gyroscopes. "
                     "Data files are the tidy table of docs/data_format.md (CSV or Parquet): rates in deg/s, "
                     "gyro outputs in LSB, DAC amplitudes in V.")
     sub = parser.add_subparsers(dest="command", required=True)
+    _add_simulate(sub)
+    _add_metrics(sub)
+    _add_compensate(sub)
+    _add_diagnose(sub)
+    _add_plan(sub)
+    _add_identify(sub)
+    _add_demo(sub)
+    _add_describe(sub)
+    return parser
+
+
+def _add_simulate(sub) -> None:
+    """`gyrojax simulate`: a lot of simulated sweeps written as a data file."""
+    from ._sweeps.registry import SWEEP_KINDS
 
     sim = sub.add_parser("simulate", help="simulate a lot of devices on rate-table, virtual-Coriolis and DAC sweeps",
                          description="Simulate sweeps of a preset device (or a lot around it) and write "
@@ -582,12 +594,18 @@ def build_parser():
     _effects_module_option(sim)
     sim.set_defaults(func=_cmd_simulate)
 
+
+def _add_metrics(sub) -> None:
+    """`gyrojax metrics`: the scale-factor metrics of a data file."""
     met = sub.add_parser("metrics", help="scale factor, nonlinearity, asymmetry, repeatability of a data file",
                          description="Scale-factor metrics of every device/run/sweep of a data file.")
     met.add_argument("data", help="a tidy data file (.csv or .parquet)")
     met.add_argument("--json", help="write the report as JSON here")
     met.set_defaults(func=_cmd_metrics)
 
+
+def _add_compensate(sub) -> None:
+    """`gyrojax compensate`: a scale-factor compensator fitted and judged."""
     comp = sub.add_parser("compensate", help="fit a scale-factor compensator on training runs, judge it on the rest",
                           description="Compensate the rate_table sweeps of a data file: fit on the training runs "
                                       "of each device, report the worst nonlinearity of every run and the "
@@ -604,6 +622,9 @@ def build_parser():
     _effects_module_option(comp)
     comp.set_defaults(func=_cmd_compensate)
 
+
+def _add_diagnose(sub) -> None:
+    """`gyrojax diagnose`: the missing effect found and added."""
     diag = sub.add_parser("diagnose", help="compare model and data, find the missing physical effect, add it",
                           description="Fit the preset's baseline (per device: its gains free, a bias per run), "
                                       "rank every candidate effect by a score test, add the significant ones one "
@@ -630,6 +651,9 @@ def build_parser():
     _effects_module_option(diag)
     diag.set_defaults(func=_cmd_diagnose)
 
+
+def _add_plan(sub) -> None:
+    """`gyrojax plan`: the measurements that make each effect testable."""
     pln = sub.add_parser("plan", help="which measurements would make each hidden effect testable; the scale "
                                       "factor's best calibration within a time budget",
                          description="From the baseline fit of DATA (fitted here as diagnose does, or --fit), the "
@@ -651,6 +675,9 @@ def build_parser():
     _effects_module_option(pln)
     pln.set_defaults(func=_cmd_plan)
 
+
+def _add_identify(sub) -> None:
+    """`gyrojax identify`: the model's parameters fitted to a data file."""
     idf = sub.add_parser("identify", help="fit the model's physical parameters to every sweep of a data file",
                          description="Fit the free parameters of a preset (plus any effects) to all sweeps of "
                                      "every device jointly, with standard errors; parameters the data cannot "
@@ -685,6 +712,9 @@ def build_parser():
     _effects_module_option(idf)
     idf.set_defaults(func=_cmd_identify)
 
+
+def _add_demo(sub) -> None:
+    """`gyrojax demo`: the main job on the embedded default data."""
     demo = sub.add_parser("demo", help="the main job on the embedded default data (seed 000 Table 2, presets)",
                           description="Simulate a lot with a hidden effect and find it (fit, rank candidates, "
                                       "add, watch the error fall); reproduce seed 000 Table 2's DAC "
@@ -700,6 +730,9 @@ def build_parser():
     demo.add_argument("--quiet", action="store_true", help="only the steps and their results, no progress messages")
     demo.set_defaults(func=_cmd_demo)
 
+
+def _add_describe(sub) -> None:
+    """`gyrojax describe`: every leaf of a device."""
     desc = sub.add_parser("describe", help="every leaf of a device (a preset or a device file): its path, value, "
                                            "unit and provenance; --toml writes it as a device file",
                           description="List every leaf of the device (the path an effect reads or writes, e.g. "
@@ -713,7 +746,6 @@ def build_parser():
                       help="write the device as a device file here, to edit and give back as --model OUT.toml "
                            "(docs/own_device.md)")
     desc.set_defaults(func=_cmd_describe)
-    return parser
 
 
 def _os_error_text(e: OSError) -> str:
