@@ -25,6 +25,7 @@ keeps the best; seed 000's 22-rate protocol at equal time is the reference.
 import functools
 import itertools
 import math
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -470,6 +471,49 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
 
     **Returns:** a `Plan`.
     """
+    _check_arguments(alpha, target_power, max_repeats, protocol, data)
+    experiments = None if experiments is None else tuple(experiments)
+    budget_min = _budget(experiments, protocol, budget_min)
+    say = as_progress(progress, "gyrojax.plan")
+    # what the experiments read beyond the baseline (default experiments: whatever a kind may read)
+    reads = tuple(dict.fromkeys(p for cls in SWEEP_KINDS.values() for p in cls.reads)) if experiments is None else \
+        tuple(dict.fromkeys(p for e in experiments if isinstance(e, CandidateExperiment) for p in e.reads))
+    fit, candidates, added = _baseline(data, model, fit, candidates, free, reads, say)
+    one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, fit.model.device)
+    experiments = _experiments(experiments, one, protocol, fit, say)
+    names = [e.name for e in experiments]
+    # The scale-factor design picks its points among the rate table's (and static VCF's) of the default kinds.
+    design_exps = tuple(e for e in default_experiments(one, protocol) if e.name in (_RATE, _VCF))
+    all_exps = experiments + tuple(e for e in design_exps if e.name not in names)
+    say(f"Jacobians of {len(all_exps)} experiments' points ({sum(e.points for e in all_exps)} points per device) "
+        f"at the baseline, {len(fit.devices)} device(s)")
+    t_sf = sf_temperature(fit.data)  # where identification reports the scale factor
+    (jac_e, g), (pred_e, sf) = jacobians(fit.model, fit.entries, all_exps, t_sf)
+    noise = noise_levels(fit.data, sf, protocol)
+    jac0 = np.asarray(fit.jacobian, dtype=float)
+    rows = _information_rows(fit, jac0, candidates, added, experiments, jac_e, pred_e, noise,
+                             identifiability_threshold)
+    say(f"expected chi2 of {len(candidates)} candidate effects on the data given and with every combination of "
+        f"0..{max_repeats} runs of {len(experiments)} experiments")
+    thetas = {c: _typical(fit, c, rows.cand_cols[c]) for c in candidates}
+    prints = _fingerprints(rows, candidates, thetas)
+    exact, combos, search = _search_order(experiments, max_repeats)
+    plans = []
+    for c in candidates:
+        plans.append(_candidate_plan(c, rows, thetas[c], _ambiguous(c, candidates, prints), experiments, alpha,
+                                     target_power, max_repeats, combos))
+        _say_candidate(say, plans[-1])
+    design = None if not scale_factor else _sf_design(fit, jac0, g, sf, all_exps, jac_e, noise, rows.pool,
+                                                      budget_min, protocol, identifiability_threshold, say)
+    warnings = _warnings(fit, design, len(fit.devices))
+    for w in warnings:
+        say(f"warning: {w}")
+    return Plan(tuple(plans), design, experiments, fit, float(alpha), float(target_power), max_repeats, fit.devices,
+                search, warnings)
+
+
+def _check_arguments(alpha, target_power, max_repeats, protocol, data) -> None:
+    """`plan`'s scalar arguments and the type of its data, each with what is expected."""
     if not (isinstance(alpha, (int, float)) and 0.0 < alpha <= 0.5):
         raise ValueError(f"alpha must be a significance level in (0, 0.5], got {alpha!r}.")
     if not (isinstance(target_power, (int, float)) and 0.0 < target_power < 1.0):
@@ -478,8 +522,11 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
         raise ValueError(f"max_repeats must be an integer in 1..8, got {max_repeats!r}.")
     if not isinstance(protocol, Protocol):
         raise ValueError(f"protocol must be a gyrojax.Protocol, got {protocol!r}.")
-    experiments = None if experiments is None else tuple(experiments)
-    # seed 000's reference: runs of the rate table planned (the experiments' own, else the default 22 rates)
+
+
+def _budget(experiments, protocol: Protocol, budget_min) -> float:
+    """The scale factor's design budget, minutes: `budget_min` checked against one run of seed 000's reference
+    (the experiments' own rate table, else the default 22 rates) and `MAX_BUDGET_MIN`; default three runs."""
     reference = next((e.sweep for e in experiments or () if isinstance(e, CandidateExperiment)
                       and e.name == _RATE and isinstance(e.sweep, RateTable)), RateTable())
     seed_run_min = reference.run_minutes(protocol)
@@ -493,14 +540,12 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
                          f"the planner designs at most {MAX_BUDGET_MIN:g} min ({_duration(MAX_BUDGET_MIN)}): over "
                          "longer, drift, the table's calibration and the schedule decide the scale factor, not the "
                          "noise the design averages down.")
-    if data is not None and not isinstance(data, (Table, FitData)):
-        raise TypeError(f"data must be a gyrojax.Table or FitData, got {type(data).__name__}.")
-    say = as_progress(progress, "gyrojax.plan")
-    # what the experiments read beyond the baseline (default experiments: whatever a kind may read)
-    reads = tuple(dict.fromkeys(p for cls in SWEEP_KINDS.values() for p in cls.reads)) if experiments is None else \
-        tuple(dict.fromkeys(p for e in experiments if isinstance(e, CandidateExperiment) for p in e.reads))
-    fit, candidates, added = _baseline(data, model, fit, candidates, free, reads, say)
-    one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, fit.model.device)
+    return budget_min
+
+
+def _experiments(experiments, one, protocol: Protocol, fit: Fit, say) -> tuple:
+    """The candidate experiments: those given, each checked, or the defaults of device `one` less the kinds
+    with no noise model of their own and no points in the data; distinct names, at least one."""
     defaults = experiments is None
     if defaults:
         experiments = default_experiments(one, protocol)
@@ -520,16 +565,27 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     names = [e.name for e in experiments]
     if len(set(names)) != len(names) or not names:
         raise ValueError(f"experiments need distinct names, at least one; got {names}.")
-    # The scale-factor design picks its points among the rate table's (and static VCF's) of the default kinds.
-    design_exps = tuple(e for e in default_experiments(one, protocol) if e.name in (_RATE, _VCF))
-    all_exps = experiments + tuple(e for e in design_exps if e.name not in names)
-    say(f"Jacobians of {len(all_exps)} experiments' points ({sum(e.points for e in all_exps)} points per device) "
-        f"at the baseline, {len(fit.devices)} device(s)")
-    t_sf = sf_temperature(fit.data)  # where identification reports the scale factor
-    (jac_e, g), (pred_e, sf) = jacobians(fit.model, fit.entries, all_exps, t_sf)
-    noise = noise_levels(fit.data, sf, protocol)
+    return experiments
+
+
+class _Rows(NamedTuple):
+    """The information the effects' part of a plan is computed from: per device, the reduced standardised rows
+    of the data given (`r0`) and of one run of each experiment (`rk[k]`), and which columns are what."""
+
+    r0: list
+    rk: list
+    cand_cols: dict  # candidate -> its columns
+    base_free: list  # the baseline fit's free columns
+    pool: list  # the columns a joint fit may free (identification's rule decides which)
+    reading: list  # per experiment, the columns of the parameters only it reads (freed with its runs)
+    threshold: float  # identification's threshold
+    n_dev: int
+
+
+def _information_rows(fit: Fit, jac0, candidates, added, experiments, jac_e, pred_e, noise, threshold) -> _Rows:
+    """The reduced rows of the data given and of one run of each experiment, per device, and the columns a
+    joint fit may free."""
     n_dev = len(fit.devices)
-    jac0 = np.asarray(fit.jacobian, dtype=float)
     free_mask = np.asarray(fit.free)
     phys = [i for i, e in enumerate(_columns(fit)) if e is None]
     cand_cols = {c: [i for i, nm in enumerate(fit.names) if nm.startswith(c + ".")] for c in candidates}
@@ -544,117 +600,145 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     r0 = [_reduce(jac0[d]) for d in range(n_dev)]
     rk = [[_reduce(weighted_rows(e, jac_e[k][d], e.sigmas(noise[d], pred_e[k][d]))) for d in range(n_dev)]
           for k, e in enumerate(experiments)]
-    say(f"expected chi2 of {len(candidates)} candidate effects on the data given and with every combination of "
-        f"0..{max_repeats} runs of {len(experiments)} experiments")
-    thetas = {c: _typical(fit, c, cand_cols[c]) for c in candidates}
-    # Fingerprints on the data given (after the baseline's free parameters), for ambiguity.
+    return _Rows(r0, rk, cand_cols, base_free, pool, reading, threshold, n_dev)
+
+
+def _fingerprints(rows: _Rows, candidates, thetas) -> dict:
+    """Each candidate's typical-size fingerprint on the data given, after the baseline's free parameters took
+    their share, over the lot's devices (for ambiguity)."""
     prints = {}
     for c in candidates:
         fp = []
-        for d in range(n_dev):
-            a = r0[d]
-            f = a[:, cand_cols[c]] @ thetas[c]
-            b = a[:, base_free]
-            if base_free:
+        for d in range(rows.n_dev):
+            a = rows.r0[d]
+            f = a[:, rows.cand_cols[c]] @ thetas[c]
+            b = a[:, rows.base_free]
+            if rows.base_free:
                 f = f - b @ np.linalg.lstsq(b, f, rcond=None)[0]
             fp.append(f)
         prints[c] = np.concatenate(fp)
-    plans = []
+    return prints
+
+
+def _ambiguous(c: str, candidates, prints) -> tuple[str, ...]:
+    """The candidates ambiguous with `c`: both fingerprints visible on the data given (a typical size changes
+    the chi2 by more than 1, the diagnosis's `min_typical_chi2`) and nearly collinear."""
+    pn = np.linalg.norm(prints[c])
+    return tuple(o for o in candidates if o != c and pn > 1.0 and np.linalg.norm(prints[o]) > 1.0
+                 and abs(prints[c] @ prints[o]) / (pn * np.linalg.norm(prints[o])) > SAME_SHAPE)
+
+
+def _search_order(experiments, max_repeats: int):
+    """How the runs are searched: (exact, the combinations cheapest first or None, the search's description).
+    Exact over every combination of 0..`max_repeats` runs where they are at most `MAX_EXACT_COMBINATIONS`,
+    else greedy."""
     exact = (max_repeats + 1) ** len(experiments) <= MAX_EXACT_COMBINATIONS
     combos = sorted(itertools.product(range(max_repeats + 1), repeat=len(experiments)),
                     key=lambda n: (sum(k * e.minutes for k, e in zip(n, experiments)), sum(n))) if exact else None
     search = (f"exact: every combination of 0..{max_repeats} runs of each experiment, cheapest first" if exact else
               f"greedy: one run at a time, the largest expected-chi2 gain per minute, up to {max_repeats} runs of "
               f"each experiment ({len(experiments)} experiments: more than {MAX_EXACT_COMBINATIONS} combinations)")
-    for c in candidates:
-        cols = cand_cols[c]
-        df = len(cols) * n_dev
-        need = required_noncentrality(df, target_power, alpha)
-        # Ambiguous: both fingerprints visible on the data given (a typical size changes the chi2 by more
-        # than 1, the diagnosis's `min_typical_chi2`) and nearly collinear.
-        pn = np.linalg.norm(prints[c])
-        amb = tuple(o for o in candidates if o != c and pn > 1.0 and np.linalg.norm(prints[o]) > 1.0
-                    and abs(prints[c] @ prints[o]) / (pn * np.linalg.norm(prints[o])) > SAME_SHAPE)
-        amb_cols = [i for o in amb for i in cand_cols[o]]
+    return exact, combos, search
 
-        def lam(counts, c=c, cols=cols, amb_cols=amb_cols):
-            blocks = [np.concatenate([r0[d]] + [math.sqrt(k) * rk[j][d] for j, k in enumerate(counts) if k])
-                      for d in range(n_dev)]
-            nuis = _nuisances(blocks, counts, base_free, pool, reading, identifiability_threshold)
-            nuis = [i for i in nuis if i not in cols] + amb_cols
-            return sum(_residual_chi2(blocks[d], nuis, cols, thetas[c]) for d in range(n_dev))
 
-        now = lam((0,) * len(experiments))
-        p_now = power(now, df, alpha)
-        per = []
-        for j, e in enumerate(experiments):
-            counts = tuple(1 if i == j else 0 for i in range(len(experiments)))
-            lj = lam(counts)
-            per.append((e.name, e.minutes, lj, power(lj, df, alpha)))
-        testable = is_testable(now)  # the diagnosis's rule (gyrojax/_numerics/testability.py)
-        detected = p_now >= target_power
-        recommended, rec_chi2, rec_power, reason = (), now, p_now, ""
-        if detected:
-            reason = f"detected on the data given (power {p_now:.2f} >= {target_power:g})"
+def _expected_chi2(rows: _Rows, counts, cols, amb_cols, theta) -> float:
+    """The expected chi2 of an effect (columns `cols`, typical size `theta`) over the lot, with `counts` runs of
+    each experiment added and the ambiguous candidates' columns `amb_cols` free beside the nuisances."""
+    blocks = [np.concatenate([rows.r0[d]] + [math.sqrt(k) * rows.rk[j][d] for j, k in enumerate(counts) if k])
+              for d in range(rows.n_dev)]
+    nuis = _nuisances(blocks, counts, rows.base_free, rows.pool, rows.reading, rows.threshold)
+    nuis = [i for i in nuis if i not in cols] + amb_cols
+    return sum(_residual_chi2(blocks[d], nuis, cols, theta) for d in range(rows.n_dev))
+
+
+def _cheapest_runs(lam, need: float, now: float, experiments, max_repeats: int, combos):
+    """The first run counts (cheapest first over `combos`; greedy, the largest gain per minute, where `combos`
+    is None) whose expected chi2 `lam(counts)` reaches `need`: (counts, chi2), or None."""
+    if combos is not None:
+        for counts in combos[1:]:
+            lc = lam(counts)
+            if lc >= need:
+                return counts, lc
+        return None
+    counts, lc = (0,) * len(experiments), now
+    while True:
+        steps = [tuple(k + (i == j) for i, k in enumerate(counts)) for j in range(len(experiments))
+                 if counts[j] < max_repeats]
+        if not steps:
+            return None
+        gains = [(lam(c) - lc) / experiments[j].minutes for j, c in
+                 zip([j for j in range(len(experiments)) if counts[j] < max_repeats], steps)]
+        counts = steps[int(np.argmax(gains))]
+        lc = lam(counts)
+        if lc >= need:
+            return counts, lc
+
+
+def _unreachable(c: str, amb, top: float, need: float, names, max_repeats: int, target_power: float) -> str:
+    """Why no combination of runs makes candidate `c` testable: the chi2 `top` all of them leave against the
+    `need`ed one, and what else would reveal it."""
+    # What the effect's own text names is not offered where these runs include it and it did not help.
+    hidden = (f"with {', '.join(amb)} free (ambiguous: they take what it leaves)" if amb else
+              "after the baseline took its share")
+    # An ambiguous candidate's own revealing text may name a sweep among these runs: that sweep separates the
+    # two at a larger size (diagnose's "X separates them" is at the fitted size), not at the typical size
+    # planned here, so it is not offered.
+    beyond = (f"at its typical size none of these runs tells it from {', '.join(amb)} (a sweep that "
+              "separates them at a larger fitted size, as diagnose may report, does not at this one)"
+              if amb else f"revealed by: {EFFECTS[c].revealed_by or 'no measurement named'}")
+    return (f"no combination of up to {max_repeats} runs of {', '.join(names)} brings it to power "
+            f"{target_power:g}: a typical size leaves chi2 {top:.3g} with all of them {hidden}, "
+            f"{need:.3g} is needed" + ("" if is_testable(top) else
+                                       f" (below {MIN_TYPICAL_CHI2:g}: not testable)") + f"; {beyond}")
+
+
+def _candidate_plan(c: str, rows: _Rows, theta, amb, experiments, alpha, target_power, max_repeats,
+                    combos) -> CandidatePlan:
+    """Candidate `c`'s plan: its expected chi2 and power now and with one run of each experiment, and the
+    cheapest runs that bring it to `target_power` (none where it is detected already), or why none do."""
+    cols = rows.cand_cols[c]
+    df = len(cols) * rows.n_dev
+    need = required_noncentrality(df, target_power, alpha)
+    amb_cols = [i for o in amb for i in rows.cand_cols[o]]
+    lam = functools.partial(_expected_chi2, rows, cols=cols, amb_cols=amb_cols, theta=theta)
+    now = lam((0,) * len(experiments))
+    p_now = power(now, df, alpha)
+    per = []
+    for j, e in enumerate(experiments):
+        counts = tuple(1 if i == j else 0 for i in range(len(experiments)))
+        lj = lam(counts)
+        per.append((e.name, e.minutes, lj, power(lj, df, alpha)))
+    testable = is_testable(now)  # the diagnosis's rule (gyrojax/_numerics/testability.py)
+    detected = p_now >= target_power
+    recommended, rec_chi2, rec_power, reason = (), now, p_now, ""
+    if detected:
+        reason = f"detected on the data given (power {p_now:.2f} >= {target_power:g})"
+    else:
+        found = _cheapest_runs(lam, need, now, experiments, max_repeats, combos)
+        if found is None:
+            top = lam((max_repeats,) * len(experiments))
+            reason = _unreachable(c, amb, top, need, [e.name for e in experiments], max_repeats, target_power)
         else:
-            found = None
-            if exact:
-                for counts in combos[1:]:
-                    lc = lam(counts)
-                    if lc >= need:
-                        found = (counts, lc)
-                        break
-            else:
-                counts, lc = (0,) * len(experiments), now
-                while found is None:
-                    steps = [tuple(k + (i == j) for i, k in enumerate(counts)) for j in range(len(experiments))
-                             if counts[j] < max_repeats]
-                    if not steps:
-                        break
-                    gains = [(lam(c) - lc) / experiments[j].minutes for j, c in
-                             zip([j for j in range(len(experiments)) if counts[j] < max_repeats], steps)]
-                    counts = steps[int(np.argmax(gains))]
-                    lc = lam(counts)
-                    if lc >= need:
-                        found = (counts, lc)
-            if found is None:
-                top = lam((max_repeats,) * len(experiments))
-                # What the effect's own text names is not offered where these runs include it and it did not help.
-                hidden = (f"with {', '.join(amb)} free (ambiguous: they take what it leaves)" if amb else
-                          "after the baseline took its share")
-                # An ambiguous candidate's own revealing text may name a sweep among these runs: that sweep
-                # separates the two at a larger size (diagnose's "X separates them" is at the fitted size), not
-                # at the typical size planned here, so it is not offered.
-                beyond = (f"at its typical size none of these runs tells it from {', '.join(amb)} (a sweep that "
-                          "separates them at a larger fitted size, as diagnose may report, does not at this one)"
-                          if amb else f"revealed by: {EFFECTS[c].revealed_by or 'no measurement named'}")
-                reason = (f"no combination of up to {max_repeats} runs of {', '.join(names)} brings it to power "
-                          f"{target_power:g}: a typical size leaves chi2 {top:.3g} with all of them {hidden}, "
-                          f"{need:.3g} is needed" + ("" if is_testable(top) else
-                                                     f" (below {MIN_TYPICAL_CHI2:g}: not testable)") + f"; {beyond}")
-            else:
-                counts, rec_chi2 = found
-                rec_power = power(rec_chi2, df, alpha)
-                recs = []
-                for j, k in enumerate(counts):
-                    if k:
-                        only = tuple(k if i == j else 0 for i in range(len(experiments)))
-                        lk = lam(only)
-                        recs.append(Recommendation(experiments[j], k, lk, power(lk, df, alpha)))
-                recommended = tuple(recs)
-                reason = "cheapest combination (exact search)" if exact else "greedy search (most chi2 per minute)"
-        plans.append(CandidatePlan(c, df, now, p_now, testable, amb, tuple(per), recommended, rec_chi2, rec_power,
-                                   reason, detected))
-        say(f"{c}: now chi2 {now:.3g} (power {p_now:.2f})" + ("" if detected else (
-            f"; add {' + '.join(f'{r.runs} x {r.experiment.name}' for r in recommended)}" if recommended
-            else "; not reachable with these experiments")))
-    design = None if not scale_factor else _sf_design(fit, jac0, g, sf, all_exps, jac_e, noise, pool, budget_min,
-                                                      protocol, identifiability_threshold, say)
-    warnings = _warnings(fit, design, len(fit.devices))
-    for w in warnings:
-        say(f"warning: {w}")
-    return Plan(tuple(plans), design, experiments, fit, float(alpha), float(target_power), max_repeats, fit.devices,
-                search, warnings)
+            counts, rec_chi2 = found
+            rec_power = power(rec_chi2, df, alpha)
+            recs = []
+            for j, k in enumerate(counts):
+                if k:
+                    only = tuple(k if i == j else 0 for i in range(len(experiments)))
+                    lk = lam(only)
+                    recs.append(Recommendation(experiments[j], k, lk, power(lk, df, alpha)))
+            recommended = tuple(recs)
+            reason = ("cheapest combination (exact search)" if combos is not None else
+                      "greedy search (most chi2 per minute)")
+    return CandidatePlan(c, df, now, p_now, testable, amb, tuple(per), recommended, rec_chi2, rec_power, reason,
+                         detected)
+
+
+def _say_candidate(say, cp: CandidatePlan) -> None:
+    """One line of progress for a candidate's plan."""
+    say(f"{cp.effect}: now chi2 {cp.expected_chi2:.3g} (power {cp.power:.2f})" + ("" if cp.detected else (
+        f"; add {' + '.join(f'{r.runs} x {r.experiment.name}' for r in cp.recommended)}" if cp.recommended
+        else "; not reachable with these experiments")))
 
 
 def _duration(minutes: float) -> str:
