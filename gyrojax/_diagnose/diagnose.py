@@ -63,26 +63,72 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
 
     **Returns:** a `Diagnosis` (with a `verdict`: explained, partly explained or unexplained).
     """
-    if not (isinstance(alpha, (int, float)) and 0.0 < alpha <= 0.5):
-        raise ValueError(f"alpha must be a significance level in (0, 0.5], got {alpha!r}.")
-    if not isinstance(max_effects, int) or isinstance(max_effects, bool) or max_effects < 0:
-        raise ValueError(f"max_effects must be an integer >= 0, got {max_effects!r}.")
-    if not (isinstance(max_typical_multiple, (int, float)) and max_typical_multiple > 1.0):
-        raise ValueError(f"max_typical_multiple must be a number > 1, got {max_typical_multiple!r}.")
+    _check_arguments(alpha, max_effects, max_typical_multiple)
     if isinstance(data, Table):
         data = fit_data(data)
     if fit is not None:
         base = baseline_model(fit, data)
     else:
         base = as_model(model)
+    candidates, broken = _usable_candidates(base, candidates)
+    say = as_progress(progress, "gyrojax.diagnose")
+    fit, fit_with = _baseline_and_refits(base, data, candidates, fit, free, start, say)
+    baseline = fit
+    discrepancy, designs = score_probes(fit, probes, alpha=alpha)
+    located = locate(fit, alpha=alpha)
+    s = _Selection(fit, discrepancy, designs, located, fits=[fit], rejected=list(broken))
+    compared = {}  # id(fit) -> its comparison: each fit of `fits` is compared once, during the steps or at the end
+
+    def comparison(f):
+        if id(f) not in compared:
+            compared[id(f)] = compare(f, alpha=alpha)
+        return compared[id(f)]
+
+    _select(s, list(candidates), fit_with, comparison, data, probes, alpha=alpha, max_effects=max_effects,
+            ambiguity=ambiguity, min_typical_chi2=min_typical_chi2, max_typical_multiple=max_typical_multiple,
+            say=say)
+    ranking0 = () if s.ranking0 is None else s.ranking0
+    # Which library effect has the shape of what is left: every candidate not selected, at the final fit.
+    others = [c for c in candidates if c not in s.selected]
+    final_scores = score_candidates(s.fit, others, min_typical_chi2=min_typical_chi2) if others else ()
+    baseline_discrepancy = with_shapes(baseline, located.locations, discrepancy, designs, ranking0, s.rejected,
+                                       max_typical_multiple, alpha)
+    discrepancy, formula = _final_discrepancy(s, final_scores, max_typical_multiple, alpha)
+    comparisons = tuple(comparison(f) for f in s.fits)
+    verdict = verdict_of(comparisons[-1], s.steps)
+    if verdict == "explained" and discrepancy:  # a located misfit is a failure the omnibus test missed
+        verdict = "partly explained" if s.steps else "unexplained"
+    say(f"done: {verdict}; selected {', '.join(s.selected) or 'none'}")
+    return Diagnosis(baseline, s.fit, tuple(s.fits), ranking0, tuple(s.steps), tuple(s.ambiguous), s.untestable,
+                     tuple(s.rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2, comparisons,
+                     baseline_discrepancy, discrepancy, verdict, max_typical_multiple, formula=formula,
+                     notes=s.located.notes)
+
+
+def _check_arguments(alpha, max_effects, max_typical_multiple) -> None:
+    """`diagnose`'s scalar arguments, each with what is expected."""
+    if not (isinstance(alpha, (int, float)) and 0.0 < alpha <= 0.5):
+        raise ValueError(f"alpha must be a significance level in (0, 0.5], got {alpha!r}.")
+    if not isinstance(max_effects, int) or isinstance(max_effects, bool) or max_effects < 0:
+        raise ValueError(f"max_effects must be an integer >= 0, got {max_effects!r}.")
+    if not (isinstance(max_typical_multiple, (int, float)) and max_typical_multiple > 1.0):
+        raise ValueError(f"max_typical_multiple must be a number > 1, got {max_typical_multiple!r}.")
+
+
+def _usable_candidates(base, candidates) -> tuple[tuple[str, ...], list[Rejection]]:
+    """The candidates checked against the baseline `base`, less those that give the device NaN or infinite
+    values (a user effect's bug), which are dropped with a note: (candidates, those notes)."""
     candidates = candidate_effects(base, candidates, "diagnose")
-    # A candidate that gives the device NaN or infinite values (a user effect's bug) is dropped with a note.
     one = first_device(base.device) if is_lot(base.device) else base.device
     broken = [Rejection(c, f"{why}: dropped from the candidates", kind="non-finite model")
               for c in candidates if (why := nonfinite_effect(c, one)) is not None]
     candidates = tuple(c for c in candidates if c not in {r.effect for r in broken})
-    say = as_progress(progress, "gyrojax.diagnose")
+    return candidates, broken
 
+
+def _baseline_and_refits(base, data, candidates, fit, free, start, say):
+    """The baseline fit (of `data`, or the given `fit` evaluated where it ended), with every candidate at zero,
+    and the refit with a selection of them freed: (baseline, refit(selected))."""
     weights = {"data": data, "estimate_noise": None}
 
     def fit_with(selected):
@@ -99,133 +145,168 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         # likelihood-ratio tests compare fits of the same weighted data.
         weights.update(data=baseline.data, estimate_noise=False)
         say("the data give no output_sigma: every fit uses the noise estimated from the baseline's residuals")
-    fits, steps, ambiguous, rejected = [fit], [], [], list(broken)
-    ranking0, untestable = None, ()
-    selected: list[str] = []
-    remaining = list(candidates)
-    discrepancy, designs = score_probes(fit, probes, alpha=alpha)
-    located = locate(fit, alpha=alpha)
-    baseline_discrepancy, baseline_designs, baseline_located = discrepancy, designs, located
-    family: list[float] = []  # every refit's selection-corrected p-value, for the false-discovery control
-    compared = {}  # id(fit) -> its comparison: each fit of `fits` is compared once, during the steps or at the end
+    return baseline, fit_with
 
-    def comparison(f):
-        if id(f) not in compared:
-            compared[id(f)] = compare(f, alpha=alpha)
-        return compared[id(f)]
 
-    def first_ranking(scores, threshold):
-        # one rule (gyrojax._numerics.testability): untestable is what score_candidates marks so, whatever its p-value
-        return scores, tuple(c.effect for c in scores if not c.testable)
+@dataclasses.dataclass
+class _Selection:
+    """Where the one-at-a-time selection stands: the current fit, the probes' scores and the locations of its
+    misfit, and what was fitted, confirmed, found ambiguous and rejected so far."""
 
+    fit: Fit
+    discrepancy: tuple
+    designs: object
+    located: object
+    fits: list
+    rejected: list
+    selected: list = dataclasses.field(default_factory=list)
+    steps: list = dataclasses.field(default_factory=list)
+    ambiguous: list = dataclasses.field(default_factory=list)
+    family: list = dataclasses.field(default_factory=list)  # every refit's selection-corrected p-value (FDR)
+    ranking0: tuple | None = None
+    untestable: tuple = ()
+
+
+def _first_ranking(scores):
+    # one rule (gyrojax._numerics.testability): untestable is what score_candidates marks so, whatever its p-value
+    return scores, tuple(c.effect for c in scores if not c.testable)
+
+
+def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, *, alpha, max_effects, ambiguity,
+            min_typical_chi2, max_typical_multiple, say) -> None:
+    """Add the significant candidates of `remaining` to `s` one at a time, each scored at the current fit,
+    guarded, refitted (`fit_with`) and confirmed, until none is significant or `max_effects` are."""
     if remaining and max_effects == 0:  # rank at the baseline only
-        ranking0, untestable = first_ranking(score_candidates(fit, remaining, min_typical_chi2=min_typical_chi2),
-                                             alpha / len(remaining))
-    while remaining and len(selected) < max_effects:
-        scores = score_candidates(fit, remaining, min_typical_chi2=min_typical_chi2)
+        s.ranking0, s.untestable = _first_ranking(score_candidates(s.fit, remaining,
+                                                                   min_typical_chi2=min_typical_chi2))
+    while remaining and len(s.selected) < max_effects:
+        scores = score_candidates(s.fit, remaining, min_typical_chi2=min_typical_chi2)
         threshold = alpha / len(remaining)
-        if ranking0 is None:
-            ranking0, untestable = first_ranking(scores, threshold)
+        if s.ranking0 is None:
+            s.ranking0, s.untestable = _first_ranking(scores)
         significant = [c for c in scores if c.testable and c.p_value < threshold]
         if not significant:
             break
         best = significant[0]
         if best.implied_multiple > max_typical_multiple:
-            rejected.append(Rejection(best.effect, (
-                f"it explains the misfit only at ~{best.implied_multiple:.3g}x its typical size, beyond "
-                f"{max_typical_multiple:g}x, where its physics does not reach: another effect, perhaps not in the "
-                "library, leaves a similar fingerprint"),
-                kind=f"only at ~{best.implied_multiple:.3g}x its typical size"))
+            s.rejected.append(_implausible(best, max_typical_multiple))
             remaining.remove(best.effect)
             continue
-        guard = probe_guard(fit, best, discrepancy, designs, threshold, alpha)
+        guard = probe_guard(s.fit, best, s.discrepancy, s.designs, threshold, alpha)
         if guard is not None:
-            rejected.append(Rejection(best.effect, guard, kind="not its shape"))
+            s.rejected.append(Rejection(best.effect, guard, kind="not its shape"))
             remaining.remove(best.effect)
             continue
-        group = tuple(c.effect for c in significant[1:]
-                      if abs(cosine(best.fingerprint, c.fingerprint)) > ambiguity)
-        separated = None
-        if group:
-            others = [c for c in significant if c.effect in group]
-            seps = {separating_sweep(best.fingerprint, c.fingerprint, data, ambiguity) for c in others}
-            separated = seps.pop() if len(seps) == 1 else None
-        say(f"refitting with {best.effect} (step {len(selected) + 1}; score S = {best.statistic:.4g}, "
+        group, separated = _ambiguity_group(best, significant, ambiguity, data)
+        say(f"refitting with {best.effect} (step {len(s.selected) + 1}; score S = {best.statistic:.4g}, "
             f"p = {best.p_value:.2g})")
         n_tried = len(remaining)
-        new = fit_with(tuple(selected) + (best.effect,))
-        lr = fit.chi2_total - new.chi2_total
-        df = int(np.sum(new.free)) - int(np.sum(fit.free))
-        df_total = df * len(data.devices)
-        p_lr = chi2_sf(lr, df_total)
-        n_points = int(np.sum([np.asarray(b.mask).sum() for b in data.blocks.values()]))
-        delta_bic = -lr + df_total * math.log(max(n_points, 2))
+        new = fit_with(tuple(s.selected) + (best.effect,))
+        lr, df, df_total, p_lr, delta_bic = _likelihood_ratio(s.fit, new, data)
         remaining.remove(best.effect)
-        if df <= 0:
-            rejected.append(Rejection(best.effect, (
-                "the refit cannot fix its parameters: a change of its typical size moves the chi2 by less than the "
-                f"noise does, so the score implies ~{best.implied_multiple:.3g}x its typical size"),
-                kind="not determined by the data"))
-            continue
-        if "not converged" in new.status:
-            rejected.append(Rejection(best.effect, f"the refit did not converge: {new.result_message}",
-                                      kind="refit did not converge"))
-            continue
-        if p_lr >= alpha:
-            rejected.append(Rejection(best.effect, f"likelihood-ratio p = {p_lr:.3g} >= alpha: the refit does not "
-                                                   "confirm what the score promised", kind="refit rejects it"))
-            continue
-        beyond = encompassing_guard(fit, new, best.effect, located, df_total, alpha)
-        if beyond is not None:
-            rejected.append(Rejection(best.effect, beyond, kind="not its shape"))
-            continue
-        against, rival_alike = rival_guard(fit, new, best.effect, df_total, located, alpha=alpha)
-        if against is not None:
-            rejected.append(Rejection(best.effect, against, kind="a closed form of another shape as good"))
-            continue
-        family.append(selection_p(p_lr, n_tried))
-        q = float(bh_q_values(family)[-1])
-        if q >= alpha:
-            rejected.append(Rejection(best.effect, (
-                f"false-discovery control: the refit's p = {p_lr:.3g}, as the best of {n_tried} candidates "
-                f"{family[-1]:.3g}, has q = {q:.3g} >= alpha over the {len(family)} refits of this diagnosis"),
-                kind="not significant under false-discovery control"))
-            continue
-        at_noise = not comparison(fit).fails and not located.locations
-        if at_noise and delta_bic >= 0:
-            rejected.append(Rejection(best.effect, (
-                f"the model before it already describes the data at the noise level, and the information "
-                f"criterion does not prefer it (delta BIC {delta_bic:+.3g}; LR p = {p_lr:.2g})"),
-                kind="not preferred at the noise level"))
-            continue
-        worse = contradictions(fit, new, alpha, df_total)
-        if worse:
-            rejected.append(Rejection(best.effect, "contradicted by " + "; ".join(
-                f"{s} (its misfit rose from chi2 {a:.4g} to {b:.4g} over {n} points)" for s, a, b, n in worse),
-                tuple(s for s, _, _, _ in worse), kind="contradicted by " + ", ".join(s for s, _, _, _ in worse)))
+        rejection, q, rival_alike = _refit_rejection(s.fit, s.located, s.family, new, best, df, df_total, p_lr,
+                                                     delta_bic, n_tried, comparison, alpha)
+        if rejection is not None:
+            s.rejected.append(rejection)
             continue
         if group:
-            ambiguous.append((best.effect,) + group)
-        selected.append(best.effect)
-        alike = look_alikes(fit, best.effect, discrepancy, designs, alpha) + (
+            s.ambiguous.append((best.effect,) + group)
+        s.selected.append(best.effect)
+        alike = look_alikes(s.fit, best.effect, s.discrepancy, s.designs, alpha) + (
             (rival_alike,) if rival_alike is not None else ())
-        fit = new
-        fits.append(fit)
-        cols = effect_columns(fit, best.effect)
-        multiple = float(np.max(np.abs(np.asarray(fit.u)[:, cols])))
-        steps.append(Step(best.effect, best.statistic, best.p_value, lr, df_total, p_lr, delta_bic,
-                          fit.chi2_red_total, nonlinearity_residual_ppm(fit), scores, group, separated, multiple,
-                          best.implied_multiple, look_alikes=alike, q_value=q))
-        discrepancy, designs = score_probes(fit, probes, alpha=alpha)
-        located = locate(fit, alpha=alpha)
-    if ranking0 is None:
-        ranking0 = ()
-    # Which library effect has the shape of what is left: every candidate not selected, at the final fit.
-    others = [c for c in candidates if c not in selected]
-    final_scores = score_candidates(fit, others, min_typical_chi2=min_typical_chi2) if others else ()
-    baseline_discrepancy = with_shapes(baseline, baseline_located.locations, baseline_discrepancy, baseline_designs,
-                                       ranking0, rejected, max_typical_multiple, alpha)
-    discrepancy = with_shapes(fit, located.locations, discrepancy, designs, final_scores, rejected,
+        s.fit = new
+        s.fits.append(s.fit)
+        cols = effect_columns(s.fit, best.effect)
+        multiple = float(np.max(np.abs(np.asarray(s.fit.u)[:, cols])))
+        s.steps.append(Step(best.effect, best.statistic, best.p_value, lr, df_total, p_lr, delta_bic,
+                            s.fit.chi2_red_total, nonlinearity_residual_ppm(s.fit), scores, group, separated,
+                            multiple, best.implied_multiple, look_alikes=alike, q_value=q))
+        s.discrepancy, s.designs = score_probes(s.fit, probes, alpha=alpha)
+        s.located = locate(s.fit, alpha=alpha)
+
+
+def _implausible(best, max_typical_multiple) -> Rejection:
+    """The rejection of a candidate whose score implies a size beyond `max_typical_multiple` typical sizes."""
+    return Rejection(best.effect, (
+        f"it explains the misfit only at ~{best.implied_multiple:.3g}x its typical size, beyond "
+        f"{max_typical_multiple:g}x, where its physics does not reach: another effect, perhaps not in the "
+        "library, leaves a similar fingerprint"),
+        kind=f"only at ~{best.implied_multiple:.3g}x its typical size")
+
+
+def _ambiguity_group(best, significant, ambiguity, data):
+    """The significant candidates whose fingerprints are nearly collinear with `best`'s, and the one sweep of
+    `data` that separates them, if one does: (group, sweep or None)."""
+    group = tuple(c.effect for c in significant[1:]
+                  if abs(cosine(best.fingerprint, c.fingerprint)) > ambiguity)
+    separated = None
+    if group:
+        others = [c for c in significant if c.effect in group]
+        seps = {separating_sweep(best.fingerprint, c.fingerprint, data, ambiguity) for c in others}
+        separated = seps.pop() if len(seps) == 1 else None
+    return group, separated
+
+
+def _likelihood_ratio(fit, new, data):
+    """The likelihood-ratio test of the refit `new` against `fit`: (chi2 drop, parameters added per device,
+    over the lot, p-value, delta BIC)."""
+    lr = fit.chi2_total - new.chi2_total
+    df = int(np.sum(new.free)) - int(np.sum(fit.free))
+    df_total = df * len(data.devices)
+    p_lr = chi2_sf(lr, df_total)
+    n_points = int(np.sum([np.asarray(b.mask).sum() for b in data.blocks.values()]))
+    delta_bic = -lr + df_total * math.log(max(n_points, 2))
+    return lr, df, df_total, p_lr, delta_bic
+
+
+def _refit_rejection(fit, located, family, new, best, df, df_total, p_lr, delta_bic, n_tried, comparison, alpha):
+    """The guards after the refit `new` of `fit` with `best`, in order: (the first rejection or None, the
+    refit's false-discovery q-value where it was reached, a closed form of another shape about as good or None).
+    `family` (every refit's selection-corrected p-value) gains this refit's where the control is reached."""
+    if df <= 0:
+        return Rejection(best.effect, (
+            "the refit cannot fix its parameters: a change of its typical size moves the chi2 by less than the "
+            f"noise does, so the score implies ~{best.implied_multiple:.3g}x its typical size"),
+            kind="not determined by the data"), None, None
+    if "not converged" in new.status:
+        return Rejection(best.effect, f"the refit did not converge: {new.result_message}",
+                         kind="refit did not converge"), None, None
+    if p_lr >= alpha:
+        return Rejection(best.effect, f"likelihood-ratio p = {p_lr:.3g} >= alpha: the refit does not "
+                                      "confirm what the score promised", kind="refit rejects it"), None, None
+    beyond = encompassing_guard(fit, new, best.effect, located, df_total, alpha)
+    if beyond is not None:
+        return Rejection(best.effect, beyond, kind="not its shape"), None, None
+    against, rival_alike = rival_guard(fit, new, best.effect, df_total, located, alpha=alpha)
+    if against is not None:
+        return Rejection(best.effect, against, kind="a closed form of another shape as good"), None, rival_alike
+    family.append(selection_p(p_lr, n_tried))
+    q = float(bh_q_values(family)[-1])
+    if q >= alpha:
+        return Rejection(best.effect, (
+            f"false-discovery control: the refit's p = {p_lr:.3g}, as the best of {n_tried} candidates "
+            f"{family[-1]:.3g}, has q = {q:.3g} >= alpha over the {len(family)} refits of this diagnosis"),
+            kind="not significant under false-discovery control"), q, rival_alike
+    at_noise = not comparison(fit).fails and not located.locations
+    if at_noise and delta_bic >= 0:
+        return Rejection(best.effect, (
+            f"the model before it already describes the data at the noise level, and the information "
+            f"criterion does not prefer it (delta BIC {delta_bic:+.3g}; LR p = {p_lr:.2g})"),
+            kind="not preferred at the noise level"), q, rival_alike
+    worse = contradictions(fit, new, alpha, df_total)
+    if worse:
+        return Rejection(best.effect, "contradicted by " + "; ".join(
+            f"{s} (its misfit rose from chi2 {a:.4g} to {b:.4g} over {n} points)" for s, a, b, n in worse),
+            tuple(s for s, _, _, _ in worse), kind="contradicted by " + ", ".join(s for s, _, _, _ in worse)), \
+            q, rival_alike
+    return None, q, rival_alike
+
+
+def _final_discrepancy(s: _Selection, final_scores, max_typical_multiple, alpha):
+    """What is left at the final fit, with the library's shapes, a closed-form formula along its coordinate
+    (which then names the coordinate) and the misfit's size as the term's coefficient: (discrepancy, formula)."""
+    fit, located = s.fit, s.located
+    discrepancy = with_shapes(fit, located.locations, s.discrepancy, s.designs, final_scores, s.rejected,
                               max_typical_multiple, alpha)
     formula = propose_along(fit, discrepancy[0], step_at=located.step_at, period=located.period, alpha=alpha) \
         if discrepancy else None
@@ -240,12 +321,4 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     size = term_size(formula, discrepancy[0]) if discrepancy and not discrepancy[0].probe else None
     if size is not None:  # the misfit's size as the term's coefficient, where one term of its coordinate has it
         discrepancy = (dataclasses.replace(discrepancy[0], size=size),) + discrepancy[1:]
-    comparisons = tuple(comparison(f) for f in fits)
-    verdict = verdict_of(comparisons[-1], steps)
-    if verdict == "explained" and discrepancy:  # a located misfit is a failure the omnibus test missed
-        verdict = "partly explained" if steps else "unexplained"
-    say(f"done: {verdict}; selected {', '.join(selected) or 'none'}")
-    return Diagnosis(baseline, fit, tuple(fits), ranking0, tuple(steps), tuple(ambiguous), untestable,
-                     tuple(rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2, comparisons,
-                     baseline_discrepancy, discrepancy, verdict, max_typical_multiple, formula=formula,
-                     notes=located.notes)
+    return discrepancy, formula
