@@ -547,38 +547,7 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
     if full_scale not in FULL_SCALE_CONVENTIONS:
         raise ValueError(f"full_scale must be one of {', '.join(FULL_SCALE_CONVENTIONS)}, got {full_scale!r}.")
     groups = table.groups()
-
-    def name(key, rows) -> str:
-        dev, run, sweep = key
-        first = table.locate(int(rows[0]), with_source=False)
-        last = table.locate(int(rows[-1]), with_source=False)
-        span = first if len(rows) == 1 else f"{first} to {last}"
-        return f"device {dev!r}, run {run}, sweep {sweep!r} ({span})"
-
-    # Checks with names, before any arithmetic.
-    for key, rows in groups.items():
-        sweep = key[2]
-        line = sweep_kind(sweep).straight_line
-        need = MIN_POINTS_LINEAR if line else MIN_POINTS_BANDWIDTH
-        what = "a scale factor with a nonlinearity" if line else "a rate bandwidth"
-        if len(rows) < need:
-            raise DataError(f"{table.source}: {name(key, rows)} has {len(rows)} point{'s' * (len(rows) != 1)}; "
-                            f"{what} needs at least {need}.", source=table.source, row=int(rows[0]) + 1)
-        if weighted and line:
-            sig = table["output_sigma"] if "output_sigma" in table else None
-            bad = rows if sig is None else rows[~(sig[rows] > 0)]
-            if bad.size:
-                raise DataError(f"{table.locate(int(bad[0]), 'output_sigma')}: weighted=True needs a positive "
-                                f"output_sigma on every point; {name(key, rows)} lacks one.",
-                                source=table.source, row=int(bad[0]) + 1, column="output_sigma")
-        if sweep_kind(sweep).fit_against_rate and "rate_dps" in table:
-            given = ~np.isnan(table["rate_dps"][rows])
-            if given.any() and not given.all():
-                r = int(rows[~given][0])
-                raise DataError(f"{table.locate(r, 'rate_dps')}: rate_dps is given for some points of "
-                                f"{name(key, rows)} but not this one; give it for all or none.",
-                                source=table.source, row=r + 1, column="rate_dps")
-
+    _check_groups(table, groups, weighted)
     check_outputs_change(table, groups)
 
     records: dict[tuple, dict[str, Any]] = {}
@@ -587,70 +556,13 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
         if not any(k[2] == sweep for k in groups):
             continue
         arr = SimpleNamespace(**padded_columns(table, sweep))  # NumPy: no compilation for a report
-        index = {(dev, r): (d, k) for d, dev in enumerate(arr.devices) for k, r in enumerate(arr.runs[d])}
-        sig = arr.sigmas if weighted else None
         if not sweep_kind(sweep).straight_line:
-            phase = arr.aux.get("phase_deg")
-            if phase is not None:
-                phase = np.where(np.isnan(phase), 0.0, phase)
-            try:
-                bw = rate_bandwidth(arr.inputs, arr.outputs, mask=arr.mask, phase_deg=phase)
-            except DataError as e:
-                key = _first_failing_bandwidth(arr, table, groups)
-                raise DataError(f"{table.source}: {name(key, groups[key])}: {e}", source=table.source) from None
-            for (dev, r), (d, k) in index.items():
-                has_phase = phase is not None and not np.isnan(arr.aux["phase_deg"][d, k][arr.mask[d, k]]).any()
-                records[(dev, r, sweep)] = {
-                    "device": dev, "run": r, "sweep": sweep, "n_points": int(arr.mask[d, k].sum()),
-                    "scale_factor": None, "bias": None, "nonlinearity_max_ppm": None,
-                    "nonlinearity_rms_ppm": None, "asymmetry_ppm": None,
-                    "bandwidth_hz": _num(bw.bandwidth_hz[d, k]),
-                    "phase_deg_at_bandwidth": _num(bw.phase_deg[d, k]) if has_phase else None,
-                    "low_frequency_gain": _num(bw.low_frequency_gain[d, k])}
-                sel = arr.mask[d, k]
-                why = _why_not(records[(dev, r, sweep)], arr.outputs[d, k][sel], arr.inputs[d, k][sel])
-                records[(dev, r, sweep)]["undetermined"] = [key for key in why if key in _DETERMINED]
-                records[(dev, r, sweep)]["not_applicable"] = why
+            records.update(_bandwidth_records(table, groups, arr, sweep))
             continue
+        sig = arr.sigmas if weighted else None
         fit = fit_scale_factor(arr.inputs, arr.outputs, mask=arr.mask, sigmas=sig, full_scale=full_scale)
-        asym = asymmetry(arr.inputs, arr.outputs, mask=arr.mask, sigmas=sig, common_bias=common_bias)
-        vs_rate = None
-        if sweep_kind(sweep).fit_against_rate and "rate_dps" in arr.aux:
-            rate = arr.aux["rate_dps"]
-            has = arr.mask & ~np.isnan(rate)
-            vs_rate = fit_scale_factor(np.where(has, rate, 0.0), arr.outputs, mask=has, sigmas=sig,
-                                       full_scale=full_scale)
-        for (dev, r), (d, k) in index.items():
-            rec = {"device": dev, "run": r, "sweep": sweep, "n_points": int(arr.mask[d, k].sum()),
-                   "scale_factor": _num(fit.scale_factor[d, k]), "bias": _num(fit.bias[d, k]),
-                   "nonlinearity_max_ppm": _num(fit.nonlinearity_max_ppm[d, k]),
-                   "nonlinearity_rms_ppm": _num(fit.nonlinearity_rms_ppm[d, k]),
-                   "asymmetry_ppm": _num(asym[d, k])}
-            if vs_rate is not None and _num(vs_rate.n_points[d, k]):
-                rec.update({"scale_factor_vs_rate": _num(vs_rate.scale_factor[d, k]),
-                            "bias_vs_rate": _num(vs_rate.bias[d, k]),
-                            "nonlinearity_max_ppm_vs_rate": _num(vs_rate.nonlinearity_max_ppm[d, k]),
-                            "nonlinearity_rms_ppm_vs_rate": _num(vs_rate.nonlinearity_rms_ppm[d, k])})
-            sel = arr.mask[d, k]
-            kind_reasons = _drop_inapplicable(rec, sweep, brief=True)
-            why = _why_not({key: v for key, v in rec.items() if key not in kind_reasons}, arr.outputs[d, k][sel],
-                           arr.inputs[d, k][sel])
-            rec["undetermined"] = [key for key in why if key in _DETERMINED]
-            rec["not_applicable"] = {**why, **kind_reasons}
-            records[(dev, r, sweep)] = rec
-        run_mask = arr.mask.any(axis=-1)
-        rep = repeatability(np.where(run_mask, fit.scale_factor, 0.0), mask=run_mask, ddof=ddof)
-        n_runs = run_mask.sum(axis=-1)
-        for d, dev in enumerate(arr.devices):
-            sf = fit.scale_factor[d][run_mask[d]]
-            rec = {"device": dev, "sweep": sweep, "n_runs": int(n_runs[d]),
-                   "scale_factor_mean": _num(np.mean(sf)), "repeatability_ppm": _num(rep[d])}
-            rec["not_applicable"] = _drop_inapplicable(rec, sweep)
-            if rec["repeatability_ppm"] is None and "repeatability_ppm" not in rec["not_applicable"]:
-                rec["not_applicable"]["repeatability_ppm"] = (
-                    f"{int(n_runs[d])} run{'s' * (int(n_runs[d]) != 1)}: a repeatability needs at least {ddof + 1}"
-                    if int(n_runs[d]) <= ddof else "the mean scale factor is 0: there is nothing to be relative to")
-            device_records.append(rec)
+        records.update(_linear_records(arr, sweep, fit, sig, full_scale, common_bias))
+        device_records.extend(_device_records(arr, sweep, fit, ddof))
     order = {}
     for dev, _, sweep in groups:
         order.setdefault((dev, sweep), len(order))
@@ -665,6 +577,127 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
             "scale_factor_units": scale_factor_units(),
         },
     }
+
+
+def _group_name(table: Table, key, rows) -> str:
+    """A (device, run, sweep) group of `table` in words, with the rows it spans."""
+    dev, run, sweep = key
+    first = table.locate(int(rows[0]), with_source=False)
+    last = table.locate(int(rows[-1]), with_source=False)
+    span = first if len(rows) == 1 else f"{first} to {last}"
+    return f"device {dev!r}, run {run}, sweep {sweep!r} ({span})"
+
+
+def _check_groups(table: Table, groups, weighted: bool) -> None:
+    """Checks with names, before any arithmetic: enough points per group, a positive `output_sigma` on every
+    point of a weighted fit, `rate_dps` on all or none of a group's points where the kind is fitted against it."""
+    for key, rows in groups.items():
+        sweep = key[2]
+        line = sweep_kind(sweep).straight_line
+        need = MIN_POINTS_LINEAR if line else MIN_POINTS_BANDWIDTH
+        what = "a scale factor with a nonlinearity" if line else "a rate bandwidth"
+        if len(rows) < need:
+            raise DataError(f"{table.source}: {_group_name(table, key, rows)} has {len(rows)} "
+                            f"point{'s' * (len(rows) != 1)}; {what} needs at least {need}.",
+                            source=table.source, row=int(rows[0]) + 1)
+        if weighted and line:
+            sig = table["output_sigma"] if "output_sigma" in table else None
+            bad = rows if sig is None else rows[~(sig[rows] > 0)]
+            if bad.size:
+                raise DataError(f"{table.locate(int(bad[0]), 'output_sigma')}: weighted=True needs a positive "
+                                f"output_sigma on every point; {_group_name(table, key, rows)} lacks one.",
+                                source=table.source, row=int(bad[0]) + 1, column="output_sigma")
+        if sweep_kind(sweep).fit_against_rate and "rate_dps" in table:
+            given = ~np.isnan(table["rate_dps"][rows])
+            if given.any() and not given.all():
+                r = int(rows[~given][0])
+                raise DataError(f"{table.locate(r, 'rate_dps')}: rate_dps is given for some points of "
+                                f"{_group_name(table, key, rows)} but not this one; give it for all or none.",
+                                source=table.source, row=r + 1, column="rate_dps")
+
+
+def _run_index(arr) -> dict:
+    """(device, run) -> (its index on the device axis, on the run axis) of a sweep's padded arrays."""
+    return {(dev, r): (d, k) for d, dev in enumerate(arr.devices) for k, r in enumerate(arr.runs[d])}
+
+
+def _bandwidth_records(table: Table, groups, arr, sweep: str) -> dict:
+    """The point records of a dynamic sweep: its rate bandwidth, phase there and low-frequency gain per run."""
+    phase = arr.aux.get("phase_deg")
+    if phase is not None:
+        phase = np.where(np.isnan(phase), 0.0, phase)
+    try:
+        bw = rate_bandwidth(arr.inputs, arr.outputs, mask=arr.mask, phase_deg=phase)
+    except DataError as e:
+        key = _first_failing_bandwidth(arr, table, groups)
+        raise DataError(f"{table.source}: {_group_name(table, key, groups[key])}: {e}",
+                        source=table.source) from None
+    records = {}
+    for (dev, r), (d, k) in _run_index(arr).items():
+        has_phase = phase is not None and not np.isnan(arr.aux["phase_deg"][d, k][arr.mask[d, k]]).any()
+        records[(dev, r, sweep)] = {
+            "device": dev, "run": r, "sweep": sweep, "n_points": int(arr.mask[d, k].sum()),
+            "scale_factor": None, "bias": None, "nonlinearity_max_ppm": None,
+            "nonlinearity_rms_ppm": None, "asymmetry_ppm": None,
+            "bandwidth_hz": _num(bw.bandwidth_hz[d, k]),
+            "phase_deg_at_bandwidth": _num(bw.phase_deg[d, k]) if has_phase else None,
+            "low_frequency_gain": _num(bw.low_frequency_gain[d, k])}
+        sel = arr.mask[d, k]
+        why = _why_not(records[(dev, r, sweep)], arr.outputs[d, k][sel], arr.inputs[d, k][sel])
+        records[(dev, r, sweep)]["undetermined"] = [key for key in why if key in _DETERMINED]
+        records[(dev, r, sweep)]["not_applicable"] = why
+    return records
+
+
+def _linear_records(arr, sweep: str, fit, sig, full_scale: str, common_bias: bool) -> dict:
+    """The point records of a sweep with a linear fit (`fit`): scale factor, bias, nonlinearity and asymmetry
+    per run, and against `rate_dps` where the kind is fitted against it and the data give it."""
+    asym = asymmetry(arr.inputs, arr.outputs, mask=arr.mask, sigmas=sig, common_bias=common_bias)
+    vs_rate = None
+    if sweep_kind(sweep).fit_against_rate and "rate_dps" in arr.aux:
+        rate = arr.aux["rate_dps"]
+        has = arr.mask & ~np.isnan(rate)
+        vs_rate = fit_scale_factor(np.where(has, rate, 0.0), arr.outputs, mask=has, sigmas=sig,
+                                   full_scale=full_scale)
+    records = {}
+    for (dev, r), (d, k) in _run_index(arr).items():
+        rec = {"device": dev, "run": r, "sweep": sweep, "n_points": int(arr.mask[d, k].sum()),
+               "scale_factor": _num(fit.scale_factor[d, k]), "bias": _num(fit.bias[d, k]),
+               "nonlinearity_max_ppm": _num(fit.nonlinearity_max_ppm[d, k]),
+               "nonlinearity_rms_ppm": _num(fit.nonlinearity_rms_ppm[d, k]),
+               "asymmetry_ppm": _num(asym[d, k])}
+        if vs_rate is not None and _num(vs_rate.n_points[d, k]):
+            rec.update({"scale_factor_vs_rate": _num(vs_rate.scale_factor[d, k]),
+                        "bias_vs_rate": _num(vs_rate.bias[d, k]),
+                        "nonlinearity_max_ppm_vs_rate": _num(vs_rate.nonlinearity_max_ppm[d, k]),
+                        "nonlinearity_rms_ppm_vs_rate": _num(vs_rate.nonlinearity_rms_ppm[d, k])})
+        sel = arr.mask[d, k]
+        kind_reasons = _drop_inapplicable(rec, sweep, brief=True)
+        why = _why_not({key: v for key, v in rec.items() if key not in kind_reasons}, arr.outputs[d, k][sel],
+                       arr.inputs[d, k][sel])
+        rec["undetermined"] = [key for key in why if key in _DETERMINED]
+        rec["not_applicable"] = {**why, **kind_reasons}
+        records[(dev, r, sweep)] = rec
+    return records
+
+
+def _device_records(arr, sweep: str, fit, ddof: int) -> list:
+    """The device records of a sweep with a linear fit: mean scale factor and repeatability over its runs."""
+    out = []
+    run_mask = arr.mask.any(axis=-1)
+    rep = repeatability(np.where(run_mask, fit.scale_factor, 0.0), mask=run_mask, ddof=ddof)
+    n_runs = run_mask.sum(axis=-1)
+    for d, dev in enumerate(arr.devices):
+        sf = fit.scale_factor[d][run_mask[d]]
+        rec = {"device": dev, "sweep": sweep, "n_runs": int(n_runs[d]),
+               "scale_factor_mean": _num(np.mean(sf)), "repeatability_ppm": _num(rep[d])}
+        rec["not_applicable"] = _drop_inapplicable(rec, sweep)
+        if rec["repeatability_ppm"] is None and "repeatability_ppm" not in rec["not_applicable"]:
+            rec["not_applicable"]["repeatability_ppm"] = (
+                f"{int(n_runs[d])} run{'s' * (int(n_runs[d]) != 1)}: a repeatability needs at least {ddof + 1}"
+                if int(n_runs[d]) <= ddof else "the mean scale factor is 0: there is nothing to be relative to")
+        out.append(rec)
+    return out
 
 
 def _first_failing_bandwidth(arr, table, groups):

@@ -833,7 +833,6 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
     seed_var = [per_device(seed_sets, {_RATE: seed_runs}, d) for d in range(n_dev)]
     best = None
     max_rate_runs = int(budget // (warm + 2 * dwell))
-    kinds = list(levels)
     say(f"scale-factor design within {budget:g} min: up to {max_rate_runs} rate-table runs")
     # Run counts on a roughly geometric grid (every count up to 4, then steps of ~25 %): the variance changes
     # smoothly with the count, and each count costs a greedy search.
@@ -845,43 +844,64 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
             used = (r_runs + q_runs) * warm
             if used + 2 * dwell * (r_runs + q_runs) > budget:
                 continue
-            sets = {k: () for k in kinds}
-            # start each run kind with its best pair, then add single points by variance drop per minute
-            for kind in kinds:
-                if not runs.get(kind):
-                    continue
-                lv = list(levels[kind])
-                pairs = [(i, lv.index(-x)) for i, x in enumerate(lv) if x < 0 and -x in lv]
-                pair = min(pairs, key=lambda p, kind=kind: variance({**sets, kind: tuple(sorted(p))}, runs))
-                pair = tuple(sorted(pair))
-                sets[kind] = pair
-                used += 2 * dwell * runs[kind]
-            current = variance(sets, runs)
-            while True:
-                options = []
-                for kind in kinds:
-                    cost = dwell * runs.get(kind, 0)
-                    if not runs.get(kind) or used + cost > budget + 1e-9:
-                        continue
-                    for i in range(len(levels[kind])):
-                        if i in sets[kind]:
-                            continue
-                        trial = {**sets, kind: tuple(sorted(sets[kind] + (i,)))}
-                        options.append(((current - variance(trial, runs)) / cost, kind, trial, cost))
-                if not options:
-                    break
-                gain, kind, trial, cost = max(options, key=lambda o: o[0])
-                if not gain > 0:
-                    break
-                sets, used = trial, used + cost
-                current = variance(sets, runs)
+            current, sets, used = _greedy_points(variance, levels, runs, used, budget, dwell)
             if best is None or current < best[0]:
                 best = (current, dict(sets), dict(runs), used)
     _, sets, runs, used = best
     stderr = [math.sqrt(per_device(sets, runs, d)) for d in range(n_dev)]
+    data_se, undetermined = _data_sf_errors(fit, jac0, g)
+    rates = tuple(float(levels[_RATE][i]) for i in sets[_RATE])
+    vcf = tuple(float(levels[_VCF][i]) for i in sets.get(_VCF, ())) if runs.get(_VCF) else ()
+    return ScaleFactorDesign(float(budget), rates, runs[_RATE], vcf, runs.get(_VCF, 0), float(used),
+                             tuple(stderr), seed_runs,
+                             seed_runs * (protocol.warmup_s + len(levels[_RATE]) * protocol.dwell_s) / 60.0,
+                             tuple(math.sqrt(v) for v in seed_var), tuple(data_se),
+                             tuple(float(x) for x in np.asarray(sf)), tuple(undetermined))
+
+
+def _greedy_points(variance, levels, runs, used, budget, dwell):
+    """The points of one design's runs (`runs`: per kind, how many), `used` minutes spent already: each kind
+    starts with its best pair of opposite levels, then single points are added by the largest variance drop
+    per minute while `budget` allows. Returns (the scale factor's variance, the points per kind, minutes)."""
+    kinds = list(levels)
+    sets = {k: () for k in kinds}
+    for kind in kinds:
+        if not runs.get(kind):
+            continue
+        lv = list(levels[kind])
+        pairs = [(i, lv.index(-x)) for i, x in enumerate(lv) if x < 0 and -x in lv]
+        pair = min(pairs, key=lambda p, kind=kind: variance({**sets, kind: tuple(sorted(p))}, runs))
+        pair = tuple(sorted(pair))
+        sets[kind] = pair
+        used += 2 * dwell * runs[kind]
+    current = variance(sets, runs)
+    while True:
+        options = []
+        for kind in kinds:
+            cost = dwell * runs.get(kind, 0)
+            if not runs.get(kind) or used + cost > budget + 1e-9:
+                continue
+            for i in range(len(levels[kind])):
+                if i in sets[kind]:
+                    continue
+                trial = {**sets, kind: tuple(sorted(sets[kind] + (i,)))}
+                options.append(((current - variance(trial, runs)) / cost, kind, trial, cost))
+        if not options:
+            break
+        gain, kind, trial, cost = max(options, key=lambda o: o[0])
+        if not gain > 0:
+            break
+        sets, used = trial, used + cost
+        current = variance(sets, runs)
+    return current, sets, used
+
+
+def _data_sf_errors(fit: Fit, jac0, g):
+    """The scale factor's standard error per device on the data given, and, where identification says the
+    data do not determine it (the baseline's status), its reason: (errors, reasons or '')."""
     data_free = [int(i) for i in np.nonzero(np.asarray(fit.free))[0]]
     data_se, undetermined = [], []
-    for d in range(n_dev):
+    for d in range(len(fit.devices)):
         info = jac0[d].T @ jac0[d]
         # whether the data determine it is identification's verdict (the baseline's status), not the planner's
         if fit.status[d] == "not determined":
@@ -890,13 +910,7 @@ def _sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thr
             continue
         data_se.append(math.sqrt(_sf_variance(info, g[d], data_free, 0.0)) if data_free else math.inf)
         undetermined.append("")
-    rates = tuple(float(levels[_RATE][i]) for i in sets[_RATE])
-    vcf = tuple(float(levels[_VCF][i]) for i in sets.get(_VCF, ())) if runs.get(_VCF) else ()
-    return ScaleFactorDesign(float(budget), rates, runs[_RATE], vcf, runs.get(_VCF, 0), float(used),
-                             tuple(stderr), seed_runs,
-                             seed_runs * (protocol.warmup_s + len(levels[_RATE]) * protocol.dwell_s) / 60.0,
-                             tuple(math.sqrt(v) for v in seed_var), tuple(data_se),
-                             tuple(float(x) for x in np.asarray(sf)), tuple(undetermined))
+    return data_se, undetermined
 
 
 def _sqrt_info(info):
