@@ -70,7 +70,44 @@ def validate_columns(raw: Mapping[str, Any], source: str, lines: Sequence[int] |
     """Parse and check raw columns; return the normalised columns (same order) or raise a DataError."""
     where = Where(source, lines)
     names = list(raw)
-    header = "header (line 1)" if lines is not None else "columns"
+    n = _check_shape(raw, source, "header (line 1)" if lines is not None else "columns")
+    device = [parse_str(_required_cell(where, "device", i, x), where, i, "device")
+              for i, x in enumerate(_cells(raw, "device"))]
+    run = [parse_int(_required_cell(where, "run", i, x), where, i, "run") for i, x in enumerate(_cells(raw, "run"))]
+    sweep = [parse_sweep(_required_cell(where, "sweep", i, x), where, i, "sweep")
+             for i, x in enumerate(_cells(raw, "sweep"))]
+    inputs, word_kinds = _inputs(raw, where, sweep, n)
+    output = np.array([parse_float(_required_cell(where, "output", i, x), where, i, "output")
+                       for i, x in enumerate(_cells(raw, "output"))], dtype=np.float64).reshape(n)
+    optional = _optional_columns(raw, where, n, nan_is_missing)
+    _check_word_notation(raw, where, word_kinds)
+    out: dict[str, np.ndarray] = {}
+    for c in names:
+        if c in REQUIRED_COLUMNS:
+            continue
+        if c in optional:
+            out[c] = optional[c]
+        else:
+            v = raw[c]
+            arr = np.array(v) if not isinstance(v, np.ndarray) else v.copy()
+            if arr.ndim != 1:
+                raise DataError(f"{source}: extra column {c!r} must be one-dimensional, got shape {arr.shape}.",
+                                source=source, column=c)
+            out[c] = arr
+    required = {"device": np.array(device, dtype=str), "run": np.array(run, dtype=np.int64),
+                "sweep": np.array(sweep, dtype=str), "input": inputs, "output": output}
+    ordered = {c: (required[c] if c in required else out[c]) for c in names}
+    _check_duplicates(ordered, where, device, run, sweep, inputs)
+    _check_rad_s(ordered, where, inputs)
+    for arr in ordered.values():
+        arr.flags.writeable = False
+    return ordered
+
+
+def _check_shape(raw: Mapping[str, Any], source: str, header: str) -> int:
+    """The number of rows, after checking that every required column is there (with a near spelling as a hint),
+    that every column has as many values as 'device', and that there are rows."""
+    names = list(raw)
     missing = [c for c in REQUIRED_COLUMNS if c not in raw]
     if missing:
         # Suggest a near spelling: 'Output', 'out put', 'sweep_kind' ...
@@ -93,39 +130,44 @@ def validate_columns(raw: Mapping[str, Any], source: str, lines: Sequence[int] |
                             source=source, column=c)
     if n == 0:
         raise DataError(f"{source}: empty: the {header} is there but there are no data rows.", source=source)
+    return n
 
-    def cells(c):
-        v = raw[c]
-        return v.tolist() if isinstance(v, np.ndarray) else list(v)
 
-    def required_cell(c, i, cell):
-        if is_missing(cell):
-            raise where.error(i, c, "is empty; every row needs a value in the required columns.")
-        return cell
+def _cells(raw: Mapping[str, Any], c: str) -> list:
+    v = raw[c]
+    return v.tolist() if isinstance(v, np.ndarray) else list(v)
 
-    out: dict[str, np.ndarray] = {}
-    device = [parse_str(required_cell("device", i, x), where, i, "device") for i, x in enumerate(cells("device"))]
-    run = [parse_int(required_cell("run", i, x), where, i, "run") for i, x in enumerate(cells("run"))]
-    sweep = [parse_sweep(required_cell("sweep", i, x), where, i, "sweep") for i, x in enumerate(cells("sweep"))]
+
+def _required_cell(where: Where, c: str, i: int, cell):
+    if is_missing(cell):
+        raise where.error(i, c, "is empty; every row needs a value in the required columns.")
+    return cell
+
+
+def _inputs(raw: Mapping[str, Any], where: Where, sweep: list, n: int):
+    """The 'input' column as numbers (a DAC word parsed where the row's kind takes words), and the rows of each
+    notation of the words: (inputs, {notation: rows})."""
     inputs = np.empty(n)
     word_kinds: dict[str, list[int]] = {}
-    for i, x in enumerate(cells("input")):
-        x = required_cell("input", i, x)
+    for i, x in enumerate(_cells(raw, "input")):
+        x = _required_cell(where, "input", i, x)
         if sweep_kind(sweep[i]).word_input:
             word, kind = parse_dac_word(x, where, i, "input")
             inputs[i] = word
             word_kinds.setdefault(kind, []).append(i)
         else:
             inputs[i] = parse_float(x, where, i, "input")
-    output = np.array([parse_float(required_cell("output", i, x), where, i, "output")
-                       for i, x in enumerate(cells("output"))], dtype=np.float64).reshape(n)
+    return inputs, word_kinds
 
+
+def _optional_columns(raw: Mapping[str, Any], where: Where, n: int, nan_is_missing: bool) -> dict[str, np.ndarray]:
+    """The optional columns given, as numbers (NaN where missing), each value checked for its column's range."""
     optional: dict[str, np.ndarray] = {}
     for c in OPTIONAL_COLUMNS:
         if c not in raw:
             continue
         col = np.full(n, np.nan)
-        for i, x in enumerate(cells(c)):
+        for i, x in enumerate(_cells(raw, c)):
             if is_missing(x) or (nan_is_missing and isinstance(x, float) and math.isnan(x)):
                 continue
             col[i] = parse_float(x, where, i, c)
@@ -138,34 +180,25 @@ def validate_columns(raw: Mapping[str, Any], source: str, lines: Sequence[int] |
             if c == "time_s" and col[i] < 0:
                 raise where.error(i, c, f"{show(x)} is negative; time_s is seconds since the run's power-on.")
         optional[c] = col
+    return optional
 
-    # Hex words without a prefix next to plain-digit words: '539' could be decimal 539 or hex 0x539 (seed 000
-    # Table 2 prints both 'A95' and '539'). Refuse rather than guess.
+
+def _check_word_notation(raw: Mapping[str, Any], where: Where, word_kinds: dict) -> None:
+    """Hex words without a prefix next to plain-digit words: '539' could be decimal 539 or hex 0x539 (seed 000
+    Table 2 prints both 'A95' and '539'). Refuse rather than guess."""
     if "bare hex" in word_kinds and "digits" in word_kinds:
         i_dec, i_hex = word_kinds["digits"][0], word_kinds["bare hex"][0]
-        raise where.error(i_dec, "input", f"DAC word {show(cells('input')[i_dec])} is ambiguous: it reads as a "
-                          f"decimal integer, but {where.row(i_hex)} has the bare hex word "
-                          f"{show(cells('input')[i_hex])}, so it may be hex too. Write hex words with a 0x "
+        raise where.error(i_dec, "input", f"DAC word {show(_cells(raw, 'input')[i_dec])} is ambiguous: it reads "
+                          f"as a decimal integer, but {where.row(i_hex)} has the bare hex word "
+                          f"{show(_cells(raw, 'input')[i_hex])}, so it may be hex too. Write hex words with a 0x "
                           "prefix, or give every word as a signed decimal integer.")
 
-    for c in names:
-        if c in REQUIRED_COLUMNS:
-            continue
-        if c in optional:
-            out[c] = optional[c]
-        else:
-            v = raw[c]
-            arr = np.array(v) if not isinstance(v, np.ndarray) else v.copy()
-            if arr.ndim != 1:
-                raise DataError(f"{source}: extra column {c!r} must be one-dimensional, got shape {arr.shape}.",
-                                source=source, column=c)
-            out[c] = arr
-    required = {"device": np.array(device, dtype=str), "run": np.array(run, dtype=np.int64),
-                "sweep": np.array(sweep, dtype=str), "input": inputs, "output": output}
-    ordered = {c: (required[c] if c in required else out[c]) for c in names}
 
-    # Duplicate points.
-    # A point applied again within a run (at each plateau of a plateau run) is told apart by its time_s.
+def _check_duplicates(ordered, where: Where, device, run, sweep, inputs) -> None:
+    """Duplicate points. A point applied again within a run (at each plateau of a plateau run) is told apart by
+    its time_s."""
+    source = where.source
+    n = len(device)
     seen: dict[tuple, int] = {}
     times = np.asarray(ordered["time_s"], dtype=float) if "time_s" in ordered else np.full(n, np.nan)
     for i in range(n):
@@ -179,7 +212,10 @@ def validate_columns(raw: Mapping[str, Any], source: str, lines: Sequence[int] |
                             source=source, row=i + 1, column="input")
         seen[key] = i
 
-    # Rate-table inputs that look like rad/s.
+
+def _check_rad_s(ordered, where: Where, inputs) -> None:
+    """Rate-table inputs that look like rad/s."""
+    source = where.source
     for (dev, r, s), rows in group_rows(ordered).items():
         if sweep_kind(s).rate_input and looks_like_rad_s(inputs[rows]):
             raise DataError(
@@ -190,9 +226,6 @@ def validate_columns(raw: Mapping[str, Any], source: str, lines: Sequence[int] |
                 f"{np.abs(inputs[rows]).max() * 180 / math.pi:.6g} deg/s) to 1e-6. Convert with "
                 "input_dps = input_rad_s * 180 / pi (gyrojax.units.rad_s_to_dps).",
                 source=source, row=int(rows[0]) + 1, column="input")
-    for arr in ordered.values():
-        arr.flags.writeable = False
-    return ordered
 
 
 def group_rows(columns: Mapping[str, np.ndarray]) -> dict[tuple[str, int, str], np.ndarray]:
