@@ -98,6 +98,7 @@ from ._identify import (  # noqa: E402
     Coverage as Coverage,
     DecrementCertificate as DecrementCertificate,
     Fit as Fit,
+    FitSpec as FitSpec,
     JointSolve as JointSolve,
     LoopSolve as LoopSolve,
     MultiStart as MultiStart,

@@ -203,8 +203,6 @@ LONG_FUNCTIONS = {
     "gyrojax/_identify/population.py::population_fit": 143,
     "gyrojax/_demo.py::run_demo": 141,
     "gyrojax/_compensate/compensate.py::compensate": 133,
-    "gyrojax/_data/validate.py::validate_columns": 128,
-    "gyrojax/_identify/identify.py::identify": 119,
     "gyrojax/_identify/assemble.py::assemble_fit": 118,
     "gyrojax/_compensate/model.py::_fit_arrays": 94,
     "gyrojax/_diagnose/compare.py::compare_residuals": 89,

@@ -8,8 +8,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._effects.registry import EFFECTS
-from .._identify import Fit, MultiStart, identify
+from .._identify import Fit, identify
 from .._identify.fitmatch import check_fit_data
+from .._identify.spec import FitSpec
 from .._model.fitdata import FitData
 from .._model.parameters import Model, zero_effect
 
@@ -71,18 +72,18 @@ def candidate_effects(base: Model, candidates, who: str) -> tuple[str, ...]:
     return candidates
 
 
-def baseline_fit(base: Model, data: FitData, candidates: tuple[str, ...], *, free, also_held: tuple[str, ...] = (),
-                 start: MultiStart = MultiStart(), evaluate_only: bool = False, estimate_noise: bool | None = None,
+def baseline_fit(base: Model, data: FitData, candidates: tuple[str, ...], spec: FitSpec, *,
+                 also_held: tuple[str, ...] = (), evaluate_only: bool = False, estimate_noise: bool | None = None,
                  say) -> tuple[Model, Fit]:
     """The baseline with every candidate at zero, as `diagnose` and `plan` fit it: `base` with each of
     `candidates` added at zero (the model every later fit of the diagnosis starts from) and its fit to `data`
-    with `free` free and the candidates (and `also_held`) held, or with `evaluate_only` evaluated where its
+    as `spec` says, with the candidates (and `also_held`) held too, or with `evaluate_only` evaluated where its
     parameters are. `say` is the caller's progress. Returns (that model, its fit)."""
     full = Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates))
     if not evaluate_only:
         say(f"fitting the baseline: {len(data.devices)} device(s), {data.num_points()} points, every one of "
             f"{len(candidates)} candidate effects held at zero")
         say.compiling(("identify", full_key(full, data)), "the lot's fit with every candidate")
-    fit = identify(full, data, free=free, hold=tuple(candidates) + tuple(also_held), start=start,
-                   evaluate_only=evaluate_only, estimate_noise=estimate_noise, progress=False)
+    fit = identify(full, data, spec=spec.holding(tuple(candidates) + tuple(also_held)), evaluate_only=evaluate_only,
+                   estimate_noise=estimate_noise, progress=False)
     return full, fit

@@ -8,6 +8,7 @@ import numpy as np
 
 from .._data.table import Table
 from .._identify import Fit, MultiStart, identify
+from .._identify.spec import FitSpec, fit_spec
 from .._model.fitdata import fit_data
 from .._model.parameters import DEFAULT_FREE, as_model
 from .._numerics.stats import chi2_sf
@@ -31,7 +32,7 @@ from .solution import Diagnosis, Step
 def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alpha: float = 0.01,
              max_effects: int = 4, ambiguity: float = 0.95, min_typical_chi2: float = 1.0,
              max_typical_multiple: float = MAX_TYPICAL_MULTIPLE, probes=PROBES, start: MultiStart = MultiStart(),
-             fit: Fit | None = None, progress=True) -> Diagnosis:
+             fit: Fit | None = None, spec: FitSpec | None = None, progress=True) -> Diagnosis:
     r"""Compare `model` with `data`, rank every candidate effect, add the significant ones one at a time, and
     say where what is left lives.
 
@@ -54,6 +55,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     - `start`: the starts of every fit (`gyrojax.MultiStart`, as for `identify`; default one start).
     - `fit`: a `gyrojax.Fit` of this data (from `identify`, or `gyrojax.load_fit`) to use as the baseline
       instead of fitting it again; its model replaces `model`, and its parameters are the refits' start.
+    - `spec`: a `gyrojax.FitSpec`: how every fit is made (solver, recovery, starts, what is free and held ...),
+      instead of `free` and `start`; the candidates are held on top of its `hold`.
     - `progress`: `True` (default) reports each step on standard error (fits, compiles, what was confirmed),
       `False` is silent, a callable receives the messages.
 
@@ -64,6 +67,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     **Returns:** a `Diagnosis` (with a `verdict`: explained, partly explained or unexplained).
     """
     _check_arguments(alpha, max_effects, max_typical_multiple)
+    spec = fit_spec(spec, "diagnose", free=free, start=start)
     if isinstance(data, Table):
         data = fit_data(data)
     if fit is not None:
@@ -72,7 +76,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
         base = as_model(model)
     candidates, broken = _usable_candidates(base, candidates)
     say = as_progress(progress, "gyrojax.diagnose")
-    fit, fit_with = _baseline_and_refits(base, data, candidates, fit, free, start, say)
+    fit, fit_with = _baseline_and_refits(base, data, candidates, fit, spec, say)
     baseline = fit
     discrepancy, designs = score_probes(fit, probes, alpha=alpha)
     located = locate(fit, alpha=alpha)
@@ -126,19 +130,19 @@ def _usable_candidates(base, candidates) -> tuple[tuple[str, ...], list[Rejectio
     return candidates, broken
 
 
-def _baseline_and_refits(base, data, candidates, fit, free, start, say):
+def _baseline_and_refits(base, data, candidates, fit, spec, say):
     """The baseline fit (of `data`, or the given `fit` evaluated where it ended), with every candidate at zero,
     and the refit with a selection of them freed: (baseline, refit(selected))."""
     weights = {"data": data, "estimate_noise": None}
 
     def fit_with(selected):
         held = tuple(c for c in candidates if c not in selected)
-        return identify(full, weights["data"], free=free, hold=held, start=start,
-                        estimate_noise=weights["estimate_noise"], progress=False)
+        return identify(full, weights["data"], spec=spec.holding(held), estimate_noise=weights["estimate_noise"],
+                        progress=False)
 
     if fit is not None:  # the saved fit is the baseline: evaluated where it ended, with the candidates at zero
         say("evaluating the given baseline fit with every candidate at zero")
-    full, fit = baseline_fit(base, data, candidates, free=free, start=start, evaluate_only=fit is not None, say=say)
+    full, fit = baseline_fit(base, data, candidates, spec, evaluate_only=fit is not None, say=say)
     baseline = fit
     if not data.weighted:
         # The noise was estimated from the baseline's residuals: every refit keeps those weights, so that the

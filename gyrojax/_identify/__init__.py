@@ -18,6 +18,7 @@ returns a `Fit`. One concept per file:
 - `population.py`: the lot as a population (`PopulationSolve`, `PopulationFit`): random effects, empirical Bayes.
 - `fit.py`: `Fit`, `Unidentifiable`, statuses and exit codes.
 - `fitio.py`, `fitmatch.py`, `report.py`: fit files, whether a fit belongs to the data it is given, the identify report.
+- `spec.py`: `FitSpec`, how a fit is made, which `identify`, `diagnose` and `plan` accept whole.
 - `shortcuts.py`: the strings accepted for strategy objects (`solver="levenberg-marquardt"`), in one place.
 """
 
@@ -44,6 +45,7 @@ from .recovery import (
     RestartRunoffs as RestartRunoffs,
     RetryWithSolver as RetryWithSolver,
 )
+from .spec import FitSpec as FitSpec
 from .strategies import (
     AbstractLotSolve as AbstractLotSolve,
     JointSolve as JointSolve,

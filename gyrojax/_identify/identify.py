@@ -43,11 +43,12 @@ from .population import PopulationFit, PopulationSolve, population_fit
 from .problem import make_problem, with_free
 from .recovery import RECOVERY, AbstractRecovery, DecrementCertificate, MultiStart, RetryWithSolver, Solution, Solving
 from .shortcuts import lot_solve_from, solver_from
+from .spec import FitSpec, fit_spec
 from .strategies import AbstractLotSolve, Lot
 
 
-def identify(model, data, *, free=DEFAULT_FREE, shared=(), hold=(), priors=None, tier=Steady(),
-             solver="levenberg-marquardt", rtol: float = 1e-8, atol: float = 1e-8, max_steps: int = 200,
+def identify(model, data, *, spec: FitSpec | None = None, free=DEFAULT_FREE, shared=(), hold=(), priors=None,
+             tier=Steady(), solver="levenberg-marquardt", rtol: float = 1e-8, atol: float = 1e-8, max_steps: int = 200,
              start: MultiStart = MultiStart(), lot_solve: str | AbstractLotSolve = "vmap",
              recovery: tuple[AbstractRecovery, ...] = RECOVERY, identifiability_threshold: float = 1.0,
              reject_alpha: float = 0.01, estimate_noise: bool | None = None, evaluate_only: bool = False,
@@ -59,6 +60,8 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), hold=(), priors=None,
     - `model`: a `gyrojax.Model` (a device and effects), a `Gyroscope`, or a preset name. A single device is
       the start for every device of the data; a lot (leading device axis) gives one start per device.
     - `data`: a `gyrojax.Table` or `FitData`.
+    - `spec`: a `gyrojax.FitSpec`: every argument below from `free` to `reject_alpha` at once (give those
+      either there or as keywords, not both).
     - `free`: names of `gyrojax.PARAMETERS` to fit per device (those the device lacks are skipped). Every
       parameter of every effect in the model is fitted too.
     - `shared`: names (physical, or effect fields like `"dac_inl.coefficients"`) fitted as one value for the
@@ -113,39 +116,53 @@ def identify(model, data, *, free=DEFAULT_FREE, shared=(), hold=(), priors=None,
     the model's (both named by device, run and input).
     """
     model = as_model(model)
+    data = _as_fit_data(data)
+    spec = fit_spec(spec, "identify", free=free, shared=shared, hold=hold, priors=priors, tier=tier, solver=solver,
+                    rtol=rtol, atol=atol, max_steps=max_steps, start=start, lot_solve=lot_solve, recovery=recovery,
+                    identifiability_threshold=identifiability_threshold, reject_alpha=reject_alpha)
+    if estimate_noise not in (None, True, False):
+        raise ValueError(f"estimate_noise must be None, True or False, got {estimate_noise!r}.")
+    check_absurd_outputs(data)
+    if isinstance(spec.lot_solve, PopulationSolve):
+        return _population(model, data, spec, estimate_noise, evaluate_only, progress)
+    return _identify(model, data, spec, estimate_noise, evaluate_only, progress)
+
+
+def _as_fit_data(data) -> FitData:
+    """`data` as `FitData` (a `Table` converted), else a TypeError that says what is expected."""
     if isinstance(data, Table):
         data = fit_data(data)
     if not isinstance(data, FitData):
         raise TypeError(f"data must be a gyrojax.Table or FitData, got {type(data).__name__}.")
-    if not (isinstance(reject_alpha, (int, float)) and 0.0 < reject_alpha < 1.0):
-        raise ValueError(f"reject_alpha must be a significance level in (0, 1), got {reject_alpha!r}.")
-    if not isinstance(max_steps, (int, np.integer)) or isinstance(max_steps, bool) or max_steps < 1:
-        raise ValueError(f"max_steps must be an integer >= 1, got {max_steps!r}.")
-    if estimate_noise not in (None, True, False):
-        raise ValueError(f"estimate_noise must be None, True or False, got {estimate_noise!r}.")
-    if not isinstance(start, MultiStart):
-        raise TypeError(f"start must be a gyrojax.MultiStart, got {type(start).__name__}.")
-    if isinstance(recovery, AbstractRecovery) or not all(isinstance(r, AbstractRecovery) for r in recovery):
-        raise TypeError(f"recovery must be a tuple of gyrojax.AbstractRecovery policies, got {recovery!r}.")
-    check_absurd_outputs(data)
-    if isinstance(lot_solve, PopulationSolve):
-        return population_fit(identify, as_model(model), data, lot_solve, dict(
-            free=free, shared=shared, hold=hold, priors=priors, tier=tier, solver=solver, rtol=rtol, atol=atol,
-            max_steps=max_steps, start=start, recovery=recovery, identifiability_threshold=identifiability_threshold,
-            reject_alpha=reject_alpha, estimate_noise=estimate_noise, evaluate_only=evaluate_only,
-            progress=progress), as_progress(progress, "gyrojax.identify"))
+    return data
+
+
+def _population(model, data, spec: FitSpec, estimate_noise, evaluate_only, progress):
+    """The population fit of `spec.lot_solve` (`population.py`), whose independent fits are `identify`'s."""
+    options = {k: v for k, v in spec.options().items() if k != "lot_solve"}
+    return population_fit(identify, as_model(model), data, spec.lot_solve, dict(
+        **options, estimate_noise=estimate_noise, evaluate_only=evaluate_only, progress=progress),
+        as_progress(progress, "gyrojax.identify"))
+
+
+def _identify(model, data, spec: FitSpec, estimate_noise, evaluate_only, progress):
+    """`identify` of checked arguments, without a population: the strategies composed from `spec`, then the fit
+    (twice more where the noise is estimated from a first fit's residuals)."""
+    start = spec.start
     # The strategies, composed once for every fit below: the solver, the first solve, the recovery policies.
-    recoveries = tuple(_with_tolerances(r, rtol, atol) for r in recovery
+    solver = spec.solver
+    recoveries = tuple(_with_tolerances(r, spec.rtol, spec.atol) for r in spec.recovery
                        if not (isinstance(r, RetryWithSolver) and not (isinstance(solver, str) and solver != r.solver))
                        and not (evaluate_only and not isinstance(r, DecrementCertificate)))
-    options = dict(free=free, shared=shared, priors=priors, hold=hold, tier=tier,
-                   solver=solver_from(solver, rtol, atol), solver_name=solver, lot_solve=lot_solve,
-                   first=None if evaluate_only else start, recoveries=recoveries,
-                   max_steps=max_steps, threshold=identifiability_threshold, reject_alpha=reject_alpha)
+    options = dict(free=spec.free, shared=spec.shared, priors=spec.priors, hold=spec.hold, tier=spec.tier,
+                   solver=solver_from(solver, spec.rtol, spec.atol), solver_name=solver, lot_solve=spec.lot_solve,
+                   first=None if evaluate_only else start, recoveries=recoveries, max_steps=spec.max_steps,
+                   threshold=spec.identifiability_threshold, reject_alpha=spec.reject_alpha)
     say = as_progress(progress, "gyrojax.identify")
     say(f"{'evaluating' if evaluate_only else 'fitting'} {len(data.devices)} device(s), {data.num_points()} points "
         f"({', '.join(data.sweeps)})")
-    say.compiling(("identify", jax.tree.structure(eqx.filter(model, eqx.is_array)), tuple(free), tuple(shared),
+    say.compiling(("identify", jax.tree.structure(eqx.filter(model, eqx.is_array)), tuple(spec.free),
+                   tuple(spec.shared),
                    tuple((s, tuple(np.shape(data.blocks[s].inputs))) for s in data.sweeps)), "the fit")
     if not (not data.weighted if estimate_noise is None else estimate_noise):
         fit = _fit_once(model, data, noise=None, **options)

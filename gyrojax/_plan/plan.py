@@ -22,6 +22,7 @@ budget greedily (largest variance reduction per minute), for a number of rate-ta
 keeps the best; seed 000's 22-rate protocol at equal time is the reference.
 """
 
+import dataclasses
 import functools
 import itertools
 import math
@@ -37,6 +38,7 @@ from .._effects.registry import EFFECTS
 from .._identify import Fit
 from .._identify.fit import p_text
 from .._identify.problem import sf_temperature
+from .._identify.spec import FitSpec, fit_spec
 from .._lots.noise import RateNoise
 from .._model.fitdata import FitData, fit_data
 from .._model.parameters import DEFAULT_FREE, as_model
@@ -376,7 +378,7 @@ def _typical(fit: Fit, name: str, cols) -> np.ndarray:
     return theta
 
 
-def _baseline(data, model, fit, candidates, free, reads, say):
+def _baseline(data, model, fit, candidates, spec, reads, say):
     """The baseline fit with every candidate effect in the model at zero and held (as the diagnosis fits it),
     and a held column for each parameter of `reads` (what the experiments read) that the baseline does not
     free, reusing a given fit's Jacobian when it has those columns. Returns (fit, candidates, the read
@@ -392,8 +394,7 @@ def _baseline(data, model, fit, candidates, free, reads, say):
         data = data if isinstance(data, FitData) else fit_data(data)
         base = as_model(model)
     candidates = candidate_effects(base, candidates, "plan")
-    if fit is not None:
-        free = tuple(e.label for e in fit.entries if e.effect_index is None)
+    free = spec.free if fit is None else tuple(e.label for e in fit.entries if e.effect_index is None)
     added = tuple(p for p in reads if p not in free)
     if fit is not None:
         have = set(fit.names)
@@ -402,9 +403,9 @@ def _baseline(data, model, fit, candidates, free, reads, say):
             return fit, candidates, ()
         say("evaluating the given fit with every candidate effect at zero" + (f" and {', '.join(added)} held"
             if added else "") + f" (its Jacobian lacks {', '.join(missing + list(added))})")
-    _, fit = baseline_fit(base, data if fit is None else fit.data, candidates, free=tuple(free) + added,
-                          also_held=added, evaluate_only=fit is not None,
-                          estimate_noise=None if fit is None else False, say=say)
+    _, fit = baseline_fit(base, data if fit is None else fit.data, candidates,
+                          dataclasses.replace(spec, free=tuple(free) + added), also_held=added,
+                          evaluate_only=fit is not None, estimate_noise=None if fit is None else False, say=say)
     return fit, candidates, added
 
 
@@ -441,7 +442,7 @@ def _sf_variance(info, g, cols, threshold, meat=None):
 def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=None, experiments=None,
          budget_min: float | None = None, alpha: float = 0.01, target_power: float = 0.9, max_repeats: int = 3,
          protocol: Protocol = Protocol(), free=DEFAULT_FREE, identifiability_threshold: float = 1.0,
-         scale_factor: bool = True, progress=True) -> Plan:
+         scale_factor: bool = True, spec: FitSpec | None = None, progress=True) -> Plan:
     r"""Plan the measurements that make each candidate effect testable, and the scale factor's calibration.
 
     **Arguments:**
@@ -467,18 +468,22 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     - `identifiability_threshold`: identification's threshold (what a joint fit would hold).
     - `scale_factor`: False to plan the effects only (`Plan.scale_factor` is then None; the design's greedy
       search is the slow part of a plan on a lot).
+    - `spec`: a `gyrojax.FitSpec`: how the baseline is fitted here (solver, recovery, starts, what is free and
+      held ...), instead of `free`; the candidates and the parameters the experiments read are held on top of
+      its `hold`, and those read are freed on top of its `free`.
     - `progress`: as for `gyrojax.diagnose`.
 
     **Returns:** a `Plan`.
     """
     _check_arguments(alpha, target_power, max_repeats, protocol, data)
+    spec = fit_spec(spec, "plan", free=free)
     experiments = None if experiments is None else tuple(experiments)
     budget_min = _budget(experiments, protocol, budget_min)
     say = as_progress(progress, "gyrojax.plan")
     # what the experiments read beyond the baseline (default experiments: whatever a kind may read)
     reads = tuple(dict.fromkeys(p for cls in SWEEP_KINDS.values() for p in cls.reads)) if experiments is None else \
         tuple(dict.fromkeys(p for e in experiments if isinstance(e, CandidateExperiment) for p in e.reads))
-    fit, candidates, added = _baseline(data, model, fit, candidates, free, reads, say)
+    fit, candidates, added = _baseline(data, model, fit, candidates, spec, reads, say)
     one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, fit.model.device)
     experiments = _experiments(experiments, one, protocol, fit, say)
     names = [e.name for e in experiments]
