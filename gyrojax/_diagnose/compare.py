@@ -342,6 +342,46 @@ def _shares(items):
 _BANDS = ((0.0, 1.0 / 3.0, "low"), (1.0 / 3.0, 2.0 / 3.0, "mid"), (2.0 / 3.0, np.inf, "high"))
 
 
+def _sweep_tests(sweep, zs, comps, odd, even, signs, along, time_zs, x_all, coords, m_all) -> list:
+    """The tests of one sweep's residuals from its runs' statistics: runs along the input (`zs`), trend, bow and
+    cubic (`comps`), odd and even parts, the sign gain, the linear and quadratic parts along each other
+    coordinate (`along`), and runs in time order where it is not the input's: (sweep, test, statistic, df, p,
+    coordinate) each."""
+    tests = []
+    if zs:
+        z = float(np.sum(zs) / math.sqrt(len(zs)))
+        tests.append((sweep, "runs", z, len(zs), _normal_cdf(z), "input"))
+    if comps:
+        c = np.asarray(comps)
+        for i, name in enumerate(("trend", "even bow", "odd cubic")):
+            col = c[:, i][np.isfinite(c[:, i])]
+            if col.size:
+                s = float(np.sum(col**2))
+                tests.append((sweep, name, s, int(col.size), chi2_sf(s, col.size), "input"))
+    odd_all, even_all = np.concatenate(odd) if odd else np.zeros(0), np.concatenate(even) if even else np.zeros(0)
+    if odd_all.size >= 2:
+        # The even part of a biased sweep lost one direction per run to the bias: conservative.
+        for name, part in (("odd part", odd_all), ("even part", even_all)):
+            s = float(np.sum(part**2))
+            tests.append((sweep, name, s, int(part.size), chi2_sf(s, part.size), "input"))
+    sg = np.asarray(signs, float)
+    sg = sg[np.isfinite(sg)]
+    if sg.size:
+        s = float(np.sum(sg**2))
+        tests.append((sweep, "sign gain", s, int(sg.size), chi2_sf(s, sg.size), "input"))
+    for name, (proj, _) in along.items():
+        c = np.asarray(proj, float).reshape(-1, 2)
+        for i, test in enumerate(("linear", "quadratic")):
+            col = c[:, i][np.isfinite(c[:, i])]
+            if col.size:
+                s = float(np.sum(col**2))
+                tests.append((sweep, test, s, int(col.size), chi2_sf(s, col.size), name))
+    if time_zs and not _same_order(x_all, coords.get("order"), m_all):
+        z = float(np.sum(time_zs) / math.sqrt(len(time_zs)))
+        tests.append((sweep, "runs", z, len(time_zs), _normal_cdf(z), "order"))
+    return tests
+
+
 def compare_residuals(residuals, inputs, masks, *, devices, run_ids=None, coordinates=None,
                       alpha: float = 0.01) -> Comparison:
     """`compare` on arrays: `residuals`, `inputs`, `masks` are dicts sweep -> (device, run, point)
@@ -391,37 +431,7 @@ def compare_residuals(residuals, inputs, masks, *, devices, run_ids=None, coordi
                 if "order" in coords and len(x) >= 4:
                     time_zs.append(runs_test(np.sign(r[np.argsort(coords["order"][d, k][m], kind="stable")]))[2])
         by_band += [(k, n, c) for k, (n, c) in band_chi2.items() if n]
-        if zs:
-            z = float(np.sum(zs) / math.sqrt(len(zs)))
-            tests.append((sweep, "runs", z, len(zs), _normal_cdf(z), "input"))
-        if comps:
-            c = np.asarray(comps)
-            for i, name in enumerate(("trend", "even bow", "odd cubic")):
-                col = c[:, i][np.isfinite(c[:, i])]
-                if col.size:
-                    s = float(np.sum(col**2))
-                    tests.append((sweep, name, s, int(col.size), chi2_sf(s, col.size), "input"))
-        odd_all, even_all = np.concatenate(odd) if odd else np.zeros(0), np.concatenate(even) if even else np.zeros(0)
-        if odd_all.size >= 2:
-            # The even part of a biased sweep lost one direction per run to the bias: conservative.
-            for name, part in (("odd part", odd_all), ("even part", even_all)):
-                s = float(np.sum(part**2))
-                tests.append((sweep, name, s, int(part.size), chi2_sf(s, part.size), "input"))
-        sg = np.asarray(signs, float)
-        sg = sg[np.isfinite(sg)]
-        if sg.size:
-            s = float(np.sum(sg**2))
-            tests.append((sweep, "sign gain", s, int(sg.size), chi2_sf(s, sg.size), "input"))
-        for name, (proj, _) in along.items():
-            c = np.asarray(proj, float).reshape(-1, 2)
-            for i, test in enumerate(("linear", "quadratic")):
-                col = c[:, i][np.isfinite(c[:, i])]
-                if col.size:
-                    s = float(np.sum(col**2))
-                    tests.append((sweep, test, s, int(col.size), chi2_sf(s, col.size), name))
-        if time_zs and not _same_order(x_all, coords.get("order"), m_all):
-            z = float(np.sum(time_zs) / math.sqrt(len(time_zs)))
-            tests.append((sweep, "runs", z, len(time_zs), _normal_cdf(z), "order"))
+        tests += _sweep_tests(sweep, zs, comps, odd, even, signs, along, time_zs, x_all, coords, m_all)
         confounded += confounded_coordinates({"input": x_all, **coords}, m_all, sweep)
     cut = alpha / max(len(tests), 1)
     findings = tuple(Finding(s, t, stat, df, p, p < cut,
