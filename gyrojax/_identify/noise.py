@@ -88,6 +88,35 @@ def _solve_kappa(a, q, has):
     return kappa
 
 
+def _residual_maker(jac, blocks):
+    """M = P_b - J J^+ over the real points of `blocks` (see `noise_scales`): the projector that removes each
+    biased run's bias and what the free parameters (`jac`) absorb. Returns (each block's first flattened
+    position, the real points' flattened positions, each flattened position's index among the real points or
+    -1, M)."""
+    sizes = [b[0].size for b in blocks]
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    real = np.concatenate([np.ravel(b[1]) for b in blocks]).astype(bool)
+    idx = np.flatnonzero(real)
+    pos = np.full(real.size, -1)
+    pos[idx] = np.arange(idx.size)
+    n = idx.size
+    proj = np.eye(n)
+    for s, (x, mask, inv_sigma, biased) in enumerate(blocks):
+        if not biased:
+            continue
+        for k in range(x.shape[0]):
+            local = pos[offsets[s] + k * x.shape[1] + np.flatnonzero(mask[k])]
+            if local.size:
+                w = np.ravel(inv_sigma[k][mask[k]])
+                proj[np.ix_(local, local)] -= np.outer(w, w) / (w @ w)
+    j = np.asarray(jac, dtype=float)[idx]
+    if j.size and np.all(np.isfinite(j)):
+        u, sv, _ = np.linalg.svd(j, full_matrices=False)
+        u = u[:, sv > sv[:1] * max(j.shape) * np.finfo(float).eps] if sv.size else u[:, :0]
+        return offsets, idx, pos, proj - u @ u.T
+    return offsets, idx, pos, proj
+
+
 def noise_scales(residual, jac, blocks, *, draws=0, rng=None):
     """Per sweep of one device, the factor kappa by which the variance of its standardised residuals exceeds
     1 (for unit weights: the noise variance in output units), unbiased for white noise.
@@ -109,29 +138,8 @@ def noise_scales(residual, jac, blocks, *, draws=0, rng=None):
     **Returns:** `(kappa, nu, methods, null)`: kappa per sweep (NaN where a sweep has no contrast: too few
     points), the effective degrees of freedom of each estimate (Satterthwaite: tr(S)^2 / tr(S^2) with S the
     covariance of the contrasts), how each was made, and `(chi2, chi2 draws)` or None."""
-    sizes = [b[0].size for b in blocks]
-    offsets = np.concatenate([[0], np.cumsum(sizes)])
-    real = np.concatenate([np.ravel(b[1]) for b in blocks]).astype(bool)
-    idx = np.flatnonzero(real)
-    pos = np.full(real.size, -1)
-    pos[idx] = np.arange(idx.size)
+    offsets, idx, pos, resid_maker = _residual_maker(jac, blocks)
     n = idx.size
-    proj = np.eye(n)
-    for s, (x, mask, inv_sigma, biased) in enumerate(blocks):
-        if not biased:
-            continue
-        for k in range(x.shape[0]):
-            local = pos[offsets[s] + k * x.shape[1] + np.flatnonzero(mask[k])]
-            if local.size:
-                w = np.ravel(inv_sigma[k][mask[k]])
-                proj[np.ix_(local, local)] -= np.outer(w, w) / (w @ w)
-    j = np.asarray(jac, dtype=float)[idx]
-    if j.size and np.all(np.isfinite(j)):
-        u, sv, _ = np.linalg.svd(j, full_matrices=False)
-        u = u[:, sv > sv[:1] * max(j.shape) * np.finfo(float).eps] if sv.size else u[:, :0]
-        resid_maker = proj - u @ u.T
-    else:
-        resid_maker = proj
     r = np.asarray(residual, dtype=float)[idx]
     selects = [(pos[offsets[s]:offsets[s + 1]] >= 0) for s in range(len(blocks))]
     cm, q, methods, size = [], [], [], []
