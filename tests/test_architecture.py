@@ -206,7 +206,6 @@ LONG_FUNCTIONS = {
     "gyrojax/_identify/assemble.py::assemble_fit": 118,
     "gyrojax/_compensate/model.py::_fit_arrays": 94,
     "gyrojax/_diagnose/formula.py::dictionary": 87,
-    "gyrojax/_diagnose/report.py::write_report": 83,
     "gyrojax/_diagnose/draft.py::draft_effect_source": 82,
 }
 

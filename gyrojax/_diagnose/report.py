@@ -13,82 +13,99 @@ def write_report(diagnosis, out_dir) -> dict:
     JSON."""
     import os
 
-    import matplotlib.pyplot as plt
-
-    from .. import plot
     from .._data.io import atomic_directory, atomic_write_bytes, atomic_write_json
 
     with atomic_directory(out_dir) as folder:
-        sweeps = diagnosis.baseline.data.sweeps
-        figures = []
-        fig, axes = plt.subplots(len(sweeps), 2, figsize=(12, 3.2 * len(sweeps)), squeeze=False)
-        for i, sweep in enumerate(sweeps):
-            plot.residuals(diagnosis.baseline, sweep, ax=axes[i, 0])
-            axes[i, 0].set_title(f"baseline {sweep}: chi2_red {diagnosis.baseline.chi2_red_total:.3g}", fontsize=9)
-            plot.residuals(diagnosis.final, sweep, ax=axes[i, 1])
-            axes[i, 1].set_title(f"final {sweep}: chi2_red {diagnosis.final.chi2_red_total:.3g}", fontsize=9)
-        plot.save(fig, os.path.join(folder, "residuals.png"))
-        figures.append(("Model against measurement, before and after", "residuals.png"))
-        if any(d.significant for d in diagnosis.baseline_discrepancy):
-            fig, axes = plt.subplots(1, 2, figsize=(12, 3.8))
-            plot.discrepancy(diagnosis, final=False, ax=axes[0])
-            plot.discrepancy(diagnosis, final=True, ax=axes[1])
-            plot.save(fig, os.path.join(folder, "discrepancy.png"))
-            figures.append(("Where the misfit lives: the leading generic shape, at the baseline and at the end",
-                            "discrepancy.png"))
-        if diagnosis.ranking:
-            plot.save(plot.ranking(diagnosis.ranking, alpha=diagnosis.alpha,
-                                   max_typical_multiple=diagnosis.max_typical_multiple),
-                      os.path.join(folder, "ranking.png"))
-            figures.append(("Candidate effects ranked by the score test", "ranking.png"))
-            plot.save(plot.fingerprints(diagnosis), os.path.join(folder, "fingerprints.png"))
-            figures.append(("Predicted residual shape of the top candidates against the residual, per device",
-                            "fingerprints.png"))
-        plot.save(plot.error_fall(diagnosis), os.path.join(folder, "error_fall.png"))
-        figures.append(("The error falling step by step", "error_fall.png"))
+        figures = _figures(diagnosis, folder)
         report = diagnosis.to_json()
         atomic_write_json(report, os.path.join(folder, "diagnosis.json"))
-        data = diagnosis.baseline.data
-        lines = ["# gyrojax diagnosis", "", f"Data: `{data.source}`, {len(diagnosis.baseline.devices)} device(s), "
-                 f"sweeps {', '.join(sweeps)}.", "", f"**{diagnosis.verdict_text()}**", ""]
-        left = diagnosis.remaining
-        found = [d for d in diagnosis.baseline_discrepancy if d.significant and not d.within]
-        lines += ["## Where the misfit lives", "",
-                  "Generic shapes (a bias or gain in die temperature, time since power-on, drive frequency or run; "
-                  "odd cubics after and of the DAC; an even bow; K+ vs K-), scored from the same fit as the "
-                  "candidate effects, with the share of the misfit each explains and the size of the term it "
-                  "implies.", ""]
-        for title, items in (("At the baseline", found), ("What is left at the end", left)):
-            lines += [f"{title}:", ""]
-            lines += [f"- `{d.coordinate}`: {discrepancy_text(d)} (S = {d.chi2_explained:.4g}, p = {d.p_value:.2g})"
-                      for d in items] or ["- nothing significant"]
-            lines.append("")
-        lines += ["## Summary", "", "```", diagnosis.summary(comparisons=False), "```", "",
-                  "## Where the model fails, fit by fit", "",
-                  "Misfit by sweep, device, run and input band (share of the chi2 in excess of the point count), "
-                  "and structure tests on the residuals along every recorded coordinate (`gyrojax.compare`):", ""]
-        for k, c in enumerate(diagnosis.comparisons):
-            name = "baseline" if k == 0 else f"+ {diagnosis.steps[k - 1].effect}"
-            lines += [f"### {name}", "", "```", c.summary(), "```", ""]
-        lines += ["## Step by step", "", "| step | effect | chi2_red | nonlinearity residual (ppm) |",
-                  "|---|---|---|---|",
-                  f"| 0 | baseline | {diagnosis.baseline.chi2_red_total:.3f} | "
-                  f"{_ppm_cell(diagnosis.baseline_nonlinearity_ppm, diagnosis.baseline)} |"]
-        for k, s in enumerate(diagnosis.steps, 1):
-            lines.append(f"| {k} | + {s.effect} | {s.chi2_red_after:.3f} | "
-                         f"{_ppm_cell(s.nonlinearity_ppm_after, diagnosis.fits[k])} |")
-        if diagnosis.rejected:
-            lines += ["", "Candidates not confirmed, and why:", ""]
-            lines += [f"- `{r.effect}`: {r.reason}." for r in diagnosis.rejected]
-        lines += ["", "Effects marked *not testable* leave no fingerprint that the baseline's free parameters "
-                  "(gains, per-run biases) cannot absorb on this data. What absorbs each, and the measurement that "
-                  "would reveal it:", ""]
-        lines += [f"- `{name}`: {why}." for name, why in diagnosis.absorptions.items()] or ["- none"]
-        lines += [""]
-        for title, name in figures:
-            lines += [f"## {title}", "", f"![{title}]({name})", ""]
+        lines = _markdown(diagnosis, figures)
         atomic_write_bytes(os.path.join(folder, "diagnosis.md"), "\n".join(lines).encode())
     return report
+
+
+def _figures(diagnosis, folder) -> list[tuple[str, str]]:
+    """The report's PNG plots, written into `folder`: (title, file name) each, in the report's order."""
+    import os
+
+    import matplotlib.pyplot as plt
+
+    from .. import plot
+
+    sweeps = diagnosis.baseline.data.sweeps
+    figures = []
+    fig, axes = plt.subplots(len(sweeps), 2, figsize=(12, 3.2 * len(sweeps)), squeeze=False)
+    for i, sweep in enumerate(sweeps):
+        plot.residuals(diagnosis.baseline, sweep, ax=axes[i, 0])
+        axes[i, 0].set_title(f"baseline {sweep}: chi2_red {diagnosis.baseline.chi2_red_total:.3g}", fontsize=9)
+        plot.residuals(diagnosis.final, sweep, ax=axes[i, 1])
+        axes[i, 1].set_title(f"final {sweep}: chi2_red {diagnosis.final.chi2_red_total:.3g}", fontsize=9)
+    plot.save(fig, os.path.join(folder, "residuals.png"))
+    figures.append(("Model against measurement, before and after", "residuals.png"))
+    if any(d.significant for d in diagnosis.baseline_discrepancy):
+        fig, axes = plt.subplots(1, 2, figsize=(12, 3.8))
+        plot.discrepancy(diagnosis, final=False, ax=axes[0])
+        plot.discrepancy(diagnosis, final=True, ax=axes[1])
+        plot.save(fig, os.path.join(folder, "discrepancy.png"))
+        figures.append(("Where the misfit lives: the leading generic shape, at the baseline and at the end",
+                        "discrepancy.png"))
+    if diagnosis.ranking:
+        plot.save(plot.ranking(diagnosis.ranking, alpha=diagnosis.alpha,
+                               max_typical_multiple=diagnosis.max_typical_multiple),
+                  os.path.join(folder, "ranking.png"))
+        figures.append(("Candidate effects ranked by the score test", "ranking.png"))
+        plot.save(plot.fingerprints(diagnosis), os.path.join(folder, "fingerprints.png"))
+        figures.append(("Predicted residual shape of the top candidates against the residual, per device",
+                        "fingerprints.png"))
+    plot.save(plot.error_fall(diagnosis), os.path.join(folder, "error_fall.png"))
+    figures.append(("The error falling step by step", "error_fall.png"))
+    return figures
+
+
+def _markdown(diagnosis, figures) -> list[str]:
+    """The lines of `diagnosis.md`: the verdict, where the misfit lives, the summary, each fit's comparison, the
+    steps, what was not confirmed or is not testable, and the `figures`."""
+    sweeps = diagnosis.baseline.data.sweeps
+    data = diagnosis.baseline.data
+    lines = ["# gyrojax diagnosis", "", f"Data: `{data.source}`, {len(diagnosis.baseline.devices)} device(s), "
+             f"sweeps {', '.join(sweeps)}.", "", f"**{diagnosis.verdict_text()}**", ""]
+    left = diagnosis.remaining
+    found = [d for d in diagnosis.baseline_discrepancy if d.significant and not d.within]
+    lines += ["## Where the misfit lives", "",
+              "Generic shapes (a bias or gain in die temperature, time since power-on, drive frequency or run; "
+              "odd cubics after and of the DAC; an even bow; K+ vs K-), scored from the same fit as the "
+              "candidate effects, with the share of the misfit each explains and the size of the term it "
+              "implies.", ""]
+    for title, items in (("At the baseline", found), ("What is left at the end", left)):
+        lines += [f"{title}:", ""]
+        lines += [f"- `{d.coordinate}`: {discrepancy_text(d)} (S = {d.chi2_explained:.4g}, p = {d.p_value:.2g})"
+                  for d in items] or ["- nothing significant"]
+        lines.append("")
+    lines += ["## Summary", "", "```", diagnosis.summary(comparisons=False), "```", "",
+              "## Where the model fails, fit by fit", "",
+              "Misfit by sweep, device, run and input band (share of the chi2 in excess of the point count), "
+              "and structure tests on the residuals along every recorded coordinate (`gyrojax.compare`):", ""]
+    for k, c in enumerate(diagnosis.comparisons):
+        name = "baseline" if k == 0 else f"+ {diagnosis.steps[k - 1].effect}"
+        lines += [f"### {name}", "", "```", c.summary(), "```", ""]
+    lines += ["## Step by step", "", "| step | effect | chi2_red | nonlinearity residual (ppm) |",
+              "|---|---|---|---|",
+              f"| 0 | baseline | {diagnosis.baseline.chi2_red_total:.3f} | "
+              f"{_ppm_cell(diagnosis.baseline_nonlinearity_ppm, diagnosis.baseline)} |"]
+    for k, s in enumerate(diagnosis.steps, 1):
+        lines.append(f"| {k} | + {s.effect} | {s.chi2_red_after:.3f} | "
+                     f"{_ppm_cell(s.nonlinearity_ppm_after, diagnosis.fits[k])} |")
+    if diagnosis.rejected:
+        lines += ["", "Candidates not confirmed, and why:", ""]
+        lines += [f"- `{r.effect}`: {r.reason}." for r in diagnosis.rejected]
+    lines += ["", "Effects marked *not testable* leave no fingerprint that the baseline's free parameters "
+              "(gains, per-run biases) cannot absorb on this data. What absorbs each, and the measurement that "
+              "would reveal it:", ""]
+    lines += [f"- `{name}`: {why}." for name, why in diagnosis.absorptions.items()] or ["- none"]
+    lines += [""]
+    for title, name in figures:
+        lines += [f"## {title}", "", f"![{title}]({name})", ""]
+    return lines
 
 
 def _ppm_cell(value: float, fit) -> str:
