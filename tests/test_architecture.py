@@ -202,7 +202,6 @@ LONG_FUNCTIONS = {
     "gyrojax/_lots/campaign.py::simulate_table": 148,
     "gyrojax/_identify/population.py::population_fit": 143,
     "gyrojax/_demo.py::run_demo": 141,
-    "gyrojax/_compensate/compensate.py::compensate": 133,
     "gyrojax/_identify/assemble.py::assemble_fit": 118,
     "gyrojax/_compensate/model.py::_fit_arrays": 94,
     "gyrojax/_diagnose/formula.py::dictionary": 87,

@@ -134,6 +134,100 @@ def _worst(values):
     return max(values)
 
 
+def _check_rate_tables(table: Table, compensator) -> tuple[list[str], dict[str, list[int]]]:
+    """The devices with rate_table rows (in order of appearance) and each one's runs, after checking that there
+    are such rows, that each run has enough points whose outputs change, and that every point has the columns
+    the compensator requires."""
+    groups = table.groups("rate_table")
+    if not groups:
+        present = sorted(set(table["sweep"].tolist()))
+        raise DataError(f"{table.source}: no rate_table rows to compensate; the table has {', '.join(present)}.",
+                        source=table.source, column="sweep")
+    devices: list[str] = []
+    runs_of: dict[str, list[int]] = {}
+    for dev, run, _ in groups:
+        if dev not in runs_of:
+            devices.append(dev)
+            runs_of[dev] = []
+        runs_of[dev].append(run)
+    for (dev, run, _), rows in groups.items():
+        if len(rows) < MIN_POINTS_LINEAR:
+            raise DataError(f"{table.locate(int(rows[0]))}: device {dev!r}, run {run} has {len(rows)} rate_table "
+                            f"point(s); judging a compensation needs at least {MIN_POINTS_LINEAR}.",
+                            source=table.source, row=int(rows[0]) + 1)
+    check_outputs_change(table, groups)
+    for (dev, run, _), rows in groups.items():
+        for name in compensator.requires:
+            values = table[name][rows] if name in table else np.full(len(rows), np.nan)
+            bad = rows[~np.isfinite(values)]
+            if bad.size:
+                raise DataError(f"{table.locate(int(bad[0]), name)}: {compensator.name} compensation needs "
+                                f"{name} on every rate_table point; device {dev!r}, run {run} lacks it.",
+                                source=table.source, row=int(bad[0]) + 1, column=name)
+    return devices, runs_of
+
+
+def _repeatability_or_none(sf, mask=None):
+    """The repeatability of the scale factors `sf` (of the runs of `mask`), None with fewer than 2 runs or a NaN
+    (a fit that did not converge)."""
+    if mask is not None and mask.sum() < 2 or not np.all(np.isfinite(sf)):  # NaN: fit not converged
+        return None
+    return _num(repeatability(sf if mask is None else sf[mask]))
+
+
+def _judge(dev, pts, compensator, solution, runs, train, full_scale):
+    """One device's compensation judged run by run, before and after, and over its held-out runs: (run
+    records, the device record)."""
+    converged, message = solution.status()
+    estimate = (np.asarray(solution.rate(pts.output, drive_freq_hz=pts.drive_freq_hz,
+                                         temperature_c=pts.temperature_c)) if converged else None)
+    run_records = []
+    sf_before, sf_after, held = [], [], []
+    worst_before, worst_after = [], []
+    for run in runs:
+        sel = pts.run == run
+        x = pts.rate_dps[sel]
+        before = fit_scale_factor(x, pts.output[sel], full_scale=full_scale)
+        after = fit_scale_factor(x, estimate[sel], full_scale=full_scale) if converged else None
+        trained = run in train
+        sf_before.append(float(before.scale_factor))
+        sf_after.append(float(after.scale_factor) if converged else math.nan)
+        held.append(not trained)
+        if not trained:
+            worst_before.append(float(before.nonlinearity_max_ppm))
+            if converged:
+                worst_after.append(float(after.nonlinearity_max_ppm))
+
+        def post(name):
+            return _num(getattr(after, name)) if converged else None
+
+        run_records.append({
+            "device": dev, "run": int(run), "used_for_training": bool(trained), "n_points": int(sel.sum()),
+            "converged": converged,
+            "scale_factor_before": _num(before.scale_factor), "scale_factor_after": post("scale_factor"),
+            "nonlinearity_max_ppm_before": _num(before.nonlinearity_max_ppm),
+            "nonlinearity_max_ppm_after": post("nonlinearity_max_ppm"),
+            "nonlinearity_rms_ppm_before": _num(before.nonlinearity_rms_ppm),
+            "nonlinearity_rms_ppm_after": post("nonlinearity_rms_ppm"),
+            "rates_dps": [float(v) for v in x],
+            "residuals_ppm_before": _ppm_list(before),
+            "residuals_ppm_after": _ppm_list(after) if converged else None,
+        })
+    sf_before, sf_after, held = np.asarray(sf_before), np.asarray(sf_after), np.asarray(held)
+    rep = _repeatability_or_none
+    device = {
+        "device": dev, "method": compensator.name, "train_runs": [int(r) for r in train],
+        "held_out_runs": [int(r) for r, h in zip(runs, held) if h], "n_runs": len(runs),
+        "repeatability_ppm_before": rep(sf_before), "repeatability_ppm_after": rep(sf_after),
+        "repeatability_ppm_before_held_out": rep(sf_before, held),
+        "repeatability_ppm_after_held_out": rep(sf_after, held),
+        "worst_nonlinearity_max_ppm_held_out_before": _worst(worst_before),
+        "worst_nonlinearity_max_ppm_held_out_after": _worst(worst_after),
+        "compensator": solution.summary(), "converged": converged, "message": message,
+    }
+    return run_records, device
+
+
 def compensate(table: Table, *, method: str | AbstractCompensator = "composite", train_runs=None,
                full_scale: str = "half_range", progress=True) -> CompensationResult:
     """Fit a scale-factor compensator on each device's training runs and judge it on its held-out runs.
@@ -171,32 +265,7 @@ def compensate(table: Table, *, method: str | AbstractCompensator = "composite",
     if full_scale not in FULL_SCALE_CONVENTIONS:
         raise ValueError(f"full_scale must be one of {', '.join(FULL_SCALE_CONVENTIONS)}, got {full_scale!r}.")
     compensator = _resolve_method(method)
-    groups = table.groups("rate_table")
-    if not groups:
-        present = sorted(set(table["sweep"].tolist()))
-        raise DataError(f"{table.source}: no rate_table rows to compensate; the table has {', '.join(present)}.",
-                        source=table.source, column="sweep")
-    devices: list[str] = []
-    runs_of: dict[str, list[int]] = {}
-    for dev, run, _ in groups:
-        if dev not in runs_of:
-            devices.append(dev)
-            runs_of[dev] = []
-        runs_of[dev].append(run)
-    for (dev, run, _), rows in groups.items():
-        if len(rows) < MIN_POINTS_LINEAR:
-            raise DataError(f"{table.locate(int(rows[0]))}: device {dev!r}, run {run} has {len(rows)} rate_table "
-                            f"point(s); judging a compensation needs at least {MIN_POINTS_LINEAR}.",
-                            source=table.source, row=int(rows[0]) + 1)
-    check_outputs_change(table, groups)
-    for (dev, run, _), rows in groups.items():
-        for name in compensator.requires:
-            values = table[name][rows] if name in table else np.full(len(rows), np.nan)
-            bad = rows[~np.isfinite(values)]
-            if bad.size:
-                raise DataError(f"{table.locate(int(bad[0]), name)}: {compensator.name} compensation needs "
-                                f"{name} on every rate_table point; device {dev!r}, run {run} lacks it.",
-                                source=table.source, row=int(bad[0]) + 1, column=name)
+    devices, runs_of = _check_rate_tables(table, compensator)
     train = _resolve_train_runs(train_runs, devices, runs_of)
 
     run_records, device_records, solutions = [], [], {}
@@ -215,55 +284,8 @@ def compensate(table: Table, *, method: str | AbstractCompensator = "composite",
         if not converged:
             warnings.warn(f"device {dev!r}, training runs {list(train[dev])}: {message}", RuntimeWarning,
                           stacklevel=2)
-        estimate = (np.asarray(solution.rate(pts.output, drive_freq_hz=pts.drive_freq_hz,
-                                             temperature_c=pts.temperature_c)) if converged else None)
-        sf_before, sf_after, held = [], [], []
-        worst_before, worst_after = [], []
-        for run in runs_of[dev]:
-            sel = pts.run == run
-            x = pts.rate_dps[sel]
-            before = fit_scale_factor(x, pts.output[sel], full_scale=full_scale)
-            after = fit_scale_factor(x, estimate[sel], full_scale=full_scale) if converged else None
-            trained = run in train[dev]
-            sf_before.append(float(before.scale_factor))
-            sf_after.append(float(after.scale_factor) if converged else math.nan)
-            held.append(not trained)
-            if not trained:
-                worst_before.append(float(before.nonlinearity_max_ppm))
-                if converged:
-                    worst_after.append(float(after.nonlinearity_max_ppm))
-
-            def post(name):
-                return _num(getattr(after, name)) if converged else None
-
-            run_records.append({
-                "device": dev, "run": int(run), "used_for_training": bool(trained), "n_points": int(sel.sum()),
-                "converged": converged,
-                "scale_factor_before": _num(before.scale_factor), "scale_factor_after": post("scale_factor"),
-                "nonlinearity_max_ppm_before": _num(before.nonlinearity_max_ppm),
-                "nonlinearity_max_ppm_after": post("nonlinearity_max_ppm"),
-                "nonlinearity_rms_ppm_before": _num(before.nonlinearity_rms_ppm),
-                "nonlinearity_rms_ppm_after": post("nonlinearity_rms_ppm"),
-                "rates_dps": [float(v) for v in x],
-                "residuals_ppm_before": _ppm_list(before),
-                "residuals_ppm_after": _ppm_list(after) if converged else None,
-            })
-        sf_before, sf_after, held = np.asarray(sf_before), np.asarray(sf_after), np.asarray(held)
-
-        def rep(sf, mask=None):
-            if mask is not None and mask.sum() < 2 or not np.all(np.isfinite(sf)):  # NaN: fit not converged
-                return None
-            return _num(repeatability(sf if mask is None else sf[mask]))
-
-        device_records.append({
-            "device": dev, "method": compensator.name, "train_runs": [int(r) for r in train[dev]],
-            "held_out_runs": [int(r) for r, h in zip(runs_of[dev], held) if h], "n_runs": len(runs_of[dev]),
-            "repeatability_ppm_before": rep(sf_before), "repeatability_ppm_after": rep(sf_after),
-            "repeatability_ppm_before_held_out": rep(sf_before, held),
-            "repeatability_ppm_after_held_out": rep(sf_after, held),
-            "worst_nonlinearity_max_ppm_held_out_before": _worst(worst_before),
-            "worst_nonlinearity_max_ppm_held_out_after": _worst(worst_after),
-            "compensator": solution.summary(), "converged": converged, "message": message,
-        })
+        runs, device = _judge(dev, pts, compensator, solution, runs_of[dev], train[dev], full_scale)
+        run_records += runs
+        device_records.append(device)
     return CompensationResult(method=compensator.name, runs=tuple(run_records), devices=tuple(device_records),
                               solutions=solutions, full_scale=full_scale)
