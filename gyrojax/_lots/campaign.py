@@ -106,32 +106,8 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     `drive_freq_hz` (settled PLL frequency; not given for vcf_dynamic and dac rows), `phase_deg`
     (vcf_dynamic sweeps) and `rate_dps` (dac sweeps: the rate the word stands for, seed 000 Table 2).
     """
-    sweeps = tuple(x.strip() for x in sweeps.split(",")) if isinstance(sweeps, str) else tuple(sweeps)
-    kinds = []
-    for s in sweeps:
-        try:
-            kinds.append(sweep_kind(s))
-        except ValueError:
-            raise ValueError(f"cannot simulate sweep {s!r}; choose from {', '.join(SWEEP_KINDS)}.") from None
-    if rates_dps is not None:  # the shorthand: these table rates for the rate table and the DAC sweep's words
-        kinds = [dataclasses.replace(k, rates_dps=rates_dps) if isinstance(k, (RateTable, Dac)) else k for k in kinds]
-    names = [k.name for k in kinds]
-    repeated = sorted({s for s in names if names.count(s) > 1})
-    if repeated:
-        raise ValueError(f"sweeps lists {', '.join(map(repr, repeated))} more than once; give each sweep once "
-                         "(repeats are runs).")
-    if not sweeps:
-        raise ValueError(f"sweeps is empty; choose from {', '.join(SWEEP_KINDS)}.")
-    if not isinstance(devices, int) or isinstance(devices, bool) or devices < 1:
-        raise ValueError(f"devices must be an integer >= 1, got {devices!r}.")
-    if not isinstance(runs, int) or isinstance(runs, bool) or runs < 1:
-        raise ValueError(f"runs must be an integer >= 1, got {runs!r}.")
-    if not isinstance(protocol, Protocol):
-        raise ValueError(f"protocol must be a gyrojax.Protocol, got {protocol!r}.")
-    if not isinstance(noise, RateNoise):
-        raise ValueError(f"noise must be a gyrojax.RateNoise, got {noise!r}.")
-    if not voltmeter_sigma_v >= 0:
-        raise ValueError(f"voltmeter_sigma_v must be >= 0 V, got {voltmeter_sigma_v!r}.")
+    kinds = _sweep_kinds(sweeps, rates_dps)
+    _check_lot_arguments(devices, runs, protocol, noise, voltmeter_sigma_v)
     for kind in kinds:
         kind.check_device(gyro)
 
@@ -153,51 +129,108 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     rate = next((k for k in kinds if isinstance(k, RateTable)),
                 RateTable() if rates_dps is None else RateTable(rates_dps=rates_dps))
     if rate in kinds or (not noise_free and any(k.rate_noise for k in kinds)):
-        # The rate-table sweep: an output, and each device's scale factor for the noise in LSB. The other
-        # settled sweeps (steady and set-point kinds) settle in the same call (one compiled program) when they
-        # use the same tier.
-        rate_tier = tier if rate in kinds else CAMPAIGN_TIER
         announce(rate, kinds.index(rate) + 1 if rate in kinds else 0)
-        shared = [rate] + [k for k in kinds if isinstance(k, AbstractSettledSweep) and k != rate
-                           and rate_tier is tier]
-        requests = tuple((k, jnp.asarray(campaign.applied(k, protocol.inputs(k, gyro))),
-                          jnp.asarray(campaign.temperatures(k)), jnp.asarray(campaign.times(k))) for k in shared)
-        steady = lot_steady(lot, requests, rate_tier)
-        raise_unsettled(steady[0].result, rate.title if rate in kinds
-                        else "rate-table (the noise-free sweep whose scale factor converts the noise to LSB)")
-        for k, settled in zip(shared[1:], steady[1:]):
-            raise_unsettled(settled.result, k.title)
-        rates_run = np.asarray(requests[0][1])
-        lsb_per_dps = np.abs(_slope(rates_run[0], np.asarray(steady[0].rate[:, 0], dtype=float)))
-        campaign = dataclasses.replace(campaign, lsb_per_dps=lsb_per_dps,
-                                       settled={k.name: s for k, s in zip(shared, steady) if k in kinds})
+        campaign = _settle_with_rate_table(lot, campaign, kinds, rate, tier)
+    campaign = _settle_the_rest(lot, campaign, kinds, structure, say)
 
-    rest = [k for k in kinds if isinstance(k, AbstractSettledSweep) and k.name not in campaign.settled]
-    if len(rest) > 1:
-        # The settled sweeps not settled with the rate table, in one call of the campaign's tier.
-        requests = tuple((k, jnp.asarray(campaign.applied(k, protocol.inputs(k, gyro))),
-                          jnp.asarray(campaign.temperatures(k)), jnp.asarray(campaign.times(k))) for k in rest)
-        say.compiling(("simulate", tuple(rest), structure, devices, runs, tier),
-                      "the measurement model of " + ", ".join(k.name for k in rest))
-        for k, settled in zip(rest, lot_steady(lot, requests, tier)):
-            raise_unsettled(settled.result, k.title)
-            campaign = dataclasses.replace(campaign, settled={**campaign.settled, k.name: settled})
-
-    prefix = device_prefix or gyro.name
-    device_ids = np.asarray([f"{prefix}-{i:03d}" for i in range(devices)])
     columns = []
     for k, kind in enumerate(kinds, 1):
         if kind != rate:
             announce(kind, k, compiles=kind.name not in campaign.settled)
-        cols = kind.simulate(lot, campaign)
-        full = cols["output"].shape
-        columns.append({
-            "device": np.broadcast_to(device_ids[:, None, None], full),
-            "run": np.broadcast_to(np.arange(runs)[None, :, None], full),
-            "sweep": np.full(full, kind.name),
-            **cols,
-        })
+        columns.append(_sweep_columns(kind, lot, campaign, device_prefix or gyro.name))
+    return _table_of(columns)
 
+
+def _sweep_columns(kind, lot, campaign: LotCampaign, prefix: str) -> dict:
+    """One sweep kind simulated on the lot, with its device names (`prefix`-000 ...), runs and kind, each
+    (device, run, point)."""
+    device_ids = np.asarray([f"{prefix}-{i:03d}" for i in range(campaign.devices)])
+    cols = kind.simulate(lot, campaign)
+    full = cols["output"].shape
+    return {
+        "device": np.broadcast_to(device_ids[:, None, None], full),
+        "run": np.broadcast_to(np.arange(campaign.runs)[None, :, None], full),
+        "sweep": np.full(full, kind.name),
+        **cols,
+    }
+
+
+def _sweep_kinds(sweeps, rates_dps) -> list:
+    """The sweep kinds of `sweeps` (names, a comma-separated string, or kinds), each once, with `rates_dps`
+    (the shorthand) as the rate table's rates and the DAC sweep's words."""
+    sweeps = tuple(x.strip() for x in sweeps.split(",")) if isinstance(sweeps, str) else tuple(sweeps)
+    kinds = []
+    for s in sweeps:
+        try:
+            kinds.append(sweep_kind(s))
+        except ValueError:
+            raise ValueError(f"cannot simulate sweep {s!r}; choose from {', '.join(SWEEP_KINDS)}.") from None
+    if rates_dps is not None:  # the shorthand: these table rates for the rate table and the DAC sweep's words
+        kinds = [dataclasses.replace(k, rates_dps=rates_dps) if isinstance(k, (RateTable, Dac)) else k for k in kinds]
+    names = [k.name for k in kinds]
+    repeated = sorted({s for s in names if names.count(s) > 1})
+    if repeated:
+        raise ValueError(f"sweeps lists {', '.join(map(repr, repeated))} more than once; give each sweep once "
+                         "(repeats are runs).")
+    if not sweeps:
+        raise ValueError(f"sweeps is empty; choose from {', '.join(SWEEP_KINDS)}.")
+    return kinds
+
+
+def _check_lot_arguments(devices, runs, protocol, noise, voltmeter_sigma_v) -> None:
+    """`simulate_table`'s lot size, runs, protocol and noise, each with what is expected."""
+    if not isinstance(devices, int) or isinstance(devices, bool) or devices < 1:
+        raise ValueError(f"devices must be an integer >= 1, got {devices!r}.")
+    if not isinstance(runs, int) or isinstance(runs, bool) or runs < 1:
+        raise ValueError(f"runs must be an integer >= 1, got {runs!r}.")
+    if not isinstance(protocol, Protocol):
+        raise ValueError(f"protocol must be a gyrojax.Protocol, got {protocol!r}.")
+    if not isinstance(noise, RateNoise):
+        raise ValueError(f"noise must be a gyrojax.RateNoise, got {noise!r}.")
+    if not voltmeter_sigma_v >= 0:
+        raise ValueError(f"voltmeter_sigma_v must be >= 0 V, got {voltmeter_sigma_v!r}.")
+
+
+def _settle_with_rate_table(lot, campaign: LotCampaign, kinds, rate: RateTable, tier) -> LotCampaign:
+    """The rate-table sweep settled: an output, and each device's scale factor for the noise in LSB. The other
+    settled sweeps (steady and set-point kinds) settle in the same call (one compiled program) when they use
+    the same tier. Returns the campaign with the scale factors and the settled sweeps."""
+    protocol, gyro = campaign.protocol, campaign.gyro
+    rate_tier = tier if rate in kinds else CAMPAIGN_TIER
+    shared = [rate] + [k for k in kinds if isinstance(k, AbstractSettledSweep) and k != rate
+                       and rate_tier is tier]
+    requests = tuple((k, jnp.asarray(campaign.applied(k, protocol.inputs(k, gyro))),
+                      jnp.asarray(campaign.temperatures(k)), jnp.asarray(campaign.times(k))) for k in shared)
+    steady = lot_steady(lot, requests, rate_tier)
+    raise_unsettled(steady[0].result, rate.title if rate in kinds
+                    else "rate-table (the noise-free sweep whose scale factor converts the noise to LSB)")
+    for k, settled in zip(shared[1:], steady[1:]):
+        raise_unsettled(settled.result, k.title)
+    rates_run = np.asarray(requests[0][1])
+    lsb_per_dps = np.abs(_slope(rates_run[0], np.asarray(steady[0].rate[:, 0], dtype=float)))
+    return dataclasses.replace(campaign, lsb_per_dps=lsb_per_dps,
+                               settled={k.name: s for k, s in zip(shared, steady) if k in kinds})
+
+
+def _settle_the_rest(lot, campaign: LotCampaign, kinds, structure, say) -> LotCampaign:
+    """The settled sweeps not settled with the rate table, in one call of the campaign's tier (where there are
+    several)."""
+    rest = [k for k in kinds if isinstance(k, AbstractSettledSweep) and k.name not in campaign.settled]
+    if len(rest) > 1:
+        protocol, gyro, tier = campaign.protocol, campaign.gyro, campaign.tier
+        requests = tuple((k, jnp.asarray(campaign.applied(k, protocol.inputs(k, gyro))),
+                          jnp.asarray(campaign.temperatures(k)), jnp.asarray(campaign.times(k))) for k in rest)
+        say.compiling(("simulate", tuple(rest), structure, campaign.devices, campaign.runs, tier),
+                      "the measurement model of " + ", ".join(k.name for k in rest))
+        for k, settled in zip(rest, lot_steady(lot, requests, tier)):
+            raise_unsettled(settled.result, k.title)
+            campaign = dataclasses.replace(campaign, settled={**campaign.settled, k.name: settled})
+    return campaign
+
+
+def _table_of(columns) -> Table:
+    """The simulated sweeps' columns as one table, in the data format's column order (NaN where a sweep lacks
+    a column)."""
     order = ["device", "run", "sweep", "input", "output", "output_sigma", "n_samples", "phase_deg",
              "temperature_c", "time_s", "drive_freq_hz", "rate_dps"]
     order += [c for c in OPTIONAL_COLUMNS if c not in order]
