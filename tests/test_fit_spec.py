@@ -92,3 +92,20 @@ def test_every_fit_of_a_diagnosis_uses_the_spec_solver(monkeypatch):
     d = gj.diagnose(table, "paper-qmg", spec=gj.FitSpec(solver="gauss-newton"), progress=False)
     assert "dac_inl" in d.selected
     assert len(seen) >= 2 and all(s == "gauss-newton" for s, _, _ in seen), seen
+
+
+def test_diagnose_holds_its_candidates_on_top_of_the_spec_hold(monkeypatch, small_table):
+    candidates = importlib.import_module("gyrojax._diagnose.candidates")
+    given = []
+
+    def stop(model, data, **kwargs):
+        given.append(kwargs["spec"])
+        raise _Stop
+
+    monkeypatch.setattr(candidates, "identify", stop)
+    spec = gj.FitSpec(hold=("q_y",), recovery=())
+    with pytest.raises(_Stop):
+        gj.diagnose(small_table, "paper-qmg", candidates=("dac_inl", "thermal_drift"), spec=spec, progress=False)
+    (used,) = given
+    assert used.hold == ("q_y", "dac_inl", "thermal_drift")
+    assert used.recovery == () and used.free == spec.free
