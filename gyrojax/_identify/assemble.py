@@ -33,6 +33,67 @@ def _message(converged, result_text, unsettled):
             "(solver='gauss-newton' or 'bfgs'), holding a parameter (free=...), or priors on the design values")
 
 
+def _covariances(jac, jac_lot, n: int, n_lot: int, n_free: int):
+    """(per-device covariance, the shared entries', their cross terms) of the internal coordinates: (J^T J)^+,
+    block-diagonal over devices unless some entries are shared (then the whole lot's normal matrix is
+    inverted)."""
+    if n_lot:
+        cov_all = covariance(joint_jacobian(jac, jac_lot))
+        cov_dev = np.stack([cov_all[d * n_free:(d + 1) * n_free, d * n_free:(d + 1) * n_free] for d in range(n)])
+        cov_lot = cov_all[n * n_free:, n * n_free:]
+        cross = np.stack([cov_all[d * n_free:(d + 1) * n_free, n * n_free:] for d in range(n)])
+    else:
+        cov_dev = covariance(jac)
+        cov_lot = np.zeros((0, 0))
+        cross = np.zeros((n, n_free, 0))
+    return cov_dev, cov_lot, cross
+
+
+def _sf_stderr(g, g_lot, cov_dev, cov_lot, cross, n_lot: int):
+    """The scale factor's standard error per device from its gradients (per device `g`, shared `g_lot`)."""
+    var = np.einsum("di,dij,dj->d", g, cov_dev, g)
+    if n_lot:
+        var = var + np.einsum("di,ij,dj->d", g_lot, cov_lot, g_lot) + 2 * np.einsum("di,dij,dj->d", g, cross, g_lot)
+    return np.sqrt(np.maximum(var, 0.0))
+
+
+def _statuses(data, predictions, ok, failed, determined, noise_ok, noise_notes, rejected, implausible, chi2, dof,
+              chi2_red, p_value, reject_alpha, cand_names, weak_part, n_free, threshold):
+    """Each device's status (not converged, not determined, model rejected, ok) and its warnings, with the
+    reasons in words."""
+    n = len(data.devices)
+    status, warnings = [], []
+    for d in range(n):
+        notes_d = []
+        if not ok[d] or failed[d]:
+            status.append("not converged")
+        elif not determined[d] or not noise_ok[d]:
+            status.append("not determined")
+            if not determined[d]:
+                notes_d.append(undetermined_reason(data, d, list(cand_names), weak_part[d], n_free, threshold))
+            else:  # the reason first: the noise (hence every uncertainty) is what the data leave open
+                notes_d.append(noise_notes[d][-1])
+        elif rejected[d] or implausible[d]:
+            status.append("model rejected")
+        else:
+            status.append("ok")
+        if rejected[d] and status[d] != "not converged":
+            notes_d.append(f"the model does not describe the data: chi2 {chi2[d]:.4g} over {int(dof[d])} degrees of "
+                           f"freedom has {p_text(p_value[d])} < reject_alpha = {reject_alpha:g}; the standard errors "
+                           f"are also given scaled by sqrt(chi2_red) = {math.sqrt(chi2_red[d]):.3g} (stderr_scaled). "
+                           "gyrojax.compare shows where the misfit sits")
+        if chi2_red[d] > ASTRONOMICAL_CHI2_RED and status[d] != "not converged":
+            hint = scale_hint(data, predictions, d)
+            notes_d.append(f"chi2_red {chi2_red[d]:.3g}: the solve stopped (its steps no longer lowered the chi2) "
+                           f"~{math.sqrt(chi2_red[d]):.2g} standard errors per point from the data: this is no fit "
+                           "of them" + (f"; {hint}" if hint else ": check the units of output and output_sigma"))
+        if dof[d] <= 0 and status[d] != "not converged":
+            notes_d.append(f"no degrees of freedom are left ({int(dof[d])}): nothing tests the model")
+        notes_d += implausible[d] + [w for w in noise_notes[d] if w not in notes_d]
+        warnings.append(tuple(notes_d))
+    return status, warnings
+
+
 def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index, solution: Solution, held_reports,
                  threshold: float, reject_alpha: float, noise) -> Fit:
     """The `Fit` of `solution`: covariance and physical values with standard errors (free parameters
@@ -51,15 +112,7 @@ def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index
     # Covariance of the internal coordinates: (J^T J)^+, block-diagonal over devices unless some entries
     # are shared (then the whole lot's normal matrix is inverted). Data without output_sigma were weighted by
     # their estimated noise before this (`identify`), so the covariance is that of the weights in both cases.
-    if n_lot:
-        cov_all = covariance(joint_jacobian(jac, jac_lot))
-        cov_dev = np.stack([cov_all[d * f.size:(d + 1) * f.size, d * f.size:(d + 1) * f.size] for d in range(n)])
-        cov_lot = cov_all[n * f.size:, n * f.size:]
-        cross = np.stack([cov_all[d * f.size:(d + 1) * f.size, n * f.size:] for d in range(n)])
-    else:
-        cov_dev = covariance(jac)
-        cov_lot = np.zeros((0, 0))
-        cross = np.zeros((n, f.size, 0))
+    cov_dev, cov_lot, cross = _covariances(jac, jac_lot, n, n_lot, f.size)
     cov_full = np.zeros((n, n_dev, n_dev))
     cov_full[:, f[:, None], f[None, :]] = cov_dev
     values, stderr = _physical(problem_all.start, entries, u_full, cov_full, f, shared=False)
@@ -70,10 +123,7 @@ def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index
                                               data.unlabelled().blocks, final.predictions)
     g = np.asarray(final.sf_grad)[:, f]
     g_lot = np.asarray(final.sf_grad_lot)
-    var = np.einsum("di,dij,dj->d", g, cov_dev, g)
-    if n_lot:
-        var = var + np.einsum("di,ij,dj->d", g_lot, cov_lot, g_lot) + 2 * np.einsum("di,dij,dj->d", g, cross, g_lot)
-    sf_stderr = np.sqrt(np.maximum(var, 0.0))
+    sf_stderr = _sf_stderr(g, g_lot, cov_dev, cov_lot, cross, n_lot)
     failed = np.asarray(final.failed)
     ok = np.asarray(code) == result_code(RESULTS.successful)
     messages = [_message(bool(o), "" if o else result_message(c).split(".")[0], int(fl))
@@ -98,36 +148,9 @@ def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index
     chi2_red = chi2 / np.maximum(dof, 1)
     rejected = np.nan_to_num(p_value, nan=1.0) < reject_alpha
     implausible = implausible_values(entries, problem_all.start, values, lot_values[0], free_mask, n)
-    status, warnings = [], []
-    for d in range(n):
-        notes_d = []
-        if not ok[d] or failed[d]:
-            status.append("not converged")
-        elif not determined[d] or not noise_ok[d]:
-            status.append("not determined")
-            if not determined[d]:
-                notes_d.append(undetermined_reason(data, d, [names_dev[i] for i in cand] + list(names_lot),
-                                                    weak_part[d], f.size, threshold))
-            else:  # the reason first: the noise (hence every uncertainty) is what the data leave open
-                notes_d.append(noise_notes[d][-1])
-        elif rejected[d] or implausible[d]:
-            status.append("model rejected")
-        else:
-            status.append("ok")
-        if rejected[d] and status[d] != "not converged":
-            notes_d.append(f"the model does not describe the data: chi2 {chi2[d]:.4g} over {int(dof[d])} degrees of "
-                           f"freedom has {p_text(p_value[d])} < reject_alpha = {reject_alpha:g}; the standard errors "
-                           f"are also given scaled by sqrt(chi2_red) = {math.sqrt(chi2_red[d]):.3g} (stderr_scaled). "
-                           "gyrojax.compare shows where the misfit sits")
-        if chi2_red[d] > ASTRONOMICAL_CHI2_RED and status[d] != "not converged":
-            hint = scale_hint(data, final.predictions, d)
-            notes_d.append(f"chi2_red {chi2_red[d]:.3g}: the solve stopped (its steps no longer lowered the chi2) "
-                           f"~{math.sqrt(chi2_red[d]):.2g} standard errors per point from the data: this is no fit "
-                           "of them" + (f"; {hint}" if hint else ": check the units of output and output_sigma"))
-        if dof[d] <= 0 and status[d] != "not converged":
-            notes_d.append(f"no degrees of freedom are left ({int(dof[d])}): nothing tests the model")
-        notes_d += implausible[d] + [w for w in noise_notes[d] if w not in notes_d]
-        warnings.append(tuple(notes_d))
+    status, warnings = _statuses(data, final.predictions, ok, failed, determined, noise_ok, noise_notes, rejected,
+                                 implausible, chi2, dof, chi2_red, p_value, reject_alpha,
+                                 [names_dev[i] for i in cand] + list(names_lot), weak_part, f.size, threshold)
     undetermined = np.array([s == "not determined" for s in status])
     messages = tuple(f"{m}, but far from the data (chi2_red {chi2_red[d]:.3g})"
                      if m == "converged" and chi2_red[d] > ASTRONOMICAL_CHI2_RED else m for d, m in enumerate(messages))
