@@ -57,10 +57,6 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print, progress: bool 
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    import gyrojax as gj
-    from gyrojax._units import DEG
 
     os.makedirs(out_dir, exist_ok=True)
     summary = {"versions": _versions()}
@@ -68,6 +64,33 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print, progress: bool 
     log(f"writing the demo's report, data and plots into {out_dir}")
 
     # 1. a hidden effect
+    summary["diagnosis"] = _demo_hidden_effect(out_dir, log, progress)
+
+    # 2. Table 2
+    log("[2/4] seed 000 Table 2: DAC nonlinearity of the embedded data")
+    summary["table2"], rate_dps, t2_res = _demo_table2(log)
+
+    # 2. three tiers
+    log("[3/4] paper-qmg + dac_inl on 22 rates in the steady, averaged"
+        + (" and full-waveform tiers (the full tier takes a minute)" if full_tier else " tiers"))
+    summary["tiers"] = _demo_tiers(out_dir, full_tier, rate_dps, t2_res, log)
+
+    # 3. seed 003 bandwidth
+    log("[4/4] vcf-2018: rate frequency response and bandwidth")
+    summary["seed003"] = _demo_bandwidth(out_dir, log)
+
+    summary["seconds"] = time.perf_counter() - t0
+    atomic_write_bytes(os.path.join(out_dir, "summary.json"), json.dumps(summary, indent=2).encode())
+    atomic_write_bytes(os.path.join(out_dir, "report.md"), _report(summary).encode())
+    log(f"wrote report.md, summary.json, plots and diagnosis/ to {out_dir} in {summary['seconds']:.0f} s")
+    return summary
+
+
+def _demo_hidden_effect(out_dir: str, log, progress: bool) -> dict:
+    """Step 1: the demo's lot with a hidden effect simulated, written, read back and diagnosed (a report in
+    `out_dir`/diagnosis). Returns the diagnosis's summary."""
+    import gyrojax as gj
+
     from ._diagnose import diagnose, write_report
 
     log(f"[1/4] a lot of {DEMO_LOT['devices']} paper-qmg devices x {DEMO_LOT['runs']} runs with a hidden effect: "
@@ -88,11 +111,15 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print, progress: bool 
     write_report(diag, os.path.join(out_dir, "diagnosis"))
     for line in diag.summary().splitlines():
         log("      " + line)
-    summary["diagnosis"] = {**diag.to_json(), "hidden_effect": HIDDEN_EFFECT,
-                            "found": HIDDEN_EFFECT in diag.selected or any(HIDDEN_EFFECT in g for g in diag.ambiguous)}
+    return {**diag.to_json(), "hidden_effect": HIDDEN_EFFECT,
+            "found": HIDDEN_EFFECT in diag.selected or any(HIDDEN_EFFECT in g for g in diag.ambiguous)}
 
-    # 2. Table 2
-    log("[2/4] seed 000 Table 2: DAC nonlinearity of the embedded data")
+
+def _demo_table2(log):
+    """Step 2: seed 000 Table 2's DAC nonlinearity against the word and the rate. Returns (its summary, the
+    rates, the residuals against the rate in ppm of full scale)."""
+    import gyrojax as gj
+
     table = gj.read_table(table2_path())
     words, volts, rate_dps = table["input"], table["output"], table["rate_dps"]
     t2 = {}
@@ -101,14 +128,18 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print, progress: bool 
         t2[against] = {"max_ppm": float(fit.nonlinearity_max_ppm), "rms_ppm": float(fit.nonlinearity_rms_ppm)}
         if against == "rate":
             t2_res = np.asarray(fit.residuals) / float(fit.full_scale) * 1e6
-    summary["table2"] = {**t2, "paper_ppm": 460.679,
-                         "matches": "RMS residual / full scale, against the rate"}
+    out = {**t2, "paper_ppm": 460.679, "matches": "RMS residual / full scale, against the rate"}
     log(f"      vs rate: max {t2['rate']['max_ppm']:.1f} ppm, RMS {t2['rate']['rms_ppm']:.1f} ppm "
         f"(paper: 460.679 ppm)")
+    return out, rate_dps, t2_res
 
-    # 2. three tiers
-    log("[3/4] paper-qmg + dac_inl on 22 rates in the steady, averaged"
-        + (" and full-waveform tiers (the full tier takes a minute)" if full_tier else " tiers"))
+
+def _demo_tiers(out_dir: str, full_tier: bool, rate_dps, t2_res, log) -> dict:
+    """Step 3: paper-qmg with a DAC INL on seed 000's 22 rates in each tier, against each other and Table 2's
+    residuals (a plot in `out_dir`). Returns each tier's row."""
+    import gyrojax as gj
+    from gyrojax._units import DEG
+
     gyro = gj.add_effect(gj.paper_qmg(), "dac_inl")
     rates = gj.ding_zhou_2025_rates()
     x = np.asarray(rates) / DEG
@@ -132,7 +163,13 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print, progress: bool 
     fs = np.max(np.abs(ref))
     for name in tiers:
         tier_rows[name]["max_point_difference_ppm_fs"] = float(np.max(np.abs(curves[name][1] - ref)) / fs * 1e6)
-    summary["tiers"] = tier_rows
+    _plot_tiers(out_dir, x, curves, ref, fs, rate_dps, t2_res, full_tier, len(tiers))
+    return tier_rows
+
+
+def _plot_tiers(out_dir, x, curves, ref, fs, rate_dps, t2_res, full_tier, n_tiers) -> None:
+    """The tiers' nonlinearity against Table 2's, and against each other."""
+    import matplotlib.pyplot as plt
 
     fig, (ax, diff) = plt.subplots(1, 2, figsize=(12, 4))
     for name, (res, _) in curves.items():
@@ -148,10 +185,10 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print, progress: bool 
         a.set_xlabel("input rate (deg/s)")
         a.grid(alpha=0.3)
     ax.set_ylabel("residual / full scale (ppm)")
-    ax.set_title(f"scale-factor nonlinearity, paper-qmg + dac_inl: {len(tiers)} tiers", fontsize=9)
+    ax.set_title(f"scale-factor nonlinearity, paper-qmg + dac_inl: {n_tiers} tiers", fontsize=9)
     ax.legend(fontsize=7)
     ref_name = "full" if full_tier else "steady"
-    for name in tiers:
+    for name in curves:
         if name != ref_name:
             diff.plot(x, (curves[name][1] - ref) / fs * 1e6, "o-", ms=3, label=f"{name} - {ref_name}")
     diff.set_ylabel("tier difference (ppm of full scale)")
@@ -162,15 +199,20 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print, progress: bool 
     _save_figure(fig, os.path.join(out_dir, "nonlinearity_tiers.png"))
     plt.close(fig)
 
-    # 3. seed 003 bandwidth
-    log("[4/4] vcf-2018: rate frequency response and bandwidth")
+
+def _demo_bandwidth(out_dir: str, log) -> dict:
+    """Step 4: vcf-2018's rate frequency response and bandwidth against seed 003's (a plot in `out_dir`).
+    Returns its summary."""
+    import matplotlib.pyplot as plt
+
+    import gyrojax as gj
+
     response = gj.linearise(gj.vcf_2018())  # one linearisation serves the plot and the bandwidth
     bw = response.bandwidth()
     f = np.geomspace(1, 1000, 400)
     h = np.asarray(response.response(2 * np.pi * f))
     h0 = abs(complex(np.asarray(response.response(np.zeros(1)))[0]))
-    summary["seed003"] = {"bandwidth_model_hz": bw, "bandwidth_paper_measured_hz": 354.3,
-                          "bandwidth_paper_simulated_hz": 349.5}
+    out = {"bandwidth_model_hz": bw, "bandwidth_paper_measured_hz": 354.3, "bandwidth_paper_simulated_hz": 349.5}
     log(f"      model bandwidth {bw:.1f} Hz; paper reports 354.3 Hz (measured) / 349.5 Hz (simulated): "
         f"{BANDWIDTH_NOTE}")
     fig, ax = plt.subplots(figsize=(7, 4))
@@ -186,12 +228,7 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print, progress: bool 
     ax.grid(alpha=0.3)
     _save_figure(fig, os.path.join(out_dir, "vcf2018_rate_response.png"))
     plt.close(fig)
-
-    summary["seconds"] = time.perf_counter() - t0
-    atomic_write_bytes(os.path.join(out_dir, "summary.json"), json.dumps(summary, indent=2).encode())
-    atomic_write_bytes(os.path.join(out_dir, "report.md"), _report(summary).encode())
-    log(f"wrote report.md, summary.json, plots and diagnosis/ to {out_dir} in {summary['seconds']:.0f} s")
-    return summary
+    return out
 
 
 def _versions():
