@@ -125,7 +125,7 @@ def test_noise_free_outputs_are_the_observe_predictions(which, qmg, vcf):
         settled = lot_steady(lot, (request,), gj.CAMPAIGN_TIER)[0]
         np.testing.assert_array_equal(np.asarray(settled.rate), np.asarray(arr.outputs))
     arr = t.to_arrays("vcf_dynamic")
-    amp, phase = sweeps_vcf_dynamic._lot_vcf_dynamic(lot, arr.inputs[0, 0], arr.temperatures, 0.02)
+    amp, phase = sweeps_vcf_dynamic._lot_vcf_dynamic(lot, arr.inputs[0, 0], arr.temperatures, 0.02, gj.VCF_CARRIER_V)
     np.testing.assert_array_equal(np.asarray(amp), np.asarray(arr.outputs))
     np.testing.assert_array_equal(np.asarray(phase), np.asarray(arr.aux["phase_deg"]))
     if which == "qmg":

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
+from gyrojax._model.parameters import DEFAULT_FREE
 from gyrojax._plan.absorb import absorption
 from gyrojax._sweeps.drive_amplitude import AMPLITUDE_SIGMA_PPM
 from gyrojax._sweeps.drive_frequency import FREQUENCY_SIGMA_PPM
@@ -218,7 +219,7 @@ def test_full_waveform_agrees(qmg):
 def test_baseline_leaves_the_fingerprints(qmg):
     """After the baseline's free parameters (and run biases, a meter gain) absorb what they can, each effect's
     fingerprint stays many sigmas; a zero effect leaves nothing."""
-    free = gj._parameters.DEFAULT_FREE
+    free = DEFAULT_FREE
     s = _setpoints(qmg)
 
     def drive(d):

@@ -91,4 +91,4 @@ def vcf_static_points(gyro: Gyroscope, amplitudes_v: Float[ArrayLike, " point"],
                       *, times: Float[ArrayLike, "*#point"] | None = None) -> Settled:
     """Settled static virtual-Coriolis points (seed 003 Eq. 7): the virtual-rate voltage V_ac (V, signed)
     times the fixed carrier V_fc, one die temperature and optionally one time since power-on per point."""
-    return settled_points(gyro, [(VcfStatic(carrier_v), amplitudes_v, temperatures, times)], tier)[0]
+    return settled_points(gyro, [(VcfStatic(carrier_v=carrier_v), amplitudes_v, temperatures, times)], tier)[0]
