@@ -165,12 +165,17 @@ def test_progress_line():
 FREE = ("k_vf", "sense_gain")
 
 
+def _lot_file(tmp_path_factory, devices: int) -> str:
+    pytest.importorskip("distributed")
+    path = str(tmp_path_factory.mktemp("lot") / f"lot{devices}.csv")
+    gj.write_table(gj.simulate_table(gj.paper_qmg(), devices=devices, sweeps=("rate_table",), seed=3,
+                                     progress=False), path)
+    return path
+
+
 @pytest.fixture(scope="module")
 def lot8(tmp_path_factory):
-    pytest.importorskip("distributed")
-    path = str(tmp_path_factory.mktemp("lot") / "lot8.csv")
-    gj.write_table(gj.simulate_table(gj.paper_qmg(), devices=8, sweeps=("rate_table",), seed=3, progress=False), path)
-    return path
+    return _lot_file(tmp_path_factory, 8)
 
 
 def _children():
@@ -181,10 +186,7 @@ def _children():
 
 @pytest.fixture(scope="module")
 def lot64(tmp_path_factory):
-    pytest.importorskip("distributed")
-    path = str(tmp_path_factory.mktemp("lot") / "lot64.csv")
-    gj.write_table(gj.simulate_table(gj.paper_qmg(), devices=64, sweeps=("rate_table",), seed=3, progress=False), path)
-    return path
+    return _lot_file(tmp_path_factory, 64)
 
 
 @pytest.mark.slow
