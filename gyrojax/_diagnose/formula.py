@@ -206,21 +206,27 @@ def dictionary(fit, sweeps, *, step_at: float | None = None, period: float | Non
     return terms
 
 
-def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, max_terms: int = MAX_TERMS,
-            space: ResidualSpace | None = None, allowed=None):
-    """A sparse formula for the misfit at `location` (a `Location` of `locate`; `step_at`, `period`: where its
-    scans found a step and a period), or None when no term of the dictionary is significant. The formula is
-    `complete` when the location's flexible description is not significant beyond it. `allowed(term, columns)`,
-    where given, says which terms (a `Term` and its standardised columns) the dictionary keeps."""
-    space = space or ResidualSpace(fit)
+def _location_dictionary(fit, location, space, step_at, period):
+    """The dictionary on `location`'s sweeps (each alone and together) and each term's standardised columns."""
     groups = [(s,) for s in location.located_on]
     if len(location.located_on) > 1:
         groups.append(tuple(location.located_on))
     loc = location.location
     terms = dictionary(fit, groups, step_at=loc.get("at", step_at), period=loc.get("period", period))
+    return terms, {id(t): _columns(space, t) for t in terms}
+
+
+def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, max_terms: int = MAX_TERMS,
+            space: ResidualSpace | None = None, allowed=None, prepared=None):
+    """A sparse formula for the misfit at `location` (a `Location` of `locate`; `step_at`, `period`: where its
+    scans found a step and a period), or None when no term of the dictionary is significant. The formula is
+    `complete` when the location's flexible description is not significant beyond it. `allowed(term, columns)`,
+    where given, says which terms (a `Term` and its standardised columns) the dictionary keeps; `prepared`, the
+    dictionary and columns of `space` already built for this location (`_location_dictionary`)."""
+    space = space or ResidualSpace(fit)
+    terms, cols = prepared or _location_dictionary(fit, location, space, step_at, period)
     if not terms:
         return None
-    cols = {id(t): _columns(space, t) for t in terms}
     size = len(terms)  # the family the Bonferroni cut counts, whatever `allowed` keeps
     cut = alpha / size
     if allowed is not None:
@@ -335,10 +341,12 @@ def propose_along(fit, location, **kw):
     one, the first formula found."""
     own = {location.coordinate} | ({"model"} if location.coordinate == "input" else set()) | (
         {""} if location.coordinate == "run" else set())
+    space = ResidualSpace(fit)  # one dictionary and its columns for the three searches
+    prepared = _location_dictionary(fit, location, space, kw.get("step_at"), kw.get("period"))
     found = []
     for along in (own, own | set(location.confounded_with), None):
         allowed = None if along is None else (lambda t, _, along=along: t.coordinate in along)
-        f = propose(fit, location, allowed=allowed, **kw)
+        f = propose(fit, location, allowed=allowed, space=space, prepared=prepared, **kw)
         if f is not None:
             found.append(f)
     complete = [f for f in found if f.complete]
