@@ -210,7 +210,9 @@ class Hidden:
     - `sweeps`: the sweep kinds whose outputs it changes; `coordinate`: the recorded column it varies with
       (`input`, `temperature_c`, `time_s`, `drive_freq_hz`, `run`, `device`, or `model` for a pure gain);
       `library`: the gyrojax effect it is, or None; `formula`: canonical terms that express it (None: no simple
-      term does); `unit`: the unit of its size; `fn(lot)`: the output change per row at unit size."""
+      term does); `unit`: the unit of its size; `fn(lot)`: the output change per row at unit size;
+      `drive_shift(lot)`: the relative change of the drive-frequency reading per row at unit size (None: the
+      effect leaves the drive resonance alone)."""
 
     name: str
     sweeps: frozenset
@@ -220,12 +222,13 @@ class Hidden:
     unit: str
     fn: Callable
     description: str
+    drive_shift: Callable | None = None
 
 
-def _h(name, sweeps, coordinate, library, formula, unit, description):
+def _h(name, sweeps, coordinate, library, formula, unit, description, drive_shift=None):
     def wrap(fn):
         return Hidden(name, frozenset(sweeps), coordinate, library, None if formula is None else frozenset(formula),
-                      unit, fn, description)
+                      unit, fn, description, drive_shift)
     return wrap
 
 
@@ -260,11 +263,15 @@ HIDDEN_LIST = [
     _h("vref_drift_spread", RV, "temperature_c", "vref_drift", GAIN_T, "1/K",
        "feedback reference drift, 50 % part-to-part spread")(
         lambda lot: lot.clean * _dT(lot) * _mask(lot, *RV) * _device_spread(lot, 4, 0.5)),
+    # closed loop, SF ~ omega_d: the extra TCF moves the rate gain and every drive-frequency reading alike (the
+    # VCF rows' too: the resonance does not know which sweep runs)
     _h("thermal_drift", ("rate_table",), "temperature_c", "thermal_drift", GAIN_T, "1/K",
-       "extra drive-resonance TCF: the rate scale factor (and the drive-frequency reading) follow it")(
+       "extra drive-resonance TCF: the rate scale factor (and the drive-frequency reading) follow it",
+       drive_shift=_dT)(
         lambda lot: lot.clean * _dT(lot) * _mask(lot, "rate_table")),
     _h("thermal_drift_spread", ("rate_table",), "temperature_c", "thermal_drift", GAIN_T, "1/K",
-       "extra drive-resonance TCF of 50 % part-to-part spread")(
+       "extra drive-resonance TCF of 50 % part-to-part spread",
+       drive_shift=lambda lot: _dT(lot) * _device_spread(lot, 5, 0.5))(
         lambda lot: lot.clean * _dT(lot) * _mask(lot, "rate_table") * _device_spread(lot, 5, 0.5)),
     # --- outside the library ----------------------------------------------------------------------------------
     _h("vcf_gain_tempco", ("vcf_static",), "temperature_c", None, GAIN_T, "1/K",
@@ -276,11 +283,12 @@ HIDDEN_LIST = [
     _h("bias_dTdt", RV, "dtemperature_dt", None, ("lin(dtemperature_dt)",), "deg/s per (K/min)",
        "a zero-rate output proportional to dT/dt (a thermal gradient across the die)")(
         lambda lot: lot.fs_rate / OMEGA_FS_DPS * 60.0 * lot.dtdt * _mask(lot, *RV)),
-    _h("rate_saturation", ("rate_table",), "input", None, None, "relative gain above 100 deg/s",
+    _h("rate_saturation", ("rate_table",), "input", None, ("hinge(input)",), "relative gain above 100 deg/s",
        "table-rate saturation: the output loses c of each deg/s above 100 deg/s")(
         lambda lot: -lot.sf * np.sign(_x(lot)) * np.clip(np.abs(_x(lot)) - 100.0, 0, None)
         * _mask(lot, "rate_table")),
-    _h("temp_x_abs_input", RV, "temperature_c", None, ("lin(temperature_c)*abs(input)",), "fraction of FS per K",
+    _h("temp_x_abs_input", RV, "temperature_c", None,
+       ("lin(temperature_c)*abs(input)", "lin(temperature_c)*abs(model)"), "fraction of FS per K",
        "an even gain that grows with temperature: c (T - 25) |s| W")(
         lambda lot: lot.fs_rate * _dT(lot) * np.abs(_s(lot)) * _mask(lot, *RV)),
     _h("dac_periodic", ("dac",), "input", None, ("periodic(input)",), "fraction of full scale",
@@ -381,12 +389,8 @@ def discovery_lot(hidden: str | None = None, *, snr: str = "mid", design: str = 
                     visible_sweeps=sorted(s for s, v in shares.items() if v >= 0.2),
                     sweeps=sorted(h.sweeps), coordinate=h.coordinate, library=h.library,
                     formula=None if h.formula is None else sorted(h.formula), description=h.description)
-        if hidden.startswith("thermal_drift"):
-            # the extra TCF moves the drive resonance too: the frequency reading follows it
-            rate = columns["sweep"] == "rate_table"
-            ratio = np.where(rate & (rows["clean"] != 0), delta / np.where(rows["clean"] == 0, 1, rows["clean"]), 0)
-            columns["drive_freq_hz"] = np.where(rate, columns["drive_freq_hz"] * (1.0 + ratio),
-                                                columns["drive_freq_hz"])
+        if h.drive_shift is not None:  # the effect moves the drive resonance: the frequency readings follow it
+            columns["drive_freq_hz"] = columns["drive_freq_hz"] * (1.0 + size * h.drive_shift(lot))
     noise = rows["sigma"] * rng.normal(size=rows["sigma"].size)
     columns["output"] = rows["clean"] + rows["bias"] + delta + noise
     table = Table.from_columns({k: np.asarray(v) for k, v in columns.items()},

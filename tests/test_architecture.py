@@ -201,7 +201,6 @@ MAX_FUNCTION_LINES = 80
 LONG_FUNCTIONS = {
     "gyrojax/_identify/population.py::population_fit": 143,
     "gyrojax/_compensate/model.py::_fit_arrays": 94,
-    "gyrojax/_diagnose/formula.py::dictionary": 87,
     "gyrojax/_diagnose/draft.py::draft_effect_source": 82,
 }
 

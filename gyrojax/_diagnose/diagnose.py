@@ -24,6 +24,7 @@ from .formula import formula_coordinate, propose_along, term_size
 from .guards import MAX_TYPICAL_MULTIPLE, Rejection, contradictions, probe_guard, verdict_of
 from .locate import locate
 from .probes import PROBES
+from .record import record_guard
 from .rival import rival_guard
 from .score import cosine, score_candidates, separating_sweep
 from .solution import Diagnosis, Step
@@ -90,7 +91,7 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
 
     _select(s, list(candidates), fit_with, comparison, data, probes, alpha=alpha, max_effects=max_effects,
             ambiguity=ambiguity, min_typical_chi2=min_typical_chi2, max_typical_multiple=max_typical_multiple,
-            say=say)
+            tier=spec.tier, say=say)
     ranking0 = () if s.ranking0 is None else s.ranking0
     # Which library effect has the shape of what is left: every candidate not selected, at the final fit.
     others = [c for c in candidates if c not in s.selected]
@@ -177,7 +178,7 @@ def _first_ranking(scores):
 
 
 def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, *, alpha, max_effects, ambiguity,
-            min_typical_chi2, max_typical_multiple, say) -> None:
+            min_typical_chi2, max_typical_multiple, tier, say) -> None:
     """Add the significant candidates of `remaining` to `s` one at a time, each scored at the current fit,
     guarded, refitted (`fit_with`) and confirmed, until none is significant or `max_effects` are."""
     if remaining and max_effects == 0:  # rank at the baseline only
@@ -209,7 +210,7 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
         lr, df, df_total, p_lr, delta_bic = _likelihood_ratio(s.fit, new, data)
         remaining.remove(best.effect)
         rejection, q, rival_alike = _refit_rejection(s.fit, s.located, s.family, new, best, df, df_total, p_lr,
-                                                     delta_bic, n_tried, comparison, alpha)
+                                                     delta_bic, n_tried, comparison, alpha, tier)
         if rejection is not None:
             s.rejected.append(rejection)
             continue
@@ -263,7 +264,8 @@ def _likelihood_ratio(fit, new, data):
     return lr, df, df_total, p_lr, delta_bic
 
 
-def _refit_rejection(fit, located, family, new, best, df, df_total, p_lr, delta_bic, n_tried, comparison, alpha):
+def _refit_rejection(fit, located, family, new, best, df, df_total, p_lr, delta_bic, n_tried, comparison, alpha,
+                     tier):
     """The guards after the refit `new` of `fit` with `best`, in order: (the first rejection or None, the
     refit's false-discovery q-value where it was reached, a closed form of another shape about as good or None).
     `family` (every refit's selection-corrected p-value) gains this refit's where the control is reached."""
@@ -281,6 +283,9 @@ def _refit_rejection(fit, located, family, new, best, df, df_total, p_lr, delta_
     beyond = encompassing_guard(fit, new, best.effect, located, df_total, alpha)
     if beyond is not None:
         return Rejection(best.effect, beyond, kind="not its shape"), None, None
+    recorded = record_guard(fit, new, best.effect, tier)
+    if recorded is not None:
+        return Rejection(best.effect, recorded, kind="contradicted by drive_freq_hz"), None, None
     against, rival_alike = rival_guard(fit, new, best.effect, df_total, located, alpha=alpha)
     if against is not None:
         return Rejection(best.effect, against, kind="a closed form of another shape as good"), None, rival_alike

@@ -1,12 +1,14 @@
 r"""The missing term's formula: a sparse closed form over a dictionary of terms in the recorded coordinates.
 
 The dictionary holds, for the sweeps a misfit was located on (each alone and together), terms of one coordinate
-(`lin`, `sq`, `cube` of its distance from a reference; `abs` and `sign` of the input and of dT/dt, and a `step`
-between two set points of the input; a `step` and an exponential `relax`ation along the time since power-on; a
-`periodic` error along the input), each as an offset of the output and as a gain (times the model's prediction,
-written `*model`), the products of the temperature and the time with the input, the square and cube of the model's
-output itself (a compression of the readout or the amplifier), and a gain per run. Each term has a coefficient per
-device.
+(`lin`, `sq`, `cube` of its distance from a reference; `abs` and `sign` of the input and of dT/dt; a `step`
+between two set points of the input and an odd `hinge`, a gain change beyond an input magnitude (a saturation);
+a `step` and an exponential `relax`ation along the time since power-on; a `periodic` error along the input),
+each as an offset of the output and as a gain (times the model's prediction, written `*model`), the products of
+the temperature and the time with the input, the square and cube of the model's output itself (a compression of
+the readout or the amplifier), a gain per run, and, on sweeps of different input units together, the same terms
+of the model's output in the input's place (`abs(model)`, `lin(temperature_c)*abs(model)`, ...). Each term has
+a coefficient per device.
 
 Forward selection with the score test: at each step the term that removes the most chi2 beyond the fit's own
 columns and the terms already chosen is kept if its p-value is below `alpha` over the number of terms in the
@@ -16,7 +18,7 @@ kept (greedy selection can take a term that a second one then mends). The
 chosen terms are then fitted together; their coefficients come with standard errors from the projected
 information, and `share` is the part of the fit's excess chi2 the formula removes.
 
-Canonical names: `basis(coordinate)` with basis in lin, sq, cube, abs, sign, step, relax, periodic; a gain is
+Canonical names: `basis(coordinate)` with basis in lin, sq, cube, abs, sign, step, hinge, relax, periodic; a gain is
 `basis(coordinate)*model`; products are joined by `*` (`lin(temperature_c)*lin(input)`); `per_run*model` is a
 gain per run. References: input 0, temperature 25 C, time 0 s, drive frequency the device's mean.
 """
@@ -121,89 +123,141 @@ def dictionary(fit, sweeps, *, step_at: float | None = None, period: float | Non
     """The dictionary of terms on the sweep sets `sweeps` (tuples of sweep names)."""
     terms = []
     for group in sweeps:
-        blocks = {s: fit.data.blocks[s] for s in group}
-        masks = {s: np.asarray(b.mask) for s, b in blocks.items()}
-        preds = {s: np.asarray(fit.predictions[s], float) for s in group}
-        coords = {s: coordinates(b) for s, b in blocks.items()}
-        names = set.intersection(*(set(c) for c in coords.values()))
-        out_unit = sweep_kind(group[0]).output_unit
-
-        def add(name, expr, fn, coordinate, *, gain_too=True, offset=True, unit_power=1):
-            cu = out_unit if coordinate == "model" else (_UNITS.get(coordinate) or sweep_kind(group[0]).input_unit)
-            per = f"/{cu}" if unit_power == 1 else (f"/{cu}^{unit_power}" if unit_power else "")
-            for gain in ((False, True) if gain_too else (False,)):
-                if not gain and not offset:
-                    continue
-                changes = {}
-                for s in group:
-                    v = fn(s)
-                    changes[s] = np.where(masks[s], v * (preds[s] if gain else 1.0), 0.0)
-                unit = ("1" + per if gain else out_unit + per)
-                terms.append(Term(name + ("*model" if gain else ""), tuple(group),
-                                  f"output * ({expr})" if gain else f"({expr})", gain, changes, unit,
-                                  "" if coordinate == "order" else coordinate))
-
-        for c in sorted(names):
-            if c == "order":
-                continue
-            x = {s: np.asarray(coords[s][c], float) for s in group}
-            ref = {s: _reference(c, x[s], masks[s]) for s in group}
-            code = _CODE[c]
-            for basis, k in _POWERS.items():
-                add(f"{basis}({c})", code if k == 1 else f"{code}**{k}",
-                    lambda s, k=k: (x[s] - ref[s]) ** k, c, gain_too=c != "input", unit_power=k)
-            if c in SIGNED:  # where the sign is physics: even and sign-dependent terms
-                add(f"abs({c})", f"abs({code})", lambda s: np.abs(x[s]), c)
-                add(f"sign({c})", f"sign({code})", lambda s: np.sign(x[s]), c, unit_power=0)
-            if c == "input":
-                # a step between two set points (a missing code, a range switch): every position of a short sweep,
-                # each a term of the dictionary (its Bonferroni count is the scan's look-elsewhere correction)
-                levels = np.unique(np.concatenate([x[s][masks[s]] for s in group]))
-                if 3 <= levels.size <= MAX_STEP_LEVELS:
-                    for at in (levels[1:] + levels[:-1]) / 2.0:
-                        add("step(input)", f"where(x >= {at:.8g}, 1, 0)",
-                            lambda s, at=at: (x[s] >= at).astype(float), c, gain_too=False, unit_power=0)
-                if period:
-                    for fn, nm in ((np.sin, "sin"), (np.cos, "cos")):
-                        add("periodic(input)", f"{nm}(2 pi x / {period:.6g})",
-                            lambda s, fn=fn: fn(2 * np.pi * x[s] / period), c, gain_too=False, unit_power=0)
-            if c == "time_s":
-                for tau in RELAX_TAUS_S:
-                    add("relax(time_s)", f"exp(-t / {tau:g})", lambda s, tau=tau: np.exp(-x[s] / tau), c,
-                        unit_power=0)
-                if step_at is not None:
-                    add("step(time_s)", f"where(t >= {step_at:.6g}, 1, 0)",
-                        lambda s: (x[s] >= step_at).astype(float), c, unit_power=0)
-                    for r in range(min(m.shape[1] for m in masks.values())):
-                        # the same step in one run only (a jump after one power-on)
-                        add("step(time_s)", f"where((run == {r}) & (t >= {step_at:.6g}), 1, 0)",
-                            lambda s, r=r: ((x[s] >= step_at) & (np.arange(masks[s].shape[1]) == r)[None, :, None]
-                                            ).astype(float), c, unit_power=0)
-        # a nonlinearity of the output itself (a readout's or an amplifier's compression): the same in every device
-        # in output units, whatever its scale factor
-        for basis, k in (("sq", 2), ("cube", 3)):
-            add(f"{basis}(model)", f"output**{k}", lambda s, k=k: preds[s] ** k, "model", gain_too=False,
-                unit_power=k - 1)
-        if "input" in names:
-            xin = {s: np.asarray(coords[s]["input"], float) for s in group}
-            for c in ("temperature_c", "time_s"):
-                if c in names:
-                    xc = {s: np.asarray(coords[s][c], float) - _reference(c, np.asarray(coords[s][c]), masks[s])
-                          for s in group}
-                    add(f"lin({c})*lin(input)", f"{_CODE[c]} * x", lambda s, xc=xc: xc[s] * xin[s], c,
-                        gain_too=False)
-                    for basis, fn, code in (("abs", np.abs, "abs(x)"), ("sq", np.square, "x**2"),
-                                            ("cube", lambda v: v**3, "x**3")):
-                        add(f"lin({c})*{basis}(input)", f"{_CODE[c]} * {code}",
-                            lambda s, xc=xc, fn=fn: xc[s] * fn(xin[s]), c, gain_too=False)
-        runs = min(m.shape[1] for m in masks.values())
-        if runs >= 2:
-            for r in range(1, runs):
-                add(f"per_run({r})", f"run == {r}",
-                    lambda s, r=r: np.broadcast_to((np.arange(masks[s].shape[1]) == r)[None, :, None],
-                                                   masks[s].shape).astype(float), "order", offset=False,
-                    unit_power=0)
+        g = _Group(fit, tuple(group), terms)
+        for c in sorted(g.names - {"order"}):
+            _coordinate_terms(g, c, step_at, period)
+        _output_terms(g)
+        _product_terms(g)
+        _run_terms(g)
     return terms
+
+
+class _Group:
+    """One sweep set of the dictionary: its masks, predictions and coordinates, and `add` (a term, as an offset
+    and, with `gain_too`, as a gain) appending to `terms`."""
+
+    def __init__(self, fit, group, terms):
+        self.group, self.terms = group, terms
+        blocks = {s: fit.data.blocks[s] for s in group}
+        self.masks = {s: np.asarray(b.mask) for s, b in blocks.items()}
+        self.preds = {s: np.asarray(fit.predictions[s], float) for s in group}
+        self.coords = {s: coordinates(b) for s, b in blocks.items()}
+        self.names = set.intersection(*(set(c) for c in self.coords.values()))
+        self.out_unit = sweep_kind(group[0]).output_unit
+
+    def values(self, c, *, centred=False):
+        x = {s: np.asarray(self.coords[s][c], float) for s in self.group}
+        return {s: x[s] - _reference(c, x[s], self.masks[s]) for s in self.group} if centred else x
+
+    def add(self, name, expr, fn, coordinate, *, gain_too=True, offset=True, unit_power=1, unit=None):
+        cu = self.out_unit if coordinate == "model" else (_UNITS.get(coordinate)
+                                                          or sweep_kind(self.group[0]).input_unit)
+        per = f"/{cu}" if unit_power == 1 else (f"/{cu}^{unit_power}" if unit_power else "")
+        for gain in ((False, True) if gain_too else (False,)):
+            if not gain and not offset:
+                continue
+            changes = {s: np.where(self.masks[s], fn(s) * (self.preds[s] if gain else 1.0), 0.0) for s in self.group}
+            self.terms.append(Term(name + ("*model" if gain else ""), self.group,
+                                   f"output * ({expr})" if gain else f"({expr})", gain, changes,
+                                   unit or ("1" + per if gain else self.out_unit + per),
+                                   "" if coordinate == "order" else coordinate))
+
+
+def _coordinate_terms(g: _Group, c, step_at, period):
+    """The terms of one coordinate `c`: powers of its distance from the reference, even and sign terms where its
+    sign is physics, and the input's and the time's own families."""
+    x = g.values(c)
+    ref = {s: _reference(c, x[s], g.masks[s]) for s in g.group}
+    code = _CODE[c]
+    for basis, k in _POWERS.items():
+        g.add(f"{basis}({c})", code if k == 1 else f"{code}**{k}", lambda s, k=k: (x[s] - ref[s]) ** k, c,
+              gain_too=c != "input", unit_power=k)
+    if c in SIGNED:  # where the sign is physics: even and sign-dependent terms
+        g.add(f"abs({c})", f"abs({code})", lambda s: np.abs(x[s]), c)
+        g.add(f"sign({c})", f"sign({code})", lambda s: np.sign(x[s]), c, unit_power=0)
+    if c == "input":
+        _input_terms(g, x, period)
+    if c == "time_s":
+        _time_terms(g, x, step_at)
+
+
+def _input_terms(g: _Group, x, period):
+    """Steps and odd hinges between set points of a short sweep, and a periodic error along the input."""
+    # a step between two set points (a missing code, a range switch): every position of a short sweep, each a
+    # term of the dictionary (its Bonferroni count is the scan's look-elsewhere correction)
+    levels = np.unique(np.concatenate([x[s][g.masks[s]] for s in g.group]))
+    if 3 <= levels.size <= MAX_STEP_LEVELS:
+        for at in (levels[1:] + levels[:-1]) / 2.0:
+            g.add("step(input)", f"where(x >= {at:.8g}, 1, 0)", lambda s, at=at: (x[s] >= at).astype(float),
+                  "input", gain_too=False, unit_power=0)
+        # an odd hinge between two set points' magnitudes (a saturation, a clipping, a range switch of the
+        # gain): the output gains c per unit of input beyond |x| = k, with the sign of x
+        size = np.unique(np.abs(levels[levels != 0]))
+        for at in (size[1:] + size[:-1]) / 2.0:
+            g.add("hinge(input)", f"sign(x) * maximum(abs(x) - {at:.8g}, 0)",
+                  lambda s, at=at: np.sign(x[s]) * np.maximum(np.abs(x[s]) - at, 0.0), "input", gain_too=False)
+    if period:
+        for fn, nm in ((np.sin, "sin"), (np.cos, "cos")):
+            g.add("periodic(input)", f"{nm}(2 pi x / {period:.6g})", lambda s, fn=fn: fn(2 * np.pi * x[s] / period),
+                  "input", gain_too=False, unit_power=0)
+
+
+def _time_terms(g: _Group, x, step_at):
+    """Exponential relaxations since power-on, and a step at `step_at` (in every run, and in each run alone)."""
+    for tau in RELAX_TAUS_S:
+        g.add("relax(time_s)", f"exp(-t / {tau:g})", lambda s, tau=tau: np.exp(-x[s] / tau), "time_s", unit_power=0)
+    if step_at is None:
+        return
+    g.add("step(time_s)", f"where(t >= {step_at:.6g}, 1, 0)", lambda s: (x[s] >= step_at).astype(float), "time_s",
+          unit_power=0)
+    for r in range(min(m.shape[1] for m in g.masks.values())):
+        # the same step in one run only (a jump after one power-on)
+        g.add("step(time_s)", f"where((run == {r}) & (t >= {step_at:.6g}), 1, 0)",
+              lambda s, r=r: ((x[s] >= step_at) & (np.arange(g.masks[s].shape[1]) == r)[None, :, None]
+                              ).astype(float), "time_s", unit_power=0)
+
+
+def _output_terms(g: _Group):
+    """Terms of the model's output: its square and cube (a readout's or an amplifier's compression, the same in
+    every device in output units, whatever its scale factor); on sweeps of different input units (deg/s, V),
+    which share no input axis, the output's even and temperature- or time-weighted terms, one coefficient for
+    all."""
+    p = g.preds
+    for basis, k in (("sq", 2), ("cube", 3)):
+        g.add(f"{basis}(model)", f"output**{k}", lambda s, k=k: p[s] ** k, "model", gain_too=False, unit_power=k - 1)
+    if len({sweep_kind(s).input_unit for s in g.group}) < 2:
+        return
+    g.add("abs(model)", "abs(output)", lambda s: np.abs(p[s]), "model", gain_too=False, unit_power=0, unit="1")
+    for c in ("temperature_c", "time_s"):
+        if c in g.names:
+            xc = g.values(c, centred=True)
+            for basis, fn, code in (("abs", np.abs, "abs(output)"), ("sq", np.square, "output**2")):
+                g.add(f"lin({c})*{basis}(model)", f"{_CODE[c]} * {code}", lambda s, xc=xc, fn=fn: xc[s] * fn(p[s]),
+                      c, gain_too=False)
+
+
+def _product_terms(g: _Group):
+    """The temperature's and the time's products with the input (a gain or an even term that drifts)."""
+    if "input" not in g.names:
+        return
+    xin = g.values("input")
+    for c in ("temperature_c", "time_s"):
+        if c not in g.names:
+            continue
+        xc = g.values(c, centred=True)
+        g.add(f"lin({c})*lin(input)", f"{_CODE[c]} * x", lambda s, xc=xc: xc[s] * xin[s], c, gain_too=False)
+        for basis, fn, code in (("abs", np.abs, "abs(x)"), ("sq", np.square, "x**2"),
+                                ("cube", lambda v: v**3, "x**3")):
+            g.add(f"lin({c})*{basis}(input)", f"{_CODE[c]} * {code}", lambda s, xc=xc, fn=fn: xc[s] * fn(xin[s]), c,
+                  gain_too=False)
+
+
+def _run_terms(g: _Group):
+    """A gain per run beyond the first."""
+    for r in range(1, min(m.shape[1] for m in g.masks.values())):
+        g.add(f"per_run({r})", f"run == {r}",
+              lambda s, r=r: np.broadcast_to((np.arange(g.masks[s].shape[1]) == r)[None, :, None],
+                                             g.masks[s].shape).astype(float), "order", offset=False, unit_power=0)
 
 
 def _location_dictionary(fit, location, space, step_at, period):
