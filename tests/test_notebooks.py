@@ -4,7 +4,7 @@ The committed outputs are what the installed gyrojax prints: `test_committed_out
 notebook at full size, minutes) executes every notebook afresh in memory and compares the text outputs, cell by
 cell, with the committed ones: the words exactly, the numbers to within one unit of their last printed digit,
 two numbers below 1e-20 being round-off (`_differences`). Cheap checks run in the fast tier (every code cell
-ran, in order, without error, with the installed gyrojax and at full size, nothing machine-specific), and each
+ran, in order, without error, with the installed gyrojax and at full size, nothing machine-specific), and one
 notebook is executed at small sizes in memory, never written back.
 
 After a change to what a notebook prints, re-execute it at full size and commit it (one line; no argument: every
@@ -100,11 +100,14 @@ def test_outputs_are_compared_word_for_word_and_to_the_last_digit():
 @pytest.mark.slow
 def test_committed_outputs_are_current(path):
     # a fresh execution at full size prints what the committed notebook shows (figures are not compared)
+    before = path.read_bytes()
     committed = nbformat.read(path, as_version=4)
     fresh = _execute_module().execute(path)
+    assert path.read_bytes() == before, "executing the notebook must not write into the committed file"
     old = [c for c in committed.cells if c.cell_type == "code"]
     new = [c for c in fresh.cells if c.cell_type == "code"]
     assert len(old) == len(new)
+    assert not [o for c in new for o in c.get("outputs", []) if o.output_type == "error"]
     stale = []
     for i, (a, b) in enumerate(zip(old, new)):
         for why in _differences("".join(_text_outputs(a)), "".join(_text_outputs(b))):
@@ -139,9 +142,11 @@ def test_committed_notebooks_were_executed_in_order_at_full_size(path):
     assert nb.cells[-1].cell_type == "markdown" and nb.cells[-1].source.startswith("## Conclusion")
 
 
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
+# Every notebook runs at full size above; the small sizes (GYROJAX_NOTEBOOK_SMALL, for a quick look) on the
+# quickest one
+@pytest.mark.parametrize("path", [p for p in NOTEBOOKS if p.stem.startswith("04_")], ids=lambda p: p.stem)
 @pytest.mark.slow
-def test_notebook_runs(path, monkeypatch):
+def test_notebook_runs_at_small_sizes(path, monkeypatch):
     monkeypatch.setenv("GYROJAX_NOTEBOOK_SMALL", "1")
     monkeypatch.setenv("MPLBACKEND", "Agg")
     before = path.read_bytes()

@@ -202,6 +202,9 @@ class PopulationFit(eqx.Module):
         for i, d in enumerate(self.fit.devices):
             what = f"predicted (no {', '.join(self.missing[i])})" if self.missing[i] else "shrunken"
             dof = f" (t, {self.sf_dof[i]:.3g} dof)" if self.sf_dof[i] < 1e6 else ""
+            if not math.isfinite(self.sf[i]):
+                lines.append(f"  {d}: SF not determined, {what} (see the warning)")
+                continue
             lines.append(f"  {d}: SF {self.sf[i]:.6f} +/- {self.sf_stderr[i]:.2g} LSB/(deg/s) {what}, 95 % "
                          f"[{low[i]:.6f}, {high[i]:.6f}]{dof}")
         lines += [f"  warning: {w}" for w in self.warnings]
@@ -585,9 +588,23 @@ def population_fit(identify, model, data, strategy: PopulationSolve, options: di
                                        sd_sf / math.sqrt(2.0 * max(ok.sum() - 1, 1)), sd_sf / abs(m_sf), True)
     if not fit.all_converged:
         warnings.append("not every device's conditional fit converged: see fit.status and fit.summary()")
+    warnings += _undetermined_scale_factors(fit, sf, random)
     say("population fit: " + ("converged" if converged else "NOT converged") + f" after {refits} refit(s)")
     return PopulationFit(fit, tuple(random), parameters, scale_factor, estimates, estimates_stderr, sf, sf_stderr,
                          sf_dof, missing, hyper, hcov, bool(converged), refits, tuple(warnings))
+
+
+def _undetermined_scale_factors(fit, sf, random) -> list[str]:
+    """A warning naming the devices whose scale factor is not determined (NaN: no prediction, no interval), with
+    the fit's reason for the first and what would fix it."""
+    bad = [k for k, v in enumerate(sf) if not np.isfinite(v)]
+    if not bad:
+        return []
+    why = next((w for k in bad for w in fit.warnings[k]), "its fit says why (fit.summary())")
+    return [f"the scale factor of {len(bad)} device(s) is not determined, so they get no value and no interval"
+            f": {', '.join(fit.devices[k] for k in bad)}. {fit.devices[bad[0]]}: {why}. The lot distribution "
+            f"fixes only {', '.join(random)}: make the parameters it names random too (random=...), or measure "
+            "these devices with a sweep that sees them"]
 
 
 def _sf_hyper_gradient(identify, fit, data, index, kinds, hyper, steps, priors, options):
