@@ -560,23 +560,10 @@ def population_fit(identify, model, data, strategy: PopulationSolve, options: di
         sf_dof = np.full(len(sf), np.inf)
         warnings.append("propagate=False: the intervals are normal, without the lot mean's and spread's uncertainty "
                         "(too narrow where the spread rests on few devices)")
-    parameters = []
-    for j, (nm, (t, sc, unit)) in enumerate(zip(random, kinds)):
-        mu, ls = hyper[j], hyper[k + j]
-        se_mu, se_ls = math.sqrt(hcov[j, j]), math.sqrt(hcov[k + j, k + j])
-        s = math.exp(ls)
-        if t == "log":
-            parameters.append(PopulationParameter(nm, unit, math.exp(mu), math.exp(mu) * se_mu, math.exp(mu) * s,
-                                                  math.exp(mu) * s * se_ls, s, bool(se_ls < 0.5)))
-        else:
-            parameters.append(PopulationParameter(nm, unit, mu * sc, se_mu * sc, s * sc, s * sc * se_ls, math.nan,
-                                                  bool(se_ls < 0.5)))
-    for p in parameters:
-        if not p.resolved:
-            warnings.append(f"the lot spread of {p.name} is not resolved from zero ({p.spread:.3g} +/- "
-                            f"{p.spread_stderr:.2g} {p.unit}, under 2 standard errors): too few devices fix it, or "
-                            "their own uncertainties explain their scatter; its intervals rest on an uncertain spread")
-    parameters = tuple(parameters)
+    parameters = _lot_parameters(random, kinds, hyper, hcov)
+    warnings += [f"the lot spread of {p.name} is not resolved from zero ({p.spread:.3g} +/- {p.spread_stderr:.2g} "
+                 f"{p.unit}, under 2 standard errors): too few devices fix it, or their own uncertainties explain "
+                 "their scatter; its intervals rest on an uncertain spread" for p in parameters if not p.resolved]
     # The scale factor's lot distribution: the moments of the devices' posteriors (what EM's M-step takes).
     ok = np.isfinite(sf) & np.isfinite(sf_var)
     m_sf = float(np.mean(sf[ok]))
@@ -592,6 +579,22 @@ def population_fit(identify, model, data, strategy: PopulationSolve, options: di
     say("population fit: " + ("converged" if converged else "NOT converged") + f" after {refits} refit(s)")
     return PopulationFit(fit, tuple(random), parameters, scale_factor, estimates, estimates_stderr, sf, sf_stderr,
                          sf_dof, missing, hyper, hcov, bool(converged), refits, tuple(warnings))
+
+
+def _lot_parameters(random, kinds, hyper, hcov) -> tuple:
+    """The `PopulationParameter` of each random parameter from the lot mean and log-spread (`hyper`) and their
+    covariance, in physical units."""
+    k, out = len(random), []
+    for j, (nm, (t, sc, unit)) in enumerate(zip(random, kinds)):
+        mu, s = hyper[j], math.exp(hyper[k + j])
+        se_mu, se_ls = math.sqrt(hcov[j, j]), math.sqrt(hcov[k + j, k + j])
+        if t == "log":
+            out.append(PopulationParameter(nm, unit, math.exp(mu), math.exp(mu) * se_mu, math.exp(mu) * s,
+                                           math.exp(mu) * s * se_ls, s, bool(se_ls < 0.5)))
+        else:
+            out.append(PopulationParameter(nm, unit, mu * sc, se_mu * sc, s * sc, s * sc * se_ls, math.nan,
+                                           bool(se_ls < 0.5)))
+    return tuple(out)
 
 
 def _undetermined_scale_factors(fit, sf, random) -> list[str]:
