@@ -63,7 +63,9 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
 
     Guards before a candidate is confirmed: its implied size is plausible; no probe explains the misfit it is
     credited with while it adds nothing beyond that probe; the refit passes the likelihood-ratio test and
-    converges; and no sweep's misfit gets significantly worse (else it is "contradicted by" that sweep).
+    converges; the recorded drive frequency (`drive_freq_hz`), where the steady sweeps record it, moves as the
+    refit says the PLL frequency moves (else it is "contradicted by drive_freq_hz"); and no sweep's misfit gets
+    significantly worse (else it is "contradicted by" that sweep).
 
     **Returns:** a `Diagnosis` (with a `verdict`: explained, partly explained or unexplained).
     """
