@@ -207,7 +207,7 @@ def _demo_bandwidth(out_dir: str, log) -> dict:
 
     import gyrojax as gj
 
-    response = gj.linearise(gj.vcf_2018())  # one linearisation serves the plot and the bandwidth
+    response = gj.physics.linearise(gj.vcf_2018())  # one linearisation serves the plot and the bandwidth
     bw = response.bandwidth()
     f = np.geomspace(1, 1000, 400)
     h = np.asarray(response.response(2 * np.pi * f))

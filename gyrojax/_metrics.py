@@ -1,7 +1,7 @@
 """Scale-factor metrics: scale factor, bias, nonlinearity, asymmetry, repeatability and rate bandwidth.
 
 Every function takes NumPy or JAX arrays whose *last* axis runs over the points of one sweep; leading axes are
-batch axes, so the padded `(device, run, point)` arrays of [`gyrojax.SweepArrays`][] go straight in with their
+batch axes, so the padded `(device, run, point)` arrays of [`gyrojax.io.SweepArrays`][] go straight in with their
 `mask`. They are pure functions written once for both array libraries: given any JAX array (or tracer) they
 run in `jax.numpy` and are safe under `jit`, `vmap` and `grad` (masked entries never reach a division or a log);
 given only NumPy arrays they run in NumPy, which spares a host-side report the seconds of first-call
@@ -9,7 +9,7 @@ compilation. Results come back in the library that went in.
 
 **Too few points.** A sweep with some but too few valid points is an error: a [`gyrojax.DataError`][] when the
 mask is concrete, an `eqx.error_if` runtime error under `jit`. A *fully* masked sweep is padding and gives NaN.
-[`gyrojax.metrics_report`][] checks the counts first and names the offending device, run and sweep.
+[`gyrojax.metrics.metrics_report`][] checks the counts first and names the offending device, run and sweep.
 
 **Sources.** Terms follow IEEE Std 528 (inertial sensor terminology) and the rate-table practice of
 IEEE Std 952-1997 (single-axis FOG test procedure), which seed 000 (Ding & Zhou, Micromachines 16, 851, 2025)
@@ -181,7 +181,7 @@ def fit_scale_factor(inputs: Float[ArrayLike, "*batch point"], outputs: Float[Ar
 
     **Returns:**
 
-    A [`gyrojax.ScaleFactorFit`][]. A sweep with 1 or 2 valid points is an error (a line through two points has
+    A [`gyrojax.metrics.ScaleFactorFit`][]. A sweep with 1 or 2 valid points is an error (a line through two points has
     no nonlinearity); a fully masked one gives NaN. A sweep whose outputs are all equal has scale factor 0
     exactly, bias the output, and NaN nonlinearity (there is no full scale to divide by).
     """
@@ -344,7 +344,7 @@ def repeatability(scale_factors: Float[ArrayLike, "*batch run"], *,
 
 
 class RateBandwidth(eqx.Module):
-    """Result of [`gyrojax.rate_bandwidth`][]: `bandwidth_hz` (the -3 dB frequency), `phase_deg` (the phase
+    """Result of [`gyrojax.metrics.rate_bandwidth`][]: `bandwidth_hz` (the -3 dB frequency), `phase_deg` (the phase
     there, NaN if no phase was given) and `low_frequency_gain` (the reference amplitude)."""
 
     bandwidth_hz: Float[Array, "*batch"]
@@ -374,7 +374,7 @@ def rate_bandwidth(freqs_hz: Float[ArrayLike, "*batch point"], amplitudes: Float
 
     **Returns:**
 
-    A [`gyrojax.RateBandwidth`][]. An error where a sweep has a single point, a non-positive frequency or
+    A [`gyrojax.metrics.RateBandwidth`][]. An error where a sweep has a single point, a non-positive frequency or
     amplitude, or never falls below $G_0/\sqrt2$ (extend the sweep to higher frequencies).
     """
     xp = _xp(freqs_hz, amplitudes, mask, phase_deg)
@@ -513,8 +513,8 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
     - `full_scale`: nonlinearity full scale, see [`gyrojax.fit_scale_factor`][].
     - `weighted`: weight fits by `1/output_sigma**2` (the table must give `output_sigma` for every point of
       the sweeps with a linear fit); default unweighted, as the standards do.
-    - `common_bias`: asymmetry model, see [`gyrojax.asymmetry`][].
-    - `ddof`: repeatability standard deviation, see [`gyrojax.repeatability`][].
+    - `common_bias`: asymmetry model, see [`gyrojax.metrics.asymmetry`][].
+    - `ddof`: repeatability standard deviation, see [`gyrojax.metrics.repeatability`][].
 
     **Returns:**
 

@@ -244,7 +244,7 @@ def load_effects_module(path: str | os.PathLike) -> tuple[type[AbstractEffect], 
     """Import a Python file and register every effect class it defines.
 
     Every concrete subclass of `gyrojax.AbstractEffect` defined in the file that is not registered yet is
-    registered with `gyrojax.register_effect` (so the file may call `register_effect` itself, or just define
+    registered with `gyrojax.effects.register_effect` (so the file may call `register_effect` itself, or just define
     the classes). Loading the same file again returns the same classes without running it again (registering
     any of them that was removed from `gyrojax.EFFECTS` meanwhile).
 

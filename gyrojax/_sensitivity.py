@@ -58,7 +58,7 @@ SEED000_BUDGET = {"dac_ppm": 460.679, "total_ppm": 539.281, "dac_share_pct": 85.
 
 
 class EffectContribution(eqx.Module):
-    """One effect's line of a [`gyrojax.NonlinearityBudget`][].
+    """One effect's line of a [`gyrojax.metrics.NonlinearityBudget`][].
 
     **Fields:** `name`; `alone_max_ppm`, `alone_rms_ppm` (the device with this effect only);
     `own_max_ppm`, `own_rms_ppm` (its own residual curve: alone minus base); `share_pct` (own max over the
@@ -273,7 +273,7 @@ def nonlinearity_budget(model, effects: Sequence | None = None, *,
     - `full_scale`: convention of [`gyrojax.fit_scale_factor`][] (default `"half_range"`).
     - `gradients`: also take the gradients (one reverse pass through the steady tier).
 
-    **Returns:** a [`gyrojax.NonlinearityBudget`][].
+    **Returns:** a [`gyrojax.metrics.NonlinearityBudget`][].
     """
     if full_scale not in FULL_SCALE_CONVENTIONS:
         raise ValueError(f"full_scale must be one of {', '.join(FULL_SCALE_CONVENTIONS)}, got {full_scale!r}.")

@@ -30,7 +30,7 @@ COMPENSATORS: dict[str, type[AbstractCompensator]] = {
 
 
 def rate_points(table: Table, device: str) -> RatePoints:
-    """The `rate_table` points of one device of `table` as [`gyrojax.RatePoints`][], in file order."""
+    """The `rate_table` points of one device of `table` as [`gyrojax.compensation.RatePoints`][], in file order."""
     rows = np.flatnonzero((table["device"] == device) & (table["sweep"] == "rate_table"))
     if rows.size == 0:
         raise DataError(f"{table.source}: no rate_table rows for device {device!r}.", source=table.source)
@@ -245,7 +245,7 @@ def compensate(table: Table, *, method: str | AbstractCompensator = "composite",
       on every rate_table row; `model` uses `temperature_c` (for the TCF) and `output_sigma` (weights) when
       given.
     - `method`: `"polynomial"`, `"composite"` (default, seed 000's method) or `"model"`, at their default
-      settings, or a configured compensator (e.g. `gj.PolynomialCompensator(order=5)`).
+      settings, or a configured compensator (e.g. `gj.compensation.PolynomialCompensator(order=5)`).
     - `train_runs`: run ids to fit on, the same for every device (default: each device's first run, as a
       factory calibration followed by use). Every device must have them.
     - `full_scale`: nonlinearity full-scale convention of [`gyrojax.fit_scale_factor`][].

@@ -9,7 +9,7 @@ $$ D(W) \equiv W + L \sum_{n} \rho_n\, c_n \left(\frac{W}{H}\right)^n = K(f)\,\O
    \qquad K(f) = K_{ref} \left(\frac{f}{f_{ref}}\right)^{\beta}, \qquad y = W + b_r + 10^6 d\,(f/f_{ref}-1), $$
 
 - $c_n$: the DAC INL in DAC LSB as the coefficient of $u^n$, $u = $ code / $2^{bits-1}$ (the convention of
-  `gyrojax.DacInl`), $L = 2^{word\_bits - bits}$ word LSB per DAC LSB, $H = 2^{word\_bits-1}$;
+  `gyrojax.effects.DacInl`), $L = 2^{word\_bits - bits}$ word LSB per DAC LSB, $H = 2^{word\_bits-1}$;
 - $\rho_n$: the describing-function weight of $u^n$ for a sine, $\binom{n}{(n-1)/2} 2^{1-n}$ for odd $n$
   ($\rho_3 = 3/4$, $\rho_5 = 5/8$) and 0 for even $n$: even INL terms do not reach the carrier
   fundamental, so a rate table cannot see them (they are reported as unidentifiable, never guessed);
@@ -256,7 +256,7 @@ class ModelCompensator(AbstractCompensator):
       float64 resolution (eps max|y| / min sigma) where it asks for less. Whether the fit
       converged is judged at its end, by the Gauss-Newton decrement (`DECREMENT_TOL`), not by the solver's
       stopping rule; an unconverged fit is returned with `converged` False and a message (see
-      [`gyrojax.ModelCompensation`][]).
+      [`gyrojax.compensation.ModelCompensation`][]).
     """
 
     inl_orders: tuple[int, ...] = eqx.field(static=True, default=(3, 5))

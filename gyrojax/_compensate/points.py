@@ -17,7 +17,7 @@ class RatePoints(eqx.Module):
     - `output_sigma`: standard uncertainty of `output`, LSB; NaN where not given.
     - `run`: run id of each point (int64).
 
-    Build one from a table with `gyrojax.rate_points(table, device)`, or directly from arrays.
+    Build one from a table with `gyrojax.compensation.rate_points(table, device)`, or directly from arrays.
     """
 
     rate_dps: Float[np.ndarray, " n"]

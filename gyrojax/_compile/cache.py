@@ -25,8 +25,8 @@ compiles again if not.
 **Controls.**
 
 - The environment variable `GYROJAX_CACHE_DIR` moves it (a path), or disables it (`off`, or empty).
-- `gyrojax.compilation_cache(path)` moves it, `gyrojax.compilation_cache(None)` disables it, and
-  `gyrojax.compilation_cache()` says where it is.
+- `gyrojax.io.compilation_cache(path)` moves it, `gyrojax.io.compilation_cache(None)` disables it, and
+  `gyrojax.io.compilation_cache()` says where it is.
 - A cache that JAX was already given (`JAX_COMPILATION_CACHE_DIR`, `jax.config.update(
   "jax_compilation_cache_dir", ...)` before gyrojax is imported, or `JAX_ENABLE_COMPILATION_CACHE=false`) is
   left exactly as it is: gyrojax sets nothing then.

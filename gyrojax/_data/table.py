@@ -54,7 +54,7 @@ class Table:
 
     @classmethod
     def from_records(cls, records: Iterable[Mapping[str, Any]], *, source: str = "<memory>") -> "Table":
-        """Build and validate a table from row dicts (e.g. from [`gyrojax.aggregate_samples`][]).
+        """Build and validate a table from row dicts (e.g. from [`gyrojax.io.aggregate_samples`][]).
 
         A key missing from some records is "not given" (NaN) there; it is an error for required columns.
         """
@@ -192,7 +192,7 @@ class Table:
 
         **Returns:**
 
-        A [`gyrojax.SweepArrays`][]. `Table.from_arrays` gives back exactly these rows (same column
+        A [`gyrojax.io.SweepArrays`][]. `Table.from_arrays` gives back exactly these rows (same column
         order, values and, for a table grouped by device and run, row order).
         """
         return sweep_arrays(self, sweep)

@@ -80,7 +80,7 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
     - `runs`: repeated runs per device; each (run, sweep) is a power-on session with its own warm-up,
       turn-on bias and noise.
     - `sweeps`: the sweep kinds, in the order the table lists them: `gyrojax.AbstractSweep`s with their
-      settings (`gyrojax.RateTable(rates_dps=...)`), or names of `gyrojax.SWEEP_KINDS` for a kind with its
+      settings (`gyrojax.sweeps.RateTable(rates_dps=...)`), or names of `gyrojax.sweeps.SWEEP_KINDS` for a kind with its
       default settings (a sequence, or one comma-separated string of names).
     - `tier`: simulation tier of the settled sweeps (`rate_table`, `vcf_static`), default `CAMPAIGN_TIER`
       (`Steady` at 1e-10); the dynamic sweep is the averaged model linearised at rest, the DAC sweep the

@@ -5,7 +5,7 @@ the noise-free outputs of its points for a device (the kind's own measurement mo
 shared with simulation and fitting; the steady kinds settled in one call) and the standard uncertainty of each
 point (`AbstractSweep.point_sigmas`, or `AbstractSweep.relative_sigma` times the predicted reading). The
 default candidates are the registered sweep kinds, so a kind added
-with `gyrojax.register_sweep` is a candidate without changing the planner.
+with `gyrojax.sweeps.register_sweep` is a candidate without changing the planner.
 """
 
 import math
@@ -243,7 +243,7 @@ def weighted_rows(experiment: CandidateExperiment, jac: np.ndarray, sigmas: np.n
 
 def default_experiments(gyro: Gyroscope, protocol: Protocol = Protocol(), ambient_c: float | None = None,
                         chamber_kinds=("rate_table",), kinds=()) -> tuple:
-    """One run of every registered sweep kind that `gyrojax.SWEEP_KINDS` holds, each with its default settings
+    """One run of every registered sweep kind that `gyrojax.sweeps.SWEEP_KINDS` holds, each with its default settings
     unless `kinds` gives it others (a kind whose `check_device` refuses `gyro` is left out), timed by
     `protocol`, plus each kind of `chamber_kinds` again at a chamber `CHAMBER_STEP_K` warmer after a
     `CHAMBER_SOAK_S` soak (named `<kind>_hot`). A run's inputs, minutes, settings and noise are the kind's own
@@ -257,7 +257,7 @@ def default_experiments(gyro: Gyroscope, protocol: Protocol = Protocol(), ambien
     - `protocol`: the timing (`gyrojax.Protocol`, default seed 000's).
     - `ambient_c`: the chamber temperature at power-on, deg C (default the device's own at power-on).
     - `chamber_kinds`: sweep names also proposed at the warmer plateau.
-    - `kinds`: sweep kinds with their own settings (`gyrojax.RateTable(rates_dps=...)`), each replacing the
+    - `kinds`: sweep kinds with their own settings (`gyrojax.sweeps.RateTable(rates_dps=...)`), each replacing the
       registered kind of its name.
 
     **Returns:** a tuple of `CandidateExperiment`, in registry order.
@@ -270,7 +270,7 @@ def default_experiments(gyro: Gyroscope, protocol: Protocol = Protocol(), ambien
     given = {}
     for k in kinds:
         if not isinstance(k, AbstractSweep) or k.name not in SWEEP_KINDS:
-            raise ValueError(f"kinds: expected sweep kinds registered in gyrojax.SWEEP_KINDS "
+            raise ValueError(f"kinds: expected sweep kinds registered in gyrojax.sweeps.SWEEP_KINDS "
                              f"({', '.join(SWEEP_KINDS)}), got {k!r}.")
         given[k.name] = k
     own = float(np.asarray(gyro.temperature(0.0)))

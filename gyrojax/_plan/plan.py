@@ -173,7 +173,7 @@ class ScaleFactorDesign(eqx.Module):
         return float(np.mean(np.asarray(self.stderr) / np.asarray(self.seed000_stderr)))
 
     def rate_table(self) -> RateTable:
-        """The design's rate table, `gyrojax.RateTable` at its rates (simulate it with `runs=rate_runs`)."""
+        """The design's rate table, `gyrojax.sweeps.RateTable` at its rates (simulate it with `runs=rate_runs`)."""
         return RateTable(rates_dps=self.rates_dps)
 
     def to_json(self) -> dict:

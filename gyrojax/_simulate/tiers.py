@@ -167,7 +167,7 @@ def _check_constant(stimulus):
         if not isinstance(value, jax.core.Tracer) and bool(np.any(np.asarray(value) != 0.0)):
             raise ValueError(f"Steady tier: stimulus.{name} must be 0 (a constant input has an "
                              f"equilibrium; a modulated one does not), got {value!r}. Use the "
-                             "averaged or full tier, or gyrojax.frequency_response.")
+                             "averaged or full tier, or gyrojax.physics.frequency_response.")
 
 
 def _orders(gyro):

@@ -47,10 +47,10 @@ class AbstractSweep(eqx.Module):
 
     A sweep kind owns what the data format, the simulator, identification, the metrics, the planner and the
     plots need to know about it, so that a new experiment is one file (a final subclass) plus
-    `gyrojax.register_sweep`. Its fields are its settings: the points it applies (`points_field`: the table
+    `gyrojax.sweeps.register_sweep`. Its fields are its settings: the points it applies (`points_field`: the table
     rates, the VCF voltages, the set-points ...), its own timing where it has one (`timing_field`) and the
     settings of its measurement model (the carrier of a virtual-Coriolis sweep), each with a default;
-    `gyrojax.sweep_kind(name)` gives the instance with the defaults. The run timing every kind shares (warm-up,
+    `gyrojax.sweeps.sweep_kind(name)` gives the instance with the defaults. The run timing every kind shares (warm-up,
     dwell, order, chamber plateaus) is the `Protocol`'s.
 
     **Class attributes:**
@@ -85,7 +85,7 @@ class AbstractSweep(eqx.Module):
       do not change with the input (a dead output). False for a kind whose slope is an effect's to set (the
       drive frequency against the set-point: a cubic spring of either sign).
 
-    **Metrics.** `applicable_metrics()` names the metrics of `gyrojax.metrics_report` that measure something on
+    **Metrics.** `applicable_metrics()` names the metrics of `gyrojax.metrics.metrics_report` that measure something on
     this kind, `metric_not_applicable(name)` says why another does not.
     """
 
@@ -138,7 +138,7 @@ class AbstractSweep(eqx.Module):
         return f"{out}/{unit}"
 
     def applicable_metrics(self) -> tuple[str, ...]:
-        """The metrics of `gyrojax.metrics_report` that are measurements on this kind, from `LINE_METRICS` and
+        """The metrics of `gyrojax.metrics.metrics_report` that are measurements on this kind, from `LINE_METRICS` and
         "bandwidth". Default: every straight-line metric for a straight-line kind, else the bandwidth."""
         return LINE_METRICS if self.straight_line else ("bandwidth",)
 
