@@ -112,7 +112,7 @@ def _worker(entry, data_path, out_path):
               "cache_writes": c.get("/jax/compilation_cache/cache_misses", 0),
               "slowest_programs": [{"name": n, "compile_s": round(v, 3)} for n, v in programs[:5]],
               "slowest_traces": [{"name": n, "trace_s": round(v, 3)} for n, v in traces[:5]],
-              "cache_dir": gj.compilation_cache(), "load_average": os.getloadavg()}
+              "cache_dir": gj.io.compilation_cache(), "load_average": os.getloadavg()}
     with open(out_path, "w") as f:
         json.dump(result, f)
 

@@ -88,7 +88,7 @@ def main(argv=None):
               f"{row['population_predicting']['warm_s']:.1f} s warm (x{row['ratio_warm_predicting']:.2f})",
               flush=True)
         if args.json:
-            gj.atomic_write_json({"rows": rows, "machine": platform.platform()}, args.json)
+            gj.io.atomic_write_json({"rows": rows, "machine": platform.platform()}, args.json)
     return rows
 
 

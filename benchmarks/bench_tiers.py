@@ -59,11 +59,8 @@ from scipy.integrate import odeint, solve_ivp  # noqa: E402
 from gyrojax import (  # noqa: E402
     RESULTS,
     Averaged,
-    ConstantTemperature,
-    DacInl,
     FullWaveform,
     Steady,
-    Stimulus,
     add_effect,
     make_lot,
     paper_qmg,
@@ -79,6 +76,9 @@ from gyrojax._simulate._model import (  # noqa: E402
     wave_from_slow,
     wave_scales,
 )
+from gyrojax.effects import DacInl  # noqa: E402
+from gyrojax.physics import Stimulus  # noqa: E402
+from gyrojax.temperature import ConstantTemperature  # noqa: E402
 
 
 DEG = units.DEG

@@ -64,7 +64,7 @@ def main(argv=None):
                       "seconds": time.perf_counter() - t, "status": list(fit.status)}
         if args.out:
             os.makedirs(args.out, exist_ok=True)
-            gj.atomic_write_json(out, os.path.join(args.out, "coverage_audit.json"))
+            gj.io.atomic_write_json(out, os.path.join(args.out, "coverage_audit.json"))
     return out
 
 

@@ -383,8 +383,8 @@ def main(argv=None):
                "unsupported": unsupported, "complete": len(rows) == len(todo),
                "versions": {"gyrojax": gj.__version__}}
         if args.out:
-            gj.atomic_write_json(out, os.path.join(args.out, "diagnose_confusion.json"))
-            gj.atomic_write_bytes(os.path.join(args.out, "diagnose_confusion.md"),
+            gj.io.atomic_write_json(out, os.path.join(args.out, "diagnose_confusion.json"))
+            gj.io.atomic_write_bytes(os.path.join(args.out, "diagnose_confusion.md"),
                                (markdown(rows, unsupported, settings)
                                 + (plan_markdown(plan_rows, settings) if args.plan else "")).encode())
     if unsupported:

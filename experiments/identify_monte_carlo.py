@@ -87,7 +87,7 @@ def main(argv=None):
     if args.json:
         import gyrojax as gj
 
-        gj.atomic_write_json(out, args.json)
+        gj.io.atomic_write_json(out, args.json)
     ok = all(abs(p["reported_over_scatter"] - 1) <= 0.2 and p["scatter_over_crb"] <= 1.2
              for p in out["parameters"].values())
     print("acceptance (reported within 20 % of scatter, scatter within 1.2x CRB):", "PASS" if ok else "FAIL")

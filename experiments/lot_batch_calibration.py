@@ -85,8 +85,8 @@ SHARED = ("sense_gain",)
 SWEEPS = ("rate_table", "vcf_static", "vcf_dynamic")
 
 _SMALL_RATES = (-200.0, -100.0, -20.0, -5.0, 5.0, 20.0, 100.0, 200.0)
-SMALL_SWEEPS = (gj.RateTable(rates_dps=_SMALL_RATES), gj.VcfStatic(virtual_rates_dps=_SMALL_RATES),
-                gj.VcfDynamic(frequencies_hz=tuple(10.0 * k for k in range(1, 21))))
+SMALL_SWEEPS = (gj.sweeps.RateTable(rates_dps=_SMALL_RATES), gj.sweeps.VcfStatic(virtual_rates_dps=_SMALL_RATES),
+                gj.sweeps.VcfDynamic(frequencies_hz=tuple(10.0 * k for k in range(1, 21))))
 """`--points small`: 8 table and virtual rates over +/-200 deg/s and the dynamic test on a 10 Hz grid up to 200 Hz
 (the vcf-2018 response peaks at the 62 Hz split and is past its -3 dB point at ~97 Hz): 36 points per device
 instead of 94. The scale factor's prediction error is set by the rate-path mismatch (0.087 %), far above what
@@ -118,7 +118,8 @@ def _lot_physics(lot):
     def one(g):
         r = g.resonator
         a = g.drive_amplitude(r.omega_x)
-        ratio = 2.0 * r.angular_gain * r.mass * a * r.omega_x / (g.vcf_electrode.force_per_volt2 * gj.VCF_CARRIER_V)
+        ratio = (2.0 * r.angular_gain * r.mass * a * r.omega_x
+                 / (g.vcf_electrode.force_per_volt2 * gj.sweeps.VCF_CARRIER_V))
         path = r.angular_gain * g.sense_frontend.current_per_velocity * a
         return ratio, path
 
@@ -302,9 +303,10 @@ def simulate_lot(devices=64, seed=11, process=None, sweeps=None):
     process = gj.WaferProcess() if process is None else process
     design = gj.vcf_2018()
     truth_nominal = as_built(design)
-    kinds = [gj.sweep_kind(s) for s in (SWEEPS if sweeps is None else sweeps)]
+    kinds = [gj.sweeps.sweep_kind(s) for s in (SWEEPS if sweeps is None else sweeps)]
     # The static VCF voltages come from the design values (what the test engineer knows), not the as-built.
-    kinds = tuple(dataclasses.replace(k, amplitudes_v=tuple(k.inputs(design))) if isinstance(k, gj.VcfStatic) else k
+    kinds = tuple(dataclasses.replace(k, amplitudes_v=tuple(k.inputs(design)))
+                  if isinstance(k, gj.sweeps.VcfStatic) else k
                   for k in kinds)
     table = gj.simulate_table(truth_nominal, devices=devices, runs=1, sweeps=kinds, spread=process, seed=seed,
                               device_prefix="lot")
@@ -326,7 +328,7 @@ def ratio_method(table, design):
     relative, {device: SF_virtual})."""
     design_volts_per_rad_s = float(2.0 * design.resonator.mass * design.resonator.angular_gain
                                    * design.drive_amplitude(design.resonator.omega_x) * design.resonator.omega_x
-                                   / (design.vcf_electrode.force_per_volt2 * gj.VCF_CARRIER_V))
+                                   / (design.vcf_electrode.force_per_volt2 * gj.sweeps.VCF_CARRIER_V))
     rate_devs, sf_rate = _slopes(table, "rate_table")
     vcf_devs, sf_volt = _slopes(table, "vcf_static")
     sf_virtual = dict(zip(vcf_devs, sf_volt * design_volts_per_rad_s * DEG))
@@ -523,9 +525,9 @@ def sweep(devices=64, counts=(1, 2, 4, 8, 16), seeds=(11,), process=None, joint=
     def save():
         if out:
             os.makedirs(out, exist_ok=True)
-            gj.atomic_write_json({"rows": rows, "pooled": pooled(rows), "versions": _versions()},
+            gj.io.atomic_write_json({"rows": rows, "pooled": pooled(rows), "versions": _versions()},
                                  os.path.join(out, "lot_batch_sweep.json"))
-            gj.atomic_write_bytes(os.path.join(out, "lot_batch_sweep.md"), sweep_markdown(rows, devices).encode())
+            gj.io.atomic_write_bytes(os.path.join(out, "lot_batch_sweep.md"), sweep_markdown(rows, devices).encode())
 
     for seed in seeds:
         simulated = simulate_lot(devices, seed, process, sweeps)
@@ -694,8 +696,8 @@ def main(argv=None):
     out = {"summary": summary, "devices": records, "versions": _versions(), "argv": list(argv or [])}
     if args.out:
         os.makedirs(args.out, exist_ok=True)
-        gj.atomic_write_json(out, os.path.join(args.out, "lot_batch_calibration.json"))
-        gj.atomic_write_bytes(os.path.join(args.out, "lot_batch_calibration.md"), text.encode())
+        gj.io.atomic_write_json(out, os.path.join(args.out, "lot_batch_calibration.json"))
+        gj.io.atomic_write_bytes(os.path.join(args.out, "lot_batch_calibration.md"), text.encode())
         print(f"wrote {args.out}/lot_batch_calibration.json and .md")
     return out
 

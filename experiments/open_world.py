@@ -152,8 +152,8 @@ def main(argv=None):
               f"{r['baseline_chi2_red']:.3g} -> {r['final_chi2_red']:.3f}  ({r['seconds']:.0f} s)", flush=True)
         if args.out:
             out = {"settings": settings, "rows": rows, "versions": {"gyrojax": gj.__version__}}
-            gj.atomic_write_json(out, os.path.join(args.out, "open_world.json"))
-            gj.atomic_write_bytes(os.path.join(args.out, "open_world.md"), markdown(rows, settings).encode())
+            gj.io.atomic_write_json(out, os.path.join(args.out, "open_world.json"))
+            gj.io.atomic_write_bytes(os.path.join(args.out, "open_world.md"), markdown(rows, settings).encode())
 
     for case in cases:
         table = post_process(clean, case)

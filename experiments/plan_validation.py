@@ -70,7 +70,7 @@ def scale_factor(devices=None, out=None):
     print(f"stderr ratio design / seed 000: predicted {ratio_pred:.3f}, Monte Carlo {ratio_mc:.3f} +/- "
           f"{ratio_unc:.2f}")
     if out:
-        gj.atomic_write_json({"devices": DEVICES, "seed_of_the_data_given": 1, "seed_of_the_monte_carlo": 11,
+        gj.io.atomic_write_json({"devices": DEVICES, "seed_of_the_data_given": 1, "seed_of_the_monte_carlo": 11,
                               "rows": [dict(zip(("protocol", "runs", "predicted_stderr", "mc_std", "mc_std_unc",
                                                  "fits_stderr"), r)) for r in rows],
                               "ratio_predicted": ratio_pred, "ratio_mc": ratio_mc, "ratio_mc_unc": ratio_unc,
@@ -109,7 +109,7 @@ def more_monte_carlo(seed, devices, previous, out):
                                       rows[1]["mc_std_unc"] / rows[1]["mc_std"])
     print(f"stderr ratio design / seed 000: predicted {prev['ratio_predicted']:.3f}, Monte Carlo {ratio_mc:.3f} "
           f"+/- {ratio_unc:.3f}")
-    gj.atomic_write_json({**prev, "rows": rows, "draws": draws, "ratio_mc": ratio_mc, "ratio_mc_unc": ratio_unc},
+    gj.io.atomic_write_json({**prev, "rows": rows, "draws": draws, "ratio_mc": ratio_mc, "ratio_mc_unc": ratio_unc},
                          out)
 
 
@@ -176,7 +176,7 @@ def detections(out=None):
     t0 = time.time()
     rows = [detection(effect, experiment, t0) for effect, experiment in PAIRS]
     if out:
-        gj.atomic_write_json({"pairs": rows, "seed_of_the_data_given": 1,
+        gj.io.atomic_write_json({"pairs": rows, "seed_of_the_data_given": 1,
                               "seeds": list(range(100, 100 + SEEDS))}, out)
         print(f"wrote {out}")
 

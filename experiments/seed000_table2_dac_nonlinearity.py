@@ -30,7 +30,9 @@ except ImportError:  # running from a checkout without `pip install -e .`
 
 import jax.numpy as jnp
 
-from gyrojax import DAC_WORD_BITS, FULL_SCALE_CONVENTIONS, Table, fit_scale_factor, read_table
+from gyrojax import Table, fit_scale_factor, read_table
+from gyrojax.io import DAC_WORD_BITS
+from gyrojax.metrics import FULL_SCALE_CONVENTIONS
 
 
 PAPER_DAC_PPM = 460.679

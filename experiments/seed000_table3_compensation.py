@@ -50,7 +50,7 @@ LABELS = {"uncompensated": "Origin", "polynomial": "Tra method", "composite": "C
 def protocol(rise: float) -> gj.Protocol:
     """Seed 000 §5's rate-table timing (1 min warm-up, 2 min per rate) with a warm-up of `rise` K per run,
     the first run slower."""
-    return gj.Protocol(warmup=gj.RunWarmup(
+    return gj.Protocol(warmup=gj.sweeps.RunWarmup(
         rise_k=rise, time_constant_s=RUN_TIME_CONSTANT_S, first_rise_k=rise,
         first_time_constant_s=FIRST_RUN_TIME_CONSTANT_S))
 
@@ -74,7 +74,7 @@ def leave_one_out(table: gj.Table, method) -> dict:
         sf.append(rec["scale_factor_after"])
         curves.append(rec["residuals_ppm_after"])
     return {"runs_ppm": worst, "scale_factor": float(np.mean(sf)),
-            "repeatability_ppm": float(gj.repeatability(np.asarray(sf))), "residuals_ppm": curves,
+            "repeatability_ppm": float(gj.metrics.repeatability(np.asarray(sf))), "residuals_ppm": curves,
             "compensator": res.devices[0]["compensator"]}
 
 
@@ -85,7 +85,7 @@ def uncompensated(table: gj.Table) -> dict:
         fits.append(gj.fit_scale_factor(table["input"][sel], table["output"][sel]))
     sf = np.asarray([float(f.scale_factor) for f in fits])
     return {"runs_ppm": [float(f.nonlinearity_max_ppm) for f in fits], "scale_factor": float(np.mean(sf)),
-            "repeatability_ppm": float(gj.repeatability(sf)),
+            "repeatability_ppm": float(gj.metrics.repeatability(sf)),
             "residuals_ppm": [(1e6 * f.residuals / f.full_scale).tolist() for f in fits]}
 
 
@@ -131,7 +131,7 @@ def plot(results: dict, rates, path):
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)
-    gj.atomic_write_bytes(path, buf.getvalue())
+    gj.io.atomic_write_bytes(path, buf.getvalue())
 
 
 def main(argv=None) -> dict:
@@ -145,7 +145,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--rates", default=None, help="comma-separated table rates, deg/s (default seed 000's 22)")
     ap.add_argument("--quick", action="store_true", help="skip the sensitivity rows (for tests)")
     args = ap.parse_args(argv)
-    rates = gj.DING_ZHOU_2025_RATES_DPS if args.rates is None else tuple(float(r) for r in args.rates.split(","))
+    rates = gj.sweeps.DING_ZHOU_2025_RATES_DPS if args.rates is None else tuple(float(r) for r in args.rates.split(","))
     os.makedirs(args.out, exist_ok=True)
 
     table = simulate_runs(inl_scale=args.inl_scale, rise=args.warmup_rise, seed=args.seed, rates_dps=rates)
@@ -154,9 +154,11 @@ def main(argv=None) -> dict:
     for m in ("polynomial", "composite", "model"):
         results[m] = leave_one_out(table, m)
     extras = {} if args.quick else {
-        "polynomial order 5": leave_one_out(table, gj.PolynomialCompensator(order=5)),
-        "composite, straight line per segment": leave_one_out(table, gj.CompositeCompensator(segment_degree=1)),
-        "model, frequency exponent identified": leave_one_out(table, gj.ModelCompensator(frequency_exponent=None)),
+        "polynomial order 5": leave_one_out(table, gj.compensation.PolynomialCompensator(order=5)),
+        "composite, straight line per segment": leave_one_out(
+            table, gj.compensation.CompositeCompensator(segment_degree=1)),
+        "model, frequency exponent identified": leave_one_out(
+            table, gj.compensation.ModelCompensator(frequency_exponent=None)),
     }
     worst = {m: max(results[m]["runs_ppm"]) for m in METHODS}
     gain_nl = worst["composite"] / worst["model"]
@@ -204,8 +206,8 @@ def main(argv=None) -> dict:
                "model_over_composite_worst_nonlinearity": gain_nl,
                "model_over_composite_repeatability": gain_rep, "noise_floor_ppm_per_point": floor_ppm,
                "table_markdown": text}
-    gj.atomic_write_json(summary, os.path.join(args.out, "table3.json"))
-    gj.atomic_write_bytes(os.path.join(args.out, "table3.md"), (text + "\n").encode())
+    gj.io.atomic_write_json(summary, os.path.join(args.out, "table3.json"))
+    gj.io.atomic_write_bytes(os.path.join(args.out, "table3.md"), (text + "\n").encode())
     plot(results, np.asarray(rates), os.path.join(args.out, "fig10.png"))
     print(f"  wrote data.csv, table3.md, table3.json, fig10.png to {args.out}")
     return summary

@@ -13,7 +13,7 @@ split vary most, m_d and K_svf "very close", seed 003 §3), each simulated on se
 virtual rate table and the dynamic virtual test (`gyrojax.simulate_table`, noise included), and per device:
 the rate-table SF, the virtual SF, their ratio against the model's own physical ratio
 2 Ag m a w_d / (K_svf V_fc) over the design value, and the -3 dB bandwidth of the dynamic VCF sweep
-(`gyrojax.rate_bandwidth`) against the model's own rate bandwidth (`gyrojax.bandwidth`).
+(`gyrojax.metrics.rate_bandwidth`) against the model's own rate bandwidth (`gyrojax.physics.bandwidth`).
 
 What closes (13 devices, seed 3, default noise):
   - the ratio is nearly constant across the lot while the rate SF is not: SF_rate spreads by 8.6 %
@@ -72,7 +72,7 @@ PAPER = {
     "bandwidth_simulated_hz": 349.5,  # seed 003 abstract, §3
 }
 
-DESIGN_VOLTS_PER_RAD_S = 2.0 * P.VCF_MASS * P.VCF_DRIVE_VELOCITY / (P.VCF_KSVF * gj.VCF_CARRIER_V)
+DESIGN_VOLTS_PER_RAD_S = 2.0 * P.VCF_MASS * P.VCF_DRIVE_VELOCITY / (P.VCF_KSVF * gj.sweeps.VCF_CARRIER_V)
 """Seed 003 Eq. (7) with Table 1's design values: the V_ac that stands for 1 rad/s of virtual rate."""
 
 
@@ -93,7 +93,7 @@ def run(devices=13, runs=1, seed=3):
     sf_virtual = sf_volt * DESIGN_VOLTS_PER_RAD_S * DEG  # LSB per virtual deg/s (Eq. 7, design values)
     ratio = sf_rate / sf_virtual
     dyn = table.to_arrays("vcf_dynamic")
-    bw = gj.rate_bandwidth(np.asarray(dyn.inputs), np.asarray(dyn.outputs), mask=np.asarray(dyn.mask),
+    bw = gj.metrics.rate_bandwidth(np.asarray(dyn.inputs), np.asarray(dyn.outputs), mask=np.asarray(dyn.mask),
                            phase_deg=np.asarray(dyn.aux["phase_deg"]))
     lsb_v = P.VCF_ADC_LSB  # V per output LSB (the rate output's ADC)
     records = []
@@ -103,7 +103,7 @@ def run(devices=13, runs=1, seed=3):
         temp = float(np.mean(np.asarray(rate.temperatures[d])))
         w = float(r.at_temperature(temp)[0])
         phys = (2.0 * float(r.angular_gain) * float(r.mass) * float(g.drive_amplitude(w)) * w
-                / (float(g.vcf_electrode.force_per_volt2) * gj.VCF_CARRIER_V))
+                / (float(g.vcf_electrode.force_per_volt2) * gj.sweeps.VCF_CARRIER_V))
         records.append({
             "device": table.to_arrays("rate_table").devices[d],
             "q_sense": float(r.q_y),
@@ -115,7 +115,7 @@ def run(devices=13, runs=1, seed=3):
             "ratio_physical": phys / DESIGN_VOLTS_PER_RAD_S,
             "bandwidth_vcf_hz": float(np.mean(np.asarray(bw.bandwidth_hz[d]))),
             "phase_at_bandwidth_deg": float(np.mean(np.asarray(bw.phase_deg[d]))),
-            "bandwidth_model_hz": float(gj.bandwidth(g)),
+            "bandwidth_model_hz": float(gj.physics.bandwidth(g)),
         })
     ratios = np.array([rec["ratio"] for rec in records])
     sfs = np.array([rec["sf_rate_lsb_per_dps"] for rec in records])
@@ -216,8 +216,9 @@ def main(argv=None):
     out = {"devices": records, "summary": summary, "paper": PAPER, "versions": {"gyrojax": gj.__version__}}
     if args.out:
         os.makedirs(args.out, exist_ok=True)
-        gj.atomic_write_json(out, os.path.join(args.out, "seed003_batch_calibration.json"))
-        gj.atomic_write_bytes(os.path.join(args.out, "seed003_batch_calibration.png"), _plot(table, records, summary))
+        gj.io.atomic_write_json(out, os.path.join(args.out, "seed003_batch_calibration.json"))
+        gj.io.atomic_write_bytes(os.path.join(args.out, "seed003_batch_calibration.png"),
+                                 _plot(table, records, summary))
         print(f"wrote {args.out}/seed003_batch_calibration.json and .png")
     return out
 

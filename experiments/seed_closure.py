@@ -59,7 +59,7 @@ def seed003():
     g = gj.vcf_2018()
     r = g.resonator
     dw = float((r.omega_y**2 - r.omega_x**2) / (2 * r.omega_x))
-    bw = gj.bandwidth(g)
+    bw = gj.physics.bandwidth(g)
     rates = np.array([1.0, 200.0]) * DEG
     s = gj.rate_sweep(g, rates)
     sf = np.asarray(s.rate) / rates
@@ -107,7 +107,7 @@ def main(argv=None):
     print(f"  Eq. (7) virtual rate at V_ac = 20 mV, V_fc = 1 V: {s3['vcf_equivalent_rate_dps_20mV_kg']:.0f} deg/s "
           f"with m_d in kg ({s3['vcf_equivalent_rate_dps_20mV_if_mass_in_grams']:.3g} deg/s if 'g' were meant)")
     if args.json:
-        gj.atomic_write_json({"seed000": s0, "seed003": s3, "versions": {"gyrojax": gj.__version__}}, args.json)
+        gj.io.atomic_write_json({"seed000": s0, "seed003": s3, "versions": {"gyrojax": gj.__version__}}, args.json)
     return {"seed000": s0, "seed003": s3}
 
 
