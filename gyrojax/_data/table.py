@@ -1,8 +1,8 @@
 """`Table`: the validated, immutable tidy table of settled points (docs/data_format.md).
 
 One row is one settled point of one sweep. Required columns are `device` (str), `run` (int), `sweep` (one of
-[`SWEEP_KINDS`][]), `input` and `output`; the optional columns are [`OPTIONAL_COLUMNS`][]; any other column is kept
-(and written back) but ignored.
+[`gyrojax.sweeps.SWEEP_KINDS`][]), `input` and `output`; the optional columns are
+[`gyrojax.io.OPTIONAL_COLUMNS`][]; any other column is kept (and written back) but ignored.
 """
 
 from __future__ import annotations
@@ -188,7 +188,7 @@ class Table:
 
         **Arguments:**
 
-        - `sweep`: one of [`SWEEP_KINDS`][].
+        - `sweep`: one of [`gyrojax.sweeps.SWEEP_KINDS`][].
 
         **Returns:**
 
