@@ -21,7 +21,7 @@ import numpy as np
 import gyrojax as gj
 
 
-RATES_DPS = np.asarray(gj.DING_ZHOU_2025_RATES_DPS)  # the 22 table rates, -200 ... 200 deg/s, in sweep order
+RATES_DPS = np.asarray(gj.sweeps.DING_ZHOU_2025_RATES_DPS)  # the 22 table rates, -200 ... 200 deg/s, in sweep order
 OMEGA_FS_DPS = 200.0  # the protocol's largest rate: the INL coefficients are given relative to it
 
 WARMUP_S = 60.0  # seed 000 §5: 1 min of settling after the table starts, before the first point

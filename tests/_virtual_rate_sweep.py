@@ -8,7 +8,7 @@ import numpy as np
 import gyrojax as gj
 
 
-class AbstractRateTableWithVirtualRate(gj.AbstractSteadySweep):
+class AbstractRateTableWithVirtualRate(gj.sweeps.AbstractSteadySweep):
     """What the kind is and how a point is applied; a final subclass names it and lists its inputs."""
 
     offset_v: float = 0.5
@@ -26,14 +26,14 @@ class AbstractRateTableWithVirtualRate(gj.AbstractSteadySweep):
             raise ValueError(f"{self.name} needs a virtual-Coriolis electrode; {gyro.name!r} has none.")
 
     def stimulus(self, value, time):
-        return gj.Stimulus(rate=value * gj.units.DEG, vcf_ac=0.0 * value + self.offset_v,
-                           vcf_fc=gj.VCF_CARRIER_V, time=time)
+        return gj.physics.Stimulus(rate=value * gj.units.DEG, vcf_ac=0.0 * value + self.offset_v,
+                           vcf_fc=gj.sweeps.VCF_CARRIER_V, time=time)
 
 
 class RateTableWithVirtualRate(AbstractRateTableWithVirtualRate):
     """At its own table rates (default seed 000's 22), the protocol's dwell and sampling."""
 
-    rates_dps: tuple = gj.points_field(gj.DING_ZHOU_2025_RATES_DPS, "table rates (deg/s)")
+    rates_dps: tuple = gj.sweeps.points_field(gj.sweeps.DING_ZHOU_2025_RATES_DPS, "table rates (deg/s)")
 
     name = "rate_table_vcf_offset"
     stream = 101

@@ -20,8 +20,8 @@ def _load():
 # Few points, same physics: 8 table rates / virtual rates over +/-200 deg/s and the dynamic test on a 10 Hz grid
 # up to 200 Hz (the vcf-2018 response peaks at the 62 Hz split and is past its -3 dB point at ~97 Hz).
 RATES = (-200.0, -100.0, -20.0, -5.0, 5.0, 20.0, 100.0, 200.0)
-SMALL = (gj.RateTable(rates_dps=RATES), gj.VcfStatic(virtual_rates_dps=RATES),
-         gj.VcfDynamic(frequencies_hz=tuple(10.0 * k for k in range(1, 21))))
+SMALL = (gj.sweeps.RateTable(rates_dps=RATES), gj.sweeps.VcfStatic(virtual_rates_dps=RATES),
+         gj.sweeps.VcfDynamic(frequencies_hz=tuple(10.0 * k for k in range(1, 21))))
 
 
 def test_batch_calibration_small():

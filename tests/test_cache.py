@@ -22,7 +22,7 @@ CHILD = textwrap.dedent("""
         warnings.simplefilter("always")
         import gyrojax as gj
     import jax.numpy as jnp
-    result = {"dir": gj.compilation_cache(), "warnings": [str(w.message) for w in caught
+    result = {"dir": gj.io.compilation_cache(), "warnings": [str(w.message) for w in caught
                                                            if issubclass(w.category, RuntimeWarning)]}
     WORK
     result["hits"] = counts.get("/jax/compilation_cache/cache_hits", 0)
@@ -31,7 +31,7 @@ CHILD = textwrap.dedent("""
     print("RESULT " + json.dumps(result))
 """)
 
-SETTLE = "result['rate'] = float(gj.settle(gj.paper_qmg(), gj.Stimulus(rate=0.1), gj.Steady()).rate)"
+SETTLE = "result['rate'] = float(gj.settle(gj.paper_qmg(), gj.physics.Stimulus(rate=0.1), gj.Steady()).rate)"
 TINY = "result['y'] = float(jax.jit(lambda x: jnp.sum(x * 2.0))(jnp.arange(3.0)))"
 
 
@@ -116,21 +116,21 @@ def test_compilation_cache_moves_disables_and_checks_its_argument(tmp_path):
     moved, blocker = tmp_path / "by-call", tmp_path / "a-file"
     blocker.write_text("not a folder")
     r = _run(tmp_path, f"""
-        result['moved'] = gj.compilation_cache({str(moved)!r})
+        result['moved'] = gj.io.compilation_cache({str(moved)!r})
         jax.jit(lambda x: x + 1.0)(jnp.ones(2)).block_until_ready()
         result['n_moved'] = len([p for p in os.listdir({str(moved)!r}) if p.endswith('-cache')])
-        result['off'] = gj.compilation_cache(None)
-        result['now'] = gj.compilation_cache()
+        result['off'] = gj.io.compilation_cache(None)
+        result['now'] = gj.io.compilation_cache()
         jax.jit(lambda x: x - 1.0)(jnp.ones(2)).block_until_ready()
         result['n_after_off'] = len([p for p in os.listdir({str(moved)!r}) if p.endswith('-cache')])
         errors = []
         for bad in (3, {str(blocker / "sub")!r}):
             try:
-                gj.compilation_cache(bad)
+                gj.io.compilation_cache(bad)
             except (TypeError, ValueError) as e:
                 errors.append(type(e).__name__ + ': ' + str(e))
         result['errors'] = errors
-        result['still_off'] = gj.compilation_cache()
+        result['still_off'] = gj.io.compilation_cache()
     """, GYROJAX_CACHE_DIR="off")
     assert r["moved"] == str(moved) and r["n_moved"] >= 1
     assert r["off"] is None and r["now"] is None and r["n_after_off"] == r["n_moved"]
@@ -145,7 +145,7 @@ def _import_stderr(tmp_path, **env_vars):
            if k not in ("JAX_COMPILATION_CACHE_DIR", "JAX_ENABLE_COMPILATION_CACHE", "GYROJAX_CACHE_DIR")}
     env["XDG_CACHE_HOME"] = str(tmp_path / "xdg")
     env.update(env_vars)
-    proc = subprocess.run([sys.executable, "-c", "import gyrojax; print(gyrojax.compilation_cache())"], env=env,
+    proc = subprocess.run([sys.executable, "-c", "import gyrojax; print(gyrojax.io.compilation_cache())"], env=env,
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return proc.stdout.strip(), proc.stderr
@@ -168,7 +168,7 @@ def test_a_folder_others_can_write_is_not_used(tmp_path):
     assert err.count("gyrojax: warning: the compilation cache folder") == 1 and "RuntimeWarning" not in err, err
     r = _run(tmp_path, f"""
         try:
-            gj.compilation_cache({str(shared)!r})
+            gj.io.compilation_cache({str(shared)!r})
         except ValueError as e:
             result['error'] = str(e)
     """, GYROJAX_CACHE_DIR="off")

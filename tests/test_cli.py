@@ -60,7 +60,7 @@ def test_simulate_a_revealing_sweep(tmp_path):
     assert main(["simulate", "--preset", "paper-qmg", "--sweeps", "drive_amplitude", "--effect",
                  "agc_finite_gain=1", "--seed", "2", "--out", str(out)]) == 0
     table = gj.read_table(out)
-    assert set(table["sweep"]) == {"drive_amplitude"} and len(table) == len(gj.SETPOINT_RATIOS)
+    assert set(table["sweep"]) == {"drive_amplitude"} and len(table) == len(gj.sweeps.SETPOINT_RATIOS)
     js = tmp_path / "m.json"
     assert main(["metrics", str(out), "--json", str(js)]) == 0
     (point,) = json.loads(js.read_text())["points"]

@@ -15,7 +15,7 @@ from gyrojax._presets import QMG_QUADRATURE_DPS
 from gyrojax.cli import main
 
 
-TYPICAL_INL = {3: -1063.6, 5: 3418.6}  # gyrojax.DacInl.typical(): LSB coefficients of u^3 and u^5
+TYPICAL_INL = {3: -1063.6, 5: 3418.6}  # gyrojax.effects.DacInl.typical(): LSB coefficients of u^3 and u^5
 TCF = -30e-6  # paper_qmg's silicon TCF, 1/K
 
 
@@ -50,7 +50,7 @@ def test_polynomial_is_exact_on_polynomial_data():
     a = np.array([0.3, 190.0, -0.8, 2.5])  # deg/s per (y / max|y|)^k
     u = y / np.max(np.abs(y))
     rate = a[0] + a[1] * u + a[2] * u**2 + a[3] * u**3
-    sol = gj.PolynomialCompensator(order=3).fit(gj.RatePoints(rate, y))
+    sol = gj.compensation.PolynomialCompensator(order=3).fit(gj.compensation.RatePoints(rate, y))
     np.testing.assert_allclose(np.asarray(sol.coefficients), a, rtol=1e-10, atol=1e-10)
     y_new = np.array([-1.9e6, 0.0, 1.23e6])
     u_new = y_new / np.max(np.abs(y))
@@ -58,16 +58,16 @@ def test_polynomial_is_exact_on_polynomial_data():
                                a[0] + a[1] * u_new + a[2] * u_new**2 + a[3] * u_new**3, rtol=1e-12, atol=1e-10)
     # a cubic cannot hold a quintic: order 3 leaves a residual that order 5 removes
     rate5 = rate + 0.4 * u**5
-    res3 = rate5 - np.asarray(gj.PolynomialCompensator(order=3).fit(gj.RatePoints(rate5, y)).rate(y))
-    res5 = rate5 - np.asarray(gj.PolynomialCompensator(order=5).fit(gj.RatePoints(rate5, y)).rate(y))
+    res3 = rate5 - np.asarray(gj.compensation.PolynomialCompensator(order=3).fit(gj.compensation.RatePoints(rate5, y)).rate(y))
+    res5 = rate5 - np.asarray(gj.compensation.PolynomialCompensator(order=5).fit(gj.compensation.RatePoints(rate5, y)).rate(y))
     assert np.max(np.abs(res3)) > 1e-2 and np.max(np.abs(res5)) < 1e-10
 
 
 def test_polynomial_refuses_bad_settings_and_too_few_points():
     with pytest.raises(ValueError, match="order must be an integer >= 1, got 0"):
-        gj.PolynomialCompensator(order=0)
+        gj.compensation.PolynomialCompensator(order=0)
     with pytest.raises(ValueError, match="needs at least 5 distinct training outputs, got 4"):
-        gj.PolynomialCompensator(order=3).fit(gj.RatePoints([1.0, 2, 3, 4], [10.0, 20, 30, 40]))
+        gj.compensation.PolynomialCompensator(order=3).fit(gj.compensation.RatePoints([1.0, 2, 3, 4], [10.0, 20, 30, 40]))
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -88,26 +88,26 @@ def test_composite_counter_threshold_is_configurable():
     e = np.array([0, 0, 0, 0, 0, 0, 1, 3, 6.0])
     assert side_segment_starts(e, threshold=3) == [0, 5]
     with pytest.raises(ValueError, match="threshold must be an integer >= 1, got 0"):
-        gj.CompositeCompensator(threshold=0)
+        gj.compensation.CompositeCompensator(threshold=0)
 
 
 def _piecewise_points(f_hz, bias):
     """Calibrated outputs u (LSB) whose rate is a different cubic of u on each side of zero, measured at drive
     frequencies f_hz (so the raw output is (u + bias) f / k_t with k_t the mean training frequency 4634 Hz)."""
-    rates_u = 1.0e4 * np.asarray(gj.DING_ZHOU_2025_RATES_DPS)
+    rates_u = 1.0e4 * np.asarray(gj.sweeps.DING_ZHOU_2025_RATES_DPS)
     s = rates_u / 2.0e6
     rate = np.where(s >= 0, 200 * s + 0.3 * s**2 - 0.9 * s**3, 200 * s - 0.2 * s**2 + 0.5 * s**3)
     return rate, (rates_u + bias) * f_hz / 4634.0
 
 
 def test_composite_is_exact_on_a_piecewise_cubic_with_its_own_calibration():
-    n = len(gj.DING_ZHOU_2025_RATES_DPS)
+    n = len(gj.sweeps.DING_ZHOU_2025_RATES_DPS)
     f_train = np.concatenate([np.full(n, 4634.0 * (1 + 2e-4)), np.full(n, 4634.0 * (1 - 2e-4))])  # mean 4634
     rate_a, out_a = _piecewise_points(f_train[:n], 50.0)
     rate_b, out_b = _piecewise_points(f_train[n:], 50.0)
-    train = gj.RatePoints(np.concatenate([rate_a, rate_b]), np.concatenate([out_a, out_b]), drive_freq_hz=f_train,
+    train = gj.compensation.RatePoints(np.concatenate([rate_a, rate_b]), np.concatenate([out_a, out_b]), drive_freq_hz=f_train,
                           run=np.repeat([0, 1], n))
-    sol = gj.CompositeCompensator().fit(train)
+    sol = gj.compensation.CompositeCompensator().fit(train)
     assert float(sol.k_t_hz) == pytest.approx(4634.0, rel=1e-15)
     assert sol.summary()["segments_dps"] == [[float(rate_a.min()), float(rate_a[rate_a < 0].max())],
                                              [float(rate_a[rate_a > 0].min()), float(rate_a.max())]]
@@ -153,7 +153,7 @@ def test_describing_function_matches_the_carrier_samples():
     theta = np.linspace(0, 2 * np.pi, 4096, endpoint=False)
     inl = {2: 11.4, 3: -1063.6, 4: 250.0, 5: 3418.6}  # DAC LSB at u = code / 2^15
     for q in (0.0, 4.0e5):
-        spec = gj.ModelCompensator(inl_orders=(2, 3, 4, 5), quadrature_lsb=q)
+        spec = gj.compensation.ModelCompensator(inl_orders=(2, 3, 4, 5), quadrature_lsb=q)
         for w in (-2.7e6, 1.0e5, 2.7e6):
             u = (w * np.sin(theta) + q * np.cos(theta)) / 2.0**23
             inl_words = 256.0 * sum(c * u**n for n, c in inl.items())  # DAC LSB -> 24-bit word LSB
@@ -184,7 +184,7 @@ def test_model_recovers_inl_and_tcf_on_noise_free_data(warmup_table):
     assert held["nonlinearity_max_ppm_before"] > 400
     assert res.devices[0]["repeatability_ppm_after"] < 0.01 and res.devices[0]["repeatability_ppm_before"] > 50
     # the output model (Newton on the balance) and its inverse are each other's
-    pts = gj.rate_points(warmup_table, _device(warmup_table))
+    pts = gj.compensation.rate_points(warmup_table, _device(warmup_table))
     y = sol.output(pts.rate_dps, drive_freq_hz=pts.drive_freq_hz)
     np.testing.assert_allclose(np.asarray(sol.rate(y, drive_freq_hz=pts.drive_freq_hz)), pts.rate_dps,
                                rtol=1e-12, atol=1e-9)
@@ -192,7 +192,7 @@ def test_model_recovers_inl_and_tcf_on_noise_free_data(warmup_table):
 
 @pytest.mark.slow
 def test_model_identifies_the_frequency_exponent_and_reports_even_orders(warmup_table):
-    cfg = gj.ModelCompensator(inl_orders=(2, 3, 5), frequency_exponent=None)
+    cfg = gj.compensation.ModelCompensator(inl_orders=(2, 3, 5), frequency_exponent=None)
     sol = gj.compensate(warmup_table, method=cfg, train_runs=[0, 1]).solutions[_device(warmup_table)]
     # SF tracks w_d (Eq. 2); the DAC hold's sinc gain adds 2 (w T/2)^2 / 6 ~ 7e-5 to the exponent
     assert float(sol.frequency_exponent) == pytest.approx(1.0, abs=2e-4)
@@ -207,7 +207,7 @@ def test_model_identifies_the_frequency_exponent_and_reports_even_orders(warmup_
 def test_model_fit_is_differentiable_in_the_data(warmup_table):
     """d(fitted u^3 INL)/d(outputs) by forward mode through the Levenberg-Marquardt optimum (implicit
     differentiation) against central finite differences."""
-    pts = gj.rate_points(warmup_table, _device(warmup_table))
+    pts = gj.compensation.rate_points(warmup_table, _device(warmup_table))
     pts = pts.select(np.isin(pts.run, [0, 1]))
     n = len(pts)
     data = {"x": jnp.asarray(pts.rate_dps), "y": jnp.asarray(pts.output), "f": jnp.asarray(pts.drive_freq_hz),
@@ -216,7 +216,7 @@ def test_model_fit_is_differentiable_in_the_data(warmup_table):
     free = (True, False) + (True,) * 7  # the default: beta held at 1, everything else fitted
 
     def inl3(y):
-        return _fit_arrays(gj.ModelCompensator(), 2, True, free, {**data, "y": y})["theta"][2]
+        return _fit_arrays(gj.compensation.ModelCompensator(), 2, True, free, {**data, "y": y})["theta"][2]
 
     direction = jnp.asarray(np.random.default_rng(3).normal(size=n))  # LSB
     _, tangent = jax.jvp(inl3, (data["y"],), (direction,))
@@ -227,14 +227,14 @@ def test_model_fit_is_differentiable_in_the_data(warmup_table):
 
 def test_model_refuses_bad_settings():
     with pytest.raises(ValueError, match=r"inl_orders must be a non-empty tuple of distinct integers >= 2"):
-        gj.ModelCompensator(inl_orders=(1, 3))
+        gj.compensation.ModelCompensator(inl_orders=(1, 3))
     with pytest.raises(ValueError, match="word_bits must be an integer >= dac_bits"):
-        gj.ModelCompensator(dac_bits=16, word_bits=12)
-    pts = gj.RatePoints([1.0, 2.0, 3.0, 4.0], [10.0, 20.0, 30.0, 40.0], drive_freq_hz=[4634.0] * 4)
+        gj.compensation.ModelCompensator(dac_bits=16, word_bits=12)
+    pts = gj.compensation.RatePoints([1.0, 2.0, 3.0, 4.0], [10.0, 20.0, 30.0, 40.0], drive_freq_hz=[4634.0] * 4)
     with pytest.raises(ValueError, match="needs at least 5 distinct training rates"):
-        gj.ModelCompensator().fit(pts)
+        gj.compensation.ModelCompensator().fit(pts)
     with pytest.raises(ValueError, match="needs drive_freq_hz on every point; 4 of 4"):
-        gj.ModelCompensator().fit(gj.RatePoints([1.0, 2.0, 3.0, 4.0], [10.0, 20.0, 30.0, 40.0]))
+        gj.compensation.ModelCompensator().fit(gj.compensation.RatePoints([1.0, 2.0, 3.0, 4.0], [10.0, 20.0, 30.0, 40.0]))
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -351,7 +351,7 @@ def test_table3_experiment_reproduces_the_ordering(tmp_path, capsys):
 def test_a_run_whose_outputs_do_not_change_is_refused_by_name():
     """A disconnected or saturated output gives the same value at every rate: no scale factor to compensate,
     so no 'after' figure may be computed from round-off (it was 3.5 ppm from a 1e-11 slope)."""
-    rates = np.asarray(gj.DING_ZHOU_2025_RATES_DPS)
+    rates = np.asarray(gj.sweeps.DING_ZHOU_2025_RATES_DPS)
     records = [{"device": "d", "run": r, "sweep": "rate_table", "input": x,
                 "output": 13709.8 * x if r == 0 else 5.0, "drive_freq_hz": 4634.0 + 1e-3 * i}
                for r in (0, 1) for i, x in enumerate(rates)]

@@ -48,7 +48,7 @@ def test_model_fit_reaches_its_minimum_in_few_steps(lot):
     on rounding noise before the solver's stopping rule held (10 steps: "did not converge"); whitened, the
     minimum is reached in 6 on every device of the 6-device lot, and judged there."""
     full = gj.compensate(lot, method="model", train_runs=(0,))
-    short = gj.compensate(lot, method=gj.ModelCompensator(max_steps=10), train_runs=(0,))
+    short = gj.compensate(lot, method=gj.compensation.ModelCompensator(max_steps=10), train_runs=(0,))
     for a, b in zip(full.devices, short.devices):
         assert b["converged"], b["message"]
         pa, pb = a["compensator"]["parameters"], b["compensator"]["parameters"]
@@ -63,7 +63,7 @@ def test_unconverged_device_is_reported_and_the_others_compensated():
     # one step: the linear, noise-free device starts at its minimum; the other is far from it
     with pytest.warns(RuntimeWarning, match=r"device 'foreign-00', training runs \[0\]: model compensation did not "
                                             r"converge: Levenberg-Marquardt reached max_steps=1"):
-        res = gj.compensate(table, method=gj.ModelCompensator(max_steps=1), train_runs=(0,))
+        res = gj.compensate(table, method=gj.compensation.ModelCompensator(max_steps=1), train_runs=(0,))
     ok, bad = res.devices
     assert ok["device"] == "linear-00" and ok["converged"] and ok["message"] == ""
     # left (measured 0.0018 / 0.0025 ppm): a held-out run's own turn-on bias, divided by a SF that drifts 60 ppm
@@ -104,7 +104,7 @@ def test_cli_reports_the_converged_devices_and_fails_on_the_other(tmp_path, caps
     data = tmp_path / "mixed.csv"
     gj.write_table(gj.Table({k: np.concatenate([linear[k], inl[k]]) for k in linear.columns}), data)
     # the command line has no max_steps: its "model" is made a one-step fit
-    monkeypatch.setitem(compensate_module.COMPENSATORS, "model", lambda: gj.ModelCompensator(max_steps=1))
+    monkeypatch.setitem(compensate_module.COMPENSATORS, "model", lambda: gj.compensation.ModelCompensator(max_steps=1))
     with pytest.warns(RuntimeWarning, match="device 'foreign-00'.*did not converge"):
         rc = main(["compensate", str(data), "--method", "model", "--train-runs", "0"])
     out = capsys.readouterr().out.splitlines()

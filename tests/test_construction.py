@@ -14,7 +14,7 @@ import gyrojax as gj
 def _resonator(**kw):
     base = dict(mass=1e-6, omega_x=3e4, omega_y=3e4, q_x=1e5, q_y=1e5)
     base.update(kw)
-    return gj.Resonator(**base)
+    return gj.physics.Resonator(**base)
 
 
 @pytest.mark.parametrize("name,value", [("mass", -1e-6), ("mass", 0.0), ("q_x", 0.0), ("q_y", -5.0),
@@ -26,26 +26,26 @@ def test_resonator_refuses_nonphysical(name, value):
 
 def test_electrode_gap_and_fraction():
     with pytest.raises(ValueError, match=r"FeedbackElectrode\.gap must be positive.*0\.0"):
-        gj.FeedbackElectrode(k_vf=1e-6, v_dc=10.0, gap=0.0)
+        gj.physics.FeedbackElectrode(k_vf=1e-6, v_dc=10.0, gap=0.0)
     with pytest.raises(ValueError, match=r"FeedbackElectrode\.gap_fraction must lie in \[0\.0, 1\.0\).*1\.5"):
-        gj.FeedbackElectrode(k_vf=1e-6, v_dc=10.0, gap=2e-6, gap_fraction=1.5)
+        gj.physics.FeedbackElectrode(k_vf=1e-6, v_dc=10.0, gap=2e-6, gap_fraction=1.5)
     with pytest.raises(ValueError, match=r"from_geometry\.thickness must be positive"):
-        gj.FeedbackElectrode.from_geometry(fingers=100, thickness=-1, gap=2e-6, tip_width=4e-6, v_dc=10)
+        gj.physics.FeedbackElectrode.from_geometry(fingers=100, thickness=-1, gap=2e-6, tip_width=4e-6, v_dc=10)
 
 
 @pytest.mark.parametrize("bits", [0, -3, 2.5])
 def test_dac_bits(bits):
     with pytest.raises(ValueError, match=rf"DAC\.bits must be an integer >= 1, got {bits!r}"):
-        gj.DAC(bits=bits)
+        gj.physics.DAC(bits=bits)
 
 
 def test_dac_other_fields():
     with pytest.raises(ValueError, match=r"DAC\.word_bits must be an integer >= bits \(16\)"):
-        gj.DAC(bits=16, word_bits=12)
+        gj.physics.DAC(bits=16, word_bits=12)
     with pytest.raises(ValueError, match=r"DAC\.update_rate must be positive.*-1"):
-        gj.DAC(update_rate=-1.0)
+        gj.physics.DAC(update_rate=-1.0)
     with pytest.raises(ValueError, match=r"DAC\.full_scale must be positive"):
-        gj.DAC(full_scale=0.0)
+        gj.physics.DAC(full_scale=0.0)
 
 
 def test_unknown_names():
@@ -55,22 +55,22 @@ def test_unknown_names():
                                          r"\[.*'dac_inl', .*'vref_drift', 'zro_tempco'\]"):
         gj.effect("dac_inl2")
     with pytest.raises(ValueError, match=r"FrontEnd\.kind must be one of"):
-        gj.FrontEnd(1e-6, 1e11, 1e-7, kind="capacitive")
+        gj.physics.FrontEnd(1e-6, 1e11, 1e-7, kind="capacitive")
 
 
 def test_loops_and_tiers_refuse_bad_settings():
     with pytest.raises(ValueError, match=r"DriveLoop\.pll_kp must be positive"):
-        gj.DriveLoop(1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0)
+        gj.physics.DriveLoop(1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0)
     with pytest.raises(ValueError, match=r"RebalanceLoop\.leak must be non-negative"):
-        gj.RebalanceLoop(1.0, 1.0, 1.0, leak=-1.0)
+        gj.physics.RebalanceLoop(1.0, 1.0, 1.0, leak=-1.0)
     with pytest.raises(ValueError, match=r"Averaged\.settle_time must be positive"):
         gj.Averaged(settle_time=0.0)
     with pytest.raises(ValueError, match=r"Steady\.jacobian must be 'once' \(chord\) or 'every_step'"):
         gj.Steady(jacobian="broyden")
     with pytest.raises(ValueError, match=r"Steady tier: stimulus\.rate_frequency must be 0"):
-        gj.settle(gj.paper_qmg(), gj.Stimulus(rate=1.0, rate_frequency=10.0), gj.Steady())
+        gj.settle(gj.paper_qmg(), gj.physics.Stimulus(rate=1.0, rate_frequency=10.0), gj.Steady())
     with pytest.raises(ValueError, match=r"Stimulus\.time must be non-negative"):
-        gj.Stimulus(time=-1.0)
+        gj.physics.Stimulus(time=-1.0)
     with pytest.raises(ValueError, match=r"give exactly one of rebalance_loop"):
         g = gj.paper_qmg()
         gj.Gyroscope(g.resonator, g.drive_electrode, g.drive_frontend, g.sense_frontend, g.drive_loop)
@@ -79,7 +79,7 @@ def test_loops_and_tiers_refuse_bad_settings():
 def test_dac_describing_function_of_quantiser_against_fft():
     """The DAC is memoryless on the carrier; its fundamental by phase quadrature must equal the FFT of a
     densely sampled, quantised sine."""
-    dac = gj.DAC(quantize=True, inl=jnp.array([0.0, 3.0]), update_rate=math.inf)
+    dac = gj.physics.DAC(quantize=True, inl=jnp.array([0.0, 3.0]), update_rate=math.inf)
     word = 5.3 * 256.0  # a 5.3-code sine: quantisation matters at the percent level
     n = 1 << 16
     theta = 2 * np.pi * np.arange(n) / n
@@ -93,7 +93,7 @@ def test_dac_describing_function_of_quantiser_against_fft():
 
 
 def test_dac_hold_is_sinc_and_half_sample_delay():
-    dac = gj.DAC(update_rate=1e6)
+    dac = gj.physics.DAC(update_rate=1e6)
     gain, delay = dac.hold(2 * np.pi * 5e3)
     x = np.pi * 5e3 / 1e6
     assert float(gain) == pytest.approx(np.sin(x) / x, rel=1e-14)
@@ -102,19 +102,19 @@ def test_dac_hold_is_sinc_and_half_sample_delay():
 
 def test_dac_sweep_reproduces_table2_scale():
     """16-bit DAC, +/-5 V, 24-bit word: seed 000 Table 2's 0x29E345 = 2,745,157 gives about 1.637 V."""
-    volts = float(gj.dac_sweep(gj.paper_qmg(), np.array([2745157.0]))[0])
+    volts = float(gj.sweeps.dac_sweep(gj.paper_qmg(), np.array([2745157.0]))[0])
     assert volts == pytest.approx(1.637, rel=2e-3)
 
 
 def test_effect_nests_at_zero():
     g = gj.paper_qmg()
     s0 = gj.rate_sweep(g, gj.ding_zhou_2025_rates())
-    s1 = gj.rate_sweep(gj.add_effect(g, gj.DacInl.typical(0.0)), gj.ding_zhou_2025_rates())
+    s1 = gj.rate_sweep(gj.add_effect(g, gj.effects.DacInl.typical(0.0)), gj.ding_zhou_2025_rates())
     assert np.array_equal(np.asarray(s0.rate), np.asarray(s1.rate))
 
 
 def test_feedback_force_is_linear_at_rest_and_geometry_consistent():
-    e = gj.FeedbackElectrode.from_geometry(fingers=200, thickness=60e-6, gap=2e-6, tip_width=4e-6, v_dc=10.0)
+    e = gj.physics.FeedbackElectrode.from_geometry(fingers=200, thickness=60e-6, gap=2e-6, tip_width=4e-6, v_dc=10.0)
     v = jnp.linspace(-2, 2, 9)
     assert np.allclose(np.asarray(e.force(0.0, v, v)), np.asarray(e.k_vf * v), rtol=1e-12, atol=0)
     # at v = 0 the electrostatic spring is removed (it is inside the operated w_y): what is left of the

@@ -9,16 +9,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from gyrojax import (
-    DataError,
-    SweepArrays,
-    Table,
-    aggregate_samples,
-    decode_dac_word,
-    read_table,
-    write_table,
-)
+from gyrojax import DataError, Table, read_table, write_table
 from gyrojax._data import files as data_files, io as _io, validate as data_validate
+from gyrojax.io import SweepArrays, aggregate_samples, decode_dac_word
 
 
 HEADER = "device,run,sweep,input,output"

@@ -247,7 +247,7 @@ def test_an_open_loop_file_a_warmup_history_and_what_a_file_cannot_hold(tmp_path
     from gyrojax._device.file import write_device_file
 
     g = eqx.tree_at(lambda g: g.temperature, gj.preset("vcf-2018"),
-                    gj.WarmupTemperature(ambient=22.0, rise=3.5, time_constant=90.0))
+                    gj.temperature.WarmupTemperature(ambient=22.0, rise=3.5, time_constant=90.0))
     path = tmp_path / "open.toml"
     write_device_file(g, path)
     back = gj.load_device(path)

@@ -37,7 +37,7 @@ def _leaky(g):
 
 
 def _at(g, temperature):
-    return eqx.tree_at(lambda d: d.temperature, g, gj.ConstantTemperature(jnp.asarray(temperature, dtype=float)))
+    return eqx.tree_at(lambda d: d.temperature, g, gj.temperature.ConstantTemperature(jnp.asarray(temperature, dtype=float)))
 
 
 QMG = gj.paper_qmg()
@@ -68,7 +68,7 @@ def _outputs(gyro, points):
     rates, vcf, temps = points
 
     def one(rate, v, temp):
-        s = gj.Steady().settle(_at(gyro, temp), gj.Stimulus(rate=rate * DEG, vcf_ac=v, vcf_fc=1.0))
+        s = gj.Steady().settle(_at(gyro, temp), gj.physics.Stimulus(rate=rate * DEG, vcf_ac=v, vcf_fc=1.0))
         return jnp.stack([s.rate, s.quadrature, s.frequency])
 
     return jax.vmap(one)(*(jnp.asarray(p, dtype=float) for p in points))
@@ -261,16 +261,16 @@ def test_a_lot_as_large_as_an_effects_coefficients_gets_them_per_device():
     dimension more than one device's); an effect already per device is kept, and one of another lot refused."""
     from gyrojax._model.parameters import Model, batched
 
-    inl = gj.DacInl.typical(1.0)
+    inl = gj.effects.DacInl.typical(1.0)
     for n in (3, 4, 5):
-        lot = batched(Model(gj.paper_qmg(), (inl, gj.ThermalDrift.typical(1.0))), n)
+        lot = batched(Model(gj.paper_qmg(), (inl, gj.effects.ThermalDrift.typical(1.0))), n)
         coefficients = np.asarray(lot.effects[0].coefficients)
         assert coefficients.shape == (n, 4)
         np.testing.assert_array_equal(coefficients, np.broadcast_to(np.asarray(inl.coefficients), (n, 4)))
         assert np.shape(lot.effects[1].tcf) == (n,)
         again = batched(lot, n)
         np.testing.assert_array_equal(np.asarray(again.effects[0].coefficients), coefficients)
-    per_device = gj.DacInl(jnp.arange(12.0).reshape(3, 4))
+    per_device = gj.effects.DacInl(jnp.arange(12.0).reshape(3, 4))
     with pytest.raises(ValueError, match=r"effect 'dac_inl': a parameter of shape \(3, 4\) has a device axis of 3, "
                                          r"the lot has 4 device"):
         batched(Model(gj.paper_qmg(), (per_device,)), 4)
@@ -309,7 +309,7 @@ def test_first_order_fingerprint_matches_finite_differences(name):
 # --- fingerprint shapes (docs/physics.md) --------------------------------------------------------------
 
 def test_damping_coupling_is_a_pure_bias():
-    bias = float(gj.DampingCoupling.typical().c / 2)  # rad/s of equivalent rate (Ag = 1 on both presets)
+    bias = float(gj.effects.DampingCoupling.typical().c / 2)  # rad/s of equivalent rate (Ag = 1 on both presets)
     for base_name in ("paper-qmg", "vcf-2018"):
         v0, v = values(base_name), values(base_name, damping_coupling=1.0)
         delta = v[:6, 0] - v0[:6, 0]
@@ -322,7 +322,7 @@ def test_damping_coupling_is_a_pure_bias():
 
 
 def test_quadrature_phase_mixes_quadrature_into_rate():
-    phi = float(gj.QuadraturePhase.typical().phase)
+    phi = float(gj.effects.QuadraturePhase.typical().phase)
     v0, v = values("paper-qmg"), values("paper-qmg", quadrature_phase=1.0)
     assert np.min(np.abs(v0[:, 1])) > 1e5  # the preset's residual quadrature (10 deg/s) in word LSB
     # output = SF Om cos(phi) + Q sin(phi), at every rate, temperature and in the closed-loop VCF points
@@ -343,7 +343,7 @@ def test_thermal_drift_tracks_the_drive_frequency_and_not_closed_loop_vcf():
         # closed loop: SF(T)/SF(t_ref) = w(T)/w(t_ref), to 0.3 ppm: the hot carrier is 300 ppm slower, the
         # DAC hold delay compensated at 25 deg C is then 4 urad off and mixes 0.2 ppm of quadrature in
         np.testing.assert_allclose(vals[I_HOT, 0] / vals[I_COLD, 0], vals[I_HOT, 2] / vals[I_COLD, 2], rtol=3e-7)
-    tcf = float(gj.ThermalDrift.typical().tcf)
+    tcf = float(gj.effects.ThermalDrift.typical().tcf)
     gain = (v[I_HOT, 0] / v[I_COLD, 0]) / (v0[I_HOT, 0] / v0[I_COLD, 0]) - 1
     tracking = (v[I_HOT, 2] / v[I_COLD, 2]) / (v0[I_HOT, 2] / v0[I_COLD, 2]) - 1
     assert gain == pytest.approx(tracking, rel=1e-3)
@@ -354,7 +354,7 @@ def test_thermal_drift_tracks_the_drive_frequency_and_not_closed_loop_vcf():
     # open loop: SF ~ 1/d_y, with the split drift amplified by w/dw
     o0, o = values("vcf-2018"), values("vcf-2018", thermal_drift=1.0)
     r = VCF.resonator
-    eff = gj.ThermalDrift.typical()
+    eff = gj.effects.ThermalDrift.typical()
 
     def inverse_split(tcf, tcf_split):
         dt = T_HOT - 25.0
@@ -368,7 +368,7 @@ def test_thermal_drift_tracks_the_drive_frequency_and_not_closed_loop_vcf():
 
 
 def test_vref_drift_moves_rate_and_closed_loop_vcf_alike():
-    tc = float(gj.VrefDrift.typical().tc)
+    tc = float(gj.effects.VrefDrift.typical().tc)
     expected = 1.0 / (1.0 + tc * (T_HOT - 25.0)) - 1.0  # -200 ppm over 10 K
     v0, v = values("paper-qmg"), values("paper-qmg", vref_drift=1.0)
     for cold, hot in ((I_COLD, I_HOT), (I_VCF, I_VCF_HOT)):
@@ -378,17 +378,17 @@ def test_vref_drift_moves_rate_and_closed_loop_vcf_alike():
 
 
 def test_pushpull_mismatch_is_a_gain_change_the_dac_sweep_does_not_see():
-    eff = gj.PushPullMismatch.typical()
+    eff = gj.effects.PushPullMismatch.typical()
     v0, v = values("paper-qmg"), values("paper-qmg", pushpull_mismatch=1.0)
     expected = 1.0 / (1.0 + 0.5 * float(eff.plus + eff.minus)) - 1.0  # -500 ppm
     np.testing.assert_allclose(v[:, 0] / v0[:, 0] - 1, expected, rtol=1e-6, atol=0)
     words = jnp.array([-2.7e6, 1e5, 2.7e6])
-    dac = eqx.filter_jit(gj.dac_sweep)
+    dac = eqx.filter_jit(gj.sweeps.dac_sweep)
     assert np.array_equal(np.asarray(dac(eff.apply(QMG), words)), np.asarray(dac(QMG, words)))
 
 
 def test_duffing_drive_shifts_the_drive_frequency_and_the_gain():
-    kappa = float(gj.DuffingDrive.typical().kappa)
+    kappa = float(gj.effects.DuffingDrive.typical().kappa)
     a = float(QMG.drive_amplitude(QMG.resonator.omega_x))
     shift = 3.0 / 8.0 * kappa * a**2  # relative backbone shift, 37.5 ppm
     v0, v = values("paper-qmg"), values("paper-qmg", duffing_drive=1.0)
@@ -421,7 +421,7 @@ def test_duffing_sense_is_an_odd_cubic_amplified_by_the_split():
     dy = (float(r.omega_y) ** 2 - w**2) / (2 * w)
     a = float(VCF.drive_amplitude(r.omega_x))
     amplitude = r.angular_gain * np.abs(om) * a / np.hypot(gy, dy)
-    kappa = float(gj.DuffingSense.typical().kappa)
+    kappa = float(gj.effects.DuffingSense.typical().kappa)
     expected = -3.0 / 8.0 * kappa * float(r.omega_y) ** 2 * amplitude**2 / (w * dy)
     np.testing.assert_allclose(rel, expected, rtol=2e-2)
     assert np.max(rel) > 200e-6  # softening narrows the split: +250 ppm at 200 deg/s
@@ -519,14 +519,14 @@ def _small_full_tier():
 @eqx.filter_jit
 def _full_stack(devices, rates):
     tier = _small_full_tier()
-    return eqx.filter_vmap(lambda g: jax.vmap(lambda r: tier.settle(g, gj.Stimulus(rate=r)).rate)(rates))(devices)
+    return eqx.filter_vmap(lambda g: jax.vmap(lambda r: tier.settle(g, gj.physics.Stimulus(rate=r)).rate)(rates))(devices)
 
 
 @pytest.mark.slow
 def test_full_waveform_agrees_with_steady_for_carrier_level_effects():
     # every device carries the feedback term (at zero where it is not the effect): one structure to stack
-    with_term = {b: gj.FeedbackCompression.typical(0.0).apply(BASES[b]) for b in ("paper-qmg", "qmg-leaky")}
-    devices = [gj.FeedbackCompression.typical().apply(BASES[b]) if n == "feedback_compression" else
+    with_term = {b: gj.effects.FeedbackCompression.typical(0.0).apply(BASES[b]) for b in ("paper-qmg", "qmg-leaky")}
+    devices = [gj.effects.FeedbackCompression.typical().apply(BASES[b]) if n == "feedback_compression" else
                gj.EFFECTS[n].typical().apply(with_term[b]) if n else with_term[b] for n, b in CARRIER_LEVEL]
     stack = jax.tree.map(lambda *x: jnp.stack(x), *devices)
     full = dict(zip(CARRIER_LEVEL, np.asarray(_full_stack(stack, jnp.asarray(FULL_RATES_DPS) * DEG))))
@@ -572,7 +572,7 @@ def test_guide_code_runs():
 
 def test_register_effect_checks_the_interface():
     with pytest.raises(ValueError, match=r"register_effect expects a subclass of gyrojax\.AbstractEffect"):
-        gj.register_effect(int)
+        gj.effects.register_effect(int)
     with pytest.raises(ValueError, match=r"effect name 'comb_gap' is already registered by CombGap"):
 
         class Clash(gj.AbstractEffect):
@@ -591,5 +591,5 @@ def test_register_effect_checks_the_interface():
             def supports(cls, gyro):
                 return True
 
-        gj.register_effect(Clash)
-    assert gj.register_effect(gj.CombGap) is gj.CombGap  # registering a class again is harmless
+        gj.effects.register_effect(Clash)
+    assert gj.effects.register_effect(gj.effects.CombGap) is gj.effects.CombGap  # registering a class again is harmless

@@ -67,7 +67,7 @@ PROGRAM = textwrap.dedent("""
     out = cached_program("response", response)(Gain(k, 2), jnp.linspace(0.0, 1.0, 7), 3.0)
     print("RESULT " + json.dumps({"y": [float(v) for v in out["y"]], "sum": float(out["stats"][0]),
                                   "points": repr(out.get("points")), "traces": traces,
-                                  "cache": gj.compilation_cache()}))
+                                  "cache": gj.io.compilation_cache()}))
 """)
 
 

@@ -18,7 +18,7 @@ RATE = 100 * DEG
 
 @pytest.fixture(scope="module")
 def device():
-    return gj.add_effect(gj.paper_qmg(), gj.DacInl.typical(1.0))
+    return gj.add_effect(gj.paper_qmg(), gj.effects.DacInl.typical(1.0))
 
 
 def _with(dev, k_vf, inl3):
@@ -29,7 +29,7 @@ def _with(dev, k_vf, inl3):
 def _output(tier):
     @jax.jit
     def f(params, dev):
-        return gj.settle(_with(dev, params[0], params[1]), gj.Stimulus(rate=RATE), tier).rate
+        return gj.settle(_with(dev, params[0], params[1]), gj.physics.Stimulus(rate=RATE), tier).rate
 
     return f
 

@@ -10,7 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from gyrojax import DataError, Table, asymmetry, fit_scale_factor, metrics_report, rate_bandwidth, repeatability
+from gyrojax import DataError, Table, fit_scale_factor
+from gyrojax.metrics import asymmetry, metrics_report, rate_bandwidth, repeatability
 
 
 RATES = np.array([-200, -100, -50, -20, -10, -5, -2, -1, -0.5, -0.2, -0.1,

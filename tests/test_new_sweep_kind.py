@@ -13,11 +13,11 @@ import pytest
 import gyrojax as gj
 
 
-class VcfCarrier(gj.AbstractSteadySweep):
+class VcfCarrier(gj.sweeps.AbstractSteadySweep):
     """The carrier V_fc stepped at a fixed V_ac on the virtual-Coriolis electrode, zero table rate, the settled
     rate output read."""
 
-    carriers_v: tuple = gj.points_field((-1.0, -0.5, 0.5, 1.0), "carrier voltages (V)")
+    carriers_v: tuple = gj.sweeps.points_field((-1.0, -0.5, 0.5, 1.0), "carrier voltages (V)")
     ac_v: float = 0.5
 
     name = "vcf_carrier"
@@ -41,7 +41,7 @@ class VcfCarrier(gj.AbstractSteadySweep):
             raise ValueError(f"a vcf_carrier sweep needs a virtual-Coriolis electrode; {gyro.name!r} has none.")
 
     def stimulus(self, value, time):
-        return gj.Stimulus(rate=0.0 * value, vcf_ac=0.0 * value + self.ac_v, vcf_fc=value, time=time)
+        return gj.physics.Stimulus(rate=0.0 * value, vcf_ac=0.0 * value + self.ac_v, vcf_fc=value, time=time)
 
 
 RATES = (-200.0, -50.0, 50.0, 200.0)
@@ -49,14 +49,14 @@ RATES = (-200.0, -50.0, 50.0, 200.0)
 
 @pytest.fixture(scope="module")
 def registered():
-    gj.register_sweep(VcfCarrier)
+    gj.sweeps.register_sweep(VcfCarrier)
     yield VcfCarrier
-    del gj.SWEEP_KINDS[VcfCarrier.name]
+    del gj.sweeps.SWEEP_KINDS[VcfCarrier.name]
 
 
 @pytest.fixture(scope="module")
 def lot(registered, tmp_path_factory):
-    table = gj.simulate_table(gj.paper_qmg(), devices=2, runs=1, sweeps=(gj.RateTable(RATES), registered()), seed=3,
+    table = gj.simulate_table(gj.paper_qmg(), devices=2, runs=1, sweeps=(gj.sweeps.RateTable(RATES), registered()), seed=3,
                               progress=False)
     path = tmp_path_factory.mktemp("new_kind") / "lot.csv"
     gj.write_table(table, path)
@@ -71,7 +71,7 @@ def test_a_kind_defined_in_a_test_goes_through_simulate_csv_identify_diagnose_an
     rows = np.asarray(back["sweep"]) == "vcf_carrier"
     assert rows.sum() == 2 * 4 and np.asarray(back["input"])[rows].tolist() == [-1.0, -0.5, 0.5, 1.0] * 2
     # its stream is its own: the rate table's noise does not depend on it being simulated beside it
-    alone = gj.simulate_table(gj.paper_qmg(), devices=2, runs=1, sweeps=(gj.RateTable(RATES),), seed=3,
+    alone = gj.simulate_table(gj.paper_qmg(), devices=2, runs=1, sweeps=(gj.sweeps.RateTable(RATES),), seed=3,
                               progress=False)
     np.testing.assert_array_equal(np.asarray(alone["output"]), np.asarray(back["output"])[~rows])
     # the virtual rate is proportional to the carrier: the output is a straight line through the run's bias

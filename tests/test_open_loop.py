@@ -51,17 +51,17 @@ def test_pulling_sign_in_full_waveform(device):
 def test_bandwidth_against_seed003(device):
     """The model's rate bandwidth with Table 2's numbers is ~1.55 x the split (~97 Hz), not the paper's
     354.3 Hz (measured) / 349.5 Hz (simulated): seed 003's numbers do not close."""
-    bw = gj.bandwidth(device)
+    bw = gj.physics.bandwidth(device)
     split_hz = _split(device) / (2 * np.pi)
     assert bw == pytest.approx(np.sqrt(1 + np.sqrt(2)) * split_hz, rel=0.02)
     assert bw < 0.3 * 354.3
     # the dynamic virtual-Coriolis test sees the same response
-    assert gj.bandwidth(device, input="vcf") == pytest.approx(bw, rel=1e-9)
+    assert gj.physics.bandwidth(device, input="vcf") == pytest.approx(bw, rel=1e-9)
 
 
 @pytest.mark.slow
 def test_frequency_response_dc_gain_is_the_steady_slope(device):
-    h0 = complex(np.asarray(gj.frequency_response(device, np.zeros(1)))[0])
+    h0 = complex(np.asarray(gj.physics.frequency_response(device, np.zeros(1)))[0])
     d = 1e-3
     s = gj.rate_sweep(device, np.array([-d, d]))
     slope = float(s.rate[1] - s.rate[0]) / (2 * d)
@@ -71,6 +71,6 @@ def test_frequency_response_dc_gain_is_the_steady_slope(device):
 
 @pytest.mark.slow
 def test_closed_loop_bandwidth_is_set_by_the_rebalance_loop():
-    bw = gj.bandwidth(gj.paper_qmg())
+    bw = gj.physics.bandwidth(gj.paper_qmg())
     # designed at wn = 100 Hz, zeta = 0.7, with four 1 kHz LPF stages: the rate output's -3 dB point
     assert 150 < bw < 400

@@ -87,7 +87,7 @@ def test_candidate_experiment_checks_its_settings():
         gj.CandidateExperiment("x", "rate_table", (1.0, 2.0), (25.0, 25.0), (0.0, 0.0), 0.0)
     with pytest.raises(ValueError, match="protocol must be a gyrojax.Protocol"):
         gj.CandidateExperiment("x", "rate_table", (1.0, 2.0), (25.0, 25.0), (0.0, 0.0), 1.0, 120.0)
-    exp = gj.CandidateExperiment("x", gj.VcfDynamic(), (10.0, 20.0), (25.0, 25.0), (0.0, 0.0), 1.0)
+    exp = gj.CandidateExperiment("x", gj.sweeps.VcfDynamic(), (10.0, 20.0), (25.0, 25.0), (0.0, 0.0), 1.0)
     assert exp.kind == "vcf_dynamic" and not exp.biased
 
 
@@ -95,7 +95,7 @@ def test_default_experiments_minutes_follow_the_protocol():
     exps = {e.name: e for e in gj.default_experiments(gj.preset("paper-qmg"))}
     # one run of every registered kind the device allows, in registry order, and the warmer rate table
     assert list(exps)[:5] == ["rate_table", "rate_table_hot", "vcf_static", "vcf_dynamic", "dac"]
-    assert set(exps) == {"rate_table_hot"} | set(gj.SWEEP_KINDS)
+    assert set(exps) == {"rate_table_hot"} | set(gj.sweeps.SWEEP_KINDS)
     assert exps["rate_table"].minutes == pytest.approx(1 + 22 * 2)  # seed 000: 1 min warm-up, 2 min per rate
     assert exps["rate_table_hot"].minutes == pytest.approx(45 + 30)
     assert exps["vcf_dynamic"].minutes == pytest.approx((60 + 50 * 10) / 60)
@@ -125,11 +125,11 @@ class _OffsetRateTable(AbstractRateTableWithVirtualRate):
 
 
 def test_a_registered_sweep_kind_is_a_candidate_with_its_own_minutes_and_noise():
-    gj.register_sweep(_OffsetRateTable)
+    gj.sweeps.register_sweep(_OffsetRateTable)
     try:
         exps = {e.name: e for e in gj.default_experiments(gj.preset("paper-qmg"))}
     finally:
-        del gj.SWEEP_KINDS[_OffsetRateTable.name]
+        del gj.sweeps.SWEEP_KINDS[_OffsetRateTable.name]
     new = exps[_OffsetRateTable.name]
     assert new.minutes == pytest.approx((60 + 3 * 60) / 60)  # warm-up + 3 dwells of 60 s
     assert dict(new.settings)["offset_v"] == 0.5 and new.biased and new.inputs == (-100.0, 0.0, 100.0)
@@ -302,7 +302,7 @@ def test_diagnose_max_effects_is_a_count():
 
 
 SMALL_RATES = (-200.0, -50.0, -5.0, 5.0, 50.0, 200.0)
-SMALL = (gj.RateTable(rates_dps=SMALL_RATES), gj.VcfStatic(virtual_rates_dps=SMALL_RATES))
+SMALL = (gj.sweeps.RateTable(rates_dps=SMALL_RATES), gj.sweeps.VcfStatic(virtual_rates_dps=SMALL_RATES))
 
 
 def _join(table, extra, runs_before):
@@ -320,7 +320,7 @@ def test_a_hidden_quadrature_phase_is_found_with_the_recommended_run():
     the standard sweeps cannot test a hidden quadrature_phase; the plan on their baseline recommends the
     quadrature injection; simulated for the same device (another noise seed) and added, the diagnosis selects
     it, its test sees about the chi2 the plan promised, and the final fit is within the chi2 band."""
-    gyro = gj.add_effect(gj.paper_qmg(), gj.QuadraturePhase.typical(1.0))
+    gyro = gj.add_effect(gj.paper_qmg(), gj.effects.QuadraturePhase.typical(1.0))
     table = gj.simulate_table(gyro, runs=2, seed=3, progress=False, sweeps=SMALL)
     cands = ("quadrature_phase", "damping_coupling")
     d = gj.diagnose(table, "paper-qmg", candidates=cands, progress=False)

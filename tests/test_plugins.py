@@ -9,9 +9,10 @@ import warnings
 import pytest
 
 import gyrojax as gj
-from gyrojax import _plugins, load_effect_entry_points, load_effects_module
+from gyrojax import _plugins, load_effects_module
 from gyrojax._model.parameters import zero_effect
 from gyrojax._plugins import ENTRY_POINT_GROUP
+from gyrojax.effects import load_effect_entry_points
 
 
 EFFECT = textwrap.dedent('''
@@ -66,7 +67,7 @@ def clean_registry(monkeypatch):
 def test_a_file_defining_classes_registers_them(tmp_path):
     path = tmp_path / "fx.py"
     path.write_text(effect_source() + textwrap.dedent('''
-        from gyrojax import DacInl  # imported: not this file's, not registered again
+        from gyrojax.effects import DacInl  # imported: not this file's, not registered again
 
         class AbstractUserThing(gj.AbstractEffect):  # abstract: a base for others, skipped
             pass

@@ -72,7 +72,7 @@ def test_every_sweep_for_both_presets(qmg, vcf):
             assert arr.mask.shape == (devices, runs, n_points[s]) and bool(arr.mask.all())
             assert np.all(np.asarray(arr.sigmas) > 0)
         rate = t.to_arrays("rate_table")
-        np.testing.assert_array_equal(np.asarray(rate.inputs[1, -1]), gj.DING_ZHOU_2025_RATES_DPS)
+        np.testing.assert_array_equal(np.asarray(rate.inputs[1, -1]), gj.sweeps.DING_ZHOU_2025_RATES_DPS)
         assert np.all(np.asarray(rate.aux["n_samples"]) == 120 * 100)  # seed 000: 2 min at 100 Hz
         dyn = t.to_arrays("vcf_dynamic")
         np.testing.assert_array_equal(np.asarray(dyn.inputs[0, 0]), np.arange(10.0, 501.0, 10.0))
@@ -84,7 +84,7 @@ def test_every_sweep_for_both_presets(qmg, vcf):
     design = 2 * 9.740e-8 * 0.206 / (2.14e-5 * 1.0) * 200 * DEG
     assert float(v_vcf[-1]) == pytest.approx(design, rel=1e-10) == pytest.approx(6.546e-3, abs=1e-6)
     assert float(qmg["noisy"].to_arrays("vcf_static").inputs[0, 0, -1]) == pytest.approx(2.0, rel=1e-12)
-    assert p.n_samples(gj.VcfDynamic()) == 10 * 10_000
+    assert p.n_samples(gj.sweeps.VcfDynamic()) == 10 * 10_000
 
 
 # --- the measurement model ------------------------------------------------------------------------------------
@@ -105,7 +105,7 @@ def test_noise_free_closed_loop_is_the_physics(qmg):
         np.testing.assert_allclose(np.asarray(rate.outputs[d]), sf * np.asarray(rate.inputs[d]) * DEG, rtol=1e-8)
         np.testing.assert_allclose(np.asarray(rate.drive_freqs[d]), w / (2 * np.pi), rtol=1e-12)
         gain = np.asarray(g.rebalance_gain(jnp.asarray(w)))
-        word = float(g.vcf_electrode.force_per_volt2) * gj.VCF_CARRIER_V * np.asarray(vcf_s.inputs[d]) / gain
+        word = float(g.vcf_electrode.force_per_volt2) * gj.sweeps.VCF_CARRIER_V * np.asarray(vcf_s.inputs[d]) / gain
         np.testing.assert_allclose(np.asarray(vcf_s.outputs[d]), word, rtol=1e-8)
     assert np.all(np.asarray(t["output_sigma"]) == 0.0)
 
@@ -121,11 +121,11 @@ def test_noise_free_outputs_are_the_observe_predictions(which, qmg, vcf):
         arr = t.to_arrays(sweep)
         inputs = np.asarray(arr.inputs)
         assert np.all(inputs == inputs[:1, :1])  # one input list for the whole lot
-        request = (gj.sweep_kind(sweep), jnp.asarray(inputs[0, 0]), arr.temperatures, jnp.nan)
+        request = (gj.sweeps.sweep_kind(sweep), jnp.asarray(inputs[0, 0]), arr.temperatures, jnp.nan)
         settled = lot_steady(lot, (request,), gj.CAMPAIGN_TIER)[0]
         np.testing.assert_array_equal(np.asarray(settled.rate), np.asarray(arr.outputs))
     arr = t.to_arrays("vcf_dynamic")
-    amp, phase = sweeps_vcf_dynamic._lot_vcf_dynamic(lot, arr.inputs[0, 0], arr.temperatures, 0.02, gj.VCF_CARRIER_V)
+    amp, phase = sweeps_vcf_dynamic._lot_vcf_dynamic(lot, arr.inputs[0, 0], arr.temperatures, 0.02, gj.sweeps.VCF_CARRIER_V)
     np.testing.assert_array_equal(np.asarray(amp), np.asarray(arr.outputs))
     np.testing.assert_array_equal(np.asarray(phase), np.asarray(arr.aux["phase_deg"]))
     if which == "qmg":
@@ -162,7 +162,7 @@ def test_vcf_to_rate_scale_factor_ratio_is_physical(which, qmg, vcf):
         w = np.asarray(r.at_temperature(jnp.asarray(temp))[0])
         a = np.asarray(g.drive_amplitude(jnp.asarray(w)))
         phys = 2 * float(r.angular_gain) * float(r.mass) * a * w / (float(g.vcf_electrode.force_per_volt2)
-                                                                   * gj.VCF_CARRIER_V)
+                                                                   * gj.sweeps.VCF_CARRIER_V)
         om = np.asarray(rate.inputs[d]) * DEG
         ratio = (np.asarray(rate.outputs[d]) / om) / (np.asarray(vs.outputs[d]) / np.asarray(vs.inputs[d]))
         if g.closed_loop:
@@ -202,15 +202,15 @@ def test_temperature_follows_the_warm_up(qmg):
 
 
 def test_protocol_warmup_none_keeps_the_device_history():
-    hot = gj.ConstantTemperature(31.0)
+    hot = gj.temperature.ConstantTemperature(31.0)
     g = eqx.tree_at(lambda g: g.temperature, gj.paper_qmg(), hot)
     p = gj.Protocol(warmup=None)
-    np.testing.assert_array_equal(p.temperatures(g, 2, gj.RateTable()), np.full((2, 22), 31.0))
-    g2 = eqx.tree_at(lambda g: g.temperature, g, gj.WarmupTemperature(20.0, 5.0, 100.0))
-    temp = gj.Protocol(warmup=None).temperatures(g2, 1, gj.VcfDynamic())[0]
+    np.testing.assert_array_equal(p.temperatures(g, 2, gj.sweeps.RateTable()), np.full((2, 22), 31.0))
+    g2 = eqx.tree_at(lambda g: g.temperature, g, gj.temperature.WarmupTemperature(20.0, 5.0, 100.0))
+    temp = gj.Protocol(warmup=None).temperatures(g2, 1, gj.sweeps.VcfDynamic())[0]
     np.testing.assert_allclose(temp, 20.0 + 5.0 * (1 - np.exp(-(60.0 + (np.arange(50) + 0.5) * 10.0) / 100.0)))
     # the default warm-up starts from the device's own temperature at power-on
-    temp = gj.Protocol().temperatures(g2, 2, gj.RateTable())
+    temp = gj.Protocol().temperatures(g2, 2, gj.sweeps.RateTable())
     assert temp[0, 0] == pytest.approx(20.0 + 2.0 * (1 - math.exp(-120.0 / 600.0)), rel=1e-12)
 
 
@@ -317,14 +317,14 @@ def test_protocol_refuses_bad_settings(kwargs, message):
 
 
 @pytest.mark.parametrize("kind,kwargs,message", [
-    (gj.RateTable, dict(rates_dps=(1.0,)), r"RateTable.rates_dps must hold at least 2 finite table rates"),
-    (gj.RateTable, dict(rates_dps=(1.0, 2.0, 1.0)), r"RateTable.rates_dps repeats \[1.0\]"),
-    (gj.VcfStatic, dict(amplitudes_v=(0.1, np.nan)), r"VcfStatic.amplitudes_v must hold at least 2 finite voltages"),
-    (gj.VcfDynamic, dict(frequencies_hz=(10.0, -5.0)), r"frequencies_hz must be > 0 Hz"),
-    (gj.VcfDynamic, dict(frequencies_hz=(10.0, 6000.0)), r"does not sample the highest modulation frequency 6000.0"),
-    (gj.VcfDynamic, dict(amplitude_v=0.0), r"VcfDynamic.amplitude_v must be finite and non-zero"),
-    (gj.VcfDynamic, dict(lockin_dwell_s=0.0), r"lockin_dwell_s x lockin_sample_rate_hz = 0 gives no sample"),
-    (gj.DriveFrequency, dict(register_dwell_s=-1.0), r"DriveFrequency.register_dwell_s must be finite and > 0"),
+    (gj.sweeps.RateTable, dict(rates_dps=(1.0,)), r"RateTable.rates_dps must hold at least 2 finite table rates"),
+    (gj.sweeps.RateTable, dict(rates_dps=(1.0, 2.0, 1.0)), r"RateTable.rates_dps repeats \[1.0\]"),
+    (gj.sweeps.VcfStatic, dict(amplitudes_v=(0.1, np.nan)), r"VcfStatic.amplitudes_v must hold at least 2 finite voltages"),
+    (gj.sweeps.VcfDynamic, dict(frequencies_hz=(10.0, -5.0)), r"frequencies_hz must be > 0 Hz"),
+    (gj.sweeps.VcfDynamic, dict(frequencies_hz=(10.0, 6000.0)), r"does not sample the highest modulation frequency 6000.0"),
+    (gj.sweeps.VcfDynamic, dict(amplitude_v=0.0), r"VcfDynamic.amplitude_v must be finite and non-zero"),
+    (gj.sweeps.VcfDynamic, dict(lockin_dwell_s=0.0), r"lockin_dwell_s x lockin_sample_rate_hz = 0 gives no sample"),
+    (gj.sweeps.DriveFrequency, dict(register_dwell_s=-1.0), r"DriveFrequency.register_dwell_s must be finite and > 0"),
 ])
 def test_a_sweep_kind_refuses_bad_settings(kind, kwargs, message):
     """A kind's settings are its fields, checked where they are given."""
@@ -341,14 +341,14 @@ def test_simulate_table_refuses_bad_arguments():
         gj.simulate_table(g, sweeps=("rate_table", "rate_table"))
     with pytest.raises(ValueError, match="a dac sweep needs a closed-loop device; 'vcf-2018' is open loop"):
         gj.simulate_table(g, sweeps=("dac",))
-    bare = eqx.tree_at(lambda g: g.vcf_electrode, g, gj.VirtualCoriolisElectrode(0.0))
+    bare = eqx.tree_at(lambda g: g.vcf_electrode, g, gj.physics.VirtualCoriolisElectrode(0.0))
     for sweep in ("vcf_static", "vcf_dynamic"):
         with pytest.raises(ValueError, match="needs a virtual-Coriolis electrode; 'vcf-2018' has"):
             gj.simulate_table(bare, sweeps=(sweep,))
     with pytest.raises(ValueError, match="runs must be an integer >= 1, got 0"):
         gj.simulate_table(g, runs=0)
     # a kind's points are its own: the protocol times them
-    assert gj.Protocol().point_times(gj.RateTable((-3.0, 3.0))).tolist() == [120.0, 240.0]
+    assert gj.Protocol().point_times(gj.sweeps.RateTable((-3.0, 3.0))).tolist() == [120.0, 240.0]
     # rates_dps is shorthand for the rate table's and the DAC sweep's rates
     t = gj.simulate_table(gj.paper_qmg(), sweeps=("dac",), rates_dps=(-3.0, 3.0), noise_free=True, progress=False)
     assert np.asarray(t["rate_dps"]).tolist() == [-3.0, 3.0]
@@ -369,14 +369,14 @@ def test_cli_simulates_every_sweep(tmp_path, qmg, vcf):
     assert cli(["metrics", str(out), "--json", str(js)]) == 0
     report = json.loads(js.read_text())
     dyn = [p for p in report["points"] if p["sweep"] == "vcf_dynamic"]
-    bw = gj.bandwidth(gj.vcf_2018())
+    bw = gj.physics.bandwidth(gj.vcf_2018())
     assert len(dyn) == VCF_DEVICES and all(abs(p["bandwidth_hz"] - bw) < 5.0 for p in dyn)
     out = tmp_path / "qmg.parquet"
     assert cli(["simulate", "--preset", "paper-qmg", "--devices", str(QMG_DEVICES), "--runs", str(QMG_RUNS),
                 "--sweeps", ",".join(ALL), "--seed", "11", "--out", str(out)]) == 0
     back = gj.read_table(out)
     assert sorted(set(back["sweep"])) == sorted(ALL) and len(back) == len(qmg["noisy"])
-    report = gj.metrics_report(back)
+    report = gj.metrics.metrics_report(back)
     sf = {p["sweep"]: p["scale_factor"] for p in report["points"] if p["run"] == 1}
     assert sf["rate_table"] == pytest.approx(13709.853, rel=0.02)  # seed 000's SF, LSB/(deg/s), lot spread
     assert sf["vcf_static"] * 0.01 == pytest.approx(sf["rate_table"], rel=0.05)  # 2 V <-> 200 deg/s, K_svf spread

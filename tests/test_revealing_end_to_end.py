@@ -16,10 +16,10 @@ CANDIDATES = ("quadrature_phase", "damping_coupling")
 
 @pytest.fixture(scope="module")
 def hidden():
-    effect = gj.QuadraturePhase.typical(1.0)
+    effect = gj.effects.QuadraturePhase.typical(1.0)
     gyro = gj.add_effect(gj.paper_qmg(), effect)
     table = gj.simulate_table(gyro, devices=1, runs=2, seed=3, progress=False,
-                              sweeps=(gj.RateTable(RATES), gj.VcfStatic(RATES), "quadrature_injection"))
+                              sweeps=(gj.sweeps.RateTable(RATES), gj.sweeps.VcfStatic(RATES), "quadrature_injection"))
     return float(effect.phase), table
 
 

@@ -59,7 +59,7 @@ def test_metrics_that_do_not_apply_to_a_sweep_kind_are_null_with_the_reason():
     """A straight line through the drive frequency against the set-point, or the branch ratio against the rate,
     measures noise (the issue's NL 34,732,882 ppm, SF -4.87e-9 Hz/LSB): null, with the kind's reason, and not
     counted as a number the data failed to give; the rate table's metrics are unchanged."""
-    report = gj.metrics_report(gj.Table.from_records(_revealing_rows(), source="rev.csv"))
+    report = gj.metrics.metrics_report(gj.Table.from_records(_revealing_rows(), source="rev.csv"))
     points = {(p["sweep"], p["run"]): p for p in report["points"]}
     rate = points["rate_table", 0]
     assert rate["scale_factor"] == pytest.approx(13771.0) and rate["nonlinearity_max_ppm"] is not None
@@ -80,7 +80,7 @@ def test_metrics_that_do_not_apply_to_a_sweep_kind_are_null_with_the_reason():
     assert devices["drive_frequency"]["repeatability_ppm"] is None
     assert "not a measurement on a drive_frequency sweep" in devices["drive_frequency"]["not_applicable"][
         "repeatability_ppm"]
-    kinds = {name: gj.sweep_kind(name).applicable_metrics() for name in gj.SWEEP_KINDS}
+    kinds = {name: gj.sweeps.sweep_kind(name).applicable_metrics() for name in gj.sweeps.SWEEP_KINDS}
     assert kinds["rate_table"] == kinds["dac"] == kinds["vcf_static"] == kinds["drive_amplitude"] == (
         "scale_factor", "bias", "nonlinearity", "asymmetry", "repeatability")
     assert kinds["vcf_dynamic"] == ("bandwidth",) and kinds["drive_frequency"] == ()
@@ -122,7 +122,7 @@ def test_a_constant_output_is_one_data_error_for_metrics_and_compensate(tmp_path
     assert re.search(message, errors[0]) and re.search(message, errors[1])
     assert errors[0].split("error: ", 1)[1] == errors[1].split("error: ", 1)[1]
     table = gj.Table.from_records(rows, source="dead.csv")
-    for call in (gj.metrics_report, gj.compensate):
+    for call in (gj.metrics.metrics_report, gj.compensate):
         with pytest.raises(gj.DataError, match=message.replace(r" \(line 7\)", "")):  # a table has no lines
             call(table)
 

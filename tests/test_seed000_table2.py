@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from _experiments import load_experiment
 
-from gyrojax import decode_dac_word, metrics_report
+from gyrojax.io import decode_dac_word
+from gyrojax.metrics import metrics_report
 
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

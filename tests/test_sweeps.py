@@ -17,60 +17,60 @@ import gyrojax as gj
 
 @pytest.fixture
 def registered():
-    gj.register_sweep(RateTableWithVirtualRate)
+    gj.sweeps.register_sweep(RateTableWithVirtualRate)
     yield RateTableWithVirtualRate
-    del gj.SWEEP_KINDS[RateTableWithVirtualRate.name]
+    del gj.sweeps.SWEEP_KINDS[RateTableWithVirtualRate.name]
 
 
 def test_registry_holds_the_data_formats_kinds_in_order():
-    assert tuple(gj.SWEEP_KINDS) == (
+    assert tuple(gj.sweeps.SWEEP_KINDS) == (
         "rate_table", "vcf_static", "vcf_dynamic", "dac", "quadrature_injection", "drive_amplitude",
         "drive_frequency", "setpoint_zero_rate", "branch_ratio")
     for gone in ("SWEEPS", "SIMULATED_SWEEPS", "sweep_names"):  # one list of the kinds, not four
         assert not hasattr(gj, gone)
-    kinds = [gj.sweep_kind(name) for name in gj.SWEEP_KINDS]
-    assert [type(k) for k in kinds] == [gj.RateTable, gj.VcfStatic, gj.VcfDynamic, gj.Dac, gj.QuadratureInjection,
-                                        gj.DriveAmplitude, gj.DriveFrequency, gj.SetpointZeroRate, gj.BranchRatio]
+    kinds = [gj.sweeps.sweep_kind(name) for name in gj.sweeps.SWEEP_KINDS]
+    assert [type(k) for k in kinds] == [gj.sweeps.RateTable, gj.sweeps.VcfStatic, gj.sweeps.VcfDynamic, gj.sweeps.Dac, gj.sweeps.QuadratureInjection,
+                                        gj.sweeps.DriveAmplitude, gj.sweeps.DriveFrequency, gj.sweeps.SetpointZeroRate, gj.sweeps.BranchRatio]
     assert [k.biased for k in kinds] == [True, True, False, False, True, False, False, True, False]
     assert [k.scale_factor_unit for k in kinds] == ["LSB/(deg/s)", "LSB/V", None, "V/LSB", "LSB/V", "LSB/LSB",
                                                     "Hz/LSB", "LSB/LSB", "(V/V)/(deg/s)"]
-    assert gj.sweep_kind(kinds[1]) is kinds[1]
+    assert gj.sweeps.sweep_kind(kinds[1]) is kinds[1]
     # each kind's random stream is its own number (the registry's positions when streams were positions, so
     # simulated tables did not change), not where it stands in a list
     assert [k.stream for k in kinds] == list(range(9))
     assert [k.reads for k in kinds] == [()] * 6 + [("omega_x",)] + [()] * 2
     with pytest.raises(ValueError, match="unknown sweep 'rate-table' \\(did you mean 'rate_table'\\?\\)"):
-        gj.sweep_kind("rate-table")
+        gj.sweeps.sweep_kind("rate-table")
 
 
 def test_register_sweep_refuses_a_bad_class():
     with pytest.raises(ValueError, match="expects a subclass of gyrojax.AbstractSweep"):
-        gj.register_sweep(int)
+        gj.sweeps.register_sweep(int)
 
     class NoTitle(RateTableWithVirtualRate):
         title = ""
 
     with pytest.raises(ValueError, match="class attribute 'title' must be a non-empty string"):
-        gj.register_sweep(NoTitle)
+        gj.sweeps.register_sweep(NoTitle)
 
     class Taken(RateTableWithVirtualRate):
         name = "dac"
 
     with pytest.raises(ValueError, match="sweep name 'dac' is already registered by Dac"):
-        gj.register_sweep(Taken)
+        gj.sweeps.register_sweep(Taken)
 
     class SameStream(RateTableWithVirtualRate):
         stream = 3
 
     with pytest.raises(ValueError, match="stream 3 is already the random stream of 'dac'"):
-        gj.register_sweep(SameStream)
+        gj.sweeps.register_sweep(SameStream)
 
     class NoStream(RateTableWithVirtualRate):
         stream = -1
 
     with pytest.raises(ValueError, match="'stream' must be a non-negative integer"):
-        gj.register_sweep(NoStream)
-    assert "rate_table_vcf_offset" not in gj.SWEEP_KINDS
+        gj.sweeps.register_sweep(NoStream)
+    assert "rate_table_vcf_offset" not in gj.sweeps.SWEEP_KINDS
 
 
 def test_the_data_format_page_is_the_sweep_classes():
@@ -79,8 +79,8 @@ def test_the_data_format_page_is_the_sweep_classes():
 
     page = (pathlib.Path(__file__).resolve().parents[1] / "docs" / "data_format.md").read_text(encoding="utf-8")
     rows = dict(re.findall(r"^\| `(\w+)` \| (.+ \| .+) \|$", page, flags=re.M))
-    for name in gj.SWEEP_KINDS:
-        kind = gj.sweep_kind(name)
+    for name in gj.sweeps.SWEEP_KINDS:
+        kind = gj.sweeps.sweep_kind(name)
         assert rows[name] == f"{kind.input_meaning} | {kind.output_meaning}", name
 
 
@@ -89,7 +89,7 @@ def test_a_new_experiment_is_one_file(registered, tmp_path):
     through the data layer: the virtual rate shows as an offset of the rate output by the rate it stands
     for, the scale factor stays the rate table's."""
     rates = (-100.0, -10.0, 10.0, 100.0)
-    table = gj.simulate_table(gj.paper_qmg(), sweeps=(gj.RateTable(rates), registered(rates_dps=rates)),
+    table = gj.simulate_table(gj.paper_qmg(), sweeps=(gj.sweeps.RateTable(rates), registered(rates_dps=rates)),
                               noise_free=True, progress=False)
     path = tmp_path / "offset.csv"
     gj.write_table(table, path)
@@ -100,7 +100,7 @@ def test_a_new_experiment_is_one_file(registered, tmp_path):
     shift = np.asarray(offset.outputs - plain.outputs)[0, 0]
     np.testing.assert_allclose(shift, shift[0], rtol=1e-4)  # the two Coriolis forces add
     assert abs(shift[0]) > 1e3
-    report = gj.metrics_report(back)
+    report = gj.metrics.metrics_report(back)
     sf = {p["sweep"]: p["scale_factor"] for p in report["points"]}
     np.testing.assert_allclose(sf[registered.name], sf["rate_table"], rtol=1e-4)
     assert report["conventions"]["scale_factor_units"][registered.name] == "LSB/(deg/s)"

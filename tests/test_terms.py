@@ -44,7 +44,7 @@ def _rate_out(gyro, rates=RATES, temps=AT_25, times=None):
 
 def test_with_term_checks_what_it_is_given():
     with pytest.raises(ValueError, match="Gyroscope.with_term expects a gyrojax term"):
-        QMG.with_term(gj.DacInl.typical())
+        QMG.with_term(gj.effects.DacInl.typical())
     with pytest.raises(ValueError, match=r"TemperatureCoefficient.path 'drive_frontend.gian' is not a leaf"):
         QMG.with_term(gj.TemperatureCoefficient("drive_frontend.gian", 1e-5))
     with pytest.raises(ValueError, match=r"'drive_frontend.kind' of device 'paper-qmg' is a str, not a number"):
@@ -72,11 +72,11 @@ def test_an_output_term_reaches_the_rate_outputs_only():
     np.testing.assert_allclose(_rate_out(g, times=hour) - _rate_out(QMG, times=hour), 100.0, rtol=1e-12)
     np.testing.assert_allclose(_rate_out(g) - _rate_out(QMG), 0.0, atol=1e-9)  # time not recorded: 0
     volts = np.array([-1.0, 1.0])
-    vcf = np.asarray(gj.vcf_static_points(g, volts, AT_25[:2], times=hour[:2]).rate)
-    vcf0 = np.asarray(gj.vcf_static_points(QMG, volts, AT_25[:2], times=hour[:2]).rate)
+    vcf = np.asarray(gj.sweeps.vcf_static_points(g, volts, AT_25[:2], times=hour[:2]).rate)
+    vcf0 = np.asarray(gj.sweeps.vcf_static_points(QMG, volts, AT_25[:2], times=hour[:2]).rate)
     np.testing.assert_allclose(vcf - vcf0, 100.0, rtol=1e-12)
     words = jnp.array([-2.0e6, 2.0e6])
-    np.testing.assert_array_equal(np.asarray(gj.dac_points(g, words)), np.asarray(gj.dac_points(QMG, words)))
+    np.testing.assert_array_equal(np.asarray(gj.sweeps.dac_points(g, words)), np.asarray(gj.sweeps.dac_points(QMG, words)))
 
 
 @pytest.mark.slow
@@ -84,8 +84,8 @@ def test_an_output_term_does_not_reach_the_dynamic_vcf_lock_in():
     """The dynamic VCF's lock-in reads the output at the modulation frequency: a readout offset does not reach
     it. (Slow: linearising the averaged model compiles for about a minute.)"""
     g = QMG.with_term(_OffsetPerHour(jnp.asarray(100.0)))
-    amp, _ = gj.vcf_dynamic_points(g, jnp.array([10.0, 100.0]), 25.0)
-    amp0, _ = gj.vcf_dynamic_points(QMG, jnp.array([10.0, 100.0]), 25.0)
+    amp, _ = gj.sweeps.vcf_dynamic_points(g, jnp.array([10.0, 100.0]), 25.0)
+    amp0, _ = gj.sweeps.vcf_dynamic_points(QMG, jnp.array([10.0, 100.0]), 25.0)
     np.testing.assert_array_equal(np.asarray(amp), np.asarray(amp0))
 
 
@@ -101,7 +101,7 @@ def test_a_temperature_coefficient_scales_its_leaf_at_the_die_temperature():
     np.testing.assert_allclose(ratio, 1.0 / (1.0 + tc * 10.0), rtol=1e-9)
     np.testing.assert_allclose(_rate_out(g), _rate_out(QMG), rtol=1e-12, atol=1e-9)
     # the coefficient acts inside the tiers at each instant's temperature, so the averaged tier agrees
-    warm = eqx.tree_at(lambda d: d.temperature, g, gj.ConstantTemperature(jnp.asarray(35.0)))
+    warm = eqx.tree_at(lambda d: d.temperature, g, gj.temperature.ConstantTemperature(jnp.asarray(35.0)))
     averaged = gj.rate_sweep(warm, RATES * gj.units.DEG, tier=gj.Averaged())
     np.testing.assert_allclose(np.asarray(averaged.rate), _rate_out(g, temps=hot), rtol=1e-7, atol=1e-3)
 
@@ -113,7 +113,7 @@ def test_feedback_compression_compresses_the_carrier_and_leaves_the_dac_sweep():
     zero-rate gain moves, by 3c/4 (Q/W)^2 = 2e-7 here. The DAC's zero-order hold scales the carrier amplitude by
     sinc(w T / 2) (1 - 3.5e-5 at 1 MHz). The DAC sweep reads before the amplifier."""
     c = 1e-3
-    g = gj.FeedbackCompression(c).apply(QMG)
+    g = gj.effects.FeedbackCompression(c).apply(QMG)
     settled = gj.rate_table_points(QMG, RATES, AT_25)
     base, quad = np.asarray(settled.rate), np.asarray(settled.quadrature)
     hold = float(QMG.excitation.dac.hold(QMG.resonator.omega_x)[0])
@@ -122,7 +122,7 @@ def test_feedback_compression_compresses_the_carrier_and_leaves_the_dac_sweep():
     np.testing.assert_allclose(_rate_out(g), expected, rtol=1e-10, atol=1e-6)
     assert 1.9e-7 < 0.75 * c * quad[2] ** 2 / 2.0**46 < 2.1e-7
     words = jnp.array([-2.7e6, 1.0e6, 2.7e6])
-    np.testing.assert_array_equal(np.asarray(gj.dac_points(g, words)), np.asarray(gj.dac_points(QMG, words)))
+    np.testing.assert_array_equal(np.asarray(gj.sweeps.dac_points(g, words)), np.asarray(gj.sweeps.dac_points(QMG, words)))
 
 
 @pytest.mark.slow
@@ -136,7 +136,7 @@ def test_zro_tempco_is_a_bias_that_follows_the_die_temperature():
     np.testing.assert_allclose(_rate_out(g), _rate_out(QMG), atol=1e-6)
 
     def out(b):
-        return gj.rate_table_points(gj.ZroTempco(b).apply(QMG), RATES, hot).rate
+        return gj.rate_table_points(gj.effects.ZroTempco(b).apply(QMG), RATES, hot).rate
 
     slope = np.asarray(jax.jacfwd(out)(0.0))
     h = 1e-6

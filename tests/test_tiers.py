@@ -26,8 +26,8 @@ def _fit(y):
 @pytest.fixture(scope="module")
 def devices():
     # Same array shapes for both devices, so each tier compiles once for the whole module.
-    ideal = gj.add_effect(gj.paper_qmg(), gj.DacInl.typical(0.0))
-    inl = gj.add_effect(gj.paper_qmg(), gj.DacInl.typical(1.0))
+    ideal = gj.add_effect(gj.paper_qmg(), gj.effects.DacInl.typical(0.0))
+    inl = gj.add_effect(gj.paper_qmg(), gj.effects.DacInl.typical(1.0))
     return ideal, inl
 
 
@@ -91,7 +91,7 @@ def test_sweep_chord_matches_point_by_point_values_and_derivatives(devices):
 
     @jax.jit
     def by_point(p):
-        return jax.vmap(lambda r: gj.settle(device(p), gj.Stimulus(rate=r)))(rates).rate
+        return jax.vmap(lambda r: gj.settle(device(p), gj.physics.Stimulus(rate=r)))(rates).rate
 
     p = jnp.array([float(inl.feedback_electrode.k_vf), float(inl.excitation.dac.inl[1])])
     a, b = np.asarray(by_sweep(p)), np.asarray(by_point(p))
@@ -159,8 +159,8 @@ def test_carrier_phase_error_mixes_quadrature_into_rate(devices):
     kap, phi = 2000.0, 0.01
     dev = eqx.tree_at(lambda g: (g.resonator.stiffness_coupling, g.rebalance_loop.carrier_phase), ideal,
                       (jnp.asarray(kap), ideal.rebalance_loop.carrier_phase + phi))
-    s0 = gj.settle(eqx.tree_at(lambda g: g.resonator.stiffness_coupling, ideal, jnp.asarray(kap)), gj.Stimulus())
-    s = gj.settle(dev, gj.Stimulus())
+    s0 = gj.settle(eqx.tree_at(lambda g: g.resonator.stiffness_coupling, ideal, jnp.asarray(kap)), gj.physics.Stimulus())
+    s = gj.settle(dev, gj.physics.Stimulus())
     q = float(s0.quadrature)
     # output = SF Om cos(phi) + Q sin(phi): at zero rate the bias is the quadrature word times sin(phi)
     assert float(s.rate) == pytest.approx(q * np.sin(phi), rel=1e-6)
