@@ -58,8 +58,9 @@ def test_polynomial_is_exact_on_polynomial_data():
                                a[0] + a[1] * u_new + a[2] * u_new**2 + a[3] * u_new**3, rtol=1e-12, atol=1e-10)
     # a cubic cannot hold a quintic: order 3 leaves a residual that order 5 removes
     rate5 = rate + 0.4 * u**5
-    res3 = rate5 - np.asarray(gj.compensation.PolynomialCompensator(order=3).fit(gj.compensation.RatePoints(rate5, y)).rate(y))
-    res5 = rate5 - np.asarray(gj.compensation.PolynomialCompensator(order=5).fit(gj.compensation.RatePoints(rate5, y)).rate(y))
+    points = gj.compensation.RatePoints(rate5, y)
+    res3 = rate5 - np.asarray(gj.compensation.PolynomialCompensator(order=3).fit(points).rate(y))
+    res5 = rate5 - np.asarray(gj.compensation.PolynomialCompensator(order=5).fit(points).rate(y))
     assert np.max(np.abs(res3)) > 1e-2 and np.max(np.abs(res5)) < 1e-10
 
 
@@ -67,7 +68,8 @@ def test_polynomial_refuses_bad_settings_and_too_few_points():
     with pytest.raises(ValueError, match="order must be an integer >= 1, got 0"):
         gj.compensation.PolynomialCompensator(order=0)
     with pytest.raises(ValueError, match="needs at least 5 distinct training outputs, got 4"):
-        gj.compensation.PolynomialCompensator(order=3).fit(gj.compensation.RatePoints([1.0, 2, 3, 4], [10.0, 20, 30, 40]))
+        gj.compensation.PolynomialCompensator(order=3).fit(
+            gj.compensation.RatePoints([1.0, 2, 3, 4], [10.0, 20, 30, 40]))
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -105,8 +107,8 @@ def test_composite_is_exact_on_a_piecewise_cubic_with_its_own_calibration():
     f_train = np.concatenate([np.full(n, 4634.0 * (1 + 2e-4)), np.full(n, 4634.0 * (1 - 2e-4))])  # mean 4634
     rate_a, out_a = _piecewise_points(f_train[:n], 50.0)
     rate_b, out_b = _piecewise_points(f_train[n:], 50.0)
-    train = gj.compensation.RatePoints(np.concatenate([rate_a, rate_b]), np.concatenate([out_a, out_b]), drive_freq_hz=f_train,
-                          run=np.repeat([0, 1], n))
+    train = gj.compensation.RatePoints(np.concatenate([rate_a, rate_b]), np.concatenate([out_a, out_b]),
+                                       drive_freq_hz=f_train, run=np.repeat([0, 1], n))
     sol = gj.compensation.CompositeCompensator().fit(train)
     assert float(sol.k_t_hz) == pytest.approx(4634.0, rel=1e-15)
     assert sol.summary()["segments_dps"] == [[float(rate_a.min()), float(rate_a[rate_a < 0].max())],
@@ -234,7 +236,8 @@ def test_model_refuses_bad_settings():
     with pytest.raises(ValueError, match="needs at least 5 distinct training rates"):
         gj.compensation.ModelCompensator().fit(pts)
     with pytest.raises(ValueError, match="needs drive_freq_hz on every point; 4 of 4"):
-        gj.compensation.ModelCompensator().fit(gj.compensation.RatePoints([1.0, 2.0, 3.0, 4.0], [10.0, 20.0, 30.0, 40.0]))
+        gj.compensation.ModelCompensator().fit(
+            gj.compensation.RatePoints([1.0, 2.0, 3.0, 4.0], [10.0, 20.0, 30.0, 40.0]))
 
 
 # ---------------------------------------------------------------------------------------------------------------

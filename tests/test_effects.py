@@ -37,7 +37,8 @@ def _leaky(g):
 
 
 def _at(g, temperature):
-    return eqx.tree_at(lambda d: d.temperature, g, gj.temperature.ConstantTemperature(jnp.asarray(temperature, dtype=float)))
+    return eqx.tree_at(lambda d: d.temperature, g,
+                       gj.temperature.ConstantTemperature(jnp.asarray(temperature, dtype=float)))
 
 
 QMG = gj.paper_qmg()
@@ -519,7 +520,8 @@ def _small_full_tier():
 @eqx.filter_jit
 def _full_stack(devices, rates):
     tier = _small_full_tier()
-    return eqx.filter_vmap(lambda g: jax.vmap(lambda r: tier.settle(g, gj.physics.Stimulus(rate=r)).rate)(rates))(devices)
+    return eqx.filter_vmap(
+        lambda g: jax.vmap(lambda r: tier.settle(g, gj.physics.Stimulus(rate=r)).rate)(rates))(devices)
 
 
 @pytest.mark.slow

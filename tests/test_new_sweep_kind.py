@@ -56,8 +56,8 @@ def registered():
 
 @pytest.fixture(scope="module")
 def lot(registered, tmp_path_factory):
-    table = gj.simulate_table(gj.paper_qmg(), devices=2, runs=1, sweeps=(gj.sweeps.RateTable(RATES), registered()), seed=3,
-                              progress=False)
+    table = gj.simulate_table(gj.paper_qmg(), devices=2, runs=1, sweeps=(gj.sweeps.RateTable(RATES), registered()),
+                              seed=3, progress=False)
     path = tmp_path_factory.mktemp("new_kind") / "lot.csv"
     gj.write_table(table, path)
     return table, gj.read_table(path)

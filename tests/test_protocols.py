@@ -125,7 +125,8 @@ def test_noise_free_outputs_are_the_observe_predictions(which, qmg, vcf):
         settled = lot_steady(lot, (request,), gj.CAMPAIGN_TIER)[0]
         np.testing.assert_array_equal(np.asarray(settled.rate), np.asarray(arr.outputs))
     arr = t.to_arrays("vcf_dynamic")
-    amp, phase = sweeps_vcf_dynamic._lot_vcf_dynamic(lot, arr.inputs[0, 0], arr.temperatures, 0.02, gj.sweeps.VCF_CARRIER_V)
+    amp, phase = sweeps_vcf_dynamic._lot_vcf_dynamic(lot, arr.inputs[0, 0], arr.temperatures, 0.02,
+                                                     gj.sweeps.VCF_CARRIER_V)
     np.testing.assert_array_equal(np.asarray(amp), np.asarray(arr.outputs))
     np.testing.assert_array_equal(np.asarray(phase), np.asarray(arr.aux["phase_deg"]))
     if which == "qmg":
@@ -319,9 +320,11 @@ def test_protocol_refuses_bad_settings(kwargs, message):
 @pytest.mark.parametrize("kind,kwargs,message", [
     (gj.sweeps.RateTable, dict(rates_dps=(1.0,)), r"RateTable.rates_dps must hold at least 2 finite table rates"),
     (gj.sweeps.RateTable, dict(rates_dps=(1.0, 2.0, 1.0)), r"RateTable.rates_dps repeats \[1.0\]"),
-    (gj.sweeps.VcfStatic, dict(amplitudes_v=(0.1, np.nan)), r"VcfStatic.amplitudes_v must hold at least 2 finite voltages"),
+    (gj.sweeps.VcfStatic, dict(amplitudes_v=(0.1, np.nan)),
+     r"VcfStatic.amplitudes_v must hold at least 2 finite voltages"),
     (gj.sweeps.VcfDynamic, dict(frequencies_hz=(10.0, -5.0)), r"frequencies_hz must be > 0 Hz"),
-    (gj.sweeps.VcfDynamic, dict(frequencies_hz=(10.0, 6000.0)), r"does not sample the highest modulation frequency 6000.0"),
+    (gj.sweeps.VcfDynamic, dict(frequencies_hz=(10.0, 6000.0)),
+     r"does not sample the highest modulation frequency 6000.0"),
     (gj.sweeps.VcfDynamic, dict(amplitude_v=0.0), r"VcfDynamic.amplitude_v must be finite and non-zero"),
     (gj.sweeps.VcfDynamic, dict(lockin_dwell_s=0.0), r"lockin_dwell_s x lockin_sample_rate_hz = 0 gives no sample"),
     (gj.sweeps.DriveFrequency, dict(register_dwell_s=-1.0), r"DriveFrequency.register_dwell_s must be finite and > 0"),

@@ -121,7 +121,8 @@ def test_zero_rate_scales_with_the_setpoint(qmg):
     at each set-point, which one run bias cannot take."""
     setpoints = _setpoints(qmg, (0.5, 1.0))
     kind = gj.sweeps.SetpointZeroRate()
-    base = np.asarray(kind.predict(gj.add_effect(qmg, gj.effects.DampingCoupling.typical(0.0)), setpoints, NAN, None)[0])
+    base = np.asarray(kind.predict(gj.add_effect(qmg, gj.effects.DampingCoupling.typical(0.0)), setpoints, NAN,
+                                   None)[0])
     eff = gj.effects.DampingCoupling.typical(1.0)
     out = np.asarray(kind.predict(gj.add_effect(qmg, eff), setpoints, NAN, None)[0])
     zro = float(eff.c) / (2 * float(qmg.resonator.angular_gain)) / DEG
@@ -134,8 +135,10 @@ def test_simulate_and_csv_round_trip(qmg, tmp_path):
     CSV; a device without a VCF electrode is refused by name before anything is simulated."""
     names = ("quadrature_injection", "drive_amplitude", "drive_frequency", "setpoint_zero_rate", "branch_ratio")
     two = (-100.0, 100.0)
-    kinds = (gj.sweeps.QuadratureInjection(quadrature_rates_dps=two), gj.sweeps.DriveAmplitude(setpoint_ratios=(0.5, 1.0)),
-             gj.sweeps.DriveFrequency(setpoint_ratios=(0.5, 1.0)), gj.sweeps.SetpointZeroRate(setpoint_ratios=(0.5, 1.0)),
+    kinds = (gj.sweeps.QuadratureInjection(quadrature_rates_dps=two),
+             gj.sweeps.DriveAmplitude(setpoint_ratios=(0.5, 1.0)),
+             gj.sweeps.DriveFrequency(setpoint_ratios=(0.5, 1.0)),
+             gj.sweeps.SetpointZeroRate(setpoint_ratios=(0.5, 1.0)),
              gj.sweeps.BranchRatio(rates_dps=two))
     gyro = gj.add_effect(qmg, gj.effects.QuadraturePhase.typical(1.0))
     table = gj.simulate_table(gyro, sweeps=kinds, rates_dps=two, noise_free=True, progress=False)
@@ -160,7 +163,8 @@ def test_plateau_run_history_and_vref(qmg):
     """A plateau run (`Protocol.chamber_plateaus_c`): every listed point once per plateau within the run, the die
     at each plateau (plus its self-heating) after the soak, and vref_drift scaling the static VCF output by
     1 / (1 + tc dT) between plateaus."""
-    protocol = gj.Protocol(chamber_plateaus_c=gj.sweeps.CHAMBER_PLATEAUS_C, warmup=gj.sweeps.RunWarmup(first_time_constant_s=120.0))
+    protocol = gj.Protocol(chamber_plateaus_c=gj.sweeps.CHAMBER_PLATEAUS_C,
+                           warmup=gj.sweeps.RunWarmup(first_time_constant_s=120.0))
     vcf = gj.sweeps.VcfStatic(virtual_rates_dps=(-100.0, 100.0))
     assert protocol.n_points(vcf) == 6 and protocol.n_points(gj.sweeps.Dac()) == len(gj.sweeps.Dac().rates_dps)
     np.testing.assert_array_equal(protocol.inputs(vcf, qmg), np.tile(vcf.inputs(qmg), 3))
@@ -228,14 +232,16 @@ def test_baseline_leaves_the_fingerprints(qmg):
                                 r.amplitude_lsb / (AMPLITUDE_SIGMA_PPM * 1e-6 * s)])
 
     base = gj.add_effect(qmg, gj.effects.DuffingDrive.typical(0.0))
-    duff = absorption(drive, base, gj.add_effect(qmg, gj.effects.DuffingDrive.typical(1.0)), 1.0, free=free + ("omega_x",))
+    duff = absorption(drive, base, gj.add_effect(qmg, gj.effects.DuffingDrive.typical(1.0)), 1.0,
+                      free=free + ("omega_x",))
     assert duff.signature_sigmas > 80 and duff.residual_sigmas > 40
     assert absorption(drive, base, base, 1.0, free=free + ("omega_x",)).residual_sigmas == 0.0
 
     kind = gj.sweeps.QuadratureInjection()
     q = kind.inputs(qmg)
     sf = _sf(qmg)
-    phase = absorption(lambda d: kind.predict(d, q, NAN, None)[0], gj.add_effect(qmg, gj.effects.QuadraturePhase.typical(0.0)),
+    phase = absorption(lambda d: kind.predict(d, q, NAN, None)[0],
+                       gj.add_effect(qmg, gj.effects.QuadraturePhase.typical(0.0)),
                        gj.add_effect(qmg, gj.effects.QuadraturePhase.typical(1.0)), SIGMA_DPS * sf, free=free,
                        offsets=np.ones((5, 1)))
     assert phase.residual_sigmas > 4000

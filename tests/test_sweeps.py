@@ -29,8 +29,9 @@ def test_registry_holds_the_data_formats_kinds_in_order():
     for gone in ("SWEEPS", "SIMULATED_SWEEPS", "sweep_names"):  # one list of the kinds, not four
         assert not hasattr(gj, gone)
     kinds = [gj.sweeps.sweep_kind(name) for name in gj.sweeps.SWEEP_KINDS]
-    assert [type(k) for k in kinds] == [gj.sweeps.RateTable, gj.sweeps.VcfStatic, gj.sweeps.VcfDynamic, gj.sweeps.Dac, gj.sweeps.QuadratureInjection,
-                                        gj.sweeps.DriveAmplitude, gj.sweeps.DriveFrequency, gj.sweeps.SetpointZeroRate, gj.sweeps.BranchRatio]
+    assert [type(k) for k in kinds] == [gj.sweeps.RateTable, gj.sweeps.VcfStatic, gj.sweeps.VcfDynamic, gj.sweeps.Dac,
+                                        gj.sweeps.QuadratureInjection, gj.sweeps.DriveAmplitude,
+                                        gj.sweeps.DriveFrequency, gj.sweeps.SetpointZeroRate, gj.sweeps.BranchRatio]
     assert [k.biased for k in kinds] == [True, True, False, False, True, False, False, True, False]
     assert [k.scale_factor_unit for k in kinds] == ["LSB/(deg/s)", "LSB/V", None, "V/LSB", "LSB/V", "LSB/LSB",
                                                     "Hz/LSB", "LSB/LSB", "(V/V)/(deg/s)"]

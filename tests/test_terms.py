@@ -76,7 +76,8 @@ def test_an_output_term_reaches_the_rate_outputs_only():
     vcf0 = np.asarray(gj.sweeps.vcf_static_points(QMG, volts, AT_25[:2], times=hour[:2]).rate)
     np.testing.assert_allclose(vcf - vcf0, 100.0, rtol=1e-12)
     words = jnp.array([-2.0e6, 2.0e6])
-    np.testing.assert_array_equal(np.asarray(gj.sweeps.dac_points(g, words)), np.asarray(gj.sweeps.dac_points(QMG, words)))
+    np.testing.assert_array_equal(np.asarray(gj.sweeps.dac_points(g, words)),
+                                  np.asarray(gj.sweeps.dac_points(QMG, words)))
 
 
 @pytest.mark.slow
@@ -122,7 +123,8 @@ def test_feedback_compression_compresses_the_carrier_and_leaves_the_dac_sweep():
     np.testing.assert_allclose(_rate_out(g), expected, rtol=1e-10, atol=1e-6)
     assert 1.9e-7 < 0.75 * c * quad[2] ** 2 / 2.0**46 < 2.1e-7
     words = jnp.array([-2.7e6, 1.0e6, 2.7e6])
-    np.testing.assert_array_equal(np.asarray(gj.sweeps.dac_points(g, words)), np.asarray(gj.sweeps.dac_points(QMG, words)))
+    np.testing.assert_array_equal(np.asarray(gj.sweeps.dac_points(g, words)),
+                                  np.asarray(gj.sweeps.dac_points(QMG, words)))
 
 
 @pytest.mark.slow

@@ -159,7 +159,8 @@ def test_carrier_phase_error_mixes_quadrature_into_rate(devices):
     kap, phi = 2000.0, 0.01
     dev = eqx.tree_at(lambda g: (g.resonator.stiffness_coupling, g.rebalance_loop.carrier_phase), ideal,
                       (jnp.asarray(kap), ideal.rebalance_loop.carrier_phase + phi))
-    s0 = gj.settle(eqx.tree_at(lambda g: g.resonator.stiffness_coupling, ideal, jnp.asarray(kap)), gj.physics.Stimulus())
+    s0 = gj.settle(eqx.tree_at(lambda g: g.resonator.stiffness_coupling, ideal, jnp.asarray(kap)),
+                   gj.physics.Stimulus())
     s = gj.settle(dev, gj.physics.Stimulus())
     q = float(s0.quadrature)
     # output = SF Om cos(phi) + Q sin(phi): at zero rate the bias is the quadrature word times sin(phi)
