@@ -160,7 +160,7 @@ def test_registry_names_every_effect_of_design_table():
         assert cls.name == name
         assert cls.description and "\n" not in cls.description and len(cls.description) < 110
         assert issubclass(cls, gj.AbstractEffect)
-        assert getattr(gj, cls.__name__) is cls
+        assert getattr(gj.effects, cls.__name__) is cls
         # typical(0) is all zeros, typical(1) nonzero (dac_inl's u^4 term is zero by design)
         assert all(np.all(np.asarray(x) == 0) for x in jax.tree.leaves(cls.typical(0.0)))
         leaves = np.concatenate([np.ravel(x) for x in jax.tree.leaves(cls.typical(1.0))])
