@@ -1,6 +1,6 @@
 """The package's shape: no import cycles between its modules, no private names borrowed across modules, and
-the scripts a user reads (experiments, notebooks) on the public API only. Read from the source with `ast`,
-nothing is imported."""
+the scripts a user reads (experiments, notebooks) on the public API only, read from the source with `ast`; and
+the public layout (a small top level, re-export-only submodules, moved names that warn), which imports gyrojax."""
 
 import ast
 import json
@@ -188,11 +188,104 @@ def test_experiments_and_notebooks_use_the_public_api(path, source):
 
 def test_the_package_root_is_small():
     """Every wing is a folder named for what it does; the root keeps the entry points and a few shared modules
-    (at most 20 files)."""
-    root_files = sorted(p.name for p in PACKAGE.glob("*.py"))
+    (at most 20 files), beside the public submodules (re-exports only, checked below)."""
+    root_files = sorted(p.name for p in PACKAGE.glob("*.py") if p.stem not in PUBLIC_SUBMODULES)
     assert len(root_files) <= 20, f"{len(root_files)} files at the package root: {root_files}"
     lots = sorted(str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("lot.py"))
     assert not lots, f"files named for a lot without saying what of it: {lots}"
+
+
+# The public layout (docs/architecture.md, "Public layout"): a small top level and one file of re-exports per
+# family of helpers.
+PUBLIC_SUBMODULES = ("compensation", "effects", "io", "metrics", "physics", "sweeps", "temperature")
+MAX_PUBLIC_NAMES = 100
+
+
+def _public_namespaces():
+    import gyrojax
+
+    spaces = {"gyrojax": (gyrojax, list(gyrojax.__all__))}
+    for sub in PUBLIC_SUBMODULES:
+        module = getattr(gyrojax, sub)
+        spaces[f"gyrojax.{sub}"] = (module, list(module.__all__))
+    return spaces
+
+
+def test_public_api_top_level_has_at_most_100_names():
+    import gyrojax
+
+    names = [n for n in dir(gyrojax) if not n.startswith("_")]
+    assert len(names) <= MAX_PUBLIC_NAMES, f"{len(names)} public names at gyrojax's top level: {names}"
+    assert sorted(names) == sorted(gyrojax.__all__)
+    for sub in (*PUBLIC_SUBMODULES, "units"):
+        assert sub in names, f"the public submodule gyrojax.{sub} is not listed at the top level"
+
+
+@pytest.mark.parametrize("sub", PUBLIC_SUBMODULES)
+def test_public_api_submodule_only_reexports_what_its_all_lists(sub):
+    import importlib
+
+    path = PACKAGE / f"{sub}.py"
+    tree = ast.parse(path.read_text(), filename=str(path))
+    assert ast.get_docstring(tree), f"gyrojax/{sub}.py has no module docstring saying what family it holds"
+    imported, listed = [], None
+    for node in tree.body[1:]:
+        if isinstance(node, ast.ImportFrom) and node.level == 1 and (node.module or "").startswith("_"):
+            for alias in node.names:
+                assert alias.asname == alias.name, f"gyrojax/{sub}.py:{node.lineno} renames {alias.name}"
+                imported.append(alias.name)
+        elif isinstance(node, ast.Assign) and [getattr(t, "id", None) for t in node.targets] == ["__all__"]:
+            listed = ast.literal_eval(node.value)
+        else:
+            raise AssertionError(f"gyrojax/{sub}.py:{node.lineno}: a public submodule only re-exports from "
+                                 f"private modules and lists them in __all__, found {ast.dump(node)[:80]}")
+    assert listed is not None and sorted(listed) == sorted(set(imported)) == sorted(imported)
+    module = importlib.import_module(f"gyrojax.{sub}")
+    assert sorted(n for n in vars(module) if not n.startswith("_")) == sorted(module.__all__)
+
+
+def test_public_api_moved_names_warn_and_name_their_new_home():
+    import gyrojax
+
+    assert gyrojax._MOVED, "no moved names recorded"
+    top = set(dir(gyrojax))
+    for home, names in gyrojax._MOVED.items():
+        module = getattr(gyrojax, home)
+        for name in names:
+            assert name not in top and name in module.__all__, name
+            with pytest.warns(DeprecationWarning, match=rf"^gyrojax\.{name} is gyrojax\.{home}\.{name}; import it "
+                                                        r"from there"):
+                obj = getattr(gyrojax, name)
+            assert obj is getattr(module, name)
+    with pytest.raises(AttributeError, match="module 'gyrojax' has no attribute 'NotAName'"):
+        gyrojax.NotAName  # noqa: B018
+
+
+def test_public_api_a_leftover_moved_name_fails_the_suite():
+    """pyproject's filterwarnings turns the moved names' warning into an error: its pattern matches the message."""
+    import tomllib
+    import warnings
+
+    import gyrojax
+
+    filters = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["pytest"]["ini_options"]["filterwarnings"]
+    patterns = [f.split(":")[1] for f in filters if f.startswith("error:") and f.endswith(":DeprecationWarning")]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gyrojax.DacInl  # noqa: B018
+    assert any(re.match(p, str(caught[0].message)) for p in patterns), (patterns, str(caught[0].message))
+
+
+def test_public_api_no_name_is_two_different_objects():
+    seen = {}
+    clashes = []
+    for where, (module, names) in _public_namespaces().items():
+        for name in names:
+            obj = getattr(module, name)
+            if name in seen and seen[name][1] is not obj:
+                clashes.append(f"{name}: {seen[name][0]}.{name} is not {where}.{name}")
+            seen.setdefault(name, (where, obj))
+    assert not clashes, "\n".join(clashes)
 
 
 MAX_FUNCTION_LINES = 80
