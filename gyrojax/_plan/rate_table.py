@@ -15,6 +15,7 @@ the lot is drawn from one distribution); take them at random over the lot, not t
 region of a wafer, whose rate path may differ from the lot's.
 """
 
+import json
 import math
 
 import equinox as eqx
@@ -94,3 +95,35 @@ def rate_table_plan(spread: float, target: float, *, devices: int = 64, own: flo
     ok = np.flatnonzero(half <= target)
     return RateTablePlan(counts, half, dof, float(spread), float(own), float(target), devices,
                          int(counts[ok[0]]) if ok.size else None)
+
+
+def lot_spread_from_report(path: str, name: str | None = None) -> tuple[float, int, str]:
+    """The lot's relative spread of a random parameter from an identify report with a population section
+    (`gyrojax identify DATA --population ... --json FILE`): (spread, number of devices, parameter name). `name`
+    picks the parameter where the fit had several random ones (default: the only one). Raises `ValueError`
+    naming the file and what is missing."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            report = json.load(f)
+    except (OSError, json.JSONDecodeError) as e:
+        raise ValueError(f"{path}: not a readable JSON report ({e})") from None
+    pop = report.get("population") if isinstance(report, dict) else None
+    if not isinstance(pop, dict) or not pop.get("parameters"):
+        raise ValueError(f"{path}: no 'population' section with parameters: write it with `gyrojax identify DATA "
+                         "--population NAME --json FILE`")
+    params = {p.get("name"): p for p in pop["parameters"]}
+    if name is None:
+        if len(params) != 1:
+            raise ValueError(f"{path}: the population has several random parameters ({', '.join(params)}); name the "
+                             "one only the rate table sees (--random NAME)")
+        (name,) = params
+    if name not in params:
+        raise ValueError(f"{path}: no random parameter {name!r} in its population (it has {', '.join(params)})")
+    spread = params[name].get("relative_spread")
+    if not (isinstance(spread, (int, float)) and math.isfinite(spread) and spread > 0):
+        raise ValueError(f"{path}: the population's {name} has no relative spread (a parameter on a log scale has "
+                         f"one; got {spread!r})")
+    if not params[name].get("spread_resolved", True):
+        raise ValueError(f"{path}: the lot spread of {name} is not resolved from zero in that fit: a plan on it "
+                         "would rest on noise; fit a lot with more devices first, or give --lot-spread")
+    return float(spread), len(pop.get("devices") or ()), str(name)
