@@ -86,7 +86,7 @@ def test_a_file_defining_classes_registers_them(tmp_path):
 
 def test_a_file_may_register_its_effect_itself(tmp_path):
     path = tmp_path / "self_registering.py"
-    path.write_text(effect_source() + "\ngj.register_effect(UserGain)\n")
+    path.write_text(effect_source() + "\ngj.effects.register_effect(UserGain)\n")
     (cls,) = load_effects_module(path)
     assert gj.EFFECTS["user_gain"] is cls
 
