@@ -7,7 +7,6 @@ helpers live in public submodules that only re-export: `gyrojax.effects`, `gyroj
 (docs/architecture.md, "Public layout"). Everything else is private.
 """
 
-import importlib as _importlib
 import warnings as _warnings
 
 import jax as _jax
@@ -169,16 +168,16 @@ _MOVED = {
 _HOME = {name: module for module, names in _MOVED.items() for name in names}
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> object:
     home = _HOME.get(name)
     if home is None:
         raise AttributeError(f"module 'gyrojax' has no attribute {name!r}")
     _warnings.warn(f"gyrojax.{name} is gyrojax.{home}.{name}; import it from there (the top-level name goes in "
                    "the next release).", DeprecationWarning, stacklevel=2)
-    return getattr(_importlib.import_module(f"gyrojax.{home}"), name)
+    return getattr(globals()[home], name)
 
 
-__all__ = sorted(name for name in globals() if not name.startswith("_") and name not in ("annotations",))
+__all__ = sorted(name for name in globals() if not name.startswith("_"))
 
 
 def __dir__() -> list[str]:
