@@ -34,6 +34,7 @@ from .space import ResidualSpace
 
 
 MAX_TERMS = 3
+Z_DECISIVE = 1.96  # a formula of another coordinate replaces the located one's when this many sigma better
 MAX_STEP_LEVELS = 64  # a sweep of at most this many set points is scanned for a step along its input
 TIE_CHI2, TIE_SHARE = 1.0, 1e-3  # two terms closer than this in the chi2 they remove are a tie
 REFERENCE_C = 25.0  # deg C: where a temperature term is zero (the presets' reference temperature)
@@ -390,9 +391,10 @@ def propose_along(fit, location, **kw):
     """The formula of `location` (see `propose`) sought in three dictionaries: the terms of the location's own
     coordinate (a curve along the input may be a power of the output itself, a change from run to run a gain per
     run), those of the coordinates the data confound with it, and every term. Of the complete formulas the one
-    with the fewest terms is kept, the narrower dictionary on a tie: the closed form agrees with where the
-    flexible descriptions placed the misfit unless a simpler one elsewhere says all of it. Without a complete
-    one, the first formula found."""
+    with the fewest terms is kept, the narrower dictionary unless a wider one's fits decisively better (by
+    `Z_DECISIVE` sigma: a bias that follows dT/dt is not a drift in time that fits it less well): the closed form
+    agrees with where the flexible descriptions placed the misfit unless a simpler or a better one elsewhere says
+    all of it. Without a complete one, the first formula found."""
     own = {location.coordinate} | ({"model"} if location.coordinate == "input" else set()) | (
         {""} if location.coordinate == "run" else set())
     space = ResidualSpace(fit)  # one dictionary and its columns for the three searches
@@ -404,6 +406,21 @@ def propose_along(fit, location, **kw):
         if f is not None:
             found.append(f)
     complete = [f for f in found if f.complete]
-    if complete:
-        return min(complete, key=lambda f: len(f.terms))  # min keeps the first of equals: the narrower dictionary
-    return found[0] if found else None
+    if not complete:
+        return found[0] if found else None
+    fewest = [f for f in complete if len(f.terms) == min(len(g.terms) for g in complete)]
+    best = fewest[0]  # the narrower dictionary, unless a wider one's formula fits decisively better
+    for f in fewest[1:]:
+        if f.df == best.df and _decisively_better(space, f, best):
+            best = f
+    return best
+
+
+def _decisively_better(space: ResidualSpace, a: Formula, b: Formula) -> bool:
+    """Whether formula `a` removes decisively more chi2 than `b` (as many coefficients, not nested): the
+    difference over its noise, 2 |f_a - f_b| (the two fits' standardised changes), beyond `Z_DECISIVE`; as in
+    the rival comparison (`gyrojax._diagnose.rival`)."""
+    fa = space.score(formula_columns(space, a)).fingerprint
+    fb = space.score(formula_columns(space, b)).fingerprint
+    distance = float(np.sqrt(np.sum((fa - fb) ** 2)))
+    return distance > 0 and (a.statistic - b.statistic) / (2.0 * distance) > Z_DECISIVE
