@@ -8,7 +8,7 @@ import equinox as eqx
 import numpy as np
 
 from .._data.cells import DataError
-from .._data.table import Table
+from .._data.table import Table, device_runs
 from .._data.validate import check_outputs_change
 from .._metrics import (
     FULL_SCALE_CONVENTIONS,
@@ -143,13 +143,7 @@ def _check_rate_tables(table: Table, compensator) -> tuple[list[str], dict[str, 
         present = sorted(set(table["sweep"].tolist()))
         raise DataError(f"{table.source}: no rate_table rows to compensate; the table has {', '.join(present)}.",
                         source=table.source, column="sweep")
-    devices: list[str] = []
-    runs_of: dict[str, list[int]] = {}
-    for dev, run, _ in groups:
-        if dev not in runs_of:
-            devices.append(dev)
-            runs_of[dev] = []
-        runs_of[dev].append(run)
+    devices, runs_of = device_runs(groups)
     for (dev, run, _), rows in groups.items():
         if len(rows) < MIN_POINTS_LINEAR:
             raise DataError(f"{table.locate(int(rows[0]))}: device {dev!r}, run {run} has {len(rows)} rate_table "

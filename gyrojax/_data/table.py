@@ -198,6 +198,19 @@ class Table:
         return sweep_arrays(self, sweep)
 
 
+def device_runs(groups) -> tuple[list[str], dict[str, list[int]]]:
+    """The devices of `groups` (`Table.groups`: (device, run, sweep) -> rows) in order of first appearance, and
+    each one's runs in order."""
+    devices: list[str] = []
+    runs: dict[str, list[int]] = {}
+    for dev, run, _ in groups:
+        if dev not in runs:
+            devices.append(dev)
+            runs[dev] = []
+        runs[dev].append(run)
+    return devices, runs
+
+
 def padded_columns(table: Table, sweep: str) -> dict[str, Any]:
     """The padded NumPy arrays and labels of one sweep kind of `table`, by `SweepArrays` field (behind
     `Table.to_arrays`; the metrics report uses them as they are: NumPy, no compilation)."""
@@ -208,13 +221,7 @@ def padded_columns(table: Table, sweep: str) -> dict[str, Any]:
         present = sorted(set(columns["sweep"].tolist()))
         raise DataError(f"{table.source}: no rows with sweep {sweep!r}; the table has {', '.join(present)}.",
                         source=table.source, column="sweep")
-    devices: list[str] = []
-    runs: dict[str, list[int]] = {}
-    for dev, r, _ in groups:
-        if dev not in runs:
-            devices.append(dev)
-            runs[dev] = []
-        runs[dev].append(r)
+    devices, runs = device_runs(groups)
     n_dev, n_run = len(devices), max(len(v) for v in runs.values())
     n_pt = max(len(v) for v in groups.values())
     shape = (n_dev, n_run, n_pt)
