@@ -290,7 +290,7 @@ def _refit_rejection(fit, located, family, new, best, df, df_total, p_lr, delta_
         return Rejection(best.effect, recorded, kind="contradicted by drive_freq_hz"), None, None
     against, rival_alike = rival_guard(fit, new, best.effect, df_total, located, alpha=alpha)
     if against is not None:
-        return Rejection(best.effect, against, kind="a closed form of another shape as good"), None, rival_alike
+        return Rejection(best.effect, against[0], kind=against[1]), None, rival_alike
     family.append(selection_p(p_lr, n_tried))
     q = float(bh_q_values(family)[-1])
     if q >= alpha:

@@ -15,8 +15,14 @@ standard deviation), so z = Delta / (2 |f_E - f_F|) ~ N(0, 1) when both describe
 - z above 0: a shape outside the library fits the data as well or better, after paying for its choice among
   the dictionary's terms (2 ln N per term: the risk inflation of a best-of-N selection); the effect is not
   confirmed.
-- z between -`Z_CRIT` and 0: the effect fits better, but not by `Z_CRIT` standard deviations: it is confirmed,
-  and the closed form is reported as a look-alike the data cannot tell from it.
+- z between -`Z_CRIT` (1 - inside) and 0, with `inside` the share of the effect's change inside the formula's
+  span: the effect fits better, but not by the margin the difference of the two shapes asks for. A rival of
+  nearly the effect's shape (inside near 1: a quadratic in temperature against a linear one over a ramp) predicts
+  what the effect predicts, so choosing between them is no claim about physics and needs no margin; a rival of
+  another shape (inside near 0) predicts differently, and naming the library effect is a claim the data must
+  support by the full `Z_CRIT`. Not confirmed: the data do not tell the two apart.
+- z between -`Z_CRIT` and that margin: confirmed, and the closed form is reported as a look-alike the data cannot
+  tell from it.
 - z below -`Z_CRIT`: the effect fits better than every closed form the dictionary offers.
 """
 
@@ -51,6 +57,8 @@ class Rivalry:
             return "same shape"
         if self.z > 0.0:
             return "rival fits as well"
+        if self.z > -Z_CRIT * (1.0 - self.inside):
+            return "not told apart"
         if self.z > -Z_CRIT:
             return "look-alike"
         return "effect fits better"
@@ -105,8 +113,8 @@ def _inside(space, cols, f):
 
 
 def rival_guard(before: Fit, after: Fit, effect: str, df_effect: int, localisation, *, alpha: float):
-    """(a reason not to confirm `effect`, or None; a `LookAlike` naming the rival the data cannot tell from it,
-    or None)."""
+    """(a reason not to confirm `effect` and its kind in a few words, or None; a `LookAlike` naming the rival
+    the data cannot tell from it, or None)."""
     r = rival(before, after, df_effect, localisation, alpha=alpha)
     if r is None or r.verdict in ("same shape", "effect fits better"):
         return None, None
@@ -115,7 +123,13 @@ def rival_guard(before: Fit, after: Fit, effect: str, df_effect: int, localisati
         return (f"a closed form of another shape outside the library fits the misfit it takes as well or better: "
                 f"{terms} (chi2 + 2k, the closed form also paying 2 ln {r.formula.dictionary_size} per term chosen "
                 f"from the dictionary: {effect} {r.delta:+.4g} against it, z = {r.z:.2g}; the two differ by "
-                f"{r.distance:.3g} sigma in the predictions)"), None
+                f"{r.distance:.3g} sigma in the predictions)", "a closed form of another shape as good"), None
+    if r.verdict == "not told apart":
+        return (f"the data do not tell it from a closed form of another shape outside the library: {terms} "
+                f"({100 * (1 - r.inside):.0f} % of what {effect} changes lies outside that form's span, so naming "
+                f"{effect} asks for a margin of {Z_CRIT * (1 - r.inside):.2g} standard deviations; it fits better "
+                f"by z = {-r.z:.2g} (chi2 + 2k {r.delta:+.4g}); a longer or wider sweep along the coordinate they "
+                f"differ on would decide)", "not told from a closed form of another shape"), None
     factor = (Z_CRIT / abs(r.z)) ** 2 if r.z != 0 else math.inf
     return None, LookAlike(" + ".join(t.name for t in r.formula.terms),
                            f"a closed form outside the library ({terms}), which fits {-r.delta:.3g} worse in chi2 + "
