@@ -197,7 +197,8 @@ def test_the_package_root_is_small():
 
 # The public layout (docs/architecture.md, "Public layout"): a small top level and one file of re-exports per
 # family of helpers.
-PUBLIC_SUBMODULES = ("compensation", "effects", "io", "metrics", "physics", "sweeps", "temperature")
+PUBLIC_SUBMODULES = ("compensation", "effects", "identification", "io", "metrics", "physics", "sweeps",
+                     "temperature")
 MAX_PUBLIC_NAMES = 100
 
 
