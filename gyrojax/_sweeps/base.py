@@ -183,7 +183,7 @@ class AbstractSweep(eqx.Module):
 
     @abc.abstractmethod
     def predict(self, gyro: Gyroscope, inputs: Float[ArrayLike, " point"], temperatures: Float[ArrayLike, " point"],
-                times: Float[ArrayLike, " point"], tier: AbstractTier
+                times: Float[ArrayLike, " point"] | None, tier: AbstractTier
                 ) -> tuple[Float[Array, " point"], Bool[Array, " point"]]:
         """The noise-free, bias-free outputs of one device at the points, and a flag of points the model could
         not evaluate (not settled, not finite).

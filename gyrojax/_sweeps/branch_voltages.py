@@ -154,7 +154,7 @@ class BranchRatio(AbstractSweep):
                              f"{gyro.name!r} is open loop.")
 
     def predict(self, gyro: Gyroscope, inputs: Float[ArrayLike, " point"], temperatures: Float[ArrayLike, " point"],
-                times: Float[ArrayLike, " point"], tier: AbstractTier = Steady()
+                times: Float[ArrayLike, " point"] | None, tier: AbstractTier = Steady()
                 ) -> tuple[Float[Array, " point"], Bool[Array, " point"]]:
         ratio, settled = branch_ratio_points(gyro, inputs, temperatures, times, tier)
         return ratio, (settled.result != RESULTS.successful) | ~jnp.isfinite(ratio)

@@ -78,7 +78,7 @@ class Dac(AbstractSweep):
         return np.full(np.shape(inputs), float(voltmeter_sigma_v))
 
     def predict(self, gyro: Gyroscope, inputs: Float[ArrayLike, " point"], temperatures: Float[ArrayLike, " point"],
-                times: Float[ArrayLike, " point"], tier: AbstractTier | None = None
+                times: Float[ArrayLike, " point"] | None, tier: AbstractTier | None = None
                 ) -> tuple[Float[Array, " point"], Bool[Array, " point"]]:
         pred = dac_points(gyro, inputs)
         return pred, ~jnp.isfinite(pred)

@@ -62,7 +62,7 @@ class AbstractSettledSweep(AbstractSweep):
         evaluated (not settled, not finite)."""
 
     def predict(self, gyro: Gyroscope, inputs: Float[ArrayLike, " point"], temperatures: Float[ArrayLike, " point"],
-                times: Float[ArrayLike, " point"], tier: AbstractTier = Steady()
+                times: Float[ArrayLike, " point"] | None, tier: AbstractTier = Steady()
                 ) -> tuple[Float[Array, " point"], Bool[Array, " point"]]:
         (points,) = settled_points(gyro, [(self, inputs, temperatures, times)], tier)
         return self.read(points)

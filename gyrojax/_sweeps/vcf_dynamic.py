@@ -101,7 +101,7 @@ class VcfDynamic(AbstractSweep):
                              "vcf_electrode.force_per_volt2 = 0.")
 
     def predict(self, gyro: Gyroscope, inputs: Float[ArrayLike, " point"], temperatures: Float[ArrayLike, " point"],
-                times: Float[ArrayLike, " point"], tier: AbstractTier | None = None
+                times: Float[ArrayLike, " point"] | None, tier: AbstractTier | None = None
                 ) -> tuple[Float[Array, " point"], Bool[Array, " point"]]:
         # Each point at its own die temperature, as measured and simulated: one mean temperature per sweep
         # left ~1e-5 of amplitude, 10x the noise.
