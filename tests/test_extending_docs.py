@@ -21,7 +21,7 @@ CONTRACTS = {
     "sweep_kind.md": ("gyrojax.sweeps.AbstractSweep", "gyrojax.sweeps.AbstractSettledSweep",
                       "gyrojax.sweeps.AbstractSteadySweep", "gyrojax.sweeps.AbstractSetpointSweep",
                       "gyrojax.sweeps.points_field", "gyrojax.sweeps.timing_field", "gyrojax.sweeps.register_sweep",
-                      "gyrojax.physics.Stimulus"),
+                      "gyrojax.sweeps.LotCampaign", "gyrojax.physics.Stimulus"),
     "term.md": ("gyrojax.AbstractTerm", "gyrojax.AbstractRateTerm", "gyrojax.AbstractFeedbackTerm",
                 "gyrojax.AbstractOutputTerm", "gyrojax.PointConditions", "gyrojax.TemperatureCoefficient"),
     "probe.md": ("gyrojax.AbstractProbe", "gyrojax.PROBES", "gyrojax.Fit", "gyrojax.io.FitData",
