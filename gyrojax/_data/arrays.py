@@ -97,6 +97,13 @@ class SweepArrays(eqx.Module):
         """True where (device, run) holds at least one point."""
         return jnp.any(self.mask, axis=-1)
 
+    def fit_sigmas(self) -> Float[Array, "device run point"]:
+        """`sigmas`; a ValueError where the table had none (a fit's data, `FitData`, has 1 there)."""
+        if self.sigmas is None:
+            raise ValueError(f"sweep {self.sweep!r}: these arrays have no sigmas (the table had no output_sigma); "
+                             "a fit's data (gyrojax FitData) sets them to 1.")
+        return self.sigmas
+
     def labels(self) -> tuple[tuple[str, ...], tuple[tuple[int, ...], ...]]:
         """`(devices, runs)`; a ValueError for unlabelled arrays (`FitData.unlabelled()`), which carry neither."""
         if self.devices is None or self.runs is None:

@@ -13,7 +13,6 @@ chi2, covariance and score tests are those of the full model with the biases fre
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array
 
 from .._data.arrays import SweepArrays
 from .._gyroscope import Gyroscope
@@ -64,18 +63,11 @@ def settle_with_scale_factor(gyro, requests, tier, sf_temperature=None):
     return settled[:-1], (step[1] - step[0]) / (2.0 * SF_STEP_DPS)
 
 
-def _sigmas(sweep: str, block: SweepArrays) -> Array:
-    if block.sigmas is None:  # FitData has them (1 where the table had no output_sigma)
-        raise ValueError(f"sweep {sweep!r}: residuals need the points' sigmas; these arrays have none (build "
-                         "the data with fit_data).")
-    return block.sigmas
-
-
 def run_biases(sweep: str, block: SweepArrays, pred):
     """Best bias per run (weighted mean of the raw residuals), shape (run,); zero for unbiased sweeps."""
     if not sweep_kind(sweep).biased:
         return jnp.zeros(block.inputs.shape[0])
-    w = jnp.where(block.mask, 1.0 / _sigmas(sweep, block)**2, 0.0)
+    w = jnp.where(block.mask, 1.0 / block.fit_sigmas()**2, 0.0)
     raw = jnp.where(block.mask, block.outputs - pred, 0.0)
     return jnp.sum(w * raw, axis=-1) / jnp.maximum(jnp.sum(w, axis=-1), jnp.finfo(float).tiny)
 
@@ -83,7 +75,7 @@ def run_biases(sweep: str, block: SweepArrays, pred):
 def block_residuals(sweep: str, block: SweepArrays, pred):
     """Standardised residuals (run, point) after the run biases; zero on padding."""
     b = run_biases(sweep, block, pred)
-    r = (block.outputs - pred - b[:, None]) / _sigmas(sweep, block)
+    r = (block.outputs - pred - b[:, None]) / block.fit_sigmas()
     return jnp.where(block.mask, r, 0.0)
 
 
