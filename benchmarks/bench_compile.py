@@ -11,7 +11,7 @@ static virtual-Coriolis + DAC sweeps, with the demo's hidden `dac_inl`):
 - `simulate_table`: `gj.simulate_table(gj.add_effect(gj.paper_qmg(), "dac_inl"), **DEMO_LOT)` (it also writes
   the table the others read, outside the timed part);
 - `identify`: `gj.identify("paper-qmg", table)`;
-- `diagnose`: `gj.diagnose(table, "paper-qmg")` (every candidate effect and probe);
+- `diagnose`: `gj.diagnose("paper-qmg", table)` (every candidate effect and probe);
 - `compensate`: `gj.compensate(table, method="model")` (the model-based compensator, the one that compiles);
 - `demo`: what `gyrojax demo` runs (`run_demo(folder)`, without the full-waveform tier, as the command's
   default);
@@ -87,7 +87,7 @@ def _worker(entry, data_path, out_path):
         elif entry == "identify":
             gj.identify("paper-qmg", table)
         elif entry == "diagnose":
-            gj.diagnose(table, "paper-qmg")
+            gj.diagnose("paper-qmg", table)
         elif entry == "compensate":
             gj.compensate(table, method="model")
         elif entry == "demo":

@@ -46,7 +46,7 @@ def _worker(entry, bucket, sizes, repeats, out):
             return time.perf_counter() - t, ["ok"], out
         sub = table.select(np.flatnonzero(np.isin(np.asarray(table["device"]), names[:n])))
         if entry == "diagnose":
-            f = gj.diagnose(sub, "paper-qmg", progress=False).final
+            f = gj.diagnose("paper-qmg", sub, progress=False).final
         else:
             f = gj.identify("paper-qmg", sub, progress=False)
         return time.perf_counter() - t, list(f.status), f.values

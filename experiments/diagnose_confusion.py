@@ -156,7 +156,7 @@ def case_and_data(preset, hidden, *, devices, runs, seed, progress=None):
     t0 = time.perf_counter()
     table = gj.simulate_table(g, devices=devices, runs=runs, sweeps=SWEEPS[preset], seed=seed)
     t1 = time.perf_counter()
-    d = gj.diagnose(table, base_device(preset), progress=progress)
+    d = gj.diagnose(base_device(preset), table, progress=progress)
     t2 = time.perf_counter()
     report = d.to_json()
     row = {"preset": preset, "hidden": list(hidden), "selected": list(d.selected),
@@ -190,7 +190,7 @@ def run_plan_case(preset, hidden, first, d, *, devices, runs, seed, max_repeats,
     t2 = time.perf_counter()
     # what the added runs read beyond the baseline (omega_x from the drive frequency) is freed, as planned
     free = p.free(BASE_FREE)
-    d2 = gj.diagnose(both, base_device(preset), free=free, progress=progress) if recs else d
+    d2 = gj.diagnose(base_device(preset), both, free=free, progress=progress) if recs else d
     t3 = time.perf_counter()
     report = d2.to_json()
     scores = {s.effect: s for s in d2.ranking}

@@ -6,7 +6,7 @@ Run: python experiments/discovery_benchmark.py [--methods gyrojax,refit_ftest,py
 Lots come from `experiments/_discovery_lot.py` (plain NumPy, its own closed forms; 26 hidden effects, 12 of them
 cases of library effects). Each method is a plug-in (`Method`: `name`, `run(table) -> Outcome`):
 
-- `gyrojax`: `gyrojax.diagnose(table, preset)`, read through its JSON (`read_diagnosis`);
+- `gyrojax`: `gyrojax.diagnose(preset, table)`, read through its JSON (`read_diagnosis`);
 - `refit_ftest`: forward selection over the library by refits and an F-test (p < 0.01), no localisation beyond
   the sweep with the largest residual chi2, no formula;
 - `pysindy`: a sparse regression (`pysindy.STLSQ`) of the baseline fit's standardised residuals on a dictionary of
@@ -125,7 +125,7 @@ class GyrojaxMethod(Method):
         import gyrojax as gj
 
         t0 = time.perf_counter()
-        d = gj.diagnose(table, self.preset, progress=False)
+        d = gj.diagnose(self.preset, table, progress=False)
         seconds = time.perf_counter() - t0
         return Outcome(**read_diagnosis(d.to_json()), seconds=seconds)
 

@@ -159,7 +159,7 @@ def main(argv=None):
         table = post_process(clean, case)
         t = time.perf_counter()
         absent = _library_without(case)
-        d = gj.diagnose(table, "paper-qmg", candidates=absent)
+        d = gj.diagnose("paper-qmg", table, candidates=absent)
         record(row(case, "outside", d, time.perf_counter() - t, spurious_of=absent))
         if case not in FOUND_AS:
             continue
@@ -168,7 +168,7 @@ def main(argv=None):
             gj.load_effects_module(USER_EFFECTS)
         try:
             t = time.perf_counter()
-            d = gj.diagnose(table, "paper-qmg")
+            d = gj.diagnose("paper-qmg", table)
             r = row(case, "with it", d, time.perf_counter() - t,
                     spurious_of=[c for c in gj.supported_effects(gj.paper_qmg()) if c != effect])
             r["size"] = _sizes(d, effect, truth)

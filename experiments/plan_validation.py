@@ -50,7 +50,7 @@ def scale_factor(devices=None, out=None):
     DEVICES = devices or DEVICES
     t0 = time.time()
     given = gj.simulate_table(gj.preset("paper-qmg"), runs=2, seed=1, progress=False)
-    plan = gj.plan(given, "paper-qmg", max_repeats=2, progress=False)
+    plan = gj.plan("paper-qmg", given, max_repeats=2, progress=False)
     design = plan.scale_factor
     print(plan.summary())
     print(f"[{time.time() - t0:.0f} s] Monte Carlo, {DEVICES} devices per protocol")
@@ -136,7 +136,7 @@ def detection(effect, experiment, t0):
     gyro = gj.preset("paper-qmg")
     given = gj.simulate_table(gyro, runs=1, seed=1, progress=False)
     exps = tuple(e for e in gj.default_experiments(gyro) if e.name == experiment)
-    plan = gj.plan(given, "paper-qmg", candidates=(effect,), experiments=exps, max_repeats=1, progress=False)
+    plan = gj.plan("paper-qmg", given, candidates=(effect,), experiments=exps, max_repeats=1, progress=False)
     cand = plan.candidate(effect)
     lam_typical = dict((name, lam) for name, _, lam, _ in cand.per_experiment)[experiment]
     multiple, lam = size_for_power(lam_typical, cand.df, TARGET_POWER)
@@ -148,7 +148,7 @@ def detection(effect, experiment, t0):
     stats, pvals, seen = [], [], []
     for seed in range(SEEDS):
         table = gj.simulate_table(truth, runs=1, sweeps=("rate_table", experiment), seed=100 + seed, progress=False)
-        diag = gj.diagnose(table, "paper-qmg", candidates=(effect,), max_effects=0, progress=False)
+        diag = gj.diagnose("paper-qmg", table, candidates=(effect,), max_effects=0, progress=False)
         score = next(s for s in diag.ranking if s.effect == effect)
         stats.append(float(score.statistic))
         pvals.append(float(score.p_value))

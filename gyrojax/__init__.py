@@ -2,9 +2,9 @@
 
 The top level holds what a notebook uses daily (simulate, identify, diagnose, plan, compare, compensate, tables,
 fits, models, presets, the lot strategies, results and the extension-point base classes); the families of
-helpers live in public submodules that only re-export: `gyrojax.effects`, `gyrojax.sweeps`, `gyrojax.physics`,
-`gyrojax.temperature`, `gyrojax.io`, `gyrojax.metrics`, `gyrojax.compensation`, `gyrojax.units`
-(docs/architecture.md, "Public layout"). Everything else is private.
+helpers live in public submodules that only re-export: `gyrojax.effects`, `gyrojax.sweeps`,
+`gyrojax.identification`, `gyrojax.physics`, `gyrojax.temperature`, `gyrojax.io`, `gyrojax.metrics`,
+`gyrojax.compensation`, `gyrojax.units` (docs/architecture.md, "Public layout"). Everything else is private.
 """
 
 import warnings as _warnings
@@ -21,6 +21,7 @@ _jax.config.update("jax_enable_x64", True)
 from . import _units as units  # noqa: E402, F401  (the public gyrojax.units)
 from . import compensation as compensation  # noqa: E402
 from . import effects as effects  # noqa: E402
+from . import identification as identification  # noqa: E402
 from . import io as io  # noqa: E402  (importing it imports gyrojax._compile.cache, which turns the cache on)
 from . import metrics as metrics  # noqa: E402
 from . import physics as physics  # noqa: E402
@@ -69,7 +70,6 @@ from ._identify import (  # noqa: E402
     LoopSolve as LoopSolve,
     MultiStart as MultiStart,
     PopulationFit as PopulationFit,
-    PopulationParameter as PopulationParameter,
     PopulationSolve as PopulationSolve,
     RestartRunoffs as RestartRunoffs,
     RetryWithSolver as RetryWithSolver,
@@ -159,6 +159,9 @@ _MOVED = {
     "metrics": (
         "EffectContribution", "FULL_SCALE_CONVENTIONS", "NonlinearityBudget", "RateBandwidth", "ScaleFactorFit",
         "asymmetry", "metrics_report", "rate_bandwidth", "repeatability",
+    ),
+    "identification": (
+        "PopulationParameter",
     ),
     "compensation": (
         "COMPENSATORS", "CompositeCompensation", "CompositeCompensator", "ModelCompensation", "ModelCompensator",

@@ -1,6 +1,7 @@
 """Construction-time parameter checks that stay silent under tracing (jit, vmap, grad)."""
 
 import jax
+import jax.core  # Tracer: jax.core is not imported by `import jax` for type checkers
 import numpy as np
 
 

@@ -107,7 +107,7 @@ def _demo_hidden_effect(out_dir: str, log, progress: bool) -> dict:
     lot_data = gj.Table(gj.read_table(lot_path).columns, source=LOT_SOURCE)
     log(f"      {len(lot_data)} points written to {lot_path} ({time.perf_counter() - t:.0f} s)")
 
-    diag = diagnose(lot_data, "paper-qmg", progress=detail if progress else False)
+    diag = diagnose("paper-qmg", lot_data, progress=detail if progress else False)
     write_report(diag, os.path.join(out_dir, "diagnosis"))
     for line in diag.summary().splitlines():
         log("      " + line)

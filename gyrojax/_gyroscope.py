@@ -1,7 +1,10 @@
 """The composite device: resonator, electrodes, electronics and loops, as one differentiable PyTree."""
 
+from typing import NamedTuple
+
 import equinox as eqx
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
 
 from ._control.drive import DriveLoop
 from ._control.openloop import OpenLoopReadout
@@ -68,11 +71,11 @@ class Gyroscope(eqx.Module):
             check_path(self, term.path)
         return eqx.tree_at(lambda g: g.terms, self, self.terms + (term,))
 
-    def terms_of(self, kind) -> tuple:
+    def terms_of(self, kind: type[AbstractTerm]) -> tuple:
         """The terms of one kind (a class), in the order they were added."""
         return tuple(t for t in self.terms if isinstance(t, kind))
 
-    def at_die_temperature(self, temperature) -> "Gyroscope":
+    def at_die_temperature(self, temperature: Float[ArrayLike, ""]) -> "Gyroscope":
         """The device with every `TemperatureCoefficient` applied at die `temperature` (deg C); the
         resonator's own coefficients (`Resonator.at_temperature`) act where the frequencies are used."""
         gyro = self
@@ -80,7 +83,8 @@ class Gyroscope(eqx.Module):
             gyro = term.scaled(gyro, temperature)
         return gyro
 
-    def feedback_voltages(self, dac_voltage):
+    def feedback_voltages(self, dac_voltage: Float[Array, "*sample"]
+                          ) -> tuple[Float[Array, "*sample"], Float[Array, "*sample"]]:
         """AC voltages of the + and - feedback branches for instantaneous DAC output samples (V): the
         amplifier K_a, then every `AbstractFeedbackTerm` in order, then the branch split."""
         def after_amplifier(v):
@@ -88,16 +92,17 @@ class Gyroscope(eqx.Module):
                 v = term(self, v)
             return v
 
-        return self.excitation.branch_voltages(dac_voltage, after_amplifier)
+        return closed_loop_parts(self, "feedback_voltages").excitation.branch_voltages(dac_voltage, after_amplifier)
 
-    def rebalance_gain(self, omega):
+    def rebalance_gain(self, omega: Float[ArrayLike, ""]) -> Float[Array, ""]:
         """Linear rebalance force per word LSB at the carrier, N/LSB, including the DAC hold gain."""
-        dac = self.excitation.dac
+        feedback, excitation, _ = closed_loop_parts(self, "rebalance_gain")
+        dac = excitation.dac
         hold_gain, _ = dac.hold(omega)
-        return (self.feedback_electrode.k_vf * self.excitation.amplifier_gain * dac.volts_per_word_lsb
+        return (feedback.k_vf * excitation.amplifier_gain * dac.volts_per_word_lsb
                 * (1.0 + dac.gain_error) * hold_gain)
 
-    def ideal_scale_factor(self, temperature=None):
+    def ideal_scale_factor(self, temperature: Float[ArrayLike, ""] | None = None) -> Float[Array, ""]:
         """Seed 000 Eq. (2) in output LSB per rad/s: SF = 2 Ag m a w / K_vf (closed loop, linear chain).
 
         `a` is the drive amplitude that the AGC's set point means through the drive front end, and w the
@@ -109,13 +114,14 @@ class Gyroscope(eqx.Module):
         a = self.drive_amplitude(omega)
         return 2.0 * r.angular_gain * r.mass * a * omega / self.rebalance_gain(omega)
 
-    def drive_amplitude(self, omega):
+    def drive_amplitude(self, omega: Float[ArrayLike, "*omega"]) -> Float[Array, "*omega"]:
         """Drive displacement amplitude (m) that the AGC set point stands for at frequency `omega`."""
         return self.drive_loop.amplitude_setpoint / jnp.abs(self.drive_frontend.phasor_gain(omega))
 
 
-def design_drive_loop(resonator: Resonator, electrode: DriveElectrode, frontend: FrontEnd, *, amplitude,
-                      pll_bandwidth, agc_bandwidth, demod_cutoff, damping=1.0):
+def design_drive_loop(resonator: Resonator, electrode: DriveElectrode, frontend: FrontEnd, *, amplitude: float,
+                      pll_bandwidth: float, agc_bandwidth: float, demod_cutoff: float, damping: float = 1.0
+                      ) -> DriveLoop:
     """Drive-loop gains placing the PLL's and the AGC's closed-loop poles at the given natural
     frequencies (rad/s) with the given damping, for a drive mode at resonance.
 
@@ -138,7 +144,8 @@ def design_drive_loop(resonator: Resonator, electrode: DriveElectrode, frontend:
 
 
 def design_rebalance_loop(resonator: Resonator, feedback: FeedbackElectrode, excitation: FTRExcitation,
-                          frontend: FrontEnd, *, bandwidth, demod_cutoff, damping=0.7):
+                          frontend: FrontEnd, *, bandwidth: float, demod_cutoff: float, damping: float = 0.7
+                          ) -> RebalanceLoop:
     """Rebalance gains placing the sense loop's poles at s^2 + 2 zeta wn s + wn^2 (mode-matched design),
     with the carrier advanced by the DAC hold delay at the drive resonance."""
     omega = resonator.omega_x
@@ -153,3 +160,25 @@ def design_rebalance_loop(resonator: Resonator, feedback: FeedbackElectrode, exc
         reference_phase=jnp.angle(frontend.phasor_gain(omega)),
         carrier_phase=hold_delay,
     )
+
+
+class ClosedLoopParts(NamedTuple):
+    feedback_electrode: FeedbackElectrode
+    excitation: FTRExcitation
+    rebalance_loop: RebalanceLoop
+
+
+def closed_loop_parts(gyro: Gyroscope, what: str) -> ClosedLoopParts:
+    """The force-to-rebalance parts of a closed-loop device; a ValueError naming `what` for an open-loop one."""
+    feedback, excitation, loop = gyro.feedback_electrode, gyro.excitation, gyro.rebalance_loop
+    if feedback is None or excitation is None or loop is None:
+        raise ValueError(f"{what} needs a closed-loop device (feedback_electrode, excitation and rebalance_loop); "
+                         f"{gyro.name!r} is open loop.")
+    return ClosedLoopParts(feedback, excitation, loop)
+
+
+def open_loop_readout(gyro: Gyroscope, what: str) -> OpenLoopReadout:
+    """The readout of an open-loop device; a ValueError naming `what` for a closed-loop one."""
+    if gyro.readout is None:
+        raise ValueError(f"{what} needs an open-loop device (a readout); {gyro.name!r} is closed loop.")
+    return gyro.readout

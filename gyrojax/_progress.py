@@ -10,6 +10,7 @@ through the persistent compilation cache) are fast. While XLA compiles a large p
 
 import sys
 import time
+from collections.abc import Callable
 
 from ._stop import check as _check_stop
 
@@ -59,6 +60,11 @@ class Progress:
             "may print a 'Very slow compile?' notice meanwhile, which is expected" if first else ""))
 
 
-def as_progress(progress, name: str) -> Progress:
+ProgressArg = bool | Callable[[str], object] | Progress | None
+"""What an entry point's `progress=` takes: True (lines on standard error), False or None (silent), a callable
+taking each message, or a `Progress` passed on."""
+
+
+def as_progress(progress: ProgressArg, name: str) -> Progress:
     """`progress` as a `Progress` (a `Progress` is passed through, keeping its clock and prefix)."""
     return progress if isinstance(progress, Progress) else Progress(progress, name)

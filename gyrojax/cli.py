@@ -363,7 +363,7 @@ def _cmd_diagnose(args):
     _check_outputs(("--json", args.json, False), ("--report", args.report, True),
                    ("--draft-effect", args.draft_effect, False))
     table, fit = _table_and_fit(args)
-    diag = diagnose(table, args.model, alpha=args.alpha, fit=fit, progress=not args.quiet)
+    diag = diagnose(args.model, table, alpha=args.alpha, fit=fit, progress=not args.quiet)
     names = _names(table)
     print(safe_text(diag.summary(), names))
     if args.report:
@@ -405,7 +405,7 @@ def _cmd_plan(args):
         raise ValueError("give DATA (a data file), or --rate-table-target with --lot-spread or "
                          "--population-report")
     table, fit = _table_and_fit(args)
-    result = plan(table, args.model, fit=fit, budget_min=args.budget_min, progress=not args.quiet)
+    result = plan(args.model, table, fit=fit, budget_min=args.budget_min, progress=not args.quiet)
     print(safe_text(result.summary(), _names(table)))
     if args.json:
         _write_json(result.to_json(), args.json)

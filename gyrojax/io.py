@@ -1,6 +1,6 @@
 """Input and output: the table files (`read_table`/`write_table`, the column lists, the DAC word decoding, the
-aggregation of raw samples, the padded `SweepArrays`), fits and device files, the atomic writes every output goes
-through, and the persistent compilation cache.
+aggregation of raw samples, the padded `SweepArrays` and a fit's `FitData` of one per sweep kind), fits and
+device files, the atomic writes every output goes through, and the persistent compilation cache.
 
 This module only re-exports; the code lives in the private modules it imports from.
 """
@@ -22,10 +22,12 @@ from ._data.io import (
 from ._data.samples import aggregate_samples as aggregate_samples
 from ._device.file import load_device as load_device
 from ._identify.fitio import load_fit as load_fit, save_fit as save_fit
+from ._model.fitdata import FitData as FitData
 
 
 __all__ = [
     "DAC_WORD_BITS",
+    "FitData",
     "OPTIONAL_COLUMNS",
     "REQUIRED_COLUMNS",
     "SweepArrays",

@@ -148,7 +148,7 @@ def _full_graph():
 def test_no_import_cycles_even_through_lazy_or_type_checking_imports():
     """A cycle hidden in a function's import or under TYPE_CHECKING is still two modules that need each other:
     the layering holds for every import, and no module needs `TYPE_CHECKING` to break one."""
-    assert "gyrojax._data.table" in _full_graph()["gyrojax._metrics"]  # it sees the imports of every kind
+    assert "gyrojax._data.table" in _full_graph()["gyrojax._metrics.report"]  # it sees the imports of every kind
     cycles = _cycles(_full_graph())
     assert not cycles, f"modules that import each other, counting lazy and TYPE_CHECKING imports: {cycles}"
     guarded = [str(p.relative_to(ROOT)) for p in MODULES.values() if "TYPE_CHECKING" in p.read_text()]
@@ -197,7 +197,8 @@ def test_the_package_root_is_small():
 
 # The public layout (docs/architecture.md, "Public layout"): a small top level and one file of re-exports per
 # family of helpers.
-PUBLIC_SUBMODULES = ("compensation", "effects", "io", "metrics", "physics", "sweeps", "temperature")
+PUBLIC_SUBMODULES = ("compensation", "effects", "identification", "io", "metrics", "physics", "sweeps",
+                     "temperature")
 MAX_PUBLIC_NAMES = 100
 
 
@@ -292,8 +293,6 @@ MAX_FUNCTION_LINES = 80
 # Functions still longer than MAX_FUNCTION_LINES, with their length today: the list only shrinks. A function split
 # below the limit leaves it (the test says so); none may grow, and no other function may pass the limit.
 LONG_FUNCTIONS = {
-    "gyrojax/_identify/population.py::population_fit": 131,
-    "gyrojax/_compensate/model.py::_fit_arrays": 94,
     "gyrojax/_diagnose/draft.py::draft_effect_source": 82,
 }
 
@@ -331,3 +330,34 @@ def test_no_function_over_80_lines():
     assert not grown, f"listed long functions that grew (listed, now): {grown}"
     done = sorted(k for k in LONG_FUNCTIONS if k not in long)
     assert not done, f"now at most {MAX_FUNCTION_LINES} lines: remove them from LONG_FUNCTIONS: {done}"
+
+
+MAX_FILE_LINES = 500
+# Files still longer than MAX_FILE_LINES, with their length today: the list only shrinks, as LONG_FUNCTIONS does.
+LONG_FILES = {
+    "gyrojax/_diagnose/compare.py": 509,  # on another engineer's branch now
+    "gyrojax/_plan/plan.py": 937,
+    "gyrojax/cli.py": 863,
+}
+
+
+def _line_count(path: pathlib.Path) -> int:
+    return len(path.read_text().splitlines())
+
+
+def test_the_file_length_checker_counts_lines(tmp_path):
+    (tmp_path / "a.py").write_text("x = 1\n\n# end\n")
+    assert _line_count(tmp_path / "a.py") == 3
+
+
+def test_no_file_over_500_lines():
+    """A file is one concept (equinox's habit): past 500 lines it is several, each a file of a folder named for
+    what it does. Those not split yet are listed in `LONG_FILES`; the list only shrinks."""
+    long = {p.relative_to(ROOT).as_posix(): n for p in sorted(PACKAGE.rglob("*.py"))
+            if (n := _line_count(p)) > MAX_FILE_LINES}
+    new = {k: n for k, n in long.items() if k not in LONG_FILES}
+    assert not new, f"files over {MAX_FILE_LINES} lines (split them, one concept per file): {new}"
+    grown = {k: (LONG_FILES[k], n) for k, n in long.items() if k in LONG_FILES and n > LONG_FILES[k]}
+    assert not grown, f"listed long files that grew (listed, now): {grown}"
+    done = sorted(k for k in LONG_FILES if k not in long)
+    assert not done, f"now at most {MAX_FILE_LINES} lines: remove them from LONG_FILES: {done}"

@@ -9,8 +9,9 @@ import pytest
 from _experiments import load_experiment
 
 import gyrojax as gj
+from gyrojax._compensate.balance import describing_weight, fundamental
 from gyrojax._compensate.composite import side_segment_starts
-from gyrojax._compensate.model import _fit_arrays, _fundamental, describing_weight
+from gyrojax._compensate.model import _fit_arrays
 from gyrojax._presets import QMG_QUADRATURE_DPS
 from gyrojax.cli import main
 
@@ -160,7 +161,7 @@ def test_describing_function_matches_the_carrier_samples():
             u = (w * np.sin(theta) + q * np.cos(theta)) / 2.0**23
             inl_words = 256.0 * sum(c * u**n for n, c in inl.items())  # DAC LSB -> 24-bit word LSB
             expected = w + 2 * np.mean(inl_words * np.sin(theta))
-            got = _fundamental(jnp.asarray(w), jnp.asarray(list(inl.values())), spec)
+            got = fundamental(jnp.asarray(w), jnp.asarray(list(inl.values())), spec)
             assert float(got) == pytest.approx(expected, rel=1e-13, abs=1e-7)
 
 

@@ -28,7 +28,7 @@ def _table(*effects):
 @pytest.fixture(scope="module")
 def hidden_dac_inl():
     table = _table("dac_inl")
-    return table, gj.diagnose(table, "paper-qmg")
+    return table, gj.diagnose("paper-qmg", table)
 
 
 def test_hidden_dac_inl_is_found_and_the_error_falls(hidden_dac_inl):
@@ -80,7 +80,7 @@ def test_an_effect_that_fits_only_far_beyond_its_typical_size_is_flagged(hidden_
     """An INL 40 times the library's typical one is still found, at its size, and the summary warns that a
     candidate this far out of range may stand in for another effect (same shapes: no new compile)."""
     gyro = gj.add_effect(gj.paper_qmg(), "dac_inl", 40.0)
-    d = gj.diagnose(gj.simulate_table(gyro, **DEMO_LOT), "paper-qmg")
+    d = gj.diagnose("paper-qmg", gj.simulate_table(gyro, **DEMO_LOT))
     assert d.selected[0] == "dac_inl"
     assert 38.0 < d.steps[0].typical_multiple < 42.0  # measured 40.009
     assert "! dac_inl explains the data only at" in d.summary()
@@ -116,7 +116,7 @@ def test_gain_and_bias_effects_are_reported_untestable(hidden_dac_inl):
 
 
 def test_no_hidden_effect_selects_nothing(hidden_dac_inl):
-    d = gj.diagnose(_table(), "paper-qmg")
+    d = gj.diagnose("paper-qmg", _table())
     assert d.selected == ()
     assert 0.7 <= d.baseline.chi2_red_total <= 1.4
     # the score statistics of the testable candidates are of the order of their degrees of freedom
@@ -131,7 +131,7 @@ def test_no_hidden_effect_selects_nothing(hidden_dac_inl):
 
 
 def test_two_hidden_effects_are_both_found(hidden_dac_inl):
-    d = gj.diagnose(_table("dac_inl", "vref_drift"), "paper-qmg")
+    d = gj.diagnose("paper-qmg", _table("dac_inl", "vref_drift"))
     assert set(d.selected) >= {"dac_inl", "vref_drift"} or any(
         "vref_drift" in g for g in d.ambiguous)
     assert "dac_inl" in d.selected
@@ -171,15 +171,15 @@ def test_alpha_is_a_significance_level(hidden_dac_inl):
     table, _ = hidden_dac_inl
     for bad in (0.0, 5.0, -0.1, 0.6):
         with pytest.raises(ValueError, match=r"alpha must be a significance level in \(0, 0.5\]"):
-            gj.diagnose(table, "paper-qmg", alpha=bad)
+            gj.diagnose("paper-qmg", table, alpha=bad)
 
 
 def test_bad_candidate_names(hidden_dac_inl):
     table, _ = hidden_dac_inl
     with pytest.raises(ValueError, match="unknown candidate effect 'dac_nl'"):
-        gj.diagnose(table, "paper-qmg", candidates=("dac_nl",))
+        gj.diagnose("paper-qmg", table, candidates=("dac_nl",))
     with pytest.raises(ValueError, match="cannot act on device 'paper-qmg'"):
-        gj.diagnose(table, "paper-qmg", candidates=("duffing_sense",))
+        gj.diagnose("paper-qmg", table, candidates=("duffing_sense",))
 
 
 def test_score_statistic_matches_the_refit_for_a_linear_effect(hidden_dac_inl):
@@ -237,9 +237,9 @@ def test_a_saved_baseline_fit_is_not_fitted_again(hidden_dac_inl, tmp_path):
     with pytest.warns(UserWarning,
                       match=r"baseline.fit: 3 of 3 device\(s\) are not 'ok': paper-qmg-000 \(model rejected"):
         saved = gj.load_fit(path)  # the baseline the INL breaks: the file says so, and loading warns
-    again = gj.diagnose(table, fit=saved)
+    again = gj.diagnose(data=table, fit=saved)
     assert again.baseline.chi2_total == pytest.approx(d.baseline.chi2_total, rel=1e-9)
     assert again.selected == ("dac_inl",) and again.verdict == "explained"
     other = table.select(np.flatnonzero(table["device"] != table["device"][0]))
     with pytest.raises(ValueError, match=r"fit: it was fitted to devices \['paper-qmg-000'"):
-        gj.diagnose(other, fit=d.baseline)
+        gj.diagnose(data=other, fit=d.baseline)

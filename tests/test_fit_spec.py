@@ -38,14 +38,14 @@ def _spy_solvers(monkeypatch, stop: bool):
 def test_a_solver_choice_given_to_diagnose_reaches_its_baseline_fit(monkeypatch, small_table):
     seen = _spy_solvers(monkeypatch, stop=True)
     with pytest.raises(_Stop):
-        gj.diagnose(small_table, "paper-qmg", spec=gj.FitSpec(solver="gauss-newton", rtol=1e-6), progress=False)
+        gj.diagnose("paper-qmg", small_table, spec=gj.FitSpec(solver="gauss-newton", rtol=1e-6), progress=False)
     assert seen == [("gauss-newton", 1e-6, 1e-8)]
 
 
 def test_a_solver_choice_given_to_plan_reaches_its_baseline_fit(monkeypatch, small_table):
     seen = _spy_solvers(monkeypatch, stop=True)
     with pytest.raises(_Stop):
-        gj.plan(small_table, "paper-qmg", spec=gj.FitSpec(solver="bfgs"), scale_factor=False, progress=False)
+        gj.plan("paper-qmg", small_table, spec=gj.FitSpec(solver="bfgs"), scale_factor=False, progress=False)
     assert seen == [("bfgs", 1e-8, 1e-8)]
 
 
@@ -63,14 +63,14 @@ def test_a_fit_setting_given_twice_is_refused(verb, small_table):
         if verb == "identify":
             gj.identify("paper-qmg", small_table, spec=spec, free=("k_vf",), progress=False)
         elif verb == "diagnose":
-            gj.diagnose(small_table, "paper-qmg", spec=spec, free=("k_vf",), progress=False)
+            gj.diagnose("paper-qmg", small_table, spec=spec, free=("k_vf",), progress=False)
         else:
-            gj.plan(small_table, "paper-qmg", spec=spec, free=("k_vf",), progress=False)
+            gj.plan("paper-qmg", small_table, spec=spec, free=("k_vf",), progress=False)
 
 
 def test_spec_must_be_a_fit_spec(small_table):
     with pytest.raises(TypeError, match="diagnose: spec must be a gyrojax.FitSpec, got dict"):
-        gj.diagnose(small_table, "paper-qmg", spec={"solver": "bfgs"}, progress=False)
+        gj.diagnose("paper-qmg", small_table, spec={"solver": "bfgs"}, progress=False)
 
 
 @pytest.mark.parametrize("field,value,match", [
@@ -89,7 +89,7 @@ def test_every_fit_of_a_diagnosis_uses_the_spec_solver(monkeypatch):
     """The baseline and every refit (the hidden dac_inl is refitted and confirmed) use the spec's solver."""
     table = gj.simulate_table(gj.add_effect(gj.paper_qmg(), "dac_inl"), **DEMO_LOT)
     seen = _spy_solvers(monkeypatch, stop=False)
-    d = gj.diagnose(table, "paper-qmg", spec=gj.FitSpec(solver="gauss-newton"), progress=False)
+    d = gj.diagnose("paper-qmg", table, spec=gj.FitSpec(solver="gauss-newton"), progress=False)
     assert "dac_inl" in d.selected
     assert len(seen) >= 2 and all(s == "gauss-newton" for s, _, _ in seen), seen
 
@@ -105,7 +105,7 @@ def test_diagnose_holds_its_candidates_on_top_of_the_spec_hold(monkeypatch, smal
     monkeypatch.setattr(candidates, "identify", stop)
     spec = gj.FitSpec(hold=("q_y",), recovery=())
     with pytest.raises(_Stop):
-        gj.diagnose(small_table, "paper-qmg", candidates=("dac_inl", "thermal_drift"), spec=spec, progress=False)
+        gj.diagnose("paper-qmg", small_table, candidates=("dac_inl", "thermal_drift"), spec=spec, progress=False)
     (used,) = given
     assert used.hold == ("q_y", "dac_inl", "thermal_drift")
     assert used.recovery == () and used.free == spec.free

@@ -87,7 +87,7 @@ def test_a_kind_defined_in_a_test_goes_through_simulate_csv_identify_diagnose_an
     assert 0.2 < float(np.mean(np.asarray(fit.chi2_red))) < 3.0
 
     # diagnose: nothing hidden, the baseline explains it
-    d = gj.diagnose(back, "paper-qmg", candidates=("vref_drift",), fit=fit, progress=False)
+    d = gj.diagnose("paper-qmg", back, candidates=("vref_drift",), fit=fit, progress=False)
     assert d.selected == () and d.verdict == "explained"
     assert "vcf_carrier" in str(d.to_json())
 

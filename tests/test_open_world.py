@@ -61,7 +61,7 @@ def _old_library():
 
 @pytest.fixture(scope="module")
 def outside(clean):
-    return {kind: gj.diagnose(_post(clean, kind), "paper-qmg", candidates=_old_library())
+    return {kind: gj.diagnose("paper-qmg", _post(clean, kind), candidates=_old_library())
             for kind in ("zro", "amp", "amp_small", "time")}
 
 
@@ -136,7 +136,7 @@ USER_EFFECTS = Path(__file__).resolve().parent.parent / "experiments" / "user_ef
 def inside(clean):
     try:
         (cls,) = gj.load_effects_module(USER_EFFECTS)
-        out = {kind: gj.diagnose(_post(clean, kind), "paper-qmg") for kind in ("zro", "amp", "time")}
+        out = {kind: gj.diagnose("paper-qmg", _post(clean, kind)) for kind in ("zro", "amp", "time")}
         candidates = gj.supported_effects(gj.paper_qmg())
     finally:
         gj.EFFECTS.pop("zro_time_drift", None)

@@ -48,7 +48,7 @@ def _post(table, kind):
 
 @pytest.fixture(scope="module")
 def diagnoses(clean):
-    return {kind: gj.diagnose(_post(clean, kind), "paper-qmg", progress=False) for kind in ("vcf_tc", "step")}
+    return {kind: gj.diagnose("paper-qmg", _post(clean, kind), progress=False) for kind in ("vcf_tc", "step")}
 
 
 def test_a_gain_of_one_sweep_is_placed_on_that_sweep_at_its_size(diagnoses):
@@ -76,7 +76,7 @@ def test_the_drafted_term_explains_the_data(diagnoses, clean, tmp_path):
     write_draft(d.formula, path, source="the demo lot + a VCF gain in temperature")
     (cls,) = gj.load_effects_module(path)
     try:
-        again = gj.diagnose(_post(clean, "vcf_tc"), "paper-qmg", progress=False)
+        again = gj.diagnose("paper-qmg", _post(clean, "vcf_tc"), progress=False)
     finally:
         gj.EFFECTS.pop(cls.name, None)
     assert again.selected == ("drafted_term",) and again.verdict == "explained"

@@ -184,13 +184,13 @@ def test_sandwich_variance_of_a_slope_under_correlated_noise():
 
 def test_plan_rejects_bad_arguments():
     with pytest.raises(ValueError, match="budget_min must be at least one run of seed 000's protocol"):
-        gj.plan(None, budget_min=30.0)
+        gj.plan("paper-qmg", None, budget_min=30.0)
     with pytest.raises(ValueError, match="alpha must be a significance level"):
-        gj.plan(None, alpha=0.7)
+        gj.plan("paper-qmg", None, alpha=0.7)
     with pytest.raises(ValueError, match="max_repeats must be an integer in 1..8"):
-        gj.plan(None, max_repeats=0)
+        gj.plan("paper-qmg", None, max_repeats=0)
     with pytest.raises(ValueError, match="plan needs data"):
-        gj.plan(None)
+        gj.plan("paper-qmg", None)
 
 
 def test_cli_plan_rejects_a_bad_budget(tmp_path, capsys):
@@ -259,7 +259,7 @@ def test_experiments_of_the_same_shapes_share_one_jacobian_program():
 @pytest.mark.slow
 def test_plan_on_a_rate_table(tmp_path):
     table = gj.simulate_table(gj.preset("paper-qmg"), runs=2, seed=1, progress=False)
-    plan = gj.plan(table, "paper-qmg", max_repeats=2, progress=False)
+    plan = gj.plan("paper-qmg", table, max_repeats=2, progress=False)
     fit = plan.baseline
     sfd = plan.scale_factor
     # the scale factor's stderr on the data given is the fit's own (its covariance and gradient)
@@ -298,7 +298,7 @@ def test_diagnose_max_effects_is_a_count():
     # before any data are read
     for bad in (-1, 1.5, True):
         with pytest.raises(ValueError, match="max_effects must be an integer >= 0"):
-            gj.diagnose(None, "paper-qmg", max_effects=bad)
+            gj.diagnose("paper-qmg", None, max_effects=bad)
 
 
 SMALL_RATES = (-200.0, -50.0, -5.0, 5.0, 50.0, 200.0)
@@ -323,7 +323,7 @@ def test_a_hidden_quadrature_phase_is_found_with_the_recommended_run():
     gyro = gj.add_effect(gj.paper_qmg(), gj.effects.QuadraturePhase.typical(1.0))
     table = gj.simulate_table(gyro, runs=2, seed=3, progress=False, sweeps=SMALL)
     cands = ("quadrature_phase", "damping_coupling")
-    d = gj.diagnose(table, "paper-qmg", candidates=cands, progress=False)
+    d = gj.diagnose("paper-qmg", table, candidates=cands, progress=False)
     assert "quadrature_phase" in d.untestable and not d.selected
     exps = tuple(e for e in gj.default_experiments(gj.paper_qmg(), kinds=SMALL)
                  if e.name in ("rate_table", "vcf_static", "quadrature_injection"))
@@ -336,7 +336,7 @@ def test_a_hidden_quadrature_phase_is_found_with_the_recommended_run():
     assert not p.candidate("damping_coupling").recommended
     extra = gj.simulate_table(gyro, runs=runs, seed=4, progress=False,
                               sweeps=("quadrature_injection",))
-    d2 = gj.diagnose(_join(table, extra, 2), "paper-qmg", candidates=cands, progress=False)
+    d2 = gj.diagnose("paper-qmg", _join(table, extra, 2), candidates=cands, progress=False)
     assert d2.selected == ("quadrature_phase",)
     assert 0.7 <= d2.final.chi2_red_total <= 1.4
     seen = next(s for s in d2.ranking if s.effect == "quadrature_phase")

@@ -219,9 +219,9 @@ def test_the_cli_refuses_an_effect_giving_nan_by_name(tmp_path, monkeypatch, cap
 
 
 def test_the_user_code_digest_follows_the_modules_an_effect_imports(tmp_path, monkeypatch):
-    from gyrojax._compile import export as _export
+    from gyrojax._compile import export as _export, program_key as _program_key
     # gyrojax's own files are hashed into the key too: held fixed, so that only the user code varies
-    monkeypatch.setattr(_export, "_gyrojax_files_hash", lambda: "gyrojax")
+    monkeypatch.setattr(_program_key, "_gyrojax_files_hash", lambda: "gyrojax")
     helper = tmp_path / "gjhelper_sign.py"
     helper.write_text("SIGN = 1.0\n")
     monkeypatch.syspath_prepend(str(tmp_path))

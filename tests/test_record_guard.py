@@ -40,7 +40,7 @@ def test_a_gain_following_the_frequency_reading_is_not_taken_for_an_extra_tcf(de
     """drive_freq_gain (outside the library) on both designs: thermal_drift is not confirmed, and the reason
     is the record (the refit moves the modelled frequency by tens of ppm, the record shows ~0 of it)."""
     table, _ = discovery_lot("drive_freq_gain", snr="mid", design=design, seed=0)
-    d = gj.diagnose(table, progress=False)
+    d = gj.diagnose("paper-qmg", table, progress=False)
     assert "thermal_drift" not in [s.effect for s in d.steps]
     (r,) = [r for r in d.rejected if r.effect == "thermal_drift"]
     assert r.kind == "contradicted by drive_freq_hz", r.reason
@@ -52,5 +52,5 @@ def test_a_gain_following_the_frequency_reading_is_not_taken_for_an_extra_tcf(de
 def test_a_true_extra_tcf_moves_the_record_with_it_and_is_confirmed():
     """thermal_drift hidden (its extra TCF moves the frequency readings of every steady row): confirmed."""
     table, _ = discovery_lot("thermal_drift", snr="mid", design="a", seed=1)
-    d = gj.diagnose(table, progress=False)
+    d = gj.diagnose("paper-qmg", table, progress=False)
     assert [s.effect for s in d.steps] == ["thermal_drift"], [(r.effect, r.reason) for r in d.rejected]

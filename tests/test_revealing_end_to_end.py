@@ -26,14 +26,14 @@ def hidden():
 def test_without_the_injection_it_is_not_testable(hidden):
     _, table = hidden
     old = table.select(np.flatnonzero(np.asarray(table["sweep"]) != "quadrature_injection"))
-    d = gj.diagnose(old, "paper-qmg", candidates=CANDIDATES, progress=False)
+    d = gj.diagnose("paper-qmg", old, candidates=CANDIDATES, progress=False)
     assert "quadrature_phase" in d.untestable
     assert "quadrature_phase" not in d.selected
 
 
 def test_with_the_injection_it_is_found_at_its_size(hidden):
     truth, table = hidden
-    d = gj.diagnose(table, "paper-qmg", candidates=CANDIDATES, progress=False)
+    d = gj.diagnose("paper-qmg", table, candidates=CANDIDATES, progress=False)
     assert d.ranking[0].effect == "quadrature_phase" and d.ranking[0].testable
     assert d.selected[:1] == ("quadrature_phase",)
     fit = d.final

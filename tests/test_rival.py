@@ -25,7 +25,7 @@ pytestmark = pytest.mark.slow
 
 def _diagnose(hidden):
     table, info = discovery_lot(hidden, snr="mid", design="a", seed=0)
-    return gj.diagnose(table, "paper-qmg", progress=False), info
+    return gj.diagnose("paper-qmg", table, progress=False), info
 
 
 def test_a_bias_following_dT_dt_is_not_taken_for_a_reference_drift():

@@ -191,9 +191,9 @@ def test_a_fit_is_used_only_with_the_data_it_was_fitted_to(saved, tmp_path, caps
                r".* in the data given; give the fit of this data")
     table = gj.read_table(other)
     with pytest.raises(ValueError, match=message):
-        gj.diagnose(table, fit=loaded, progress=False)
+        gj.diagnose(data=table, fit=loaded, progress=False)
     with pytest.raises(ValueError, match=message):
-        gj.plan(table, fit=loaded, progress=False)
+        gj.plan(data=table, fit=loaded, progress=False)
     for command in ("diagnose", "plan"):
         assert main([command, str(other), "--fit", str(path), "--quiet"]) == 2
         err = capsys.readouterr().err
@@ -203,4 +203,4 @@ def test_a_fit_is_used_only_with_the_data_it_was_fitted_to(saved, tmp_path, caps
     gj.write_table(gj.simulate_table(gj.paper_qmg(), devices=2, runs=1, sweeps=("rate_table",), seed=4,
                                      progress=False), seed4)
     with pytest.raises(ValueError, match=rf"device '{fit.devices[0]}', column 'output': (\d+) of \1 values differ"):
-        gj.diagnose(gj.read_table(seed4), fit=loaded, progress=False)
+        gj.diagnose(data=gj.read_table(seed4), fit=loaded, progress=False)

@@ -26,7 +26,7 @@ from gyrojax.cli import main  # noqa: E402
 def test_plan_refuses_a_budget_beyond_a_week_of_table_time(capsys):
     with pytest.raises(ValueError, match=r"budget_min 1e\+09 min is 1.9e\+03 years of rate-table time per device; "
                                          r"the planner designs at most 10080 min \(7 days\)"):
-        gj.plan(None, budget_min=1e9)
+        gj.plan("paper-qmg", None, budget_min=1e9)
     assert MAX_BUDGET_MIN == 7 * 24 * 60
     # the command says so, exit 2, before any fit
     assert main(["plan", table2_path(), "--budget-min", "1e9", "--quiet"]) == 2
@@ -169,7 +169,7 @@ def test_fingerprints_leave_out_padding_and_tell_overlapping_lines_apart():
 def test_plan_of_the_dac_only_table2_follows_identifys_verdict_on_the_scale_factor(tmp_path):
     # seed 000's Table 2 has DAC points only: identify says SF NOT DETERMINED (exit 4); the plan says so too
     table = gj.read_table(table2_path())
-    p = gj.plan(table, "paper-qmg", max_repeats=1, progress=False)
+    p = gj.plan("paper-qmg", table, max_repeats=1, progress=False)
     assert p.baseline.status == ("not determined",)
     s = p.scale_factor
     assert math.isnan(s.data_stderr[0]) and "cannot fix k_vf" in s.data_not_determined[0]

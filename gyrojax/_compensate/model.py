@@ -58,6 +58,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from .._compile.jit import jit
+from .balance import balance_offset, balance_word, describing_weight, fundamental, inl_term, newton
 from .base import AbstractCompensation, AbstractCompensator, check_side, require_side
 from .points import RatePoints
 
@@ -75,58 +76,6 @@ data do not fix is not amplified by more than 1e8)."""
 DECREMENT_TOL = 1e-6
 """A fit counts as converged when a full Gauss-Newton step would lower chi2 by less than this: the point is then
 within 1e-3 standard errors of the minimum along every direction."""
-
-
-def describing_weight(n: int) -> float:
-    r"""Carrier-fundamental weight of $u^n$ for a sine: $\sin^n\theta = \rho_n \sin\theta + \ldots$."""
-    return 0.0 if n % 2 == 0 else math.comb(n, (n - 1) // 2) / 2.0 ** (n - 1)
-
-
-def _fundamental(word, inl, spec):
-    """D(W): the in-phase carrier fundamental of the DAC output, in word LSB, for a carrier of in-phase amplitude
-    `word` (LSB) and quadrature amplitude `spec.quadrature_lsb`; `spec` carries `inl_orders`, `word_bits`,
-    `dac_bits`. The sample is W sin + Q cos = A sin(. + phi) with A^2 = W^2 + Q^2, so the in-phase fundamental
-    of u^n is rho_n A^(n-1) W / H^n."""
-    return word + _inl_term(word, inl, spec)
-
-
-def _inl_term(word, inl, spec):
-    """D(W) - W, computed on its own (it is thousands of LSB where W is millions)."""
-    lsb = 2.0 ** (spec.word_bits - spec.dac_bits)
-    h = 2.0 ** (spec.word_bits - 1)
-    a2 = word**2 + float(spec.quadrature_lsb) ** 2
-    acc = jnp.zeros_like(word)
-    for i, n in enumerate(spec.inl_orders):
-        rho = describing_weight(n)
-        if rho:
-            acc = acc + lsb * rho * inl[i] * word * a2 ** ((n - 1) // 2) / h**n
-    return acc
-
-
-def _newton(g, z0, steps):
-    """`steps` Newton steps on the elementwise equation g(z) = 0 (derivative by forward mode)."""
-    def step(_, z):
-        value, slope = jax.jvp(g, (z,), (jnp.ones_like(z),))
-        return z - value / slope
-
-    return jax.lax.fori_loop(0, steps, step, z0)
-
-
-def _balance_offset(v, inl, spec, steps):
-    """W - v for the word W with D(W) = v, i.e. the root d of d + (D - 1)(v + d) = 0, as a number of its own
-    size (so it rounds relative to the INL's thousands of LSB, not the word's millions): Newton steps on
-    constants, then one more step that carries the derivatives (the implicit function theorem,
-    dW = (dv - dD/dc dc) / D'(W)), so no derivative passes through the loop."""
-    sg = jax.lax.stop_gradient
-    c, target = sg(inl), sg(v)
-    d = _newton(lambda d: d + _inl_term(target + d, c, spec), jnp.zeros_like(target), steps)
-    value, slope = jax.jvp(lambda d: d + _inl_term(v + d, inl, spec), (d,), (jnp.ones_like(d),))
-    return d - value / sg(slope)
-
-
-def _balance_word(v, inl, spec, steps):
-    """The word W with D(W) = v (see `_balance_offset`)."""
-    return v + _balance_offset(v, inl, spec, steps)
 
 
 class ModelCompensation(AbstractCompensation):
@@ -192,13 +141,13 @@ class ModelCompensation(AbstractCompensation):
 
     def fundamental(self, word):
         """$D(W)$ in word LSB: what the DAC puts on the carrier fundamental for a carrier of amplitude `word`."""
-        return _fundamental(jnp.asarray(word, dtype=jnp.float64), self.inl_lsb, self)
+        return fundamental(jnp.asarray(word, dtype=jnp.float64), self.inl_lsb, self)
 
     def output(self, rate_dps, *, drive_freq_hz, bias_lsb=None) -> Float[Array, " n"]:
         """The model's output (LSB) at table rate `rate_dps` and drive frequency `drive_freq_hz`: the word
         solving the balance by Newton steps, plus the bias (default: `bias(drive_freq_hz)`)."""
         v = self.scale_factor(drive_freq_hz) * jnp.asarray(rate_dps, dtype=jnp.float64)
-        w = _balance_word(v, self.inl_lsb, self, self.newton_steps)
+        w = balance_word(v, self.inl_lsb, self, self.newton_steps)
         return w + (self.bias(drive_freq_hz) if bias_lsb is None else bias_lsb)
 
     def rate(self, output, *, drive_freq_hz=None, temperature_c=None) -> Float[Array, " n"]:
@@ -206,7 +155,7 @@ class ModelCompensation(AbstractCompensation):
         f = check_side("model", "drive_freq_hz", drive_freq_hz)
         d = self.fundamental(jnp.asarray(output, dtype=jnp.float64) - self.bias(f))
         k = jnp.broadcast_to(self.scale_factor(f), d.shape)
-        return _newton(lambda x: d - k * x, jnp.zeros_like(d), self.newton_steps)
+        return newton(lambda x: d - k * x, jnp.zeros_like(d), self.newton_steps)
 
     def summary(self) -> dict[str, Any]:
         def num(v):
@@ -389,6 +338,45 @@ def _lsq(a, b):
     return jax.scipy.linalg.solve_triangular(r, q.T @ b)
 
 
+def _start(k: int, n_runs: int, with_tcf: bool, data: dict[str, Array]):
+    """The start of the fit (no gradient through it: only the solver's path depends on it), with the reference
+    frequency and temperature: the straight line at the starting beta and no INL (linear least squares, exact for
+    a linear device), and the drive frequency's line in temperature."""
+    x, y, f, temp = data["x"], data["y"], data["f"], data["temp"]
+    run_index = data["run_index"]
+    f_ref = jnp.mean(f)
+    t_ref = jnp.mean(temp)
+    onehot = (run_index[:, None] == jnp.arange(n_runs)[None, :]).astype(jnp.float64)
+    lin = _lsq(jnp.concatenate([(x * (f / f_ref) ** data["beta0"])[:, None], onehot], axis=1), y)
+    parts = [lin[:1], data["beta0"][None], jnp.zeros(k), lin[1:], jnp.zeros(1)]
+    if with_tcf:
+        ft = _lsq(jnp.stack([jnp.ones_like(temp), temp - t_ref], axis=1), f / f_ref - 1.0)
+        parts.append(ft)
+    return jax.lax.stop_gradient(jnp.concatenate(parts)), f_ref, t_ref
+
+
+def _whitened_basis(residuals, n_all: int, idx):
+    """Internal coordinates z, delta = basis @ z, whitened at the start: the Jacobian in z has orthonormal columns
+    there (directions weaker than WHITEN_FLOOR keep that floor). The default INL basis (u^3, u^5) on a rate
+    table is nearly collinear (singular value 0.025 with unit columns), and Levenberg-Marquardt's first
+    damping (1 in these units) needed 12 steps to walk down to it; whitened, the near-linear problem is
+    solved in a few. Only the solver's path depends on the basis, not the optimum: no gradient through it.
+    Returns the columns' scales, the start's singular values and the basis."""
+    j0 = jax.lax.stop_gradient(jax.jacfwd(residuals)(jnp.zeros(n_all))[:, idx])
+    norms = jnp.linalg.norm(j0, axis=0)
+    col = 1.0 / jnp.where(norms > 0, norms, 1.0)
+    _, s0, vt0 = jnp.linalg.svd(j0 * col, full_matrices=False)
+    return col, s0, col[:, None] * (vt0.T / jnp.maximum(s0, WHITEN_FLOOR))
+
+
+def _balance_residual(theta, k: int, ratio, x, cfg: ModelCompensator):
+    """How well the last Newton solve closed the balance at `theta`, relative to the largest word."""
+    sf, beta, inl = theta[0], theta[1], theta[2:2 + k]
+    v = sf * ratio**beta * x
+    d = newton(lambda d: d + inl_term(v + d, inl, cfg), jnp.zeros_like(v), cfg.newton_steps)
+    return jnp.max(jnp.abs(d + inl_term(v + d, inl, cfg))) / jnp.max(jnp.abs(v))
+
+
 @jit
 def _fit_arrays(cfg: ModelCompensator, n_runs: int, with_tcf: bool, free: tuple[bool, ...],
                 data: dict[str, Array]) -> dict[str, Array]:
@@ -399,16 +387,7 @@ def _fit_arrays(cfg: ModelCompensator, n_runs: int, with_tcf: bool, free: tuple[
     run_index = data["run_index"]
     idx = jnp.asarray([i for i, b in enumerate(free) if b])
     k = len(cfg.inl_orders)
-    f_ref = jnp.mean(f)
-    t_ref = jnp.mean(temp)
-    onehot = (run_index[:, None] == jnp.arange(n_runs)[None, :]).astype(jnp.float64)
-    # Start: the straight line at the starting beta and no INL (linear least squares, exact for a linear device).
-    lin = _lsq(jnp.concatenate([(x * (f / f_ref) ** data["beta0"])[:, None], onehot], axis=1), y)
-    parts = [lin[:1], data["beta0"][None], jnp.zeros(k), lin[1:], jnp.zeros(1)]
-    if with_tcf:
-        ft = _lsq(jnp.stack([jnp.ones_like(temp), temp - t_ref], axis=1), f / f_ref - 1.0)
-        parts.append(ft)
-    theta0 = jax.lax.stop_gradient(jnp.concatenate(parts))  # only the solver's path depends on the start
+    theta0, f_ref, t_ref = _start(k, n_runs, with_tcf, data)
 
     # The residuals as functions of the deviation `delta` from the start, each formed from terms of the size of
     # the change: the start's misfit (outputs of millions of LSB minus the data) once, then the small
@@ -430,7 +409,7 @@ def _fit_arrays(cfg: ModelCompensator, n_runs: int, with_tcf: bool, free: tuple[
         dsf, dbeta, inl = delta[0], delta[1], inl0 + delta[2:2 + k]
         dg = g0 * jnp.expm1(dbeta * log_ratio)  # (f/f_ref)^beta - (f/f_ref)^beta0
         dv = (dsf * (g0 + dg) + sf0 * dg) * x
-        d = _balance_offset(v0 + dv, inl, cfg, cfg.newton_steps)
+        d = balance_offset(v0 + dv, inl, cfg, cfg.newton_steps)
         db, ddrift = delta[2 + k:2 + k + n_runs], delta[2 + k + n_runs]
         r = (misfit0 + dv + d + db[run_index] + ddrift * 1e6 * (ratio - 1.0)) / sigma
         if not with_tcf:
@@ -438,17 +417,8 @@ def _fit_arrays(cfg: ModelCompensator, n_runs: int, with_tcf: bool, free: tuple[
         rf = (fmisfit0 - delta[-2] - delta[-1] * (temp - t_ref)) / FREQ_SIGMA_REL
         return jnp.concatenate([r, rf])
 
-    # Internal coordinates z, delta = basis @ z, whitened at the start: the Jacobian in z has orthonormal columns
-    # there (directions weaker than WHITEN_FLOOR keep that floor). The default INL basis (u^3, u^5) on a rate
-    # table is nearly collinear (singular value 0.025 with unit columns), and Levenberg-Marquardt's first
-    # damping (1 in these units) needed 12 steps to walk down to it; whitened, the near-linear problem is
-    # solved in a few. Only the solver's path depends on the basis, not the optimum: no gradient through it.
     n_all = theta0.shape[0]
-    j0 = sg(jax.jacfwd(residuals)(jnp.zeros(n_all))[:, idx])
-    norms = jnp.linalg.norm(j0, axis=0)
-    col = 1.0 / jnp.where(norms > 0, norms, 1.0)
-    _, s0, vt0 = jnp.linalg.svd(j0 * col, full_matrices=False)
-    basis = col[:, None] * (vt0.T / jnp.maximum(s0, WHITEN_FLOOR))
+    col, s0, basis = _whitened_basis(residuals, n_all, idx)
 
     def delta_of(z, b):
         return jnp.zeros(n_all).at[idx].set(b @ z)
@@ -475,11 +445,7 @@ def _fit_arrays(cfg: ModelCompensator, n_runs: int, with_tcf: bool, free: tuple[
     decrement = g @ sg(cov_z) @ g
     sv = jnp.linalg.svd(sg(jz), compute_uv=False)
     cond = sv[0] / sv[-1]
-    # How well the last Newton solve closed the balance, relative to the largest word.
-    sf, beta, inl = theta[0], theta[1], theta[2:2 + k]
-    v = sf * ratio**beta * x
-    d = _newton(lambda d: d + _inl_term(v + d, inl, cfg), jnp.zeros_like(v), cfg.newton_steps)
-    bal = jnp.max(jnp.abs(d + _inl_term(v + d, inl, cfg))) / jnp.max(jnp.abs(v))
+    bal = _balance_residual(theta, k, ratio, x, cfg)
     return {"theta": theta, "stderr": stderr, "chi2_red": chi2_red, "f_ref": f_ref, "t_ref": t_ref,
             "solver_successful": sol.result == optx.RESULTS.successful, "num_steps": sol.stats["num_steps"],
             "balance_residual": bal, "decrement": decrement, "condition_number": cond,

@@ -2,6 +2,7 @@
 
 import equinox as eqx
 import jax.numpy as jnp
+from jaxtyping import Array, Complex, Float
 
 from .._checks import check_finite, check_nonnegative, check_positive
 
@@ -24,15 +25,15 @@ class DriveLoop(eqx.Module):
     V_d times the drive electrode's N/V, in phase with the drive velocity.
     """
 
-    amplitude_setpoint: float
-    center_frequency: float
-    pll_kp: float
-    pll_ki: float
-    agc_kp: float
-    agc_ki: float
-    demod_cutoff: float
-    reference_phase: float = 0.0
-    agc_leak: float = 0.0
+    amplitude_setpoint: float | Array
+    center_frequency: float | Array
+    pll_kp: float | Array
+    pll_ki: float | Array
+    agc_kp: float | Array
+    agc_ki: float | Array
+    demod_cutoff: float | Array
+    reference_phase: float | Array = 0.0
+    agc_leak: float | Array = 0.0
 
     demod_order: int = eqx.field(static=True, default=4)
 
@@ -45,7 +46,8 @@ class DriveLoop(eqx.Module):
         check_finite("DriveLoop", "reference_phase", self.reference_phase)
         check_nonnegative("DriveLoop", "agc_leak", self.agc_leak)
 
-    def control(self, e_d, z_pll, z_agc):
+    def control(self, e_d: Complex[Array, ""], z_pll: Float[Array, ""], z_agc: Float[Array, ""]
+                ) -> tuple[Float[Array, ""], Float[Array, ""], Float[Array, ""], Float[Array, ""]]:
         """`(omega, drive_voltage, dz_pll, dz_agc)` from the drive phasor and the integrator states."""
         phase = jnp.angle(e_d)
         err = self.amplitude_setpoint - jnp.abs(e_d)

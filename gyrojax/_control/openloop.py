@@ -1,6 +1,7 @@
 """Open-loop sense readout of seed 003 Fig. 2 / Fig. 6: demodulation and low-pass filtering."""
 
 import equinox as eqx
+from jaxtyping import Array
 
 from .._checks import check_finite, check_positive
 
@@ -14,9 +15,9 @@ class OpenLoopReadout(eqx.Module):
     which mixes quadrature into the output. The output is in sense-ADC LSB.
     """
 
-    demod_cutoff: float
-    reference_phase: float = 0.0
-    phase_error: float = 0.0
+    demod_cutoff: float | Array
+    reference_phase: float | Array = 0.0
+    phase_error: float | Array = 0.0
 
     demod_order: int = eqx.field(static=True, default=4)
 

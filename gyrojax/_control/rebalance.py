@@ -2,6 +2,7 @@
 
 import equinox as eqx
 import jax.numpy as jnp
+from jaxtyping import Array, Complex
 
 from .._checks import check_finite, check_nonnegative, check_positive
 
@@ -23,12 +24,12 @@ class RebalanceLoop(eqx.Module):
     `leak` > 0 gives a finite DC loop gain ki / leak and a residual sense motion proportional to the rate.
     """
 
-    kp: float
-    ki: float
-    demod_cutoff: float
-    reference_phase: float = 0.0
-    carrier_phase: float = 0.0
-    leak: float = 0.0
+    kp: float | Array
+    ki: float | Array
+    demod_cutoff: float | Array
+    reference_phase: float | Array = 0.0
+    carrier_phase: float | Array = 0.0
+    leak: float | Array = 0.0
 
     demod_order: int = eqx.field(static=True, default=4)
 
@@ -41,7 +42,7 @@ class RebalanceLoop(eqx.Module):
         check_finite("RebalanceLoop", "carrier_phase", self.carrier_phase)
         check_nonnegative("RebalanceLoop", "leak", self.leak)
 
-    def control(self, e_s, z):
+    def control(self, e_s: Complex[Array, ""], z: Complex[Array, ""]) -> tuple[Complex[Array, ""], Complex[Array, ""]]:
         """`(word, dz)` from the sense phasor and the (complex) integrator state."""
         kp, ki, leak = (jnp.asarray(v).astype(e_s.dtype) for v in (self.kp, self.ki, self.leak))
         return -(kp * e_s + z), ki * e_s - leak * z

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -84,7 +85,8 @@ class SweepArrays(eqx.Module):
             raise ValueError(f"SweepArrays.mask has dtype {self.mask.dtype}, expected bool.")
         if (self.devices is None) != (self.runs is None):
             raise ValueError("SweepArrays: devices and runs are given together or not at all.")
-        if self.devices is not None and (len(self.devices) != shape[0] or len(self.runs) != shape[0]):
+        if self.devices is not None and self.runs is not None and (len(self.devices) != shape[0]
+                                                                   or len(self.runs) != shape[0]):
             raise ValueError(f"SweepArrays: {len(self.devices)} device ids and {len(self.runs)} run lists for "
                              f"{shape[0]} devices.")
         if self.runs is not None and any(len(r) > shape[1] for r in self.runs):
@@ -95,10 +97,25 @@ class SweepArrays(eqx.Module):
         """True where (device, run) holds at least one point."""
         return jnp.any(self.mask, axis=-1)
 
-    def aligned(self, devices) -> SweepArrays:
+    def fit_sigmas(self) -> Float[Array, "device run point"]:
+        """`sigmas`; a ValueError where the table had none (a fit's data, `FitData`, has 1 there)."""
+        if self.sigmas is None:
+            raise ValueError(f"sweep {self.sweep!r}: these arrays have no sigmas (the table had no output_sigma); "
+                             "a fit's data (gyrojax FitData) sets them to 1.")
+        return self.sigmas
+
+    def labels(self) -> tuple[tuple[str, ...], tuple[tuple[int, ...], ...]]:
+        """`(devices, runs)`; a ValueError for unlabelled arrays (`FitData.unlabelled()`), which carry neither."""
+        if self.devices is None or self.runs is None:
+            raise ValueError(f"SweepArrays of sweep {self.sweep!r} are unlabelled (FitData.unlabelled() drops the "
+                             "device names and run ids); this needs the labelled arrays.")
+        return self.devices, self.runs
+
+    def aligned(self, devices: Sequence[str]) -> SweepArrays:
         """These arrays with one row per device of `devices`, in that order: a device this sweep lacks gets
         padding only (no runs)."""
-        index = [self.devices.index(d) if d in self.devices else -1 for d in devices]
+        names, runs = self.labels()
+        index = [names.index(d) if d in names else -1 for d in devices]
 
         def align(x, fill):
             if x is None:
@@ -112,7 +129,7 @@ class SweepArrays(eqx.Module):
 
         return dataclasses.replace(self, **{f: align(getattr(self, f), PADDING[f]) for f in ARRAY_FIELDS},
                                    aux={c: align(v, 0.0) for c, v in self.aux.items()}, devices=tuple(devices),
-                                   runs=tuple(self.runs[i] if i >= 0 else () for i in index))
+                                   runs=tuple(runs[i] if i >= 0 else () for i in index))
 
 
 def time_order(times, mask):

@@ -154,7 +154,7 @@ class Table:
     def from_arrays(cls, arrays: SweepArrays, *, source: str | None = None) -> Table:
         """The real (unmasked) points of `arrays` back as a table, grouped by device then run (the inverse of
         `to_arrays`)."""
-        if arrays.devices is None:
+        if arrays.devices is None or arrays.runs is None:
             raise ValueError("Table.from_arrays: these arrays have no device and run labels (unlabelled).")
         mask = np.asarray(arrays.mask)
         values = {"input": arrays.inputs, "output": arrays.outputs, "output_sigma": arrays.sigmas,
@@ -237,9 +237,8 @@ def padded_columns(table: Table, sweep: str) -> dict[str, Any]:
             arrays[f][d, k, :m] = columns[c][rows] if c in columns else np.nan
         for c in aux_names:
             aux[c][d, k, :m] = columns[c][rows]
-    if "output_sigma" not in columns:
-        arrays["sigmas"] = None
-    return {**arrays, "mask": mask, "order": time_order(arrays["times"], mask), "aux": aux, "sweep": sweep,
+    return {**arrays, "sigmas": arrays["sigmas"] if "output_sigma" in columns else None,
+            "mask": mask, "order": time_order(arrays["times"], mask), "aux": aux, "sweep": sweep,
             "devices": tuple(devices), "runs": tuple(tuple(runs[d]) for d in devices),
             "column_order": tuple(c for c in columns if c in REQUIRED_COLUMNS or c in OPTIONAL_COLUMNS)}
 
@@ -247,6 +246,9 @@ def padded_columns(table: Table, sweep: str) -> dict[str, Any]:
 def sweep_arrays(table: Table, sweep: str) -> SweepArrays:
     """`table.to_arrays(sweep)`: the padded arrays of `padded_columns` as a `SweepArrays`."""
     p = padded_columns(table, sweep)
-    return SweepArrays(**{f: None if p[f] is None else jnp.asarray(p[f]) for f in ARRAY_FIELDS},
+    optional = {f: None if p[f] is None else jnp.asarray(p[f]) for f in ARRAY_FIELDS}  # sigmas may be None
+    return SweepArrays(inputs=jnp.asarray(p["inputs"]), outputs=jnp.asarray(p["outputs"]), sigmas=optional["sigmas"],
+                       temperatures=optional["temperatures"], mask=jnp.asarray(p["mask"]), times=optional["times"],
+                       drive_freqs=optional["drive_freqs"], order=optional["order"],
                        aux={c: jnp.asarray(v) for c, v in p["aux"].items()}, sweep=sweep, devices=p["devices"],
                        runs=p["runs"], column_order=p["column_order"])

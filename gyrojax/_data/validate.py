@@ -58,7 +58,7 @@ def looks_like_rad_s(inputs: np.ndarray) -> bool:
     return bool(np.all(np.abs(deg - nearest) <= _RAD_TOL * deg))
 
 
-def rows_text(where: Where, rows: Sequence[int]) -> str:
+def rows_text(where: Where, rows: Sequence[int] | np.ndarray) -> str:
     rows = list(rows)
     if len(rows) <= 4:
         return ", ".join(where.row(r) for r in rows)

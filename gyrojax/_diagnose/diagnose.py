@@ -8,6 +8,7 @@ import numpy as np
 
 from .._data.table import Table
 from .._identify import Fit, MultiStart, identify
+from .._identify.order import DEFAULT_MODEL, model_and_data
 from .._identify.spec import FitSpec, fit_spec
 from .._model.fitdata import fit_data
 from .._model.parameters import DEFAULT_FREE, as_model
@@ -30,7 +31,7 @@ from .score import cosine, score_candidates, separating_sweep
 from .solution import Diagnosis, Step
 
 
-def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alpha: float = 0.01,
+def diagnose(model=DEFAULT_MODEL, data=None, *, candidates=None, free=DEFAULT_FREE, alpha: float = 0.01,
              max_effects: int = 4, ambiguity: float = 0.95, min_typical_chi2: float = 1.0,
              max_typical_multiple: float = MAX_TYPICAL_MULTIPLE, probes=PROBES, start: MultiStart = MultiStart(),
              fit: Fit | None = None, spec: FitSpec | None = None, progress=True) -> Diagnosis:
@@ -39,8 +40,8 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
 
     **Arguments:**
 
-    - `data`: a `gyrojax.Table` (or `FitData`) of any sweeps.
     - `model`: the baseline: a preset name, a `Gyroscope`, or a `gyrojax.Model` (its effects stay in).
+    - `data`: a `gyrojax.Table` (or `FitData`) of any sweeps (the old order `diagnose(data, model)` warns).
     - `candidates`: effect names to consider (default: every registered effect the device supports).
     - `free`: baseline physical parameters free per device (see `gyrojax.identify`).
     - `alpha`: family-wise significance per step, in (0, 0.5]; a candidate must reach p < alpha /
@@ -70,9 +71,9 @@ def diagnose(data, model="paper-qmg", *, candidates=None, free=DEFAULT_FREE, alp
     **Returns:** a `Diagnosis` (with a `verdict`: explained, partly explained or unexplained).
     """
     _check_arguments(alpha, max_effects, max_typical_multiple)
+    model, data = model_and_data("diagnose", model, data, data_required=True)
     spec = fit_spec(spec, "diagnose", free=free, start=start)
-    if isinstance(data, Table):
-        data = fit_data(data)
+    data = fit_data(data) if isinstance(data, Table) else data
     if fit is not None:
         base = baseline_model(fit, data)
     else:

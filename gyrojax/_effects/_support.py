@@ -1,6 +1,7 @@
 """What a device must have for an effect to act on it, and the error when it does not."""
 
 import jax
+import jax.core  # Tracer: jax.core is not imported by `import jax` for type checkers
 import jax.numpy as jnp
 import numpy as np
 
@@ -15,7 +16,7 @@ def rebalance_is_leaky(gyro: Gyroscope) -> bool:
     displacement reaches the settled output. A traced leak cannot be checked and counts as leaky; a lot is
     leaky when every device is.
     """
-    if not gyro.closed_loop:
+    if gyro.rebalance_loop is None:  # open loop
         return False
     leak = gyro.rebalance_loop.leak
     if isinstance(leak, jax.core.Tracer):

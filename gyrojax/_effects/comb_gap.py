@@ -4,7 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._checks import check_range
-from .._gyroscope import Gyroscope
+from .._gyroscope import Gyroscope, closed_loop_parts
 from ._support import as_parameter, rebalance_is_leaky, require
 from .base import AbstractEffect
 
@@ -52,7 +52,7 @@ class CombGap(AbstractEffect):
         require(self.name, gyro, self.supports(gyro),
                 "a closed-loop device whose rebalance loop has a finite DC gain (RebalanceLoop.leak > 0), or "
                 "the sense mass never moves and the gap term cannot act")
-        fb = gyro.feedback_electrode
+        fb = closed_loop_parts(gyro, self.name).feedback_electrode
         return eqx.tree_at(lambda g: g.feedback_electrode.gap_fraction, gyro, fb.gap_fraction + self.gap_fraction)
 
     @classmethod

@@ -4,7 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._checks import check_finite
-from .._gyroscope import Gyroscope
+from .._gyroscope import Gyroscope, closed_loop_parts
 from ._support import require
 from .base import AbstractEffect
 
@@ -44,7 +44,7 @@ class DacInl(AbstractEffect):
 
     def apply(self, gyro: Gyroscope) -> Gyroscope:
         require(self.name, gyro, self.supports(gyro), "a closed-loop device (an FTR DAC); it is open loop")
-        inl = gyro.excitation.dac.inl
+        inl = closed_loop_parts(gyro, self.name).excitation.dac.inl
         n = max(inl.shape[0], self.coefficients.shape[0])
         total = jnp.pad(inl, (0, n - inl.shape[0])) + jnp.pad(self.coefficients,
                                                                  (0, n - self.coefficients.shape[0]))

@@ -4,7 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._checks import check_finite
-from .._gyroscope import Gyroscope
+from .._gyroscope import Gyroscope, closed_loop_parts
 from ._support import as_parameter, require
 from .base import AbstractEffect
 
@@ -55,7 +55,7 @@ class PushPullMismatch(AbstractEffect):
     def apply(self, gyro: Gyroscope) -> Gyroscope:
         require(self.name, gyro, self.supports(gyro), "a closed-loop device (push-pull feedback combs); "
                 "it is open loop")
-        ex = gyro.excitation
+        ex = closed_loop_parts(gyro, self.name).excitation
         return eqx.tree_at(lambda g: (g.excitation.branch_gain_error_plus, g.excitation.branch_gain_error_minus),
                            gyro, (ex.branch_gain_error_plus + self.plus, ex.branch_gain_error_minus + self.minus))
 

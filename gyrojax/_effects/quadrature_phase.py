@@ -4,7 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._checks import check_finite
-from .._gyroscope import Gyroscope
+from .._gyroscope import Gyroscope, open_loop_readout
 from ._support import as_parameter
 from .base import AbstractEffect
 
@@ -41,10 +41,11 @@ class QuadraturePhase(AbstractEffect):
         return True
 
     def apply(self, gyro: Gyroscope) -> Gyroscope:
-        if gyro.closed_loop:
+        if gyro.rebalance_loop is not None:  # closed loop
             return eqx.tree_at(lambda g: g.rebalance_loop.carrier_phase, gyro,
                                gyro.rebalance_loop.carrier_phase + self.phase)
-        return eqx.tree_at(lambda g: g.readout.phase_error, gyro, gyro.readout.phase_error + self.phase)
+        readout = open_loop_readout(gyro, self.name)
+        return eqx.tree_at(lambda g: g.readout.phase_error, gyro, readout.phase_error + self.phase)
 
     @classmethod
     def typical(cls, scale: float = 1.0) -> "QuadraturePhase":

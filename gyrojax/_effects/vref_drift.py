@@ -4,7 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._checks import check_finite
-from .._gyroscope import Gyroscope
+from .._gyroscope import Gyroscope, closed_loop_parts
 from ._support import as_parameter, require
 from .base import AbstractEffect
 
@@ -43,7 +43,7 @@ class VrefDrift(AbstractEffect):
     def apply(self, gyro: Gyroscope) -> Gyroscope:
         require(self.name, gyro, self.supports(gyro), "a closed-loop device (biased feedback combs); "
                 "it is open loop")
-        fb = gyro.feedback_electrode
+        fb = closed_loop_parts(gyro, self.name).feedback_electrode
         return eqx.tree_at(lambda g: g.feedback_electrode.v_dc_tc, gyro, fb.v_dc_tc + self.tc)
 
     @classmethod

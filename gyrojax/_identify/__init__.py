@@ -15,7 +15,8 @@ returns a `Fit`. One concept per file:
 - `plausibility.py`: data no fit can mean anything with (refused), and implausible fitted values (flagged).
 - `assemble.py`: from a solution to a `Fit` (statuses and warnings).
 - `coverage.py`: the coverage audit of a fit's intervals (`coverage`, `Coverage`): simulated draws refitted.
-- `population.py`: the lot as a population (`PopulationSolve`, `PopulationFit`): random effects, empirical Bayes.
+- `population/`: the lot as a population (`PopulationSolve`, `PopulationFit`): random effects, empirical Bayes,
+  one concept per file.
 - `fit.py`: `Fit`, `Unidentifiable`, statuses and exit codes.
 - `fitio.py`, `fitmatch.py`, `report.py`: fit files, whether a fit belongs to the data it is given, the identify report.
 - `spec.py`: `FitSpec`, how a fit is made, which `identify`, `diagnose` and `plan` accept whole.

@@ -113,6 +113,9 @@ def coverage(fit: Fit, draws: int = 50, *, seed: int = 0, low: float = 0.93, **i
     model = jax.tree.map(lambda x: _tile(x, draws), fit.model)
     free = identify_options.pop("free", tuple(e.label for e in fit.entries if not e.shared and e.effect_index is None))
     refit = identify(model, data, free=free, estimate_noise=False, progress=False, **identify_options)
+    if not isinstance(refit, Fit):
+        raise ValueError("coverage: the refit is a population fit (lot_solve=PopulationSolve(...)); audit a fit of "
+                         "independent or joint solves.")
     truth = np.tile(np.asarray(fit.values), (draws, 1))
     ok = np.asarray(refit.converged)
     names, cov, count, zrms = [], [], [], []

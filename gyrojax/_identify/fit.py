@@ -82,45 +82,46 @@ class Fit(eqx.Module):
     """
 
     # Flat, not grouped into sub-objects: a fit file (`save_fit`) stores the leaves in this order, and users
-    # read the fields by these names.
+    # read the fields by these names. Arrays are NumPy or JAX: `identify` assembles some on the host.
     model: Model
     names: tuple[str, ...] = eqx.field(static=True)
     lot_names: tuple[str, ...] = eqx.field(static=True)
-    values: Float[Array, "device param"]
-    stderr: Float[Array, "device param"]
-    lot_values: Float[Array, " lot"]
-    lot_stderr: Float[Array, " lot"]
+    values: Float[Array | np.ndarray, "device param"]
+    stderr: Float[Array | np.ndarray, "device param"]
+    lot_values: Float[Array | np.ndarray, " lot"]
+    lot_stderr: Float[Array | np.ndarray, " lot"]
     free: tuple[bool, ...] = eqx.field(static=True)
-    covariance: Float[Array, "device param param"]
-    u: Float[Array, "device param"]
-    u_lot: Float[Array, " lot"]
+    covariance: Float[Array | np.ndarray, "device param param"]
+    u: Float[Array | np.ndarray, "device param"]
+    u_lot: Float[Array | np.ndarray, " lot"]
     residuals: dict
     predictions: dict
     biases: dict
-    chi2: Float[Array, " device"]
-    dof: Int[Array, " device"]
-    converged: Bool[Array, " device"]
+    chi2: Float[Array | np.ndarray, " device"]
+    dof: Int[Array | np.ndarray, " device"]
+    converged: Bool[Array | np.ndarray, " device"]
     result_message: tuple[str, ...] = eqx.field(static=True)
-    num_steps: Int[Array, " device"]
-    unsettled: Int[Array, " device"]
+    num_steps: Int[Array | np.ndarray, " device"]
+    unsettled: Int[Array | np.ndarray, " device"]
     unidentifiable: tuple = eqx.field(static=True)
-    scale_factor: Float[Array, " device"]
-    scale_factor_stderr: Float[Array, " device"]
+    scale_factor: Float[Array | np.ndarray, " device"]
+    scale_factor_stderr: Float[Array | np.ndarray, " device"]
     devices: tuple[str, ...] = eqx.field(static=True)
     data: FitData
     entries: tuple[Entry, ...] = eqx.field(static=True)
     weighted: bool = eqx.field(static=True)
-    jacobian: Float[Array, "device residual param"]  # d(residual)/du for every per-device entry, held ones too
-    residual_vector: Float[Array, "device residual"]  # all standardised residuals (data then priors)
+    # d(residual)/du for every per-device entry, held ones too
+    jacobian: Float[Array | np.ndarray, "device residual param"]
+    residual_vector: Float[Array | np.ndarray, "device residual"]  # all standardised residuals (data then priors)
     status: tuple[str, ...] = eqx.field(static=True)
     warnings: tuple[tuple[str, ...], ...] = eqx.field(static=True)
     reject_alpha: float = eqx.field(static=True)
-    stderr_scaled: Float[Array, "device param"]
-    lot_stderr_scaled: Float[Array, " lot"]
-    scale_factor_stderr_scaled: Float[Array, " device"]
-    noise_dof: Float[Array, " device"]
-    p_value: Float[Array, " device"]
-    p_value_total: Float[Array, ""]
+    stderr_scaled: Float[Array | np.ndarray, "device param"]
+    lot_stderr_scaled: Float[Array | np.ndarray, " lot"]
+    scale_factor_stderr_scaled: Float[Array | np.ndarray, " device"]
+    noise_dof: Float[Array | np.ndarray, " device"]
+    p_value: Float[Array | np.ndarray, " device"]
+    p_value_total: Float[Array | np.ndarray, ""]
 
     @property
     def chi2_red(self):

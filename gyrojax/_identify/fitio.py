@@ -31,6 +31,7 @@ import math
 import os
 import struct
 import warnings
+from typing import Any, cast
 
 import equinox as eqx
 import jax
@@ -87,7 +88,12 @@ def _skeleton_model(preset_name: str | None, effects: tuple[str, ...], n: int, d
     from .._device.file import device_from_text
     from .._presets import preset
 
-    device = preset(preset_name) if device_file is None else device_from_text(device_file, check_loops=False).device
+    if device_file is not None:
+        device = device_from_text(device_file, check_loops=False).device
+    elif preset_name is not None:
+        device = preset(preset_name)
+    else:
+        raise ValueError("the fit file names no preset and holds no device file: its model cannot be rebuilt.")
     return batched(Model(device, tuple(zero_effect(e) for e in effects)), n)
 
 
@@ -129,8 +135,10 @@ def _skeleton_block(sweep: str, fields, runs) -> SweepArrays:
     """Arrays of `sweep` with the labels `runs` (per device) and zeros in `fields` (the others None), shaped so
     that they are valid (the leaves are replaced on loading)."""
     shape = (len(runs), max((len(r) for r in runs), default=0), 1)
-    return SweepArrays(**{f: (np.zeros(shape, dtype=bool if f == "mask" else np.float64) if f in fields else None)
-                          for f in ARRAY_FIELDS}, sweep=sweep, devices=tuple(d for d, _ in runs),
+    leaves = {f: (np.zeros(shape, dtype=bool if f == "mask" else np.float64) if f in fields else None)
+              for f in ARRAY_FIELDS}
+    # NumPy placeholders for the stored leaves (loaded as saved), in the fields' places: typed as what they become.
+    return SweepArrays(**cast(dict[str, Any], leaves), sweep=sweep, devices=tuple(d for d, _ in runs),
                        runs=tuple(r for _, r in runs), column_order=FIT_COLUMNS)
 
 
@@ -151,7 +159,8 @@ def _skeleton_fit(header: dict, model: Model) -> Fit:
     data = FitData(blocks, bool(header["data_weighted"]), header["data_source"])
     per_sweep = {s: z for s in header["result_sweeps"]}
     n = len(header["devices"])
-    new = None if v1 else z
+    # A version 1 payload has no leaves for these: None in the skeleton, and `_from_v1` fills them after loading.
+    new = cast(np.ndarray, None) if v1 else z
     return Fit(model=model, names=tuple(header["names"]), lot_names=tuple(header["lot_names"]), values=z,
                stderr=z, lot_values=z, lot_stderr=z, free=tuple(bool(f) for f in header["free"]), covariance=z,
                u=z, u_lot=z, residuals=dict(per_sweep), predictions=dict(per_sweep), biases=dict(per_sweep),
@@ -181,7 +190,7 @@ def _from_v1(fit: Fit) -> Fit:
                                p_value=jnp.asarray(p), p_value_total=jnp.asarray(p_total))
 
 
-def _header(fit: Fit, preset_name: str) -> dict:
+def _header(fit: Fit, preset_name: str | None) -> dict:
     """Everything static of `fit` for the file's header (without the leaves' description and checksum)."""
     held = [nm for nm, f in zip(fit.names, fit.free) if not f]
     return {

@@ -23,16 +23,18 @@ What the fit reports is checked before it is called a result (`Fit.status`, `Fit
 """
 
 import dataclasses
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax
 import numpy as np
 
 from .._data.table import Table
+from .._gyroscope import Gyroscope
 from .._model.fitdata import FitData, fit_data
-from .._model.parameters import DEFAULT_FREE, as_model
-from .._progress import as_progress
-from .._simulate.tiers import Steady
+from .._model.parameters import DEFAULT_FREE, Model, as_model
+from .._progress import ProgressArg, as_progress
+from .._simulate.tiers import AbstractTier, Steady
 from .._solution import RESULTS, result_code
 from .assemble import assemble_fit
 from .fit import Fit
@@ -44,15 +46,17 @@ from .problem import make_problem, with_free
 from .recovery import RECOVERY, AbstractRecovery, DecrementCertificate, MultiStart, RetryWithSolver, Solution, Solving
 from .shortcuts import lot_solve_from, solver_from
 from .spec import FitSpec, fit_spec
-from .strategies import AbstractLotSolve, Lot
+from .strategies import AbstractLotSolve, Lot, Solver
 
 
-def identify(model, data, *, spec: FitSpec | None = None, free=DEFAULT_FREE, shared=(), hold=(), priors=None,
-             tier=Steady(), solver="levenberg-marquardt", rtol: float = 1e-8, atol: float = 1e-8, max_steps: int = 200,
+def identify(model: Model | Gyroscope | str, data: Table | FitData, *, spec: FitSpec | None = None,
+             free: Sequence[str] = DEFAULT_FREE, shared: Sequence[str] = (), hold: Sequence[str] = (),
+             priors: dict | None = None, tier: AbstractTier = Steady(), solver: str | Solver = "levenberg-marquardt",
+             rtol: float = 1e-8, atol: float = 1e-8, max_steps: int = 200,
              start: MultiStart = MultiStart(), lot_solve: str | AbstractLotSolve = "vmap",
              recovery: tuple[AbstractRecovery, ...] = RECOVERY, identifiability_threshold: float = 1.0,
              reject_alpha: float = 0.01, estimate_noise: bool | None = None, evaluate_only: bool = False,
-             progress=True) -> Fit | PopulationFit:
+             progress: ProgressArg = True) -> Fit | PopulationFit:
     r"""Fit the free parameters of `model` to every sweep in `data`, per device (vmapped) or jointly.
 
     **Arguments:**
@@ -124,7 +128,7 @@ def identify(model, data, *, spec: FitSpec | None = None, free=DEFAULT_FREE, sha
         raise ValueError(f"estimate_noise must be None, True or False, got {estimate_noise!r}.")
     check_absurd_outputs(data)
     if isinstance(spec.lot_solve, PopulationSolve):
-        return _population(model, data, spec, estimate_noise, evaluate_only, progress)
+        return _population(model, data, spec, spec.lot_solve, estimate_noise, evaluate_only, progress)
     return _identify(model, data, spec, estimate_noise, evaluate_only, progress)
 
 
@@ -137,10 +141,10 @@ def _as_fit_data(data) -> FitData:
     return data
 
 
-def _population(model, data, spec: FitSpec, estimate_noise, evaluate_only, progress):
+def _population(model, data, spec: FitSpec, strategy: PopulationSolve, estimate_noise, evaluate_only, progress):
     """The population fit of `spec.lot_solve` (`population.py`), whose independent fits are `identify`'s."""
     options = {k: v for k, v in spec.options().items() if k != "lot_solve"}
-    return population_fit(identify, as_model(model), data, spec.lot_solve, dict(
+    return population_fit(identify, as_model(model), data, strategy, dict(
         **options, estimate_noise=estimate_noise, evaluate_only=evaluate_only, progress=progress),
         as_progress(progress, "gyrojax.identify"))
 

@@ -198,14 +198,14 @@ def estimated_noise(fit: Fit, seed: int, first_device: int = 0):
     rows = sum(int(np.prod(data.blocks[s].inputs.shape[1:])) for s in sweeps)
     free = np.asarray(fit.free)
     dof = np.asarray(fit.dof)
-    n = len(data.devices)
+    n = len(data.device_names())
     kappa = np.ones((n, len(sweeps)))
     noise_dof = np.full(n, np.inf)
     p_value = np.full(n, np.nan)
     notes, determined, nulls = [], [], []
     for d in range(n):
         blocks = [(np.asarray(data.blocks[s].inputs[d]), np.asarray(data.blocks[s].mask[d]),
-                   1.0 / np.asarray(data.blocks[s].sigmas[d]), sweep_kind(s).biased) for s in sweeps]
+                   1.0 / np.asarray(data.blocks[s].fit_sigmas()[d]), sweep_kind(s).biased) for s in sweeps]
         res = np.asarray(fit.residual_vector[d])[:rows]
         jac = np.asarray(fit.jacobian[d])[:rows][:, free]
         if not (np.all(np.isfinite(res)) and np.all(np.isfinite(jac))):
@@ -224,7 +224,7 @@ def estimated_noise(fit: Fit, seed: int, first_device: int = 0):
         unit = "x the given output_sigma" if data.weighted else "output units"
         # Without output_sigma the first fit's sigmas are a scale (`first_fit_scale`): the noise is k times it.
         base = [1.0 if data.weighted else float(np.max(np.where(np.asarray(data.blocks[s].mask[d]),
-                                                                 np.asarray(data.blocks[s].sigmas[d]), 0.0)))
+                                                                 np.asarray(data.blocks[s].fit_sigmas()[d]), 0.0)))
                 for s in sweeps]
         parts = [f"{s} {math.sqrt(k[i]) * base[i]:.3g} {unit} from {nu[i]:.3g} effective degrees of freedom "
                  f"({methods[i]})" for i, s in enumerate(sweeps) if ok[i]]
@@ -253,8 +253,9 @@ def first_fit_scale(data: FitData, predictions) -> FitData:
     sweeps, `output_scale_ratio`), so that the fit, the noise estimated from it and the p-value do not depend on
     the unit of the outputs. 1 (the unit weights) for outputs in the model's units."""
     ratio = output_scale_ratio(data, predictions)
-    scale = np.ones(len(data.devices))
-    for d in range(len(data.devices)):
+    n = len(data.device_names())
+    scale = np.ones(n)
+    for d in range(n):
         r = ratio[d][np.isfinite(ratio[d])]
         if r.size:
             scale[d] = 10.0 ** round(math.log10(float(np.median(r))))
@@ -270,5 +271,6 @@ def reweighted(data: FitData, kappa) -> FitData:
     for i, s in enumerate(sweeps):
         block = data.blocks[s]
         scale = jnp.sqrt(jnp.asarray(kappa[:, i]))[:, None, None]
-        new.append(jnp.where(block.mask, block.sigmas * scale, block.sigmas))
+        sigmas = block.fit_sigmas()
+        new.append(jnp.where(block.mask, sigmas * scale, sigmas))
     return eqx.tree_at(lambda dd: [dd.blocks[s].sigmas for s in sweeps], data, new)

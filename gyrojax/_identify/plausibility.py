@@ -34,7 +34,8 @@ def check_absurd_outputs(data: FitData):
             for j, i in enumerate(idx):
                 others = mag[top[0]] if j == top[1] else mag[top[1]]
                 if others > 0 and mag[j] > ABSURD_RATIO * others:
-                    bad.append(f"sweep {s!r}, device {data.devices[d]!r}, run {runs[d][k]}, input {x[d, k, i]:.6g}: "
+                    bad.append(f"sweep {s!r}, device {data.device_names()[d]!r}, run {runs[d][k]}, "
+                               f"input {x[d, k, i]:.6g}: "
                                f"output {y[d, k, i]:.6g} is {mag[j] / others:.2g} times the largest other output "
                                f"of its run ({others:.6g})")
     if bad:
@@ -95,7 +96,8 @@ def check_signs(data: FitData, predictions, model_name: str):
             # there the data's slope is the effect to be found, not a flipped convention.
             if (np.isfinite(b) and np.isfinite(b_model) and np.isfinite(se) and se > 0 and b * b_model < 0
                     and abs(b) > _FLIP_SIGMAS * se and abs(b_model) > _FLIP_SIGMAS * se):
-                bad.append(f"sweep {s!r}, device {data.devices[d]!r}, run {runs[d][k]}: slope {b:.6g} +/- {se:.2g} "
+                bad.append(f"sweep {s!r}, device {data.device_names()[d]!r}, run {runs[d][k]}: "
+                           f"slope {b:.6g} +/- {se:.2g} "
                            f"per input unit, the model's {b_model:.6g}")
     if bad:
         raise ValueError(f"identify: {data.source}: the outputs change with the input with the opposite sign of "
@@ -166,7 +168,7 @@ def output_scale_ratio(data: FitData, predictions) -> np.ndarray:
     """(device, sweep): how many times the model's the data's outputs are, as the ratio of their spreads about
     each run's mean (a turn-on bias changes neither), over the valid points; NaN where either spread is 0 or not
     finite (a sweep without `predictions`, a single point per run)."""
-    out = np.full((len(data.devices), len(data.sweeps)), np.nan)
+    out = np.full((len(data.device_names()), len(data.sweeps)), np.nan)
     for i, s in enumerate(data.sweeps):
         if s not in predictions:
             continue

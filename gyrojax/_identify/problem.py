@@ -82,7 +82,7 @@ def sf_temperature(data):
     # numpy: a few host operations, not a compiled program per operation
     used = [np.asarray(b.mask) & np.isfinite(np.asarray(b.temperatures)) for b in blocks]
     total = sum(np.sum(np.where(m, np.asarray(b.temperatures), 0.0), axis=(1, 2)) for m, b in zip(used, blocks))
-    count = sum(np.sum(m, axis=(1, 2)) for m in used).astype(float)
+    count = np.asarray(sum(np.sum(m, axis=(1, 2)) for m in used), dtype=float)
     return np.where(count > 0, total / np.maximum(count, 1.0), 25.0)
 
 
@@ -99,7 +99,7 @@ class Layout(eqx.Module):
 def make_problem(model: Model, data: FitData, *, free, shared, hold, priors, tier) -> tuple[Problem, Layout]:
     """The problem of every device of `data` (device axis first) with every per-device entry free, and its
     layout. Raises a `ValueError` naming a parameter of `free`, `shared`, `hold` or `priors` the fit lacks."""
-    n = len(data.devices)
+    n = len(data.device_names())
     model = batched(model, n)
     one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, model)
     free = tuple(name for name in free if PARAMETERS.get(name) is None or PARAMETERS[name].exists_on(one.device))

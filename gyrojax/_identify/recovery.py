@@ -19,7 +19,7 @@ from .evaluation import Evaluation
 from .identifiability import weak_directions
 from .problem import Problem
 from .shortcuts import solver_from
-from .strategies import Lot
+from .strategies import Lot, Solver
 
 
 class Solving(eqx.Module):
@@ -27,7 +27,7 @@ class Solving(eqx.Module):
 
     problem: Problem
     lot: Lot
-    solver: eqx.Module  # an optimistix least-squares solver
+    solver: Solver
     solver_name: object  # as given to identify: a name of SOLVERS, or the solver
     max_steps: int = eqx.field(static=True)
     n_lot: int = eqx.field(static=True)  # shared entries (a joint fit)
@@ -39,7 +39,9 @@ class Solving(eqx.Module):
         """The full internal vector of the solver's `u_free`: held entries at 0 (their start)."""
         return np.asarray(u_free) * np.asarray(self.problem.free_mask)
 
-    def solve(self, u0, u_lot0, stage: str, *, problem: Problem | None = None, solver=None):
+    def solve(self, u0: np.ndarray, u_lot0: np.ndarray, stage: str, *, problem: Problem | None = None,
+              solver: Solver | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, Evaluation]:
         """The lot strategy's solve from `u0`, `u_lot0`: numpy `(u, u_lot, code, steps, chi2)` per device and
         the `Evaluation` at the solution."""
         return self.lot.solve(self.problem if problem is None else problem, u0, u_lot0,
@@ -122,6 +124,8 @@ class MultiStart(eqx.Module):
                 (u, _, *rest), (u_b, u_lot, *rest_b) = res, best
                 u, *rest = _pick(_better(res[4], best[4]), (u, *rest), (u_b, *rest_b))
                 best = (u, u_lot, *rest)
+        if best is None:
+            raise ValueError(f"MultiStart: starts must be >= 1, got {self.starts!r}.")
         u_free, u_lot, code, steps, chi2, final = best
         return Solution(u_free, u_lot, code, steps, chi2, solving.full(u_free), final, ("",) * n)
 
@@ -143,7 +147,7 @@ class DecrementCertificate(AbstractRecovery):
 
     tol: float = 1e-6
 
-    def __call__(self, solving, solution):
+    def __call__(self, solving: Solving, solution: Solution) -> Solution:
         final, code = solution.final, solution.code
         stopped = (code == result_code(RESULTS.nonlinear_max_steps_reached)) & (np.asarray(final.failed) == 0)
         if not stopped.any():
@@ -170,7 +174,7 @@ class RetryWithSolver(AbstractRecovery):
     rtol: float | None = None
     atol: float | None = None
 
-    def __call__(self, solving, solution):
+    def __call__(self, solving: Solving, solution: Solution) -> Solution:
         # Levenberg-Marquardt can crawl where a full Gauss-Newton step would not (measured: a leaky-rebalance
         # paper-qmg lot with comb_gap free, LM 200 steps at chi2_red 6.3, Gauss-Newton 10 steps to 1.02).
         ok = result_code(RESULTS.successful)
@@ -183,6 +187,8 @@ class RetryWithSolver(AbstractRecovery):
             np.zeros((n, n_dev)), u_lot0, f"during the {self.solver} retry",
             solver=solver_from(self.solver, self.rtol, self.atol))
         u_lot, chi2 = solution.u_lot, solution.chi2
+        if chi2 is None:  # an evaluation without a solve has every code successful, so it returned above
+            raise ValueError("RetryWithSolver: the solution to retry has no chi2 (an evaluation, not a solve).")
         if solving.lot.joint:
             total, total_2 = (np.sum(np.nan_to_num(c, nan=np.inf)) for c in (chi2, chi2_2))
             better = np.full(n, bool(np.all(code2 == ok)) and total_2 <= total * (1 + 1e-6))
@@ -206,7 +212,7 @@ class RestartRunoffs(AbstractRecovery):
     its start with that direction held, then released from there; the lower chi2 wins, and its message says
     so. Independent fits only (costs two more solves when it fires)."""
 
-    def __call__(self, solving, solution):
+    def __call__(self, solving: Solving, solution: Solution) -> Solution:
         if solving.lot.joint:
             return solution
         free_index = list(solving.free_index)

@@ -4,13 +4,14 @@ the strategies that choose among them (`VmapSolve`, `LoopSolve`, `JointSolve`)."
 
 import abc
 import dataclasses
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+from jaxtyping import Array, ArrayLike, Float
 
 from .._compile.export import cached_program
 from .._compile.jit import jit
@@ -18,7 +19,11 @@ from .._lots.stack import bucket_size, pad_devices, unpad_devices
 from .._numerics.lm import RunoffBound, with_max_steps
 from .._solution import RESULTS, result_code
 from .evaluation import Evaluation, evaluated, evaluation_step, final_evaluation, one_trace
-from .problem import nonfinite_explained
+from .problem import Problem, nonfinite_explained
+
+
+Solver = optx.AbstractLeastSquaresSolver | optx.AbstractMinimiser
+"""What `optimistix.least_squares` takes (gyrojax's Levenberg-Marquardt, Gauss-Newton, BFGS ...)."""
 
 
 def map_devices(f, chunk, *trees):
@@ -158,7 +163,9 @@ class AbstractLotSolve(eqx.Module):
         """How a lot of `n` devices is padded and placed for the solves."""
 
     @abc.abstractmethod
-    def solve(self, problem, spread: LotSpread, u0, u_lot0, solver, max_steps):
+    def solve(self, problem: Problem, spread: LotSpread, u0: Float[ArrayLike, "device dev"],
+              u_lot0: Float[ArrayLike, " lot"], solver: Solver, max_steps: int | Array
+              ) -> tuple[Array, Array, Array, Array, Array, Evaluation]:
         """Solve every device of the padded `problem` from `u0` (device, n_dev) and `u_lot0` (n_lot,) with the
         optimistix `solver`: `(u, u_lot, result code, steps, chi2, Evaluation at the solution)`, unpadded, per
         device."""
@@ -182,7 +189,7 @@ class VmapSolve(AbstractLotSolve):
       in chunks (`gyrojax.DistributedSolve`) shares one compiled fit, the last one included.
     """
 
-    chunk: int | None | str = eqx.field(static=True, default="auto")
+    chunk: int | None | Literal["auto"] = eqx.field(static=True, default="auto")
     shard: bool | None = eqx.field(static=True, default=None)
     bucket: bool = eqx.field(static=True, default=True)
     pad_to: int | None = eqx.field(static=True, default=None)
@@ -196,7 +203,7 @@ class VmapSolve(AbstractLotSolve):
                                         or self.pad_to < 1):
             raise ValueError(f"VmapSolve: pad_to must be None or an integer >= 1, got {self.pad_to!r}.")
 
-    def spread(self, n):
+    def spread(self, n: int) -> LotSpread:
         shards, chunk = _shards(self.shard), self.chunk
         if chunk == "auto":
             # Measured: 256 CPU devices ran 3-4x faster per device in chunks of 16 than of 128; 4096 devices on
@@ -206,7 +213,9 @@ class VmapSolve(AbstractLotSolve):
             raise ValueError("VmapSolve: a chunk applies on one JAX device; drop chunk or shard.")
         return LotSpread(n, shards, chunk, bucket=self.bucket, pad_to=self.pad_to)
 
-    def solve(self, problem, spread, u0, u_lot0, solver, max_steps):
+    def solve(self, problem: Problem, spread: LotSpread, u0: Float[ArrayLike, "device dev"],
+              u_lot0: Float[ArrayLike, " lot"], solver: Solver, max_steps: int | Array
+              ) -> tuple[Array, Array, Array, Array, Array, Evaluation]:
         u0_s, = spread.pad(jnp.asarray(u0))
         u, code, steps, chi2, ev = spread.unpad(_solve_independent(problem, u0_s, jnp.zeros(0), solver, max_steps,
                                                                    spread.chunk))
@@ -219,10 +228,12 @@ class LoopSolve(AbstractLotSolve):
 
     joint: ClassVar[bool] = False
 
-    def spread(self, n):
+    def spread(self, n: int) -> LotSpread:
         return LotSpread(n, 1)
 
-    def solve(self, problem, spread, u0, u_lot0, solver, max_steps):
+    def solve(self, problem: Problem, spread: LotSpread, u0: Float[ArrayLike, "device dev"],
+              u_lot0: Float[ArrayLike, " lot"], solver: Solver, max_steps: int | Array
+              ) -> tuple[Array, Array, Array, Array, Array, Evaluation]:
         u, code, steps, chi2, ev = _solve_loop(problem, jnp.asarray(u0), jnp.zeros(0), solver, max_steps)
         return u, jnp.zeros(0), code, steps, chi2, Evaluation(*ev)
 
@@ -235,11 +246,13 @@ class JointSolve(AbstractLotSolve):
     shard: bool | None = eqx.field(static=True, default=None)
     joint: ClassVar[bool] = True
 
-    def spread(self, n):
+    def spread(self, n: int) -> LotSpread:
         shards = _shards(self.shard)
         return LotSpread(n, shards if n % shards == 0 else 1)
 
-    def solve(self, problem, spread, u0, u_lot0, solver, max_steps):
+    def solve(self, problem: Problem, spread: LotSpread, u0: Float[ArrayLike, "device dev"],
+              u_lot0: Float[ArrayLike, " lot"], solver: Solver, max_steps: int | Array
+              ) -> tuple[Array, Array, Array, Array, Array, Evaluation]:
         (u0_s,) = spread.pad(jnp.asarray(u0))
         return spread.unpad(_solve_joint(problem, u0_s, jnp.asarray(u_lot0), solver, max_steps))
 
@@ -258,15 +271,17 @@ class Lot(eqx.Module):
     def joint(self) -> bool:
         return self.strategy.joint
 
-    def solve(self, problem, u0, u_lot0, solver, max_steps, stage: str):
+    def solve(self, problem: Problem, u0: Float[ArrayLike, "device dev"], u_lot0: Float[ArrayLike, " lot"],
+              solver: Solver, max_steps: int, stage: str
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, Evaluation]:
         """The strategy's solve of `problem` from `u0`, `u_lot0`: numpy `(u, u_lot, code, steps, chi2)` and the
         `Evaluation` at the solution."""
         (problem_s,) = self.spread.pad(problem)
         # The step budget as a traced value of gyrojax's LM: a fit retried with more steps reuses the program.
         solver, max_steps = with_max_steps(solver, max_steps)
         with nonfinite_explained(stage):
-            *out, ev = self.strategy.solve(problem_s, self.spread, u0, u_lot0, solver, max_steps)
-        return tuple(np.asarray(x) for x in out) + (ev,)
+            u, u_lot, code, steps, chi2, ev = self.strategy.solve(problem_s, self.spread, u0, u_lot0, solver, max_steps)
+        return np.asarray(u), np.asarray(u_lot), np.asarray(code), np.asarray(steps), np.asarray(chi2), ev
 
     def evaluate(self, problem, u, u_lot, solver, max_steps, stage: str) -> Evaluation:
         """Residuals, Jacobians and the scale factor of every device of `problem` at `u`, `u_lot`: the solve's

@@ -1,6 +1,7 @@
 """A tidy table as the arrays a fit needs: every sweep padded to one common device axis."""
 
 import dataclasses
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -48,8 +49,13 @@ class FitData(eqx.Module):
         """`(sweep, run ids per device)` pairs (padding runs are masked); see `run_ids`."""
         return tuple((s, b.runs) for s, b in self.blocks.items())
 
+    def device_names(self) -> tuple[str, ...]:
+        """The devices' names; a ValueError for unlabelled data (`unlabelled()`), which carry none."""
+        return next(iter(self.blocks.values())).labels()[0]
+
     def run_ids(self, sweep: str) -> tuple[tuple[int, ...], ...]:
-        return self.blocks[sweep].runs
+        """Run ids per device of `sweep`; a ValueError for unlabelled data."""
+        return self.blocks[sweep].labels()[1]
 
     def unlabelled(self) -> "FitData":
         """The same arrays without device names, run ids, source and `weighted` (None): what compiled
@@ -61,11 +67,11 @@ class FitData(eqx.Module):
         import jax
         return jax.tree.map(lambda x: x[i:i + 1], self)
 
-    def num_points(self):
+    def num_points(self) -> int:
         return int(sum(np.asarray(b.mask).sum() for b in self.blocks.values()))
 
 
-def fit_data(table: Table, sweeps=None) -> FitData:
+def fit_data(table: Table, sweeps: Sequence[str] | None = None) -> FitData:
     """Convert a validated `Table` to `FitData` (only the sweeps named, default all present)."""
     present = [s for s in SWEEP_KINDS if s in set(table["sweep"].tolist())]
     if sweeps is None:
@@ -88,7 +94,8 @@ def fit_data(table: Table, sweeps=None) -> FitData:
             bad = np.asarray(arr.mask) & ~(np.asarray(arr.sigmas) > 0)
             if bad.any():
                 d, r, p = map(int, np.argwhere(bad)[0])
-                raise DataError(f"{table.source}: sweep {s!r}, device {arr.devices[d]!r}, run {arr.runs[d][r]}, "
+                names, runs = arr.labels()
+                raise DataError(f"{table.source}: sweep {s!r}, device {names[d]!r}, run {runs[d][r]}, "
                                 f"point {p}: output_sigma must be > 0 to weight a fit, got "
                                 f"{np.asarray(arr.sigmas)[d, r, p]!r}.", source=table.source, column="output_sigma")
         else:

@@ -127,6 +127,8 @@ class Entry(eqx.Module):
         if self.effect_index is None:
             return PARAMETERS[self.label].where
         i, f = self.effect_index, self.field
+        if f is None:
+            raise ValueError(f"Entry {self.label!r}: an effect's entry needs the effect's field name, got None.")
         return lambda g, i=i, f=f: getattr(g, f)  # applied to the effect module
 
 

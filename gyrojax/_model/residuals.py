@@ -33,6 +33,9 @@ def predict_block(gyro: Gyroscope, sweep: str, block: SweepArrays, tier=Steady()
     """Noise-free, bias-free predictions of one device's sweep block, shape (run, point), and a flag of
     points that could not be evaluated (not settled, not finite)."""
     shape = block.inputs.shape
+    if block.temperatures is None:
+        raise ValueError(f"sweep {sweep!r}: the data carry no temperatures (a fit file of an early format); a "
+                         "prediction needs each point's die temperature.")
     pred, bad = sweep_kind(sweep).predict(gyro, jnp.ravel(block.inputs), jnp.ravel(block.temperatures),
                                           None if block.times is None else jnp.ravel(block.times), tier)
     return jnp.reshape(pred, shape), jnp.reshape(bad & jnp.ravel(block.mask), shape)
@@ -64,7 +67,7 @@ def run_biases(sweep: str, block: SweepArrays, pred):
     """Best bias per run (weighted mean of the raw residuals), shape (run,); zero for unbiased sweeps."""
     if not sweep_kind(sweep).biased:
         return jnp.zeros(block.inputs.shape[0])
-    w = jnp.where(block.mask, 1.0 / block.sigmas**2, 0.0)
+    w = jnp.where(block.mask, 1.0 / block.fit_sigmas()**2, 0.0)
     raw = jnp.where(block.mask, block.outputs - pred, 0.0)
     return jnp.sum(w * raw, axis=-1) / jnp.maximum(jnp.sum(w, axis=-1), jnp.finfo(float).tiny)
 
@@ -72,7 +75,7 @@ def run_biases(sweep: str, block: SweepArrays, pred):
 def block_residuals(sweep: str, block: SweepArrays, pred):
     """Standardised residuals (run, point) after the run biases; zero on padding."""
     b = run_biases(sweep, block, pred)
-    r = (block.outputs - pred - b[:, None]) / block.sigmas
+    r = (block.outputs - pred - b[:, None]) / block.fit_sigmas()
     return jnp.where(block.mask, r, 0.0)
 
 
@@ -88,9 +91,9 @@ def device_residuals(gyro: Gyroscope, data: FitData, tier=Steady(), sf_temperatu
     settled = dict(zip(steady, settled))
     parts, preds, failed = [], {}, jnp.zeros((), dtype=int)
     for sweep in data.sweeps:
-        block = data.blocks[sweep]
-        if sweep in settled:
-            pred, bad = sweep_kind(sweep).read(settled[sweep])
+        block, kind = data.blocks[sweep], sweep_kind(sweep)
+        if sweep in settled and isinstance(kind, AbstractSettledSweep):
+            pred, bad = kind.read(settled[sweep])
             pred, bad = jnp.reshape(pred, block.inputs.shape), bad & jnp.ravel(block.mask)
         else:
             pred, bad = predict_block(gyro, sweep, block, tier)
@@ -102,7 +105,7 @@ def device_residuals(gyro: Gyroscope, data: FitData, tier=Steady(), sf_temperatu
 
 def num_biases(data: FitData):
     """Run biases per device (real runs of biased sweeps), shape (device,) (numpy: counted on the host)."""
-    total = np.zeros(len(data.devices), dtype=int)
+    total = np.zeros(len(data.device_names()), dtype=int)
     for sweep in data.sweeps:
         if sweep_kind(sweep).biased:
             total = total + np.sum(np.any(np.asarray(data.blocks[sweep].mask), axis=-1), axis=-1)

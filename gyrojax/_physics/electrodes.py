@@ -2,6 +2,7 @@
 
 import equinox as eqx
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
 
 from .._checks import check_finite, check_positive, check_range
 from .._units import EPS0
@@ -15,7 +16,7 @@ class DriveElectrode(eqx.Module):
     def __check_init__(self):
         check_positive("DriveElectrode", "force_per_volt", self.force_per_volt)
 
-    def force(self, voltage):
+    def force(self, voltage: Float[ArrayLike, "*s"]) -> Float[ArrayLike, "*s"]:
         return self.force_per_volt * voltage
 
 
@@ -64,7 +65,8 @@ class FeedbackElectrode(eqx.Module):
         check_finite("FeedbackElectrode", "v_dc_tc", self.v_dc_tc)
 
     @classmethod
-    def from_geometry(cls, *, fingers, thickness, gap, tip_width, v_dc):
+    def from_geometry(cls, *, fingers: float, thickness: float, gap: float, tip_width: float, v_dc: float
+                      ) -> "FeedbackElectrode":
         """Build from comb geometry, seed 000 Eq. (5)-(7): n movable fingers, thickness h, gap d0,
         finger-tip width b and bias V_dc: K_vf = V_dc (4 n eps0 h / d0 + 2 (2n+1) eps0 h b / d0^2)."""
         for name, value in (("fingers", fingers), ("thickness", thickness), ("gap", gap),
@@ -81,11 +83,12 @@ class FeedbackElectrode(eqx.Module):
         minus = (1.0 - rho) + rho * d0**2 / (d0 + y) ** 2
         return plus, minus
 
-    def bias(self, dt=0.0):
+    def bias(self, dt: Float[ArrayLike, "*s"] = 0.0) -> Float[ArrayLike, "*s"]:
         """The bias V_dc (V) at a die temperature `dt` kelvin above the reference temperature."""
         return self.v_dc * (1.0 + self.v_dc_tc * dt)
 
-    def force(self, y, v_plus, v_minus, dt=0.0):
+    def force(self, y: Float[Array, "*s"], v_plus: Float[Array, "*s"], v_minus: Float[Array, "*s"],
+              dt: Float[ArrayLike, "*s"] = 0.0) -> Float[Array, "*s"]:
         """Sense-axis force (N) at displacement `y` (m) with AC branch voltages `v_plus`, `v_minus` (V), at a
         die temperature `dt` kelvin above the reference temperature (it sets the bias)."""
         a = self.k_vf / (2.0 * self.v_dc)
@@ -108,5 +111,5 @@ class VirtualCoriolisElectrode(eqx.Module):
     def __check_init__(self):
         check_finite("VirtualCoriolisElectrode", "force_per_volt2", self.force_per_volt2)
 
-    def force_amplitude(self, v_ac, v_fc):
+    def force_amplitude(self, v_ac: Float[ArrayLike, "*s"], v_fc: Float[ArrayLike, "*s"]) -> Float[Array, "*s"]:
         return self.force_per_volt2 * jnp.asarray(v_ac, dtype=float) * v_fc

@@ -2,8 +2,13 @@
 
 import equinox as eqx
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
 
 from .._checks import check_finite, check_nonnegative
+
+
+# A field is one number, or an array of one per point when the points of a sweep settle together.
+_Value = float | Float[Array, "*point"]
 
 
 class Stimulus(eqx.Module):
@@ -21,13 +26,13 @@ class Stimulus(eqx.Module):
     - `time`: time since power-on at the start of the point, s (sets the temperature).
     """
 
-    rate: float = 0.0
-    rate_frequency: float = 0.0
-    vcf_ac: float = 0.0
-    vcf_fc: float = 0.0
-    vcf_frequency: float = 0.0
-    vcf_phase: float = 0.0
-    time: float = 0.0
+    rate: _Value = 0.0
+    rate_frequency: _Value = 0.0
+    vcf_ac: _Value = 0.0
+    vcf_fc: _Value = 0.0
+    vcf_frequency: _Value = 0.0
+    vcf_phase: _Value = 0.0
+    time: _Value = 0.0
 
     def __check_init__(self):
         for name in ("rate", "vcf_ac", "vcf_fc", "vcf_phase"):
@@ -35,9 +40,9 @@ class Stimulus(eqx.Module):
         for name in ("rate_frequency", "vcf_frequency", "time"):
             check_nonnegative("Stimulus", name, getattr(self, name))
 
-    def rate_at(self, t):
+    def rate_at(self, t: Float[ArrayLike, "*t"]) -> Float[Array, "*t"]:
         return self.rate * jnp.cos(self.rate_frequency * t)
 
-    def vcf_at(self, t):
+    def vcf_at(self, t: Float[ArrayLike, "*t"]) -> Float[Array, "*t"]:
         """V_ac V_fc(t), V^2."""
         return self.vcf_ac * self.vcf_fc * jnp.cos(self.vcf_frequency * t)

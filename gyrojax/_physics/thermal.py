@@ -4,6 +4,7 @@ import abc
 
 import equinox as eqx
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
 
 from .._checks import check_finite, check_positive
 
@@ -12,19 +13,19 @@ class AbstractTemperature(eqx.Module):
     """A die-temperature history T(t) in degrees Celsius, t in seconds since power-on."""
 
     @abc.abstractmethod
-    def __call__(self, t):
+    def __call__(self, t: Float[ArrayLike, "*time"]) -> Float[Array, "*time"]:
         """Temperature in deg C at time `t` (s)."""
 
 
 class ConstantTemperature(AbstractTemperature):
     """A die held at one temperature (a settled, thermostatted device)."""
 
-    value: float = 25.0
+    value: float | Float[Array, ""] = 25.0
 
     def __check_init__(self):
         check_finite("ConstantTemperature", "value", self.value)
 
-    def __call__(self, t):
+    def __call__(self, t: Float[ArrayLike, "*time"]) -> Float[Array, "*time"]:
         return jnp.asarray(self.value, dtype=float) + 0.0 * jnp.asarray(t, dtype=float)
 
 
@@ -44,7 +45,7 @@ class WarmupTemperature(AbstractTemperature):
         check_finite("WarmupTemperature", "rise", self.rise)
         check_positive("WarmupTemperature", "time_constant", self.time_constant)
 
-    def __call__(self, t):
+    def __call__(self, t: Float[ArrayLike, "*time"]) -> Float[Array, "*time"]:
         t = jnp.asarray(t, dtype=float)
         return self.ambient + self.rise * (1.0 - jnp.exp(-t / self.time_constant))
 
@@ -88,7 +89,7 @@ class PlateauTemperature(AbstractTemperature):
         check_positive("PlateauTemperature", "package_time_constant_s", self.package_time_constant_s)
         check_positive("PlateauTemperature", "heating_time_constant_s", self.heating_time_constant_s)
 
-    def __call__(self, t):
+    def __call__(self, t: Float[ArrayLike, "*time"]) -> Float[Array, "*time"]:
         t = jnp.asarray(t, dtype=float)
         temp = self.initial_c + self.rise_k * (1.0 - jnp.exp(-t / self.heating_time_constant_s))
         previous = self.initial_c

@@ -37,6 +37,7 @@ from .._diagnose.candidates import baseline_fit, baseline_model, candidate_effec
 from .._effects.registry import EFFECTS
 from .._identify import Fit
 from .._identify.fit import p_text
+from .._identify.order import DEFAULT_MODEL, model_and_data
 from .._identify.problem import sf_temperature
 from .._identify.spec import FitSpec, fit_spec
 from .._lots.noise import RateNoise
@@ -439,7 +440,7 @@ def _sf_variance(info, g, cols, threshold, meat=None):
     return var if part <= SF_HELD_TOL * math.sqrt(max(var, 0.0)) else math.inf
 
 
-def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=None, experiments=None,
+def plan(model=DEFAULT_MODEL, data=None, *, fit: Fit | None = None, candidates=None, experiments=None,
          budget_min: float | None = None, alpha: float = 0.01, target_power: float = 0.9, max_repeats: int = 3,
          protocol: Protocol = Protocol(), free=DEFAULT_FREE, identifiability_threshold: float = 1.0,
          scale_factor: bool = True, spec: FitSpec | None = None, progress=True) -> Plan:
@@ -447,10 +448,10 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
 
     **Arguments:**
 
-    - `data`: a `gyrojax.Table` (or `FitData`): the measurements made so far. May be None when `fit` is given
-      (its data are used).
     - `model`: the baseline (a preset name, `Gyroscope` or `gyrojax.Model`) fitted to `data` when no `fit`
       is given, with every candidate effect held at zero (as `gyrojax.diagnose` fits it).
+    - `data`: a `gyrojax.Table` (or `FitData`): the measurements made so far. May be None when `fit` is given
+      (its data are used). The old order `plan(data, model)` still works, with a `DeprecationWarning`.
     - `fit`: a `gyrojax.Fit` of `data` (from `identify`, `diagnose(...).baseline` or `load_fit`): the
       baseline; its Jacobian is reused (evaluated once more if it lacks the candidates' columns).
     - `candidates`: effect names to plan for (default every registered effect the device supports and the
@@ -476,6 +477,7 @@ def plan(data=None, model="paper-qmg", *, fit: Fit | None = None, candidates=Non
     **Returns:** a `Plan`.
     """
     _check_arguments(alpha, target_power, max_repeats, protocol, data)
+    model, data = model_and_data("plan", model, data, data_required=False)
     spec = fit_spec(spec, "plan", free=free)
     experiments = None if experiments is None else tuple(experiments)
     budget_min = _budget(experiments, protocol, budget_min)

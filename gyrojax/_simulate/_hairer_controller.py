@@ -4,6 +4,7 @@ from collections.abc import Callable
 
 import diffrax
 import jax
+import jax.core  # Tracer: jax.core is not imported by `import jax` for type checkers
 import jax.numpy as jnp
 import optimistix as optx
 

@@ -23,7 +23,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._gyroscope import Gyroscope
+from .._gyroscope import Gyroscope, closed_loop_parts, open_loop_readout
 from .._physics.stimulus import Stimulus
 from .._terms import AbstractRateTerm
 
@@ -99,13 +99,13 @@ def controls(gyro: Gyroscope, loops: Loops) -> Controls:
     e_d = _c(loops.drive_lpf[-1]) * expj(-dl.reference_phase)
     omega, v_d, d_pll, d_agc = dl.control(e_d, loops.pll, loops.agc)
     if gyro.closed_loop:
-        rl = gyro.rebalance_loop
+        rl = closed_loop_parts(gyro, "controls").rebalance_loop
         e_s = _c(loops.sense_lpf[-1]) * expj(-rl.reference_phase)
         word, dz = rl.control(e_s, _c(loops.rebalance))
         rate, quad = jnp.real(word), jnp.imag(word)
         d_reb = _r(dz)
     else:
-        ro = gyro.readout
+        ro = open_loop_readout(gyro, "controls")
         e_s = _c(loops.sense_lpf[-1]) * expj(-(ro.reference_phase + ro.phase_error))
         word = jnp.zeros((), dtype=complex)
         rate, quad = jnp.real(e_s), jnp.imag(e_s)
@@ -122,7 +122,9 @@ def _lpf(cutoff, stages, signal):
 
 def _sense_demod(gyro):
     """The loop or readout that owns the sense demodulator."""
-    return gyro.rebalance_loop if gyro.closed_loop else gyro.readout
+    if gyro.closed_loop:
+        return closed_loop_parts(gyro, "the sense demodulator").rebalance_loop
+    return open_loop_readout(gyro, "the sense demodulator")
 
 
 def _loop_derivatives(gyro, loops, ctl, drive_demod, sense_demod):
@@ -284,13 +286,13 @@ def operating_point(gyro: Gyroscope, stim: Stimulus):
     coupling = _cj((r.angular_gain * om_sense + r.damping_coupling / 2) * a, -r.stiffness_coupling * a / (2 * w))
     drive_meas = gyro.drive_frontend.phasor_gain(w) * X
     if gyro.closed_loop:
+        fb, excitation, rebalance_loop = closed_loop_parts(gyro, "operating_point")
         Y = jnp.zeros((), dtype=complex)
-        _, hold_delay = gyro.excitation.dac.hold(w)
-        fb = gyro.feedback_electrode
+        _, hold_delay = excitation.dac.hold(w)
         bias_ratio = fb.bias(temp - r.t_ref) / fb.v_dc
         needed = coupling + _cx(vcf / (2 * w * m)) * expj(stim.vcf_phase)
         word = (needed * _cx(2 * w * m / gyro.rebalance_gain(w)) / _cx(bias_ratio)
-                * expj(-(gyro.rebalance_loop.carrier_phase - hold_delay)))
+                * expj(-(rebalance_loop.carrier_phase - hold_delay)))
         rebalance = _r(-word)
     else:
         # Open loop: the sense answers quasi-statically, and its Coriolis back-action pulls the drive
@@ -332,7 +334,7 @@ def wave_from_slow(state: SlowState, omega):
 def _loop_scales(gyro: Gyroscope, a, omega):
     g_d = jnp.abs(gyro.drive_frontend.phasor_gain(omega))
     g_s = jnp.abs(gyro.sense_frontend.phasor_gain(omega))
-    word = (2.0 ** (gyro.excitation.dac.word_bits - 1)) if gyro.closed_loop else 1.0
+    word = (2.0 ** (closed_loop_parts(gyro, "_loop_scales").excitation.dac.word_bits - 1)) if gyro.closed_loop else 1.0
     return Loops(
         pll=jnp.ones(()),
         agc=jnp.ones(()),
@@ -360,7 +362,7 @@ def wave_scales(gyro: Gyroscope) -> WaveState:
 def output_scales(gyro: Gyroscope) -> Outputs:
     omega = gyro.resonator.omega_x
     if gyro.closed_loop:
-        word = 2.0 ** (gyro.excitation.dac.word_bits - 1)
+        word = 2.0 ** (closed_loop_parts(gyro, "output_scales").excitation.dac.word_bits - 1)
     else:
         word = jnp.abs(gyro.sense_frontend.phasor_gain(omega)) * gyro.drive_amplitude(omega) * 1e-3
     return Outputs(jnp.asarray(word, dtype=float), jnp.asarray(word, dtype=float), jnp.asarray(omega))

@@ -95,6 +95,8 @@ class UnrolledRK(diffrax.AbstractAdaptiveSolver):
             raise ValueError(f"UnrolledRK.from_solver: {type(solver).__name__}'s tableau is FSAL without being "
                              "SSAL (or the reverse); only tableaus with both or neither are supported.")
         order = solver.order(diffrax.ODETerm(lambda t, y, args: y))
+        if order is None:
+            raise ValueError(f"UnrolledRK.from_solver: {type(solver).__name__} does not report its order.")
         return cls(c=_floats(tableau.c), a=tuple(_floats(row) for row in tableau.a_lower),
                    b_sol=_floats(tableau.b_sol), b_error=_floats(tableau.b_error), fsal=bool(tableau.fsal),
                    method_order=int(order))

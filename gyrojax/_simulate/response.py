@@ -48,7 +48,7 @@ class StateSpace(eqx.Module):
         for _ in range(60):
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if float(_gain_hz(self, jnp.full((1,), mid))[0]) >= level else (lo, mid)
-        return 0.5 * (lo + hi)
+        return float(0.5 * (lo + hi))
 
 
 def linearise(gyro: Gyroscope, stimulus: Stimulus = Stimulus(), *, input: str = "rate") -> StateSpace:

@@ -7,6 +7,7 @@ import math
 import diffrax
 import equinox as eqx
 import jax
+import jax.core  # Tracer: jax.core is not imported by `import jax` for type checkers
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
@@ -178,7 +179,8 @@ def _orders(gyro):
 def _steady_settled(gyro, stimulus, orders, z, ok, steps):
     state = _all_stages(_mul(z, _last_stages(slow_scales(gyro))), orders)
     _, out = averaged_field(0.0, state, gyro, stimulus)
-    result = RESULTS.where(ok, RESULTS.successful, RESULTS.root_find_failed)
+    # equinox's Enumeration types its items as their message strings; they are RESULTS items at run time.
+    result = RESULTS.where(ok, RESULTS.successful, RESULTS.root_find_failed)  # pyright: ignore[reportArgumentType]
     return _finalise(out.rate, out.quadrature, out.frequency, state, result, steps)
 
 
@@ -332,6 +334,8 @@ def _ode_settle(tier, field, y0, scales, gyro, stimulus, average_time):
         adjoint=tier.adjoint,
         throw=False,
     )
+    if sol.ys is None:  # SaveAt(ts=...) above saves both times
+        raise RuntimeError("the settle's ODE solve returned no saved states.")
     state = jax.tree.map(lambda s, x: s[-1] * x, sol.ys[0], scales)
     mean = jax.tree.map(lambda acc, s: (acc[1] - acc[0]) / average_time * s, sol.ys[1], out_scales)
     return _finalise(mean.rate, mean.quadrature, mean.frequency, state, _ode_result(sol.result),

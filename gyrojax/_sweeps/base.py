@@ -7,10 +7,12 @@ from typing import Any, ClassVar
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._gyroscope import Gyroscope
 from .._lots.noise import RateNoise
 from .._physics.thermal import ConstantTemperature
+from .._simulate.tiers import AbstractTier
 from .lot_campaign import LotCampaign
 from .protocol import Protocol
 
@@ -28,7 +30,7 @@ def _optional_float_tuple(values):
     return None if values is None else float_tuple(values)
 
 
-def points_field(default, what: str, *, optional: bool = False):
+def points_field(default: tuple | None, what: str, *, optional: bool = False) -> Any:
     """A field of a sweep kind that lists its points (`what`: their quantity and unit, for messages), a tuple of
     floats; None allowed where `optional`. `AbstractSweep` checks that it holds at least 2 finite distinct
     values, and `run_settings` leaves it out (a run lists its inputs)."""
@@ -36,7 +38,7 @@ def points_field(default, what: str, *, optional: bool = False):
                      metadata={"points": what, "run_setting": False})
 
 
-def timing_field(default):
+def timing_field(default: float) -> Any:
     """A field of a sweep kind's own timing (a dwell, a sampling rate), > 0; reported by `run_settings` through
     `dwell_s`, not as itself."""
     return eqx.field(default=default, metadata={"timing": True, "run_setting": False})
@@ -111,7 +113,9 @@ class AbstractSweep(eqx.Module):
     def __check_init__(self):
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if "points" in f.metadata and value is not None:
+            if "points" in f.metadata:
+                if value is None:  # an optional list left out
+                    continue
                 values = np.asarray(value)
                 if values.size < 2 or not np.all(np.isfinite(values)):
                     raise ValueError(f"{type(self).__name__}.{f.name} must hold at least 2 finite "
@@ -178,7 +182,9 @@ class AbstractSweep(eqx.Module):
     # -- measurement model ---------------------------------------------------------------------------------------
 
     @abc.abstractmethod
-    def predict(self, gyro: Gyroscope, inputs, temperatures, times, tier) -> tuple[Any, Any]:
+    def predict(self, gyro: Gyroscope, inputs: Float[ArrayLike, " point"], temperatures: Float[ArrayLike, " point"],
+                times: Float[ArrayLike, " point"] | None, tier: AbstractTier
+                ) -> tuple[Float[Array, " point"], Bool[Array, " point"]]:
         """The noise-free, bias-free outputs of one device at the points, and a flag of points the model could
         not evaluate (not settled, not finite).
 
@@ -228,7 +234,7 @@ class AbstractSweep(eqx.Module):
             out["warmup_s"] = float(protocol.warmup_s)
         return out
 
-    def point_sigmas(self, inputs, protocol: Protocol, noise: RateNoise, lsb_per_dps: float,
+    def point_sigmas(self, inputs: Float[ArrayLike, " point"], protocol: Protocol, noise: RateNoise, lsb_per_dps: float,
                      voltmeter_sigma_v: float) -> np.ndarray | None:
         """Standard uncertainty of each point of one run, in the output unit, as the simulator draws it.
 
@@ -256,7 +262,7 @@ class AbstractSweep(eqx.Module):
         return None
 
 
-def at_temperature(gyro: Gyroscope, temperature) -> Gyroscope:
+def at_temperature(gyro: Gyroscope, temperature: Float[ArrayLike, ""]) -> Gyroscope:
     """`gyro` held at `temperature` (deg C); NaN keeps the device's own temperature at power-on."""
     t = jnp.asarray(temperature, dtype=float)
     t = jnp.where(jnp.isnan(t), gyro.temperature(0.0), t)

@@ -25,15 +25,18 @@ ppm off, ~200 sigma of a 14 ppm ratio per point. A share of a branch's gain erro
 area) rather than its amplifier acts on the force, not on the voltage: a voltmeter cannot see it.
 """
 
+from typing import ClassVar
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._compile.jit import jit
 from .._gyroscope import Gyroscope
 from .._simulate._model import SlowState, controls, dac_voltage, expj, phase_grid
-from .._simulate.tiers import Steady
+from .._simulate.tiers import AbstractTier, Settled, Steady
 from .._solution import RESULTS
 from .base import AbstractSweep, at_temperature, points_field
 from .lot_campaign import LotCampaign
@@ -66,7 +69,10 @@ def branch_amplitudes(gyro: Gyroscope, loops, temperature):
     return fundamental(v_plus), fundamental(v_minus)
 
 
-def branch_ratio_points(gyro: Gyroscope, rates_dps, temperatures, times=None, tier=Steady()):
+def branch_ratio_points(gyro: Gyroscope, rates_dps: Float[ArrayLike, " point"],
+                        temperatures: Float[ArrayLike, "*#point"],
+                        times: Float[ArrayLike, " point"] | None = None, tier: AbstractTier = Steady()
+                        ) -> tuple[Float[Array, " point"], Settled]:
     """V_f+ / V_f- at each rate-table point of one closed-loop device (rates in deg/s, die temperatures in
     deg C, times since power-on in s), and the `Settled` points of the tier (steady or averaged: the full
     waveform's loop states carry a 2w ripple)."""
@@ -115,7 +121,7 @@ class BranchRatio(AbstractSweep):
     rates_dps: tuple = points_field(BRANCH_RATES_DPS, "table rates (deg/s)")
 
     name = "branch_ratio"
-    stream = 8
+    stream: ClassVar[int] = 8
     title = "branch-ratio"
     input_quantity = "table rate"
     input_unit = "deg/s"
@@ -147,7 +153,9 @@ class BranchRatio(AbstractSweep):
             raise ValueError(f"a branch_ratio sweep needs a closed-loop device (push-pull feedback combs); "
                              f"{gyro.name!r} is open loop.")
 
-    def predict(self, gyro, inputs, temperatures, times, tier=Steady()):
+    def predict(self, gyro: Gyroscope, inputs: Float[ArrayLike, " point"], temperatures: Float[ArrayLike, " point"],
+                times: Float[ArrayLike, " point"] | None, tier: AbstractTier = Steady()
+                ) -> tuple[Float[Array, " point"], Bool[Array, " point"]]:
         ratio, settled = branch_ratio_points(gyro, inputs, temperatures, times, tier)
         return ratio, (settled.result != RESULTS.successful) | ~jnp.isfinite(ratio)
 

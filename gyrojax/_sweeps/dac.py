@@ -1,13 +1,17 @@
 """The DAC sweep (seed 000 Table 2): the FTR DAC alone, fed with carrier sines of given word amplitudes."""
 
+from typing import ClassVar
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float, Real
+from jaxtyping import Array, ArrayLike, Bool, Float, Real
 
 from .._compile.jit import jit
 from .._gyroscope import Gyroscope
+from .._lots.noise import RateNoise
+from .._simulate.tiers import AbstractTier
 from .._units import DEG
 from .base import AbstractSweep, points_field
 from .lot_campaign import LotCampaign
@@ -34,7 +38,7 @@ class Dac(AbstractSweep):
     rates_dps: tuple = points_field(DING_ZHOU_2025_RATES_DPS, "rates (deg/s)")
 
     name = "dac"
-    stream = 3
+    stream: ClassVar[int] = 3
     title = "DAC"
     input_quantity = "DAC word"
     input_unit = "LSB"
@@ -44,7 +48,7 @@ class Dac(AbstractSweep):
     biased = False
     straight_line = True
     word_input = True
-    timed = False
+    timed: ClassVar[bool] = False
     fit_against_rate = True
 
     def inputs(self, gyro: Gyroscope | None = None) -> np.ndarray:
@@ -69,10 +73,13 @@ class Dac(AbstractSweep):
     def run_settings(self, protocol: Protocol) -> dict:
         return {"reading_s": DAC_READING_S}
 
-    def point_sigmas(self, inputs, protocol, noise, lsb_per_dps, voltmeter_sigma_v):
+    def point_sigmas(self, inputs: Float[ArrayLike, " point"], protocol: Protocol, noise: RateNoise, lsb_per_dps: float,
+                     voltmeter_sigma_v: float) -> np.ndarray:
         return np.full(np.shape(inputs), float(voltmeter_sigma_v))
 
-    def predict(self, gyro, inputs, temperatures, times, tier=None):
+    def predict(self, gyro: Gyroscope, inputs: Float[ArrayLike, " point"], temperatures: Float[ArrayLike, " point"],
+                times: Float[ArrayLike, " point"] | None, tier: AbstractTier | None = None
+                ) -> tuple[Float[Array, " point"], Bool[Array, " point"]]:
         pred = dac_points(gyro, inputs)
         return pred, ~jnp.isfinite(pred)
 

@@ -8,7 +8,10 @@ integrator is the only source of one, a fixed fraction beta / (1 + beta) of ever
 gain change.
 """
 
+from typing import ClassVar
+
 import numpy as np
+from jaxtyping import Array, Float
 
 from .base import timing_field
 from .lot_campaign import LotCampaign
@@ -30,7 +33,7 @@ class DriveAmplitude(AbstractSetpointSweep):
     register_dwell_s: float = timing_field(DRIVE_REGISTER_DWELL_S)
 
     name = "drive_amplitude"
-    stream = 5
+    stream: ClassVar[int] = 5
     title = "drive-amplitude"
     output_unit = "LSB"
     input_meaning = ("the AGC set-point, drive ADC LSB (the amplitude the AGC regulates the demodulated drive "
@@ -42,7 +45,7 @@ class DriveAmplitude(AbstractSetpointSweep):
     def dwell_s(self, protocol: Protocol) -> float:
         return self.register_dwell_s
 
-    def reading(self, points: SetpointReading):
+    def reading(self, points: SetpointReading) -> Float[Array, " point"]:
         return points.amplitude_lsb
 
     def relative_sigma(self, protocol: Protocol) -> float:

@@ -6,7 +6,10 @@ bends it along the backbone w = w_x (1 + 3/8 kappa a^2) (the closed form of the 
 500 ppm x (rho^2 - 1) on vcf-2018. At the nominal set-point alone it is an `omega_x` shift.
 """
 
+from typing import ClassVar
+
 import numpy as np
+from jaxtyping import Array, Float
 
 from .base import timing_field
 from .lot_campaign import LotCampaign
@@ -28,7 +31,7 @@ class DriveFrequency(AbstractSetpointSweep):
     register_dwell_s: float = timing_field(DRIVE_REGISTER_DWELL_S)
 
     name = "drive_frequency"
-    stream = 6
+    stream: ClassVar[int] = 6
     title = "drive-frequency"
     output_unit = "Hz"
     input_meaning = "the AGC set-point, drive ADC LSB, at zero table rate (as for `drive_amplitude`)"
@@ -49,7 +52,7 @@ class DriveFrequency(AbstractSetpointSweep):
     def dwell_s(self, protocol: Protocol) -> float:
         return self.register_dwell_s
 
-    def reading(self, points: SetpointReading):
+    def reading(self, points: SetpointReading) -> Float[Array, " point"]:
         return points.frequency_hz
 
     def relative_sigma(self, protocol: Protocol) -> float:

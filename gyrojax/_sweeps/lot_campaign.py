@@ -47,7 +47,7 @@ class LotCampaign(eqx.Module):
         """Time since power-on at the middle of each point's dwell, s, (run, point)."""
         return np.broadcast_to(self.protocol.point_times(sweep), self.shape(sweep)[1:])
 
-    def applied(self, sweep: Scheduled, listed) -> np.ndarray:
+    def applied(self, sweep: Scheduled, listed: np.ndarray) -> np.ndarray:
         """The inputs of each run in the order applied, (run, point): rows of the table in time order."""
         return np.asarray(listed)[self.protocol.point_order(sweep, self.runs, self.seed)]
 

@@ -8,7 +8,7 @@ reads (`AbstractSweep.dwell_s`, `sample_rate_hz`). `gyrojax.simulate_table` runs
 """
 
 import math
-from typing import Protocol as _Structural
+from typing import ClassVar, Protocol as _Structural
 
 import equinox as eqx
 import numpy as np
@@ -31,8 +31,8 @@ RATE_TABLE_SAMPLE_RATE_HZ = 100.0
 class Scheduled(_Structural):
     """What the protocol reads of a sweep kind to schedule its points (every `gyrojax.AbstractSweep` has it)."""
 
-    timed: bool
-    stream: int
+    timed: ClassVar[bool]
+    stream: ClassVar[int]
 
     def inputs(self, gyro: Gyroscope | None = None) -> np.ndarray: ...
 
@@ -109,7 +109,7 @@ class RunWarmup(eqx.Module):
         check_positive("RunWarmup", "time_constant_s", self.time_constant_s)
         check_positive("RunWarmup", "first_time_constant_s", self.first_time_constant_s)
 
-    def history(self, gyro: Gyroscope, run: int) -> AbstractTemperature:
+    def history(self, gyro: Gyroscope, run: int) -> WarmupTemperature:
         """Temperature history (deg C vs s since power-on) of run `run` of `gyro` (a single device)."""
         first = run == 0
         return WarmupTemperature(
@@ -245,12 +245,13 @@ class Protocol(eqx.Module):
     def run_history(self, gyro: Gyroscope, run: int, sweep: Scheduled | None = None) -> AbstractTemperature:
         """The die-temperature history of run `run` (the device's own when `warmup` is None; in a plateau run,
         the chamber's `PlateauTemperature` for `sweep`'s schedule)."""
-        if sweep is not None and self.plateaus(sweep) > 1:
+        plateaus = self.chamber_plateaus_c
+        if sweep is not None and plateaus is not None and self.plateaus(sweep) > 1:
             heating = (WarmupTemperature(rise=0.0) if self.warmup is None
                        else self.warmup.history(gyro, run))
             return PlateauTemperature(
-                plateaus_c=self.chamber_plateaus_c, starts_s=self.plateau_starts(sweep),
-                initial_c=self.chamber_plateaus_c[0], package_time_constant_s=self.package_time_constant_s,
+                plateaus_c=plateaus, starts_s=self.plateau_starts(sweep),
+                initial_c=plateaus[0], package_time_constant_s=self.package_time_constant_s,
                 rise_k=heating.rise, heating_time_constant_s=heating.time_constant)
         return gyro.temperature if self.warmup is None else self.warmup.history(gyro, run)
 

@@ -34,7 +34,10 @@ gain-bandwidth amplifier) keeps delta well below the 5 mrad to be found; `Quadra
 models any other delta.
 """
 
+from typing import ClassVar
+
 import numpy as np
+from jaxtyping import Array, Float
 
 from .._gyroscope import Gyroscope
 from .._physics.stimulus import Stimulus
@@ -72,7 +75,7 @@ class QuadratureInjection(AbstractSteadySweep):
     carrier_phase: float = np.pi / 2
 
     name = "quadrature_injection"
-    stream = 4
+    stream: ClassVar[int] = 4
     title = "quadrature-injection"
     input_quantity = "injection voltage V_ac"
     input_unit = "V"
@@ -101,6 +104,6 @@ class QuadratureInjection(AbstractSteadySweep):
             raise ValueError(f"a quadrature_injection sweep needs a virtual-Coriolis electrode; {gyro.name!r} has "
                              "vcf_electrode.force_per_volt2 = 0.")
 
-    def stimulus(self, value, time) -> Stimulus:
+    def stimulus(self, value: Float[Array, " point"], time: Float[Array, " point"]) -> Stimulus:
         return Stimulus(rate=0.0 * value, vcf_ac=value, vcf_fc=self.carrier_v + 0.0 * value,
                         vcf_phase=self.carrier_phase + 0.0 * value, time=time)

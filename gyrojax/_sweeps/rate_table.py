@@ -1,5 +1,7 @@
 """The rate table (seed 000 §5): the device on a turntable at a constant rate per point."""
 
+from typing import ClassVar
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -30,7 +32,7 @@ class RateTable(AbstractSteadySweep):
     rates_dps: tuple = points_field(DING_ZHOU_2025_RATES_DPS, "table rates (deg/s)")
 
     name = "rate_table"
-    stream = 0
+    stream: ClassVar[int] = 0
     title = "rate-table"
     input_quantity = "table rate"
     input_unit = "deg/s"
@@ -50,7 +52,7 @@ class RateTable(AbstractSteadySweep):
     def check_device(self, gyro: Gyroscope) -> None:
         pass
 
-    def stimulus(self, value, time) -> Stimulus:
+    def stimulus(self, value: Float[Array, " point"], time: Float[Array, " point"]) -> Stimulus:
         return Stimulus(rate=value * DEG, vcf_fc=0.0 * value, time=time)
 
 

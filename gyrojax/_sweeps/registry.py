@@ -39,9 +39,9 @@ def register_sweep(cls: type[AbstractSweep]) -> type[AbstractSweep]:
         raise ValueError(f"register_sweep expects a subclass of gyrojax.AbstractSweep, got {cls!r}.")
     for attr, kind in _CLASS_ATTRIBUTES.items():
         value = getattr(cls, attr, None)
-        if (not isinstance(value, kind) or (kind is str and not value.strip())
-                or (kind is int and (isinstance(value, bool) or value < 0))
-                or (kind is tuple and not all(isinstance(v, str) for v in value))):
+        if (not isinstance(value, kind) or (isinstance(value, str) and not value.strip())
+                or (kind is int and isinstance(value, int) and (isinstance(value, bool) or value < 0))
+                or (isinstance(value, tuple) and not all(isinstance(v, str) for v in value))):
             what = {str: "non-empty string", bool: "bool", int: "non-negative integer (its own random stream)",
                     tuple: "tuple of parameter names"}[kind]
             raise ValueError(f"sweep class {cls.__qualname__}: class attribute {attr!r} must be a {what}, got "

@@ -30,6 +30,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._gyroscope import Gyroscope
 from .._physics.stimulus import Stimulus
@@ -66,7 +67,7 @@ class SetpointReading(eqx.Module):
     settled: Settled
 
     @property
-    def result(self):
+    def result(self) -> RESULTS:
         """The tier's result per point (`settled.result`)."""
         return self.settled.result
 
@@ -86,7 +87,8 @@ def displacement_amplitude(state, frequency):
     raise ValueError(f"displacement_amplitude: expected a SlowState or WaveState, got {type(state).__name__}.")
 
 
-def setpoint_points(gyro: Gyroscope, sweep: AbstractSweep, setpoints_lsb, temperatures, times=None,
+def setpoint_points(gyro: Gyroscope, sweep: AbstractSweep, setpoints_lsb: Float[ArrayLike, " point"],
+                    temperatures: Float[ArrayLike, " point"], times: Float[ArrayLike, " point"] | None = None,
                     tier: AbstractTier = Steady()) -> SetpointReading:
     """The settled set-points of one device at zero table rate (`steady_points` settles them with other
     sweeps' points in one call).
@@ -126,7 +128,7 @@ class AbstractSetpointSweep(AbstractSettledSweep):
     straight_line = True
 
     @abc.abstractmethod
-    def reading(self, points: SetpointReading):
+    def reading(self, points: SetpointReading) -> Float[Array, " point"]:
         """The reading this kind takes from the settled points."""
 
     @abc.abstractmethod
@@ -152,16 +154,18 @@ class AbstractSetpointSweep(AbstractSettledSweep):
             raise ValueError(f"a {self.name} sweep needs a positive AGC set-point; {gyro.name!r} has "
                              f"drive_loop.amplitude_setpoint = {gyro.drive_loop.amplitude_setpoint!r}.")
 
-    def point(self, gyro, value, time):
+    def point(self, gyro: Gyroscope, value: Float[Array, " point"], time: Float[Array, " point"]
+              ) -> tuple[Gyroscope, Stimulus]:
         return with_setpoint(gyro, value), Stimulus(rate=0.0 * value, time=time)
 
-    def finish(self, gyro, gyros, settled, inputs, temperatures, times):
+    def finish(self, gyro: Gyroscope, gyros: Gyroscope, settled: Settled, inputs: Float[Array, " point"],
+               temperatures: Float[Array, " point"], times: Float[Array, " point"]) -> SetpointReading:
         a = displacement_amplitude(settled.state, settled.frequency)
         gain = jnp.abs(jax.vmap(lambda g, w: g.drive_frontend.phasor_gain(w))(gyros, settled.frequency))
         rate = read_out(gyro, settled, self, inputs, temperatures, times).rate
         return SetpointReading(settled.frequency / (2.0 * jnp.pi), gain * a, rate, settled)
 
-    def read(self, points):
+    def read(self, points: SetpointReading) -> tuple[Float[Array, " point"], Bool[Array, " point"]]:
         out = self.reading(points)
         return out, (points.settled.result != RESULTS.successful) | ~jnp.isfinite(out)
 

@@ -24,7 +24,10 @@ zero-rate output is 0 at every amplitude, and one run bias takes only the mean: 
 leave the same fingerprint here; the quadrature injection sees phi alone.
 """
 
+from typing import ClassVar
+
 import numpy as np
+from jaxtyping import Array, Float
 
 from .lot_campaign import LotCampaign
 from .setpoint import AbstractSetpointSweep, SetpointReading
@@ -37,7 +40,7 @@ class SetpointZeroRate(AbstractSetpointSweep):
     rate-table point."""
 
     name = "setpoint_zero_rate"
-    stream = 7
+    stream: ClassVar[int] = 7
     title = "set-point zero-rate"
     output_unit = "LSB"
     input_meaning = "the AGC set-point, drive ADC LSB, at zero table rate (as for `drive_amplitude`)"
@@ -50,7 +53,7 @@ class SetpointZeroRate(AbstractSetpointSweep):
         return ("scale_factor", "bias")  # the zero-rate output per set-point LSB, and the run's turn-on bias
     # dwell_s: the protocol's rate-output dwell (AbstractSweep's default), not the drive registers' register_dwell_s
 
-    def reading(self, points: SetpointReading):
+    def reading(self, points: SetpointReading) -> Float[Array, " point"]:
         return points.rate_lsb
 
     def add_noise(self, out: np.ndarray, campaign: LotCampaign) -> tuple[np.ndarray, np.ndarray]:

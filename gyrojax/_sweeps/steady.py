@@ -10,12 +10,13 @@ depend on it (`gyrojax.AbstractRateTerm`, `AbstractOutputTerm`); the device's re
 """
 
 import abc
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._compile.jit import jit, top_level
 from .._gyroscope import Gyroscope
@@ -41,24 +42,28 @@ class AbstractSettledSweep(AbstractSweep):
     moves simulated outputs in their last bits)."""
 
     @abc.abstractmethod
-    def point(self, gyro: Gyroscope, value, time) -> tuple[Gyroscope, Stimulus]:
+    def point(self, gyro: Gyroscope, value: Float[Array, " point"], time: Float[Array, " point"]
+              ) -> tuple[Gyroscope, Stimulus]:
         """The device (already at the point's die temperature) and the stimulus of one point: `value` from the
         `input` column, `time` since power-on (s). Every field of the returned `Stimulus` must be an array
         shaped like `value` (`0.0 * value` for zero), so that the points of several sweeps stack into one
         settle."""
 
     @abc.abstractmethod
-    def finish(self, gyro: Gyroscope, gyros: Gyroscope, settled: Settled, inputs, temperatures, times):
+    def finish(self, gyro: Gyroscope, gyros: Gyroscope, settled: Settled, inputs: Float[Array, " point"],
+               temperatures: Float[Array, " point"], times: Float[Array, " point"]) -> Any:
         """What the kind keeps of its settled points (a `Settled` or the kind's own module): `gyro` the device,
         `gyros` the device at each point (`point`'s), `inputs`, `temperatures` (NaN: not recorded) and `times`
         per point."""
 
     @abc.abstractmethod
-    def read(self, points) -> tuple[jax.Array, jax.Array]:
+    def read(self, points: Any) -> tuple[Float[Array, " point"], Bool[Array, " point"]]:
         """The noise-free output per point of `finish`'s points, and a flag of points that could not be
         evaluated (not settled, not finite)."""
 
-    def predict(self, gyro, inputs, temperatures, times, tier=Steady()):
+    def predict(self, gyro: Gyroscope, inputs: Float[ArrayLike, " point"], temperatures: Float[ArrayLike, " point"],
+                times: Float[ArrayLike, " point"] | None, tier: AbstractTier = Steady()
+                ) -> tuple[Float[Array, " point"], Bool[Array, " point"]]:
         (points,) = settled_points(gyro, [(self, inputs, temperatures, times)], tier)
         return self.read(points)
 
@@ -74,18 +79,20 @@ class AbstractSteadySweep(AbstractSettledSweep):
     rate_noise = True
 
     @abc.abstractmethod
-    def stimulus(self, value, time) -> Stimulus:
+    def stimulus(self, value: Float[Array, " point"], time: Float[Array, " point"]) -> Stimulus:
         """What one point applies: `value` from the `input` column, `time` since power-on (s). Every field
         of the returned `Stimulus` must be an array shaped like `value` (`0.0 * value` for zero), so that
         the points of several steady sweeps stack into one settle."""
 
-    def point(self, gyro, value, time):
+    def point(self, gyro: Gyroscope, value: Float[Array, " point"], time: Float[Array, " point"]
+              ) -> tuple[Gyroscope, Stimulus]:
         return gyro, self.stimulus(value, time)
 
-    def finish(self, gyro, gyros, settled, inputs, temperatures, times):
+    def finish(self, gyro: Gyroscope, gyros: Gyroscope, settled: Settled, inputs: Float[Array, " point"],
+               temperatures: Float[Array, " point"], times: Float[Array, " point"]) -> Settled:
         return read_out(gyro, settled, self, inputs, temperatures, times)
 
-    def read(self, points):
+    def read(self, points: Settled) -> tuple[Float[Array, " point"], Bool[Array, " point"]]:
         return points.rate, points.result != RESULTS.successful
 
     def simulate(self, lot: Gyroscope, campaign: LotCampaign) -> dict[str, np.ndarray]:

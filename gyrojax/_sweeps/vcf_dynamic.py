@@ -1,15 +1,19 @@
 """The dynamic virtual-Coriolis test (seed 003 Eq. 6): the rate output's response to a modulated virtual rate."""
 
+from typing import ClassVar
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._compile.jit import jit
 from .._gyroscope import Gyroscope
+from .._lots.noise import RateNoise
 from .._physics.stimulus import Stimulus
 from .._simulate.response import linearise
+from .._simulate.tiers import AbstractTier
 from .base import AbstractSweep, at_temperature, points_field, timing_field
 from .lot_campaign import LotCampaign
 from .protocol import Protocol
@@ -53,7 +57,7 @@ class VcfDynamic(AbstractSweep):
     lockin_sample_rate_hz: float = timing_field(VCF_DYNAMIC_SAMPLE_RATE_HZ)
 
     name = "vcf_dynamic"
-    stream = 2
+    stream: ClassVar[int] = 2
     title = "dynamic-VCF"
     input_quantity = "modulation frequency"
     input_unit = "Hz"
@@ -96,13 +100,16 @@ class VcfDynamic(AbstractSweep):
             raise ValueError(f"a vcf_dynamic sweep needs a virtual-Coriolis electrode; {gyro.name!r} has "
                              "vcf_electrode.force_per_volt2 = 0.")
 
-    def predict(self, gyro, inputs, temperatures, times, tier=None):
+    def predict(self, gyro: Gyroscope, inputs: Float[ArrayLike, " point"], temperatures: Float[ArrayLike, " point"],
+                times: Float[ArrayLike, " point"] | None, tier: AbstractTier | None = None
+                ) -> tuple[Float[Array, " point"], Bool[Array, " point"]]:
         # Each point at its own die temperature, as measured and simulated: one mean temperature per sweep
         # left ~1e-5 of amplitude, 10x the noise.
         pred, _ = vcf_dynamic_points(gyro, inputs, temperatures, self.amplitude_v, self.carrier_v)
         return pred, ~jnp.isfinite(pred)
 
-    def point_sigmas(self, inputs, protocol, noise, lsb_per_dps, voltmeter_sigma_v):
+    def point_sigmas(self, inputs: Float[ArrayLike, " point"], protocol: Protocol, noise: RateNoise, lsb_per_dps: float,
+                     voltmeter_sigma_v: float) -> np.ndarray:
         # Lock-in over whole cycles: the rate noise at each modulation frequency (see RateNoise).
         return np.asarray(noise.amplitude_sigma_dps(np.asarray(inputs, dtype=float), self.dwell_s(protocol)),
                           dtype=float) * abs(float(lsb_per_dps))
@@ -135,8 +142,8 @@ class VcfDynamic(AbstractSweep):
 
 
 def vcf_dynamic_points(gyro: Gyroscope, frequencies_hz: Float[ArrayLike, " point"],
-                       temperatures: Float[ArrayLike, "*#point"], amplitude_v=VCF_DYNAMIC_AMPLITUDE_V,
-                       carrier_v=VCF_CARRIER_V) -> tuple[Float[Array, " point"], Float[Array, " point"]]:
+                       temperatures: Float[ArrayLike, "*#point"], amplitude_v: float = VCF_DYNAMIC_AMPLITUDE_V,
+                       carrier_v: float = VCF_CARRIER_V) -> tuple[Float[Array, " point"], Float[Array, " point"]]:
     """Dynamic virtual-Coriolis test (seed 003 Eq. 6): the rate output's amplitude (LSB) and phase (deg)
     for V_ac = `amplitude_v` modulated at each frequency (Hz), from the averaged model linearised at rest at
     the die temperature of each point (deg C; one value for every point linearises once). A lock-in reads

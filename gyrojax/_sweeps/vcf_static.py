@@ -1,7 +1,9 @@
 """The static virtual-Coriolis sweep (seed 003 Eq. 7): a virtual rate from the VCF electrode, no rotation."""
 
+from typing import ClassVar
+
 import numpy as np
-from jaxtyping import ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Float
 
 from .._gyroscope import Gyroscope
 from .._physics.stimulus import Stimulus
@@ -57,7 +59,7 @@ class VcfStatic(AbstractSteadySweep):
     carrier_v: float = VCF_CARRIER_V
 
     name = "vcf_static"
-    stream = 1
+    stream: ClassVar[int] = 1
     title = "static-VCF"
     input_quantity = "virtual-rate voltage V_ac"
     input_unit = "V"
@@ -82,12 +84,13 @@ class VcfStatic(AbstractSteadySweep):
         # explicit voltages on a device without one read zero, as measured.
         self.inputs(gyro)
 
-    def stimulus(self, value, time) -> Stimulus:
+    def stimulus(self, value: Float[Array, " point"], time: Float[Array, " point"]) -> Stimulus:
         return Stimulus(rate=0.0 * value, vcf_ac=value, vcf_fc=self.carrier_v, time=time)
 
 
 def vcf_static_points(gyro: Gyroscope, amplitudes_v: Float[ArrayLike, " point"],
-                      temperatures: Float[ArrayLike, " point"], tier: AbstractTier = Steady(), carrier_v=VCF_CARRIER_V,
+                      temperatures: Float[ArrayLike, " point"], tier: AbstractTier = Steady(),
+                      carrier_v: float = VCF_CARRIER_V,
                       *, times: Float[ArrayLike, "*#point"] | None = None) -> Settled:
     """Settled static virtual-Coriolis points (seed 003 Eq. 7): the virtual-rate voltage V_ac (V, signed)
     times the fixed carrier V_fc, one die temperature and optionally one time since power-on per point."""

@@ -1,0 +1,55 @@
+"""Identification: how a fit is made, beside `gyrojax.identify` itself. `FitSpec` (the whole specification), the
+first solve (`MultiStart`), the recovery policies tried after it (`AbstractRecovery`, the built-in ones and their
+default tuple `RECOVERY`) with what a policy receives and returns (`Solving`, `Solution`, its `Evaluation`, the
+integer codes of `result_code`), the lot strategies (`AbstractLotSolve` and its kinds) and the population records
+(`PopulationParameter`). A new recovery policy is one `AbstractRecovery` (docs: "Extending", "A recovery policy").
+
+This module only re-exports; the code lives in the private modules it imports from.
+"""
+
+from ._identify.evaluation import Evaluation as Evaluation
+from ._identify.population import (
+    PopulationFit as PopulationFit,
+    PopulationParameter as PopulationParameter,
+    PopulationSolve as PopulationSolve,
+)
+from ._identify.recovery import (
+    RECOVERY as RECOVERY,
+    AbstractRecovery as AbstractRecovery,
+    DecrementCertificate as DecrementCertificate,
+    MultiStart as MultiStart,
+    RestartRunoffs as RestartRunoffs,
+    RetryWithSolver as RetryWithSolver,
+    Solution as Solution,
+    Solving as Solving,
+)
+from ._identify.spec import FitSpec as FitSpec
+from ._identify.strategies import (
+    AbstractLotSolve as AbstractLotSolve,
+    JointSolve as JointSolve,
+    LoopSolve as LoopSolve,
+    VmapSolve as VmapSolve,
+)
+from ._solution import result_code as result_code
+
+
+__all__ = [
+    "AbstractLotSolve",
+    "AbstractRecovery",
+    "DecrementCertificate",
+    "Evaluation",
+    "FitSpec",
+    "JointSolve",
+    "LoopSolve",
+    "MultiStart",
+    "PopulationFit",
+    "PopulationParameter",
+    "PopulationSolve",
+    "RECOVERY",
+    "RestartRunoffs",
+    "RetryWithSolver",
+    "Solution",
+    "Solving",
+    "VmapSolve",
+    "result_code",
+]
