@@ -81,9 +81,11 @@ def baseline_fit(base: Model, data: FitData, candidates: tuple[str, ...], spec: 
     parameters are. `say` is the caller's progress. Returns (that model, its fit)."""
     full = Model(base.device, base.effects + tuple(zero_effect(c) for c in candidates))
     if not evaluate_only:
-        say(f"fitting the baseline: {len(data.devices)} device(s), {data.num_points()} points, every one of "
+        n_devices = np.shape(next(iter(data.blocks.values())).mask)[0]
+        say(f"fitting the baseline: {n_devices} device(s), {data.num_points()} points, every one of "
             f"{len(candidates)} candidate effects held at zero")
         say.compiling(("identify", full_key(full, data)), "the lot's fit with every candidate")
     fit = identify(full, data, spec=spec.holding(tuple(candidates) + tuple(also_held)), evaluate_only=evaluate_only,
                    estimate_noise=estimate_noise, progress=False)
+    assert isinstance(fit, Fit)  # a lot strategy other than a population is not in the spec a diagnosis passes
     return full, fit

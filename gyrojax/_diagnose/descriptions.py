@@ -240,6 +240,8 @@ def _step_scan(space, sweep, t, mask):
         for p, devs in ((all_p, np.flatnonzero(ok)), (one_p, np.array([dv]))):
             if best is None or p < best[0]:
                 best = (p, rn, j, devs, cols)
+    if best is None:
+        return None
     p, rn, j, devs, cols = best
     keep = np.zeros(n_dev, bool)
     keep[devs] = True

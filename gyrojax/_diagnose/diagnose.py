@@ -23,7 +23,7 @@ from .encompass import encompassing_guard
 from .fdr import bh_q_values, selection_p
 from .formula import formula_coordinate, propose_along, term_size
 from .guards import MAX_TYPICAL_MULTIPLE, Rejection, contradictions, probe_guard, verdict_of
-from .locate import locate
+from .locate import Localisation, locate
 from .probes import PROBES
 from .record import record_guard
 from .rival import rival_guard
@@ -164,7 +164,7 @@ class _Selection:
     fit: Fit
     discrepancy: tuple
     designs: object
-    located: object
+    located: Localisation
     fits: list
     rejected: list
     selected: list = dataclasses.field(default_factory=list)
@@ -228,7 +228,8 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
         multiple = float(np.max(np.abs(np.asarray(s.fit.u)[:, cols])))
         s.steps.append(Step(best.effect, best.statistic, best.p_value, lr, df_total, p_lr, delta_bic,
                             s.fit.chi2_red_total, nonlinearity_residual_ppm(s.fit), scores, group, separated,
-                            multiple, best.implied_multiple, look_alikes=alike, q_value=q))
+                            multiple, best.implied_multiple, look_alikes=alike,
+                            q_value=q if q is not None else math.nan))
         s.discrepancy, s.designs = score_probes(s.fit, probes, alpha=alpha)
         s.located = locate(s.fit, alpha=alpha)
 

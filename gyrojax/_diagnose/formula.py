@@ -79,7 +79,7 @@ class Formula:
     left_df: int
     left_p_value: float
     complete: bool  # nothing significant left of the location beyond the formula (at alpha)
-    spread: np.ndarray = None  # the devices' standard deviation of each coefficient
+    spread: np.ndarray | None = None  # the devices' standard deviation of each coefficient
 
     @property
     def description(self) -> str:
@@ -366,7 +366,7 @@ def formula_coordinate(formula: Formula | None) -> str | None:
     return coords.pop() if len(coords) == 1 and "" not in coords else None
 
 
-def term_size(formula: Formula, location) -> dict | None:
+def term_size(formula: Formula | None, location) -> dict | None:
     """The size of `location`'s misfit as the formula's coefficient, when the formula is one complete term
     along the location's coordinate: {value, unit, stderr} (a gain in ppm per unit of the coordinate)."""
     if formula is None or not formula.complete or len(formula.terms) != 1:

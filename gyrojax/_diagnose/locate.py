@@ -331,6 +331,8 @@ def _size(fit, space, members, sc):
             full = float(np.max(np.abs(np.asarray(fit.predictions[m.sweep])[dv][np.asarray(block.mask)[dv]])))
             best = (value, math.sqrt(max(var, 0.0)) * float(sig[dv, row]), sweep_kind(m.sweep).output_unit, full,
                     m.sweep)
+    if best is None:
+        return None, "no coefficient of the description is on a recorded row"
     value, stderr, unit, full, sweep = best
     if not math.isfinite(value) or abs(value) == 0:
         return None, "the fitted description is zero"

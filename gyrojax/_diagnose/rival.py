@@ -33,7 +33,7 @@ import numpy as np
 
 from .._identify import Fit
 from .discrepancy import LookAlike
-from .formula import formula_columns, propose
+from .formula import Formula, formula_columns, propose
 from .space import ResidualSpace
 
 
@@ -45,7 +45,7 @@ Z_CRIT = 1.96  # a rival closer than this many standard deviations is a look-ali
 class Rivalry:
     """The comparison of an effect's refit with the formula of the misfit it takes."""
 
-    formula: object  # the rival `Formula`
+    formula: Formula  # the rival
     z: float  # > 0: the formula fits better
     delta: float  # the penalised chi2 difference (effect - formula)
     distance: float  # |f_E - f_F|, standardised

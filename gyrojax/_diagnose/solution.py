@@ -9,6 +9,7 @@ import numpy as np
 from .._effects.registry import EFFECTS
 from .._identify import Fit
 from .compare import nonlinearity_residual_ppm
+from .formula import Formula
 from .guards import MAX_TYPICAL_MULTIPLE
 from .report import discrepancy_text, nonlinearity_not_determined, write_report
 
@@ -69,7 +70,7 @@ class Diagnosis:
     discrepancy: tuple = ()  # the same at the final fit: where what is left lives
     verdict: str = "unexplained"
     max_typical_multiple: float = MAX_TYPICAL_MULTIPLE
-    formula: object = None  # `Formula` proposed for the leading discrepancy (gyrojax/_diagnose/formula.py)
+    formula: Formula | None = None  # proposed for the leading discrepancy
     notes: tuple = ()  # coordinates the localisation did not describe along, and why
 
     @property
@@ -109,7 +110,7 @@ class Diagnosis:
                      f"{discrepancy_text(left[0])}): see where the model fails")
         state = "the model still fails" if fails else "the residuals keep structure"
         if not fails:
-            worst = min(final.flagged, key=lambda f: f.p_value, default=None)
+            worst = min(final.flagged if final is not None else (), key=lambda f: f.p_value, default=None)
             state += f" ({worst.label}: p = {worst.p_value:.2g}, {worst.meaning})" if worst is not None else ""
             tail = f" though the chi2 is at the noise level{tail}"
         fails_now = "the model fails" if fails else state
