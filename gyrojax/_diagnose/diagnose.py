@@ -16,7 +16,7 @@ from .._numerics.stats import chi2_sf
 from .._plugins import nonfinite_effect
 from .._progress import as_progress
 from .candidates import baseline_fit, baseline_model, candidate_effects, first_device, is_lot
-from .columns import effect_columns
+from .columns import base_columns, effect_columns
 from .compare import compare, nonlinearity_residual_ppm
 from .discrepancy import look_alikes, score_probes, with_shapes
 from .encompass import encompassing_guard
@@ -24,10 +24,10 @@ from .fdr import bh_q_values, selection_p
 from .formula import formula_coordinate, propose_along, term_size
 from .guards import MAX_TYPICAL_MULTIPLE, Rejection, contradictions, probe_guard, verdict_of
 from .locate import Localisation, locate
-from .probes import PROBES
+from .probes import PROBES, score_columns
 from .record import record_guard
 from .rival import rival_guard
-from .score import cosine, score_candidates, separating_sweep
+from .score import TYPICAL_RANK_TOL, cosine, score_candidates, separating_sweep
 from .solution import Diagnosis, Step
 
 
@@ -205,7 +205,7 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
             s.rejected.append(Rejection(best.effect, guard, kind="not its shape"))
             remaining.remove(best.effect)
             continue
-        group, separated = _ambiguity_group(best, significant, ambiguity, data)
+        group, separated = _ambiguity_group(s.fit, best, significant, ambiguity, alpha, data)
         say(f"refitting with {best.effect} (step {len(s.selected) + 1}; score S = {best.statistic:.4g}, "
             f"p = {best.p_value:.2g})")
         n_tried = len(remaining)
@@ -243,17 +243,30 @@ def _implausible(best, max_typical_multiple) -> Rejection:
         kind=f"only at ~{best.implied_multiple:.3g}x its typical size")
 
 
-def _ambiguity_group(best, significant, ambiguity, data):
-    """The significant candidates whose fingerprints are nearly collinear with `best`'s, and the one sweep of
-    `data` that separates them, if one does: (group, sweep or None)."""
+def _ambiguity_group(fit, best, significant, ambiguity, alpha, data):
+    """The significant candidates the data cannot tell from `best`, and the one sweep of `data` that separates
+    them, if one does: (group, sweep or None). A candidate is in the group when its fingerprint is nearly
+    collinear with `best`'s (|cosine| > `ambiguity`) or when the two are interchangeable at `fit`: neither
+    removes significant chi2 (at `alpha`) beyond the other, so whichever is fitted first takes the misfit."""
     group = tuple(c.effect for c in significant[1:]
-                  if abs(cosine(best.fingerprint, c.fingerprint)) > ambiguity)
+                  if abs(cosine(best.fingerprint, c.fingerprint)) > ambiguity
+                  or _interchangeable(fit, best.effect, c.effect, alpha))
     separated = None
     if group:
         others = [c for c in significant if c.effect in group]
         seps = {separating_sweep(best.fingerprint, c.fingerprint, data, ambiguity) for c in others}
         separated = seps.pop() if len(seps) == 1 else None
     return group, separated
+
+
+def _interchangeable(fit, a: str, b: str, alpha: float) -> bool:
+    """Whether neither of the candidate effects `a` and `b` removes chi2 significant at `alpha` beyond the
+    other (score tests at `fit`, beyond its free columns): two explanations of one misfit."""
+    base, res, jac = base_columns(fit), np.asarray(fit.residual_vector), np.asarray(fit.jacobian)
+    ja, jb = jac[:, :, effect_columns(fit, a)], jac[:, :, effect_columns(fit, b)]
+    a_beyond = score_columns(np.concatenate([base, jb], axis=-1), ja, res, rank_tol=TYPICAL_RANK_TOL)
+    b_beyond = score_columns(np.concatenate([base, ja], axis=-1), jb, res, rank_tol=TYPICAL_RANK_TOL)
+    return a_beyond.p_value >= alpha and b_beyond.p_value >= alpha
 
 
 def _likelihood_ratio(fit, new, data):
