@@ -84,6 +84,8 @@ def test_a_gain_growing_with_temperature_is_not_named_a_zero_rate_tempco_at_low_
     kinds = {r.effect: (r.kind, r.reason) for r in d.rejected}
     assert kinds["zro_tempco"][0] == "not told from a closed form of another shape"
     assert "lin(temperature_c)*abs(input)" in kinds["zro_tempco"][1]
+    as_json = {r["effect"]: r["kind"] for r in d.to_json()["rejected"]}
+    assert as_json["zro_tempco"] == "not told from a closed form of another shape"
 
 
 def test_a_dac_inl_taken_for_a_feedback_compression_at_low_snr_is_declared_ambiguous():

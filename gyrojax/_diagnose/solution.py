@@ -218,7 +218,8 @@ class Diagnosis:
             "selected": list(self.selected),
             "ambiguous": [list(g) for g in self.ambiguous],
             "untestable": list(self.untestable),
-            "rejected": [{"effect": r.effect, "reason": r.reason, "contradicted_by": list(r.contradicted_by)}
+            "rejected": [{"effect": r.effect, "reason": r.reason, "kind": r.kind,
+                          "contradicted_by": list(r.contradicted_by)}
                          for r in self.rejected],
             "final": {"chi2_red": self.final.chi2_red_total,
                       **_ppm_json(nonlinearity_residual_ppm(self.final), self.final)},
