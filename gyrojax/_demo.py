@@ -16,6 +16,7 @@ import json
 import os
 import time
 from importlib import resources
+from typing import Any
 
 import numpy as np
 
@@ -59,7 +60,7 @@ def run_demo(out_dir: str, *, full_tier: bool = True, log=print, progress: bool 
     matplotlib.use("Agg")
 
     os.makedirs(out_dir, exist_ok=True)
-    summary = {"versions": _versions()}
+    summary: dict[str, Any] = {"versions": _versions()}
     t0 = time.perf_counter()
     log(f"writing the demo's report, data and plots into {out_dir}")
 

@@ -32,6 +32,7 @@ import json
 import math
 import os
 import tomllib
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -238,7 +239,7 @@ class _Reader:
             if key not in valid:
                 self.fail(f"[{name}]", f"unknown key {key!r}{_nearest(key, valid)}")
         kind = table.get("kind") if cls is FrontEnd else None
-        kwargs = {}
+        kwargs: dict[str, Any] = {}  # parsed from the file; `cls` checks the values
         for f in fields:
             if f.name in subs:
                 if f.name in table:
