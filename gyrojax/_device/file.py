@@ -362,7 +362,7 @@ def device_from_text(text: str, path: str = "<text>", *, check_loops: bool = Tru
     return DeviceFile(gyro, tuple(free), dict(reader.provenance), path)
 
 
-def load_device(path) -> Gyroscope:
+def load_device(path: str | os.PathLike) -> Gyroscope:
     """The device a device file describes (TOML, see docs/own_device.md), checked: its units converted, its
     values possible, its loops able to lock. Raises a `ValueError` naming the file, section and key otherwise.
     Write one to start from with `gyrojax describe --model PRESET --toml FILE.toml`."""
