@@ -19,7 +19,8 @@ import numpy as np
 
 from . import _presets
 from ._device.file import is_device_file, parameter_paths, read_device_file, write_device_file
-from ._model.parameters import DEFAULT_FREE, PARAMETERS, as_model
+from ._gyroscope import Gyroscope
+from ._model.parameters import DEFAULT_FREE, PARAMETERS, Model, as_model
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,7 +93,7 @@ def _preset_comments() -> dict:
 
 
 def _provenance(preset: str | None, path: str, comments: dict) -> str:
-    names = _FROM.get(preset, {}).get(path, ())
+    names = _FROM.get(preset, {}).get(path, ()) if preset is not None else ()
     parts = [f"{n}: {comments[n]}" for n in names if n in comments]
     if not parts and path in _LOOPS and preset in _FROM:
         parts = ["ASSUMPTION: loop designs are not printed; designed in gyrojax/_presets.py from the bandwidths "
@@ -109,7 +110,7 @@ def _field_docs(cls) -> dict:
             m = re.match(r"^\s*- ((?:`\w+`(?:, )?)+): (.*)$", line)
             if m:
                 items.append([m.group(1), m.group(2).strip()])
-            elif items and re.match(r"^\s{6,}\S", line):
+            elif items and items[-1] is not None and re.match(r"^\s{6,}\S", line):
                 items[-1][1] += " " + line.strip()
             else:
                 items.append(None) if items and items[-1] is not None else None
@@ -128,8 +129,9 @@ def _field_docs(cls) -> dict:
 def _records(tree, prefix: str, preset: str | None, comments: dict, named: dict) -> list:
     out = []
     for keys, leaf in jax.tree_util.tree_leaves_with_path(tree):
-        names = [getattr(k, "name", None) for k in keys]
-        if None in names:  # only attribute paths (a Module's fields) are user-facing
+        attributes = [getattr(k, "name", None) for k in keys]
+        names = [n for n in attributes if isinstance(n, str)]
+        if len(names) != len(attributes):  # only attribute paths (a Module's fields) are user-facing
             continue
         path = ".".join([prefix] + names if prefix else names)
         owner = tree
@@ -162,7 +164,7 @@ def _named_paths(gyro) -> dict:
     return out
 
 
-def describe(model="paper-qmg") -> tuple:
+def describe(model: Model | Gyroscope | str = "paper-qmg") -> tuple:
     """Every leaf of `model` (a preset name, a `Gyroscope` or a `gyrojax.Model`; effects included, as
     `<effect>.<field>`), in the device's order: a tuple of `LeafRecord` (path, value, unit, description,
     provenance). A preset (by name, or a device whose `name` is a preset's) carries the provenance recorded in

@@ -94,7 +94,7 @@ class Gyroscope(eqx.Module):
 
         return closed_loop_parts(self, "feedback_voltages").excitation.branch_voltages(dac_voltage, after_amplifier)
 
-    def rebalance_gain(self, omega: Float[ArrayLike, ""]) -> Float[Array, ""]:
+    def rebalance_gain(self, omega: float | Float[Array, ""]) -> Float[Array, ""]:
         """Linear rebalance force per word LSB at the carrier, N/LSB, including the DAC hold gain."""
         feedback, excitation, _ = closed_loop_parts(self, "rebalance_gain")
         dac = excitation.dac

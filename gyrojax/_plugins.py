@@ -28,6 +28,7 @@ import sysconfig
 import traceback
 import types
 import warnings
+from collections.abc import Mapping
 
 from ._effects.base import AbstractEffect
 from ._effects.registry import EFFECTS, register_effect
@@ -92,7 +93,7 @@ def _record_sources(module, origin: str, extra=()) -> None:
         _origins[module.__name__] = origin
 
 
-def _digest(sources: dict[str, str]) -> str:
+def _digest(sources: Mapping[str, object]) -> str:
     return hashlib.sha256(json.dumps(sources, sort_keys=True).encode()).hexdigest()
 
 
@@ -132,8 +133,9 @@ def user_code_changes(recorded: dict, effect_names) -> list[str]:
         if was == is_ or (was and is_ and was["sha256"] == is_["sha256"]):
             continue
         if was is None:
-            out.append(f"effect {name!r} comes now from the user module {is_['module']}; the fit recorded no user "
-                       "code for it")
+            if is_ is not None:  # (both None are equal: skipped above)
+                out.append(f"effect {name!r} comes now from the user module {is_['module']}; the fit recorded no "
+                           "user code for it")
         elif is_ is None:
             out.append(f"effect {name!r} came from the user module {was['module']}; it is not loaded from it now")
         else:
@@ -226,7 +228,7 @@ def _register_all(classes, origin: str) -> tuple[type[AbstractEffect], ...]:
         for cls in classes:
             _check_signatures(cls, origin)
         for cls in classes:
-            if EFFECTS.get(getattr(cls, "name", None)) is cls:
+            if EFFECTS.get(getattr(cls, "name", "")) is cls:
                 continue  # registered already (e.g. the module called register_effect itself)
             try:
                 register_effect(cls)
@@ -275,6 +277,8 @@ def load_effects_module(path: str | os.PathLike) -> tuple[type[AbstractEffect], 
     stem = re.sub(r"\W", "_", os.path.splitext(os.path.basename(real))[0])
     name = f"gyrojax_user_effects_{stem}_{hashlib.sha256(real.encode()).hexdigest()[:12]}"
     spec = importlib.util.spec_from_file_location(name, real)
+    if spec is None or spec.loader is None:
+        raise ValueError(f"{given}: Python cannot load it as a module.")
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module  # dataclasses (equinox modules) look their module up while the class is built
     before = set(sys.modules)

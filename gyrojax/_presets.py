@@ -73,7 +73,7 @@ def _qmg_kvf():
         QMG_AMPLIFIER_GAIN * QMG_DAC_VOLTS_PER_LSB * hold_gain * sf_rad)
 
 
-def paper_qmg(**resonator_overrides) -> Gyroscope:
+def paper_qmg(**resonator_overrides: float) -> Gyroscope:
     """The closed-loop (force-to-rebalance) quad-mass gyroscope of seed 000.
 
     Table 1 gives the mechanics; Table 2 the DAC scale (16-bit, +/-5 V, 24-bit word); §5 the scale factor
@@ -147,7 +147,7 @@ VCF_ADC_LSB = 2.0 / 2**16  # V, ASSUMPTION: NI DAQ 6366 (16-bit) on its +/-1 V r
 VCF_KYI = 1.0e-6  # A/(m/s), ASSUMPTION: pick-off factor (not printed; only the product with K_iv matters)
 
 
-def vcf_2018(**resonator_overrides) -> Gyroscope:
+def vcf_2018(**resonator_overrides: float) -> Gyroscope:
     """The open-loop z-axis gyroscope of seed 003 (Tables 1-2), with its virtual-Coriolis electrode.
 
     The readout gain is chosen so that the rate-table scale factor is the measured 0.104 mV/(deg/s) at the

@@ -255,9 +255,9 @@ def _joint_max_ppm(params, base, effects, x_dps, rates, full_scale, where):
 _joint_grad = jit(eqx.filter_grad(_joint_max_ppm))
 
 
-def nonlinearity_budget(model, effects: Sequence | None = None, *,
-                        rates_dps: Float[ArrayLike, " point"] = DING_ZHOU_2025_RATES_DPS, device: int | None = None,
-                        full_scale: str = "half_range",
+def nonlinearity_budget(model: Model | Gyroscope | str, effects: Sequence | None = None, *,
+                        rates_dps: Float[ArrayLike, " point"] | Sequence[float] = DING_ZHOU_2025_RATES_DPS,
+                        device: int | None = None, full_scale: str = "half_range",
                         gradients: bool = True) -> NonlinearityBudget:
     r"""Scale-factor nonlinearity of each effect alone and of all jointly, shares and gradients.
 

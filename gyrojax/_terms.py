@@ -20,10 +20,16 @@ structure and every compiled function; the device without it has another).
 
 import abc
 import functools
+from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+
+Device = Any
+"""A `gyrojax.Gyroscope`, which holds the terms (its module imports this one, so this one cannot import it)."""
 
 
 class AbstractTerm(eqx.Module):
@@ -40,7 +46,8 @@ class AbstractRateTerm(AbstractTerm):
     """
 
     @abc.abstractmethod
-    def rate(self, gyro, temperature, time, rate):
+    def rate(self, gyro: Device, temperature: Float[Array, ""], time: Float[Array, ""], rate: Float[Array, ""]
+             ) -> Float[Array, ""]:
         """Om_eq in rad/s at die `temperature` (deg C), `time` since power-on (s) and input `rate` (rad/s)."""
 
 
@@ -49,7 +56,7 @@ class AbstractFeedbackTerm(AbstractTerm):
     (V, instantaneous carrier samples) goes in, the voltage split onto the + and - branches comes out."""
 
     @abc.abstractmethod
-    def __call__(self, gyro, voltage):
+    def __call__(self, gyro: Device, voltage: Float[Array, "*sample"]) -> Float[Array, "*sample"]:
         """The voltage after this term, for instantaneous samples `voltage` (V, any shape)."""
 
 
@@ -69,7 +76,7 @@ class AbstractOutputTerm(AbstractTerm):
     e.g. an additive offset that drifts with temperature or time, or an output nonlinearity."""
 
     @abc.abstractmethod
-    def __call__(self, gyro, output, conditions: PointConditions):
+    def __call__(self, gyro: Device, output: Float[Array, ""], conditions: PointConditions) -> Float[Array, ""]:
         """The output (LSB) after this term."""
 
 
@@ -85,13 +92,13 @@ class TemperatureCoefficient(AbstractTerm):
     path: str = eqx.field(static=True)
     tc: jax.Array = eqx.field(converter=lambda x: jnp.asarray(x, dtype=float))
 
-    def scaled(self, gyro, temperature):
+    def scaled(self, gyro: Device, temperature: Float[ArrayLike, ""]) -> Device:
         dt = jnp.asarray(temperature, dtype=float) - gyro.resonator.t_ref
         where = _leaf(self.path)
         return eqx.tree_at(where, gyro, where(gyro) * (1.0 + self.tc * dt))
 
 
-def check_path(gyro, path: str) -> None:
+def check_path(gyro: Device, path: str) -> None:
     """Raise a ValueError unless `path` names an array leaf of `gyro`."""
     try:
         leaf = _leaf(path)(gyro)

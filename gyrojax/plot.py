@@ -73,6 +73,7 @@ def ranking(scores, *, alpha: float = 0.01, max_typical_multiple: float = 100.0,
     quantile of its df at the Bonferroni level, a black tick); a significant candidate that would need more
     than `max_typical_multiple` times its typical size is coloured apart (the diagnosis does not confirm it);
     candidates the data cannot test are listed apart."""
+    from matplotlib.artist import Artist
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
@@ -99,7 +100,8 @@ def ranking(scores, *, alpha: float = 0.01, max_typical_multiple: float = 100.0,
     for bar, lim in zip(bars, limits[::-1]):
         y = bar.get_y()
         ax.plot([lim, lim], [y - 0.08, y + bar.get_height() + 0.08], color="k", lw=1.2)
-    handles = [Line2D([], [], color="k", lw=1.2, label=f"significance threshold (p = {alpha:g} / {len(scores)})")]
+    threshold = f"significance threshold (p = {alpha:g} / {len(scores)})"
+    handles: list[Artist] = [Line2D([], [], color="k", lw=1.2, label=threshold)]
     for colour, label in ((PALETTE[1], "significant, at a plausible size"),
                           (PALETTE[4], f"significant only beyond {max_typical_multiple:g}x its typical size"),
                           (PALETTE[0], "not significant")):
@@ -249,6 +251,8 @@ def discrepancy(diagnosis, *, which: int = 0, final: bool = True, ax=None):
         mask = np.asarray(block.mask).reshape(len(fit.devices), -1)
         if d.coordinate == "run":
             coord = np.broadcast_to(np.arange(block.inputs.shape[1])[None, :, None], block.inputs.shape)
+        elif field is None:
+            raise ValueError(f"discrepancy on an unknown coordinate {d.coordinate!r}.")
         else:
             coord = getattr(block, field, None)
         if coord is None:
@@ -304,11 +308,13 @@ def save(fig_or_ax, path):
     """Save atomically (PNG)."""
     import io
 
+    from matplotlib.figure import Figure
+
     from ._data.io import atomic_write_bytes
 
     if isinstance(fig_or_ax, np.ndarray):
         fig_or_ax = fig_or_ax.flat[0]
-    fig = fig_or_ax.figure if hasattr(fig_or_ax, "figure") and not isinstance(fig_or_ax, plt.Figure) else fig_or_ax
+    fig = fig_or_ax.figure if hasattr(fig_or_ax, "figure") and not isinstance(fig_or_ax, Figure) else fig_or_ax
     buf = io.BytesIO()
     fig.tight_layout()
     # "tight": titles, legends and notes placed outside the axes are kept, not clipped

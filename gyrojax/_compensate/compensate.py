@@ -2,6 +2,7 @@
 
 import math
 import warnings
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import equinox as eqx
@@ -16,7 +17,7 @@ from .._metrics import (
     fit_scale_factor,
     repeatability,
 )
-from .._progress import as_progress
+from .._progress import ProgressArg, as_progress
 from .base import AbstractCompensation, AbstractCompensator
 from .composite import CompositeCompensator
 from .model import ModelCompensator
@@ -24,7 +25,8 @@ from .points import RatePoints
 from .polynomial import PolynomialCompensator
 
 
-COMPENSATORS: dict[str, type[AbstractCompensator]] = {
+# Callable: each is a concrete compensator class whose fields all have defaults.
+COMPENSATORS: dict[str, Callable[[], AbstractCompensator]] = {
     cls.name: cls for cls in (PolynomialCompensator, CompositeCompensator, ModelCompensator)}
 """Compensation methods by name, each at its default settings."""
 
@@ -97,13 +99,13 @@ def _resolve_method(method) -> AbstractCompensator:
     raise ValueError(f"method must be one of {', '.join(COMPENSATORS)} (or a gyrojax compensator), got {method!r}.")
 
 
-def _resolve_train_runs(train_runs, devices, runs_of) -> dict[str, tuple[int, ...]]:
+def _resolve_train_runs(train_runs: object, devices, runs_of) -> dict[str, tuple[int, ...]]:
     if train_runs is None:
         return {d: (runs_of[d][0],) for d in devices}
     if isinstance(train_runs, (int, np.integer)) and not isinstance(train_runs, bool):
         train_runs = (train_runs,)
     try:
-        items = list(train_runs)
+        items = list(train_runs) if isinstance(train_runs, Iterable) else []
     except TypeError:
         items = []
     if not items or any(isinstance(r, bool) or not isinstance(r, (int, np.integer)) for r in items):
@@ -182,18 +184,18 @@ def _judge(dev, pts, compensator, solution, runs, train, full_scale):
         sel = pts.run == run
         x = pts.rate_dps[sel]
         before = fit_scale_factor(x, pts.output[sel], full_scale=full_scale)
-        after = fit_scale_factor(x, estimate[sel], full_scale=full_scale) if converged else None
+        after = fit_scale_factor(x, estimate[sel], full_scale=full_scale) if estimate is not None else None
         trained = run in train
         sf_before.append(float(before.scale_factor))
-        sf_after.append(float(after.scale_factor) if converged else math.nan)
+        sf_after.append(float(after.scale_factor) if after is not None else math.nan)
         held.append(not trained)
         if not trained:
             worst_before.append(float(before.nonlinearity_max_ppm))
-            if converged:
+            if after is not None:
                 worst_after.append(float(after.nonlinearity_max_ppm))
 
         def post(name):
-            return _num(getattr(after, name)) if converged else None
+            return _num(getattr(after, name)) if after is not None else None
 
         run_records.append({
             "device": dev, "run": int(run), "used_for_training": bool(trained), "n_points": int(sel.sum()),
@@ -205,7 +207,7 @@ def _judge(dev, pts, compensator, solution, runs, train, full_scale):
             "nonlinearity_rms_ppm_after": post("nonlinearity_rms_ppm"),
             "rates_dps": [float(v) for v in x],
             "residuals_ppm_before": _ppm_list(before),
-            "residuals_ppm_after": _ppm_list(after) if converged else None,
+            "residuals_ppm_after": _ppm_list(after) if after is not None else None,
         })
     sf_before, sf_after, held = np.asarray(sf_before), np.asarray(sf_after), np.asarray(held)
     rep = _repeatability_or_none
@@ -222,8 +224,9 @@ def _judge(dev, pts, compensator, solution, runs, train, full_scale):
     return run_records, device
 
 
-def compensate(table: Table, *, method: str | AbstractCompensator = "composite", train_runs=None,
-               full_scale: str = "half_range", progress=True) -> CompensationResult:
+def compensate(table: Table, *, method: str | AbstractCompensator = "composite",
+               train_runs: int | Sequence[int] | None = None, full_scale: str = "half_range",
+               progress: ProgressArg = True) -> CompensationResult:
     """Fit a scale-factor compensator on each device's training runs and judge it on its held-out runs.
 
     Only the `rate_table` rows are used. For each device the compensator is fitted on the points of its

@@ -143,7 +143,8 @@ class CompositeCompensation(AbstractCompensation):
             acc = acc * t + c[..., k]
         return acc
 
-    def rate(self, output, *, drive_freq_hz=None, temperature_c=None) -> Float[Array, " n"]:
+    def rate(self, output: Float[ArrayLike, " n"], *, drive_freq_hz: Float[ArrayLike, " n"] | None = None,
+             temperature_c: Float[ArrayLike, " n"] | None = None) -> Float[Array, " n"]:
         """The rate estimate (deg/s); needs each point's `drive_freq_hz`."""
         f = jnp.asarray(check_side("composite", "drive_freq_hz", drive_freq_hz), dtype=jnp.float64)
         u = jnp.asarray(output, dtype=jnp.float64) * (self.k_t_hz / f) - self.bias

@@ -2,7 +2,7 @@
 
 import equinox as eqx
 import numpy as np
-from jaxtyping import Float, Int
+from jaxtyping import ArrayLike, Bool, Float, Int
 
 
 class RatePoints(eqx.Module):
@@ -27,7 +27,11 @@ class RatePoints(eqx.Module):
     output_sigma: Float[np.ndarray, " n"]
     run: Int[np.ndarray, " n"]
 
-    def __init__(self, rate_dps, output, *, drive_freq_hz=None, temperature_c=None, output_sigma=None, run=None):
+    def __init__(self, rate_dps: Float[ArrayLike, " n"], output: Float[ArrayLike, " n"], *,
+                 drive_freq_hz: Float[ArrayLike, " n"] | None = None,
+                 temperature_c: Float[ArrayLike, " n"] | None = None,
+                 output_sigma: Float[ArrayLike, " n"] | None = None,
+                 run: Int[ArrayLike, " n"] | None = None):
         self.rate_dps = np.asarray(rate_dps, dtype=np.float64)
         self.output = np.asarray(output, dtype=np.float64)
         n = self.output.shape
@@ -65,7 +69,7 @@ class RatePoints(eqx.Module):
         _, first = np.unique(self.run, return_index=True)
         return tuple(int(r) for r in self.run[np.sort(first)])
 
-    def select(self, keep) -> "RatePoints":
+    def select(self, keep: Bool[np.ndarray, " n"] | Int[np.ndarray, " k"]) -> "RatePoints":
         """The points where boolean `keep` is True (or at integer indices `keep`)."""
         return RatePoints(self.rate_dps[keep], self.output[keep], drive_freq_hz=self.drive_freq_hz[keep],
                           temperature_c=self.temperature_c[keep], output_sigma=self.output_sigma[keep],

@@ -21,7 +21,8 @@ class PolynomialCompensation(AbstractCompensation):
     coefficients: Float[Array, " order_plus_one"]
     output_scale: Float[Array, ""]
 
-    def rate(self, output: Float[ArrayLike, " n"], *, drive_freq_hz=None, temperature_c=None) -> Float[Array, " n"]:
+    def rate(self, output: Float[ArrayLike, " n"], *, drive_freq_hz: Float[ArrayLike, " n"] | None = None,
+             temperature_c: Float[ArrayLike, " n"] | None = None) -> Float[Array, " n"]:
         """The rate estimate (deg/s); side information is not used by this method."""
         u = jnp.asarray(output, dtype=jnp.float64) / self.output_scale
         acc = jnp.zeros_like(u)

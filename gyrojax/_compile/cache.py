@@ -46,11 +46,13 @@ warnings are `CacheWarning`s (a `RuntimeWarning`), each given once per process, 
 
 from __future__ import annotations
 
+import enum
 import os
 import stat
 import sys
 import tempfile
 import warnings
+from typing import Any
 
 import jax
 from jax.experimental.compilation_cache import compilation_cache as _jax_cache
@@ -141,6 +143,12 @@ def _writable(path: str) -> str | None:
     return None
 
 
+def jax_flag(name: str) -> Any:
+    """The value of JAX's configuration flag `name` (jax.config makes its flags attributes at run time, which
+    type checkers cannot see)."""
+    return getattr(jax.config, name)
+
+
 def _use(path: str | None) -> None:
     """Point JAX's persistent cache at `path` (`None`: no cache) and make the change take effect even after
     a compilation (JAX opens its cache once, at the first compile)."""
@@ -152,14 +160,14 @@ def _use(path: str | None) -> None:
 
 def _jax_already_configured() -> bool:
     """Whether JAX was given a cache folder, or told not to cache, before gyrojax was imported."""
-    return bool(jax.config.jax_compilation_cache_dir) or not jax.config.jax_enable_compilation_cache
+    return bool(jax_flag("jax_compilation_cache_dir")) or not jax_flag("jax_enable_compilation_cache")
 
 
 def _thresholds() -> None:
     # Only JAX's defaults are replaced: a value the user set (JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS, or
     # jax.config) stays.
     if ("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ
-            and jax.config.jax_persistent_cache_min_compile_time_secs == 1.0):
+            and jax_flag("jax_persistent_cache_min_compile_time_secs") == 1.0):
         jax.config.update("jax_persistent_cache_min_compile_time_secs", MIN_COMPILE_TIME_S)
 
 
@@ -171,7 +179,7 @@ def enable_default() -> str | None:
     `RuntimeWarning` says why).
     """
     if _jax_already_configured():
-        return jax.config.jax_compilation_cache_dir or None
+        return jax_flag("jax_compilation_cache_dir") or None
     value = os.environ.get(ENV_VAR)
     if value is not None and value.strip().lower() in OFF_VALUES:
         return None
@@ -193,10 +201,14 @@ def enable_default() -> str | None:
     return path
 
 
-_UNSET = object()
+class _Unset(enum.Enum):
+    UNSET = 0
 
 
-def compilation_cache(path=_UNSET) -> str | None:
+_UNSET = _Unset.UNSET  # `path` omitted (None means no cache)
+
+
+def compilation_cache(path: str | os.PathLike[str] | None | _Unset = _UNSET) -> str | None:
     """Where gyrojax's compiled programs are kept between processes; move the cache or switch it off.
 
     gyrojax turns JAX's persistent compilation cache on when it is imported (a per-user folder, e.g.
@@ -220,7 +232,7 @@ def compilation_cache(path=_UNSET) -> str | None:
     choosing, so do not point it at a folder shared with users you do not trust.
     """
     if path is _UNSET:
-        return jax.config.jax_compilation_cache_dir or None
+        return jax_flag("jax_compilation_cache_dir") or None
     if path is None:
         _use(None)
         return None

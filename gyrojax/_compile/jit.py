@@ -56,7 +56,8 @@ def jit(fn: Callable) -> Callable:
         options = compiler_options() if top_level() else None
         key = None if options is None else tuple(sorted(options.items()))
         if key not in compiled:
-            compiled[key] = eqx.filter_jit(fn, compiler_options=options)  # None: XLA's defaults
+            # options None: XLA's defaults. equinox's overloads of filter_jit omit the jax.jit keywords it passes on.
+            compiled[key] = eqx.filter_jit(fn, compiler_options=options)  # pyright: ignore[reportCallIssue]
         return compiled[key](*args, **kwargs)
 
     return run

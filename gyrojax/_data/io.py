@@ -166,7 +166,7 @@ def _first_non_finite(obj, where: str = "") -> str | None:
     return None
 
 
-def atomic_write_json(obj, path: str | os.PathLike) -> None:
+def atomic_write_json(obj: object, path: str | os.PathLike) -> None:
     """Write `obj` as indented JSON atomically (as [`gyrojax.io.atomic_write_bytes`][]).
 
     Raises `ValueError` naming the file and the key of the first NaN or infinity: JSON has no such numbers,

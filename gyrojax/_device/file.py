@@ -32,6 +32,7 @@ import json
 import math
 import os
 import tomllib
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -238,7 +239,7 @@ class _Reader:
             if key not in valid:
                 self.fail(f"[{name}]", f"unknown key {key!r}{_nearest(key, valid)}")
         kind = table.get("kind") if cls is FrontEnd else None
-        kwargs = {}
+        kwargs: dict[str, Any] = {}  # parsed from the file; `cls` checks the values
         for f in fields:
             if f.name in subs:
                 if f.name in table:
@@ -361,7 +362,7 @@ def device_from_text(text: str, path: str = "<text>", *, check_loops: bool = Tru
     return DeviceFile(gyro, tuple(free), dict(reader.provenance), path)
 
 
-def load_device(path) -> Gyroscope:
+def load_device(path: str | os.PathLike) -> Gyroscope:
     """The device a device file describes (TOML, see docs/own_device.md), checked: its units converted, its
     values possible, its loops able to lock. Raises a `ValueError` naming the file, section and key otherwise.
     Write one to start from with `gyrojax describe --model PRESET --toml FILE.toml`."""

@@ -1,6 +1,8 @@
 """`DistributedSolve`: how a lot is run in chunks of devices on Dask distributed, and the client it opens."""
 
 import contextlib
+from collections.abc import Iterator
+from typing import Any
 
 import equinox as eqx
 
@@ -46,7 +48,7 @@ class DistributedSolve(eqx.Module):
                              f"{self.scheduler!r}.")
 
     @staticmethod
-    def require():
+    def require() -> None:
         """Raise an ImportError that says how to install Dask distributed where it is missing."""
         try:
             import dask  # noqa: F401
@@ -55,10 +57,10 @@ class DistributedSolve(eqx.Module):
             raise ImportError(f"a distributed lot needs Dask distributed: {INSTALL}") from None
 
     @contextlib.contextmanager
-    def client(self):
+    def client(self) -> Iterator[Any]:  # a distributed.Client (an optional dependency, imported here)
         """A Dask client of this cluster; a local cluster is started here and closed at the end."""
         self.require()
-        import dask
+        import dask.config
         import distributed
 
         # A worker that dies mid-chunk: the scheduler runs the chunk elsewhere up to `retries` more times.

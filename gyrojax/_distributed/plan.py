@@ -55,8 +55,9 @@ class Plan:
         self.groups = [self.devices[i:i + chunk] for i in range(0, len(self.devices), chunk)]
         self.split_files = [None if suffix == ".parquet" else os.path.join(self.folder, "input", chunk_name(k) + ".csv")
                             for k in range(len(self.groups))]
-        if suffix == ".csv" and not all(os.path.exists(p) for p in self.split_files):
-            split_csv(self.data, self.groups, self.split_files)
+        csv_files = [p for p in self.split_files if p is not None]  # every chunk's, for a .csv
+        if suffix == ".csv" and not all(os.path.exists(p) for p in csv_files):
+            split_csv(self.data, self.groups, csv_files)
         if not self.resumed:
             atomic_write_json({**wanted, "devices": self.devices}, manifest_path)
 

@@ -5,15 +5,18 @@ import json
 import os
 import time
 from collections import Counter
+from collections.abc import Sequence
+from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
 
 from .._data.io import atomic_write_json
+from .._gyroscope import Gyroscope
 from .._identify.covariance import chi2_p_value
 from .._identify.fit import EXIT_CODES, EXIT_PRECEDENCE
-from .._model.parameters import DEFAULT_FREE, as_model
-from .._progress import as_progress
+from .._model.parameters import DEFAULT_FREE, Model, as_model
+from .._progress import ProgressArg, as_progress
 from .engine import DistributedSolve
 from .plan import Plan
 from .task import fit_chunk
@@ -23,8 +26,8 @@ from .task import fit_chunk
 _COUPLED = ("shared", "lot_solve")
 
 
-def identify_lot(model, data, out, strategy: DistributedSolve, *, free=DEFAULT_FREE, progress=True,
-                 **options) -> dict:
+def identify_lot(model: Model | Gyroscope | str, data: str, out: str, strategy: DistributedSolve,
+                 *, free: Sequence[str] = DEFAULT_FREE, progress: ProgressArg = True, **options: Any) -> dict:
     """Fit every device of the table file `data` (CSV or Parquet, read a chunk of devices at a time) with
     `identify`'s independent per-device fit, in chunks on the Dask cluster of `strategy`, and write the merged
     identify report (docs/cli.md's keys) to `out` (JSON).

@@ -18,7 +18,7 @@ def fit_chunk(task: dict) -> dict:
     import numpy as np
 
     from .._data.chunked import read_chunk
-    from .._identify import MultiStart, VmapSolve, identify
+    from .._identify import Fit, MultiStart, VmapSolve, identify
     from .._identify.report import fit_report
 
     start = time.perf_counter()
@@ -33,6 +33,8 @@ def fit_chunk(task: dict) -> dict:
         first = dataclasses.replace(task["options"].get("start", MultiStart()), first_device=task["first_device"])
         fit = identify(task["model"], table, lot_solve=VmapSolve(pad_to=task["chunk"]), progress=False,
                        **{**task["options"], "start": first})
+        if not isinstance(fit, Fit):  # lot_solve is a VmapSolve: never a population fit
+            raise RuntimeError(f"the chunk's fit is a {type(fit).__name__}, not a gyrojax.Fit.")
         if list(fit.devices) != list(task["devices"]):
             raise RuntimeError(f"the chunk's fit holds devices {list(fit.devices)[:5]} in another order than the "
                                f"plan's {list(task['devices'])[:5]}: their positions in the lot would be wrong.")

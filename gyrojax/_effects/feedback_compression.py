@@ -2,9 +2,10 @@
 
 import equinox as eqx
 import jax.numpy as jnp
+from jaxtyping import Array, Float
 
 from .._checks import check_finite
-from .._gyroscope import Gyroscope
+from .._gyroscope import Gyroscope, closed_loop_parts
 from .._terms import AbstractFeedbackTerm
 from ._support import as_parameter, require
 from .base import AbstractEffect
@@ -48,8 +49,9 @@ class FeedbackCompression(AbstractEffect, AbstractFeedbackTerm):
         require(self.name, gyro, self.supports(gyro), "a closed-loop device (a feedback amplifier); it is open loop")
         return gyro.with_term(self)
 
-    def __call__(self, gyro, voltage):
-        full = gyro.excitation.amplifier_gain * gyro.excitation.dac.full_scale
+    def __call__(self, gyro: Gyroscope, voltage: Float[Array, "*sample"]) -> Float[Array, "*sample"]:
+        excitation = closed_loop_parts(gyro, self.name).excitation
+        full = excitation.amplifier_gain * excitation.dac.full_scale
         return voltage * (1.0 - self.cubic * (voltage / full) ** 2)
 
     @classmethod

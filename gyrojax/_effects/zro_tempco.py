@@ -2,6 +2,7 @@
 
 import equinox as eqx
 import jax.numpy as jnp
+from jaxtyping import Array, Float
 
 from .._checks import check_finite
 from .._gyroscope import Gyroscope
@@ -48,7 +49,8 @@ class ZroTempco(AbstractEffect, AbstractRateTerm):
     def apply(self, gyro: Gyroscope) -> Gyroscope:
         return gyro.with_term(self)
 
-    def rate(self, gyro, temperature, time, rate):
+    def rate(self, gyro: Gyroscope, temperature: Float[Array, ""], time: Float[Array, ""], rate: Float[Array, ""]
+             ) -> Float[Array, ""]:
         return self.coefficient * (temperature - gyro.resonator.t_ref)
 
     @classmethod

@@ -5,6 +5,7 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
 from .._checks import check_finite, check_nonnegative, check_positive, check_positive_or_inf
 
@@ -56,16 +57,16 @@ class DAC(eqx.Module):
         check_nonnegative("DAC", "dnl_amplitude", self.dnl_amplitude)
 
     @property
-    def code_scale(self):
+    def code_scale(self) -> float:
         """Codes per word LSB."""
         return 2.0 ** (self.bits - self.word_bits)
 
     @property
-    def volts_per_word_lsb(self):
+    def volts_per_word_lsb(self) -> float | Float[Array, ""]:
         """Ideal output volts per word LSB (the linear DAC gain)."""
         return self.full_scale * self.code_scale / 2.0 ** (self.bits - 1)
 
-    def inl_lsb(self, u):
+    def inl_lsb(self, u: Float[ArrayLike, "*s"]) -> Float[Array, "*s"]:
         """INL in DAC LSB at normalised code u = c / 2^(bits-1)."""
         powers = jnp.arange(self.inl.shape[0], dtype=float) + 2.0
         return jnp.sum(self.inl * jnp.asarray(u)[..., None] ** powers, axis=-1)
@@ -74,7 +75,7 @@ class DAC(eqx.Module):
         phase = code / self.dnl_period
         return self.dnl_amplitude * (2.0 * (phase - jnp.floor(phase)) - 1.0)
 
-    def __call__(self, word_sample):
+    def __call__(self, word_sample: Float[Array, "*s"]) -> Float[Array, "*s"]:
         """Output voltage (V) for an instantaneous carrier sample in word LSB (memoryless part)."""
         code = word_sample * self.code_scale
         half = 2.0 ** (self.bits - 1)
@@ -82,7 +83,7 @@ class DAC(eqx.Module):
         err = self.inl_lsb(code / half) + self._dnl_lsb(code)
         return self.full_scale * (1.0 + self.gain_error) * (q + err) / half + self.offset
 
-    def hold(self, omega):
+    def hold(self, omega: float | Float[Array, "*s"]) -> tuple[Float[Array, "*s"], float | Float[Array, "*s"]]:
         """ZOH at the carrier: `(gain, delay_phase)` with gain sinc(wT/2) and phase lag wT/2 (rad)."""
         half_angle = 0.5 * omega / self.update_rate
         gain = jnp.where(half_angle > 0, jnp.sin(half_angle) / jnp.where(half_angle > 0, half_angle, 1.0), 1.0)

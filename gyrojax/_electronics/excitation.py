@@ -1,6 +1,9 @@
 """The FTR differential excitation circuit of seed 000 Fig. 5: word -> carrier -> DAC -> K_a -> +/- branches."""
 
+from collections.abc import Callable
+
 import equinox as eqx
+from jaxtyping import Array, Float
 
 from .._checks import check_finite, check_positive
 from .dac import DAC
@@ -25,7 +28,9 @@ class FTRExcitation(eqx.Module):
         check_finite("FTRExcitation", "branch_gain_error_plus", self.branch_gain_error_plus)
         check_finite("FTRExcitation", "branch_gain_error_minus", self.branch_gain_error_minus)
 
-    def branch_voltages(self, dac_voltage, after_amplifier=None):
+    def branch_voltages(self, dac_voltage: Float[Array, "*s"],
+                        after_amplifier: Callable[[Float[Array, "*s"]], Float[Array, "*s"]] | None = None
+                        ) -> tuple[Float[Array, "*s"], Float[Array, "*s"]]:
         """AC parts of V_f+ and of -(V_f-) for a DAC output voltage: `(v_plus, v_minus)`. `after_amplifier`
         (optional) maps the amplifier output V_fa before the split (the device's feedback terms)."""
         v = self.amplifier_gain * dac_voltage

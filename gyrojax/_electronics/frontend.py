@@ -2,6 +2,7 @@
 
 import equinox as eqx
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Complex, Float
 
 from .._checks import check_finite, check_positive
 
@@ -34,14 +35,14 @@ class FrontEnd(eqx.Module):
         check_finite("FrontEnd", "gain", self.gain)
         check_positive("FrontEnd", "adc_lsb", self.adc_lsb)
 
-    def phasor_gain(self, omega):
+    def phasor_gain(self, omega: Float[ArrayLike, "*s"]) -> Complex[Array, "*s"]:
         """Complex LSB per metre of displacement phasor at angular frequency `omega`."""
         g = self.gain * self.current_per_velocity / self.adc_lsb
         if self.kind == "charge":
             return jnp.asarray(g * jnp.ones_like(omega), dtype=complex)
         return jnp.asarray(omega * g, dtype=complex) * 1j
 
-    def sample(self, displacement, velocity):
+    def sample(self, displacement: Float[Array, "*s"], velocity: Float[Array, "*s"]) -> Float[Array, "*s"]:
         """Instantaneous output, LSB."""
         g = self.gain * self.current_per_velocity / self.adc_lsb
         return g * (displacement if self.kind == "charge" else velocity)

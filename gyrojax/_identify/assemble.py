@@ -94,6 +94,13 @@ def _statuses(data, predictions, ok, failed, determined, noise_ok, noise_notes, 
     return status, warnings
 
 
+def _weighted(data: FitData) -> bool:
+    """`data.weighted`; a ValueError for unlabelled data (`FitData.unlabelled()` drops it)."""
+    if data.weighted is None:
+        raise ValueError("assemble_fit: the data are unlabelled (FitData.unlabelled()); a Fit needs the labelled data.")
+    return data.weighted
+
+
 def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index, solution: Solution, held_reports,
                  threshold: float, reject_alpha: float, noise) -> Fit:
     """The `Fit` of `solution`: covariance and physical values with standard errors (free parameters
@@ -104,8 +111,6 @@ def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index
     u_full, u_lot, code, steps = solution.u_full, np.asarray(solution.u_lot), solution.code, solution.steps
     final, notes, candidates = solution.final, solution.notes, list(layout.candidates)
     n, n_dev, n_lot = len(data.device_names()), len(names_dev), len(names_lot)
-    if data.weighted is None:
-        raise ValueError("assemble_fit: the data are unlabelled (FitData.unlabelled()); a Fit needs the labelled data.")
     f = np.asarray(free_index, dtype=int)
     jac = np.asarray(final.jac)[:, :, f]  # (device, residual, free)
     jac_lot = np.asarray(final.jac_lot)
@@ -169,7 +174,7 @@ def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index
                converged=jnp.asarray(ok & (failed == 0) & ~undetermined),
                result_message=messages, num_steps=jnp.asarray(steps), unsettled=jnp.asarray(failed),
                unidentifiable=held_reports, scale_factor=jnp.asarray(sf), scale_factor_stderr=jnp.asarray(sf_stderr),
-               devices=data.device_names(), data=data, entries=entries, weighted=data.weighted, jacobian=final.jac,
+               devices=data.device_names(), data=data, entries=entries, weighted=_weighted(data), jacobian=final.jac,
                residual_vector=final.residuals, status=tuple(status), warnings=tuple(warnings),
                reject_alpha=float(reject_alpha), stderr_scaled=jnp.asarray(stderr[:, :n_dev] * scale[:, None]),
                lot_stderr_scaled=jnp.asarray(lot_stderr[0] * lot_scale),

@@ -12,6 +12,7 @@ log-transformed parameters with large relative errors) is flagged: its intervals
 
 import dataclasses
 import math
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -84,7 +85,7 @@ def simulated_data(fit: Fit, draws: int, key):
     return dataclasses.replace(fit.data, blocks=blocks, source=f"{fit.data.source} (coverage draws)")
 
 
-def coverage(fit: Fit, draws: int = 50, *, seed: int = 0, low: float = 0.93, **identify_options) -> Coverage:
+def coverage(fit: Fit, draws: int = 50, *, seed: int = 0, low: float = 0.93, **identify_options: Any) -> Coverage:
     """Audit the coverage of `fit`'s 95 % intervals: simulate the fitted lot with the data's noise `draws` times,
     refit every draw (one vmapped `identify`), and report per free parameter and for the scale factor the share
     of intervals that cover the values the draws were made from.

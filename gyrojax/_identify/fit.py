@@ -124,23 +124,23 @@ class Fit(eqx.Module):
     p_value_total: Float[Array | np.ndarray, ""]
 
     @property
-    def chi2_red(self):
+    def chi2_red(self) -> Float[Array | np.ndarray, " device"]:
         return self.chi2 / jnp.maximum(self.dof, 1).astype(self.chi2.dtype)
 
     @property
-    def chi2_total(self):
+    def chi2_total(self) -> float:
         return float(jnp.sum(self.chi2))
 
     @property
-    def dof_total(self):
+    def dof_total(self) -> int:
         return int(jnp.sum(self.dof)) - len(self.lot_names)
 
     @property
-    def chi2_red_total(self):
+    def chi2_red_total(self) -> float:
         return self.chi2_total / max(self.dof_total, 1)
 
     @property
-    def correlation(self):
+    def correlation(self) -> Float[Array | np.ndarray, "device param param"]:
         sd = jnp.sqrt(jnp.diagonal(self.covariance, axis1=-2, axis2=-1))
         sd = jnp.where(sd > 0, sd, jnp.inf)
         return self.covariance / (sd[..., :, None] * sd[..., None, :])
@@ -158,7 +158,7 @@ class Fit(eqx.Module):
                 return EXIT_CODES[status]
         raise ValueError(f"unknown device status in {self.status!r}; expected those of {EXIT_PRECEDENCE}.")
 
-    def value(self, name: str, device: int | None = None):
+    def value(self, name: str, device: int | None = None) -> Float[Array | np.ndarray, "*device"]:
         """Fitted physical value of a parameter (all devices, or one)."""
         if name in self.lot_names:
             return self.lot_values[self.lot_names.index(name)]

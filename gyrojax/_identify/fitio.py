@@ -213,7 +213,7 @@ def _header(fit: Fit, preset_name: str | None) -> dict:
     }
 
 
-def save_fit(fit: Fit, path) -> None:
+def save_fit(fit: Fit, path: str | os.PathLike) -> None:
     """Write `fit` to `path` (atomically), to be read back exactly by `load_fit`.
 
     **Arguments:**
@@ -347,7 +347,7 @@ def _read(path: str) -> tuple[dict, bytes]:
     return header, payload
 
 
-def load_fit(path) -> Fit:
+def load_fit(path: str | os.PathLike) -> Fit:
     """Read a fit written by `save_fit`. Raises a `ValueError` naming the file if it is not a regular file (a
     folder, a FIFO, a device), is not a gyrojax fit file, is truncated, corrupt or edited (its header and its
     arrays are covered by checksums), describes arrays that the file does not hold, or was written by an

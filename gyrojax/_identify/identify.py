@@ -52,11 +52,10 @@ from .strategies import AbstractLotSolve, Lot, Solver
 def identify(model: Model | Gyroscope | str, data: Table | FitData, *, spec: FitSpec | None = None,
              free: Sequence[str] = DEFAULT_FREE, shared: Sequence[str] = (), hold: Sequence[str] = (),
              priors: dict | None = None, tier: AbstractTier = Steady(), solver: str | Solver = "levenberg-marquardt",
-             rtol: float = 1e-8, atol: float = 1e-8, max_steps: int = 200,
-             start: MultiStart = MultiStart(), lot_solve: str | AbstractLotSolve = "vmap",
-             recovery: tuple[AbstractRecovery, ...] = RECOVERY, identifiability_threshold: float = 1.0,
-             reject_alpha: float = 0.01, estimate_noise: bool | None = None, evaluate_only: bool = False,
-             progress: ProgressArg = True) -> Fit | PopulationFit:
+             rtol: float = 1e-8, atol: float = 1e-8, max_steps: int = 200, start: MultiStart = MultiStart(),
+             lot_solve: str | AbstractLotSolve = "vmap", recovery: tuple[AbstractRecovery, ...] = RECOVERY,
+             identifiability_threshold: float = 1.0, reject_alpha: float = 0.01, estimate_noise: bool | None = None,
+             evaluate_only: bool = False, progress: ProgressArg = True) -> Fit | PopulationFit:
     r"""Fit the free parameters of `model` to every sweep in `data`, per device (vmapped) or jointly.
 
     **Arguments:**

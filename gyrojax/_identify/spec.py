@@ -3,6 +3,7 @@ policies, how the lot is solved), as one object that `identify`, `diagnose` and 
 choice made once reaches every fit a verb makes."""
 
 import dataclasses
+from collections.abc import Iterable
 
 import equinox as eqx
 import numpy as np
@@ -55,7 +56,7 @@ class FitSpec(eqx.Module):
                                                                    for r in self.recovery):
             raise TypeError(f"recovery must be a tuple of gyrojax.AbstractRecovery policies, got {self.recovery!r}.")
 
-    def holding(self, names) -> "FitSpec":
+    def holding(self, names: Iterable[str]) -> "FitSpec":
         """This spec with `names` held too (after its own `hold`)."""
         return dataclasses.replace(self, hold=tuple(self.hold) + tuple(names))
 

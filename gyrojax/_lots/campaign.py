@@ -8,6 +8,7 @@ a run rather than to a device: its temperature history (`Protocol.warmup`), its 
 """
 
 import dataclasses
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax
@@ -18,8 +19,9 @@ from jaxtyping import ArrayLike, Float
 from .._data.cells import OPTIONAL_COLUMNS
 from .._data.table import Table
 from .._gyroscope import Gyroscope
-from .._progress import as_progress
+from .._progress import ProgressArg, as_progress
 from .._simulate.tiers import AbstractTier, Steady
+from .._sweeps.base import AbstractSweep, float_tuple
 from .._sweeps.dac import Dac
 from .._sweeps.lot_campaign import LotCampaign
 from .._sweeps.protocol import Protocol
@@ -65,12 +67,13 @@ def campaign_lot(gyro: Gyroscope, *, devices: int = 1, seed: int = 0,
     return make_lot(gyro, devices, key_lot, spread)
 
 
-def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=("rate_table",),
+def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1,
+                   sweeps: str | Sequence[str | AbstractSweep] = ("rate_table",),
                    tier: AbstractTier = CAMPAIGN_TIER, rates_dps: Float[ArrayLike, " point"] | None = None,
                    noise: RateNoise = RateNoise(), noise_free: bool = False, seed: int = 0,
                    spread: ProcessSpread | WaferProcess = ProcessSpread(),
                    device_prefix: str | None = None, protocol: Protocol = Protocol(),
-                   voltmeter_sigma_v: float = DAC_VOLTMETER_SIGMA_V, progress=True) -> Table:
+                   voltmeter_sigma_v: float = DAC_VOLTMETER_SIGMA_V, progress: ProgressArg = True) -> Table:
     """Simulate a measurement campaign and return it in the tidy data format (docs/data_format.md).
 
     **Arguments:**
@@ -127,7 +130,7 @@ def simulate_table(gyro: Gyroscope, *, devices: int = 1, runs: int = 1, sweeps=(
 
     # The rate table of the campaign (a noise-free one for the scale factor when the table is not simulated).
     rate = next((k for k in kinds if isinstance(k, RateTable)),
-                RateTable() if rates_dps is None else RateTable(rates_dps=rates_dps))
+                RateTable() if rates_dps is None else RateTable(rates_dps=float_tuple(rates_dps)))
     if rate in kinds or (not noise_free and any(k.rate_noise for k in kinds)):
         announce(rate, kinds.index(rate) + 1 if rate in kinds else 0)
         campaign = _settle_with_rate_table(lot, campaign, kinds, rate, tier)

@@ -32,6 +32,7 @@ import math
 
 import equinox as eqx
 import numpy as np
+from jaxtyping import ArrayLike, Float
 
 from .._checks import check_nonnegative, check_positive
 
@@ -103,7 +104,7 @@ class RateNoise(eqx.Module):
         check_positive("RateNoise.point_sigma_dps", "dwell_s", dwell_s)
         return math.sqrt(self.arw_dps_per_sqrt_s**2 / dwell_s + self.wander_mean_variance(dwell_s))
 
-    def amplitude_sigma_dps(self, frequency_hz, dwell_s: float):
+    def amplitude_sigma_dps(self, frequency_hz: Float[ArrayLike, "*f"], dwell_s: float) -> Float[np.ndarray, "*f"]:
         """Standard uncertainty (deg/s) of each quadrature component of a lock-in reading at
         `frequency_hz` (array) over `dwell_s` seconds: sqrt(G(f) / T)."""
         check_positive("RateNoise.amplitude_sigma_dps", "dwell_s", dwell_s)
@@ -112,7 +113,8 @@ class RateNoise(eqx.Module):
         psd = 2.0 * self.arw_dps_per_sqrt_s**2 + 4.0 * q**2 * tau / (1.0 + (2.0 * np.pi * f * tau) ** 2)
         return np.sqrt(psd / dwell_s)
 
-    def sample_point_means(self, rng: np.random.Generator, shape, n_points: int, dwell_s: float):
+    def sample_point_means(self, rng: np.random.Generator, shape: tuple[int, ...], n_points: int, dwell_s: float
+                           ) -> tuple[np.ndarray, np.ndarray]:
         """Noise (deg/s) of `n_points` consecutive settled points of `dwell_s` each, per run.
 
         **Arguments:**

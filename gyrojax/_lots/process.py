@@ -33,6 +33,7 @@ import math
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import PRNGKeyArray
 
 from .._checks import check_nonnegative, check_positive
 from .._gyroscope import Gyroscope
@@ -86,7 +87,7 @@ class WaferProcess(eqx.Module):
         Ag and the two pick-off mismatches (h and the CD cancel, see the module docstring)."""
         return math.sqrt(3.0) * self.mismatch
 
-    def draw(self, gyro: Gyroscope, n: int, key) -> Gyroscope:
+    def draw(self, gyro: Gyroscope, n: int, key: PRNGKeyArray) -> Gyroscope:
         """`n` devices drawn around `gyro`: one Gyroscope whose array leaves have a leading axis of size `n`
         (the loops' firmware gains stay those of the design)."""
         if not isinstance(n, int) or n < 1:

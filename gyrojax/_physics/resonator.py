@@ -10,6 +10,7 @@ rest is already inside it.
 
 import equinox as eqx
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
 
 from .._checks import check_finite, check_positive
 
@@ -55,7 +56,8 @@ class Resonator(eqx.Module):
                      "tcf_split", "t_ref"):
             check_finite("Resonator", name, getattr(self, name))
 
-    def at_temperature(self, temperature):
+    def at_temperature(self, temperature: Float[ArrayLike, "*s"]
+                       ) -> tuple[Float[Array, "*s"], Float[Array, "*s"], Float[Array, "*s"], Float[Array, "*s"]]:
         """Resonances and Q's at `temperature` (deg C): `(omega_x, omega_y, q_x, q_y)`."""
         dt = jnp.asarray(temperature, dtype=float) - self.t_ref
         f = 1.0 + self.tcf * dt

@@ -9,11 +9,13 @@ with `gyrojax.sweeps.register_sweep` is a candidate without changing the planner
 """
 
 import math
+from collections.abc import Iterable, Sequence
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float
 
 from .._compile.jit import jit
 from .._gyroscope import Gyroscope
@@ -69,7 +71,10 @@ class CandidateExperiment(eqx.Module):
     protocol: Protocol = eqx.field(static=True, default=Protocol())
     settings: tuple = eqx.field(static=True, default=())
 
-    def __init__(self, name, sweep, inputs, temperatures_c, times_s, minutes, protocol=Protocol(), settings=()):
+    def __init__(self, name: str, sweep: AbstractSweep | str, inputs: Float[ArrayLike, " point"] | Sequence[float],
+                 temperatures_c: Float[ArrayLike, " point"] | Sequence[float],
+                 times_s: Float[ArrayLike, " point"] | Sequence[float], minutes: float,
+                 protocol: Protocol = Protocol(), settings: Iterable[tuple[str, object]] = ()):
         if isinstance(sweep, str):
             if sweep not in SWEEP_KINDS:
                 raise ValueError(f"CandidateExperiment {name!r}: sweep must be a registered sweep kind "
@@ -116,7 +121,7 @@ class CandidateExperiment(eqx.Module):
         return {"sweep": self.name, "kind": self.kind, "settings": dict(self.settings), "minutes": self.minutes,
                 "points": self.points}
 
-    def sigmas(self, noise: "NoiseLevel", outputs=None) -> np.ndarray:
+    def sigmas(self, noise: "NoiseLevel", outputs: Float[ArrayLike, " point"] | None = None) -> np.ndarray:
         """Standard uncertainty of each point for one device whose noise is `noise`: the kind's own noise
         model (`AbstractSweep.point_sigmas`), rate noise scaled to the data's level; else, for a kind whose
         noise is relative to its reading (`AbstractSweep.relative_sigma`), that fraction of the predicted
@@ -242,7 +247,7 @@ def weighted_rows(experiment: CandidateExperiment, jac: np.ndarray, sigmas: np.n
 
 
 def default_experiments(gyro: Gyroscope, protocol: Protocol = Protocol(), ambient_c: float | None = None,
-                        chamber_kinds=("rate_table",), kinds=()) -> tuple:
+                        chamber_kinds: Sequence[str] = ("rate_table",), kinds: Iterable[AbstractSweep] = ()) -> tuple:
     """One run of every registered sweep kind that `gyrojax.sweeps.SWEEP_KINDS` holds, each with its default settings
     unless `kinds` gives it others (a kind whose `check_device` refuses `gyro` is left out), timed by
     `protocol`, plus each kind of `chamber_kinds` again at a chamber `CHAMBER_STEP_K` warmer after a

@@ -77,7 +77,7 @@ class Settled(eqx.Module):
         reasons = sorted({result_message(c) for c in codes[bad]})
         return f"{int(bad.sum())} of {codes.size} point(s) did not settle: " + " / ".join(reasons)
 
-    def check(self):
+    def check(self) -> "Settled":
         """Raise a RuntimeError with the reason if any point did not settle (eager use only; under jit
         inspect `result`)."""
         if self.status != "settled":
@@ -92,7 +92,8 @@ class AbstractTier(eqx.Module):
     def settle(self, gyro: Gyroscope, stimulus: Stimulus) -> Settled:
         """Settle `gyro` under a constant `stimulus`."""
 
-    def settle_points(self, gyros: Gyroscope, stimuli: Stimulus, groups=None) -> Settled:
+    def settle_points(self, gyros: Gyroscope, stimuli: Stimulus, groups: tuple[tuple[int, int], ...] | None = None
+                      ) -> Settled:
         """Settle the points of a sweep: `gyros` and `stimuli` carry a leading point axis on every array leaf
         (e.g. the device at each point's die temperature). `groups` (None: one) is a tuple of `(start, stop)`
         slices of the points that belong together (several sweeps settled in one call; `Steady` forms one
@@ -132,14 +133,15 @@ class Steady(AbstractTier):
             raise ValueError(f"Steady.jacobian must be 'once' (chord) or 'every_step' (Newton), got "
                              f"{self.jacobian!r}.")
 
-    def settle(self, gyro, stimulus):
+    def settle(self, gyro: Gyroscope, stimulus: Stimulus) -> Settled:
         _check_constant(stimulus)
         orders = _orders(gyro)
         z, (result, steps) = implicit_root((gyro, stimulus), find=ft.partial(_steady_find, self, orders),
                                            residual=ft.partial(_steady_residual, orders))
         return _steady_settled(gyro, stimulus, orders, z, result == RESULTS.successful, steps)
 
-    def settle_points(self, gyros, stimuli, groups=None):
+    def settle_points(self, gyros: Gyroscope, stimuli: Stimulus, groups: tuple[tuple[int, int], ...] | None = None
+                      ) -> Settled:
         """A sweep's points from one Jacobian (`jacobian="once"`): formed and factorised at the sweep's centre
         (the mean over points of every parameter and input: zero rate for a symmetric rate table), then
         refined per point by Broyden updates (`_sweep_broyden`); each point costs only evaluations of the
@@ -362,7 +364,7 @@ class Averaged(AbstractTier):
         check_positive("Averaged", "settle_time", self.settle_time)
         check_positive("Averaged", "average_time", self.average_time)
 
-    def settle(self, gyro, stimulus):
+    def settle(self, gyro: Gyroscope, stimulus: Stimulus) -> Settled:
         y0 = operating_point(gyro, stimulus)
         return _ode_settle(self, averaged_field, y0, slow_scales(gyro), gyro, stimulus, self.average_time)
 
@@ -468,7 +470,7 @@ class FullWaveform(AbstractTier):
         if self.average_periods < 1:
             raise ValueError(f"FullWaveform.average_periods must be >= 1, got {self.average_periods!r}.")
 
-    def settle(self, gyro, stimulus):
+    def settle(self, gyro: Gyroscope, stimulus: Stimulus) -> Settled:
         slow = operating_point(gyro, stimulus)
         omega = gyro.drive_loop.center_frequency
         period = 2.0 * math.pi / omega
