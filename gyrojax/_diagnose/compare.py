@@ -33,6 +33,7 @@ import math
 
 import numpy as np
 
+from .._identify import Fit
 from .._numerics.stats import chi2_sf
 
 
@@ -456,7 +457,7 @@ def _same_order(inputs, order, mask):
     return True
 
 
-def compare(fit, *, alpha: float = 0.01) -> Comparison:
+def compare(fit: Fit, *, alpha: float = 0.01) -> Comparison:
     """Compare a fitted model with its data: where the misfit sits (sweep, device, run, input band) and
     whether the residuals have structure along the input (runs, trend, bow, cubic, odd and even parts).
 

@@ -3,18 +3,20 @@ at a time until no candidate is significant."""
 
 import dataclasses
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
 from .._data.table import Table
+from .._gyroscope import Gyroscope
 from .._identify import Fit, MultiStart, identify
 from .._identify.order import DEFAULT_MODEL, model_and_data
 from .._identify.spec import FitSpec, fit_spec
-from .._model.fitdata import fit_data
-from .._model.parameters import DEFAULT_FREE, as_model
+from .._model.fitdata import FitData, fit_data
+from .._model.parameters import DEFAULT_FREE, Model, as_model
 from .._numerics.stats import chi2_sf
 from .._plugins import nonfinite_effect
-from .._progress import as_progress
+from .._progress import ProgressArg, as_progress
 from .candidates import baseline_fit, baseline_model, candidate_effects, first_device, is_lot
 from .columns import base_columns, effect_columns
 from .compare import compare, nonlinearity_residual_ppm
@@ -24,17 +26,19 @@ from .fdr import bh_q_values, selection_p
 from .formula import formula_coordinate, propose_along, term_size
 from .guards import MAX_TYPICAL_MULTIPLE, Rejection, contradictions, probe_guard, verdict_of
 from .locate import Localisation, locate
-from .probes import PROBES, score_columns
+from .probes import PROBES, AbstractProbe, score_columns
 from .record import record_guard
 from .rival import rival_guard
 from .score import TYPICAL_RANK_TOL, cosine, score_candidates, separating_sweep
 from .solution import Diagnosis, Step
 
 
-def diagnose(model=DEFAULT_MODEL, data=None, *, candidates=None, free=DEFAULT_FREE, alpha: float = 0.01,
+def diagnose(model: Model | Gyroscope | str = DEFAULT_MODEL, data: Table | FitData | None = None, *,
+             candidates: Sequence[str] | None = None, free: Sequence[str] = DEFAULT_FREE, alpha: float = 0.01,
              max_effects: int = 4, ambiguity: float = 0.95, min_typical_chi2: float = 1.0,
-             max_typical_multiple: float = MAX_TYPICAL_MULTIPLE, probes=PROBES, start: MultiStart = MultiStart(),
-             fit: Fit | None = None, spec: FitSpec | None = None, progress=True) -> Diagnosis:
+             max_typical_multiple: float = MAX_TYPICAL_MULTIPLE, probes: Sequence[AbstractProbe] = PROBES,
+             start: MultiStart = MultiStart(), fit: Fit | None = None, spec: FitSpec | None = None,
+             progress: ProgressArg = True) -> Diagnosis:
     r"""Compare `model` with `data`, rank every candidate effect, add the significant ones one at a time, and
     say where what is left lives.
 
@@ -47,7 +51,8 @@ def diagnose(model=DEFAULT_MODEL, data=None, *, candidates=None, free=DEFAULT_FR
     - `alpha`: family-wise significance per step, in (0, 0.5]; a candidate must reach p < alpha /
       n_candidates in the score test and p < alpha in the likelihood-ratio test after its refit.
     - `max_effects`: stop after this many (0: only rank the candidates at the baseline, no refit).
-    - `ambiguity`: |cos| between fingerprints above which two candidates are reported as ambiguous.
+    - `ambiguity`: |cos| between fingerprints above which two candidates are reported as ambiguous (as are two
+      neither of which removes significant chi2 beyond the other).
     - `min_typical_chi2`: a candidate whose typical-size fingerprint, after the baseline took up what it
       could, changes the lot's chi2 by less than this is not testable on this data, whatever its p-value
       (`gyrojax.plan` applies the same rule, `gyrojax/_numerics/testability.py`).
@@ -64,9 +69,10 @@ def diagnose(model=DEFAULT_MODEL, data=None, *, candidates=None, free=DEFAULT_FR
 
     Guards before a candidate is confirmed: its implied size is plausible; no probe explains the misfit it is
     credited with while it adds nothing beyond that probe; the refit passes the likelihood-ratio test and
-    converges; the recorded drive frequency (`drive_freq_hz`), where the steady sweeps record it, moves as the
-    refit says the PLL frequency moves (else it is "contradicted by drive_freq_hz"); and no sweep's misfit gets
-    significantly worse (else it is "contradicted by" that sweep).
+    converges; it stays significant beyond the flexible description of the misfit it leaves; the recorded drive
+    frequency (`drive_freq_hz`) moves as the refit says the PLL frequency moves; it fits better than the closed
+    form of another shape the data propose for what it takes, by a margin that grows with how different the
+    two shapes are; its q-value passes false-discovery control; and no sweep's misfit gets significantly worse.
 
     **Returns:** a `Diagnosis` (with a `verdict`: explained, partly explained or unexplained).
     """
@@ -74,17 +80,13 @@ def diagnose(model=DEFAULT_MODEL, data=None, *, candidates=None, free=DEFAULT_FR
     model, data = model_and_data("diagnose", model, data, data_required=True)
     spec = fit_spec(spec, "diagnose", free=free, start=start)
     data = fit_data(data) if isinstance(data, Table) else data
-    if fit is not None:
-        base = baseline_model(fit, data)
-    else:
-        base = as_model(model)
+    base = baseline_model(fit, data) if fit is not None else as_model(model)
     candidates, broken = _usable_candidates(base, candidates)
     say = as_progress(progress, "gyrojax.diagnose")
-    fit, fit_with = _baseline_and_refits(base, data, candidates, fit, spec, say)
-    baseline = fit
-    discrepancy, designs = score_probes(fit, probes, alpha=alpha)
-    located = locate(fit, alpha=alpha)
-    s = _Selection(fit, discrepancy, designs, located, fits=[fit], rejected=list(broken))
+    baseline, fit_with = _baseline_and_refits(base, data, candidates, fit, spec, say)
+    discrepancy, designs = score_probes(baseline, probes, alpha=alpha)
+    located = locate(baseline, alpha=alpha)
+    s = _Selection(baseline, discrepancy, designs, located, fits=[baseline], rejected=list(broken))
     compared = {}  # id(fit) -> its comparison: each fit of `fits` is compared once, during the steps or at the end
 
     def comparison(f):

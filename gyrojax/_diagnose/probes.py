@@ -24,6 +24,7 @@ from typing import ClassVar
 import equinox as eqx
 import numpy as np
 
+from .._identify import Fit
 from .._numerics.stats import chi2_sf
 from .._sweeps.registry import sweep_kind
 
@@ -67,12 +68,12 @@ class AbstractProbe(eqx.Module):
     unit: ClassVar[str]
     sweeps: ClassVar  # (AbstractSweep) -> bool
 
-    def acts_on(self, fit, sweep: str) -> bool:
+    def acts_on(self, fit: Fit, sweep: str) -> bool:
         """Whether the probe acts on the data's sweep `sweep`."""
         return sweep in fit.data.blocks and type(self).sweeps(sweep_kind(sweep))
 
     @abc.abstractmethod
-    def changes(self, fit, sweep: str) -> np.ndarray | None:
+    def changes(self, fit: Fit, sweep: str) -> np.ndarray | None:
         """The change of the predictions of `sweep` per unit coefficient, shape (device, run, point, k) in the
         sweep's output unit; None when the probe does not act on this sweep or the data lack its
         coordinate."""

@@ -3,6 +3,7 @@ JSON."""
 
 import dataclasses
 import math
+import os
 
 import numpy as np
 
@@ -179,7 +180,7 @@ class Diagnosis:
         lines.append(self.verdict_text())
         return "\n".join(lines)
 
-    def draft_effect(self, path, *, name: str = "drafted_term") -> str:
+    def draft_effect(self, path: str | os.PathLike, *, name: str = "drafted_term") -> str:
         """Write the proposed missing term (`formula`) as an effect module at `path` (a readout term named
         `name`, its typical size the fitted formula), ready for `gyrojax.load_effects_module`; returns its text.
         Raises a `ValueError` saying why when there is no complete formula or a readout term cannot hold it."""
@@ -190,7 +191,7 @@ class Diagnosis:
                              "there is no formula to draft.")
         return write_draft(self.formula, path, name=name, source=str(self.baseline.data.source or ""))
 
-    def write_report(self, out_dir) -> dict:
+    def write_report(self, out_dir: str | os.PathLike) -> dict:
         """The report folder (Markdown, JSON, PNG plots) of `write_report`; returns the JSON."""
         return write_report(self, out_dir)
 
