@@ -53,18 +53,23 @@ DEVICE_BIAS_SIGMA_DPS = 0.5  # ASSUMPTION: 0.5 deg/s device-to-device untrimmed 
 SF_SPREAD_REL = 0.02  # ASSUMPTION: 2 % device-to-device scale-factor spread (mass, gap, gain tolerances)
 F0_SPREAD_REL = 0.005  # ASSUMPTION: 0.5 % resonance spread from lithography
 FREQ_READING_SIGMA_HZ = 1e-4  # ASSUMPTION: the PLL word averaged over a 2-min dwell resolves ~0.1 mHz
+STEP_TAU_S = 900.0  # ASSUMPTION: a packaged die follows a chamber step with a 15-minute time constant
 CYCLE_K = (6.0, 3.0)  # ASSUMPTION: chamber cycle amplitude of run 0, run 1 (the last repeats for more runs)
 
 
 @dataclasses.dataclass(frozen=True)
 class Design:
     """A device design: nominal scale factor (LSB per deg/s), drive frequency (Hz) and VCF equivalent rate per
-    volt (deg/s per V at V_fc = 1 V)."""
+    volt (deg/s per V at V_fc = 1 V), and the protocol it is measured with: `"cycle"` (the rates in sweep order
+    while the chamber runs one half-sine cycle per run) or `"shuffled-ramp"` (the rates in a random order per
+    run while the chamber steps, up on even runs and down on odd ones, and the die follows it with the time
+    constant `STEP_TAU_S`)."""
 
     name: str
     sf_lsb_per_dps: float
     f0_hz: float
     vcf_dps_per_v: float
+    protocol: str = "cycle"
 
 
 DESIGNS = {
@@ -72,6 +77,8 @@ DESIGNS = {
     "a": Design("a", 13700.0, 4634.0, 100.0),
     # far apart: twice the drive frequency (stiffer springs) and 0.6x the scale factor; Omega_eq ~ 1/omega_d
     "b": Design("b", 0.6 * 13700.0, 2.0 * 4634.0, 50.0),
+    # design a on another protocol: the input order no longer follows the time, nor dT/dt its sign
+    "c": Design("c", 13700.0, 4634.0, 100.0, protocol="shuffled-ramp"),
 }
 
 SWEEPS = ("rate_table", "vcf_static", "dac")
@@ -117,11 +124,12 @@ def _rows(design, n_devices, n_runs, rng):
         name = f"disc-{design.name}-{d:02d}"
         for r in range(n_runs):
             amp = CYCLE_K[min(r, len(CYCLE_K) - 1)]
-            temp = AMBIENT_C + amp * np.sin(np.pi * t / t_end)
-            dtdt = amp * np.pi / t_end * np.cos(np.pi * t / t_end)
+            temp, dtdt = _chamber(design, r, amp, t, t_end)
+            order = rng.permutation(n) if design.protocol == "shuffled-ramp" else np.arange(n)
             rel = TCF_PER_K * (temp - AMBIENT_C)
             rate_gain = sf * (1.0 + rel)  # the Coriolis force follows omega_d; the VCF force does not
-            for sweep, x, gain in (("rate_table", RATES_DPS, rate_gain), ("vcf_static", VCF_AMPLITUDES_V, g_vcf)):
+            for sweep, x, gain in (("rate_table", RATES_DPS[order], rate_gain),
+                                   ("vcf_static", VCF_AMPLITUDES_V[order], g_vcf)):
                 f = f0 * (1.0 + rel) + FREQ_READING_SIGMA_HZ * rng.normal(size=n)
                 b = sf * (bias_dev + TURN_ON_BIAS_SIGMA_DPS * rng.normal())
                 add(device=name, run=r, sweep=sweep, input=x, clean=gain * x, bias=b, sigma=sf * sigma_dps,
@@ -139,6 +147,16 @@ def _rows(design, n_devices, n_runs, rng):
 # ----------------------------------------------------------------------------------------------------------------
 # Hidden effects. Each returns the change of the output per row at unit size (zero on the rows it leaves alone);
 # `lot` holds the clean rows. Sizes are in the unit the `unit` field names.
+
+def _chamber(design, run, amp, t, t_end):
+    """The die temperature and dT/dt at the dwell times `t` of run `run` (chamber amplitude `amp`, K)."""
+    if design.protocol == "shuffled-ramp":
+        sign = 1.0 if run % 2 == 0 else -1.0
+        settled = np.exp(-t / STEP_TAU_S)  # the share of the step still to come
+        temp = AMBIENT_C + amp * (1.0 - settled if sign > 0 else settled)
+        return temp, sign * amp / STEP_TAU_S * settled
+    return AMBIENT_C + amp * np.sin(np.pi * t / t_end), amp * np.pi / t_end * np.cos(np.pi * t / t_end)
+
 
 def _mask(lot, *sweeps):
     return np.isin(lot.columns["sweep"], sweeps)

@@ -21,7 +21,17 @@ import numpy as np
 
 from .._sweeps.registry import sweep_kind
 from .._text import safe_name as clean
-from .descriptions import SIGNED, Description, coordinates, describe, interactions, spline_basis, strength
+from .descriptions import (
+    SIGNED,
+    WITHIN_RUN_SHARE,
+    Description,
+    coordinates,
+    describe,
+    interactions,
+    spline_basis,
+    spread,
+    strength,
+)
 from .space import ResidualSpace
 
 
@@ -154,6 +164,8 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS) -> L
         primary = min([best] + confounded, key=_preference)
         confounded = tuple(dict.fromkeys(d.coordinate for d in [best] + confounded if d is not primary))
         best = primary
+        if best.coordinate == "run":  # a coordinate constant within runs is described only as the run
+            confounded = tuple(dict.fromkeys(confounded + run_properties(fit.data.blocks[best.sweep])))
         members, joined = [best], space.with_columns(best.columns)
         for d in sorted(significant, key=strength, reverse=True):
             if d.sweep in {m.sweep for m in members} or (d.coordinate, d.family) != (best.coordinate, best.family):
@@ -167,6 +179,26 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS) -> L
         space = joined
     hints = hints or (None, None)
     return Localisation(tuple(found), notes, *hints)
+
+
+def run_properties(block) -> tuple:
+    """The coordinates of a sweep block that are constant within each run but differ between the runs of a
+    device (a chamber that steps between runs: its temperature's rate of change): what a misfit that changes
+    from run to run may follow."""
+    mask = np.asarray(block.mask)
+    out = []
+    for name, x in coordinates(block).items():
+        x = np.where(mask, np.asarray(x, float), 0.0)
+        run, _, lot = spread(x, mask)
+        if lot <= 0 or run > WITHIN_RUN_SHARE * lot:
+            continue
+        v = np.where(mask, x, np.nan)
+        with np.errstate(all="ignore"):
+            means = np.nanmean(v, axis=2)  # (device, run)
+            between = np.nanmax(np.nanmax(means, axis=1) - np.nanmin(means, axis=1))
+        if np.isfinite(between) and between > WITHIN_RUN_SHARE * lot:
+            out.append(name)
+    return tuple(out)
 
 
 def _hints(descs):
@@ -216,7 +248,7 @@ def _location(space, fit, members, confounded) -> Location:
     sc = space.score(cols)
     excess = space.excess
     share = min(max(sc.statistic - sc.df, 0.0) / excess, 1.0) if excess > 0 else 0.0
-    shares = _measured_shares(space, fit, best)
+    shares = _measured_shares(space, fit, best, sc)
     location = _where(fit, space, best, members, sc)
     size, reason = _size(fit, space, members, sc)
     return Location(best.coordinate, best.family, _shape_words(best), shares, sc.statistic, sc.df, share,
@@ -240,8 +272,11 @@ def _shape_words(d: Description) -> str:
     return f"{what} that varies smoothly along {d.coordinate}"
 
 
-def _measured_shares(space, fit, best: Description) -> tuple:
-    """Each sweep's share of the misfit along `best`'s coordinate and family, fitted to its own residuals."""
+def _measured_shares(space, fit, best: Description, sc) -> tuple:
+    """Each sweep's share of the misfit along `best`'s coordinate and family, fitted to its own residuals.
+    Where those fits together find under `MEASURED_FLOOR` of the location's chi2 `sc` (a misfit seen only beyond
+    the fit's own span: a gain that changes with a coordinate the fit's gains nearly follow), the shares of the
+    location's own description (`sc`'s fingerprint) instead: a sweep's residuals as they are say nothing there."""
     if best.family in ("step", "periodic"):
         return ((best.sweep, 1.0),)
     found = {}
@@ -268,9 +303,18 @@ def _measured_shares(space, fit, best: Description) -> tuple:
             g = hats * pred[..., None] if best.family == "gain" else hats
         found[sweep] = space.raw_excess(space.columns({sweep: g}), sweep)
     total = sum(found.values())
+    if total < MEASURED_FLOOR * sc.statistic:
+        fp = np.asarray(sc.fingerprint, float) ** 2
+        found = {s: float(np.sum(fp[:, i:j])) for s, (i, j) in space.blocks.items()}
+        total = sum(found.values())
     if total <= 0:
         return ()
     return tuple(sorted(((s, v / total) for s, v in found.items() if v / total >= 0.05), key=lambda x: -x[1]))
+
+
+# Below this share of a location's chi2, the sweeps' own residuals do not measure where it lives (see
+# `_measured_shares`).
+MEASURED_FLOOR = 0.1
 
 
 def _rows_of(space, sweep):
