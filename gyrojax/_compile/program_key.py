@@ -78,7 +78,12 @@ def _package_versions() -> tuple:
 
 def _gyrojax_files_hash() -> str:
     """A hash of every file of the gyrojax package (its code and data)."""
-    root = os.path.dirname(os.path.abspath(__file__))
+    return _files_hash(_gyrojax_files())
+
+
+def _gyrojax_files() -> tuple:
+    """(path relative to the package, path, mtime, size) of every file of the gyrojax package, in order."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # gyrojax/, not this wing's folder
     files = []
     for folder, dirs, names in os.walk(root):
         dirs[:] = sorted(d for d in dirs if d != "__pycache__")
@@ -87,7 +92,7 @@ def _gyrojax_files_hash() -> str:
                 path = os.path.join(folder, name)
                 st = _stat(path)
                 files.append((os.path.relpath(path, root), path, st.st_mtime_ns, st.st_size))
-    return _files_hash(tuple(files))
+    return tuple(files)
 
 
 @functools.cache
