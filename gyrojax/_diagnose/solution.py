@@ -3,6 +3,7 @@ JSON."""
 
 import dataclasses
 import math
+from typing import ClassVar
 
 import numpy as np
 
@@ -10,7 +11,7 @@ from .._effects.registry import EFFECTS
 from .._identify import Fit
 from .compare import nonlinearity_residual_ppm
 from .guards import MAX_TYPICAL_MULTIPLE
-from .report import discrepancy_text, nonlinearity_not_determined, write_report
+from .report import discrepancy_text, markdown_text, nonlinearity_not_determined, write_report
 
 
 # ASSUMPTION: each effect's `typical(1.0)` is a realistic size with a provenance; a device more than 20 times
@@ -71,6 +72,8 @@ class Diagnosis:
     max_typical_multiple: float = MAX_TYPICAL_MULTIPLE
     formula: object = None  # `Formula` proposed for the leading discrepancy (gyrojax/_diagnose/formula.py)
     notes: tuple = ()  # coordinates the localisation did not describe along, and why
+
+    kind: ClassVar[str] = "diagnosis"  # the result's name for output formats (gyrojax.io.AbstractResult)
 
     @property
     def selected(self) -> tuple[str, ...]:
@@ -188,6 +191,10 @@ class Diagnosis:
             raise DraftError(f"no term of the dictionary is significant in what is left (verdict: {self.verdict}): "
                              "there is no formula to draft.")
         return write_draft(self.formula, path, name=name, source=str(self.baseline.data.source or ""))
+
+    def markdown(self) -> str:
+        """The Markdown page of the report folder (`diagnosis.md`) without its plots."""
+        return markdown_text(self)
 
     def write_report(self, out_dir) -> dict:
         """The report folder (Markdown, JSON, PNG plots) of `write_report`; returns the JSON."""

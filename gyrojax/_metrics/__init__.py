@@ -25,6 +25,7 @@ from .asymmetry import asymmetry as asymmetry
 from .bandwidth import RateBandwidth as RateBandwidth, rate_bandwidth as rate_bandwidth
 from .repeatability import repeatability as repeatability
 from .report import metrics_report as metrics_report, scale_factor_units as scale_factor_units
+from .result import MetricsReport as MetricsReport
 from .scale_factor import (
     FULL_SCALE_CONVENTIONS as FULL_SCALE_CONVENTIONS,
     MIN_POINTS_LINEAR as MIN_POINTS_LINEAR,

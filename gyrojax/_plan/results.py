@@ -2,6 +2,7 @@
 the scale factor's `ScaleFactorDesign`; their summaries and JSON."""
 
 import math
+from typing import ClassVar
 
 import equinox as eqx
 import numpy as np
@@ -166,6 +167,8 @@ class Plan(eqx.Module):
         nothing is recommended."""
         return simulate_runs(self.runs(), gyro, table, devices=devices, runs_given=runs, seed=seed,
                              noise_seed=noise_seed)
+
+    kind: ClassVar[str] = "plan"
 
     def to_json(self) -> dict:
         """The plan as JSON (numbers that are not finite, e.g. an undetermined stderr, are null)."""
