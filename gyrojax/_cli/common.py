@@ -60,6 +60,41 @@ def write_json(obj, path) -> None:
         raise RuntimeError(str(e)) from None
 
 
+def result_options(parser, what: str) -> None:
+    """The options of a command that writes a result: --json FILE, and --out FILE in --format NAME."""
+    parser.add_argument("--out", metavar="FILE",
+                        help=f"write the {what} here, in the format --format names or else the one of FILE's suffix "
+                             "(.json, .md, .txt, or a format registered with gyrojax.io.register_format)")
+    parser.add_argument("--format", metavar="NAME",
+                        help="the format of --out: json, markdown, text, or a registered one's name")
+
+
+def check_result_outputs(args, *outputs) -> None:
+    """Before any work: --out's format is known (a `ValueError` names the file and the known formats), and every
+    output path of the command (--json, --out, then `outputs`) can be written."""
+    from .._report import format_for
+
+    if args.format is not None and args.out is None:
+        raise ValueError(f"--format {args.format} needs --out FILE: the file to write the result to in that format "
+                         "(--json always writes JSON)")
+    if args.out is not None:
+        format_for(args.out, args.format)
+    check_outputs(("--json", args.json, False), ("--out", args.out, False), *outputs)
+
+
+def write_result_files(args, result) -> None:
+    """`result` written to --json (as JSON) and to --out (in its format), each followed by "wrote FILE"."""
+    from .._report import write_result
+
+    for path, fmt in ((args.json, "json"), (args.out, args.format)):
+        if path:
+            try:
+                write_result(result, path, fmt)
+            except ValueError as e:  # a NaN in a result: a computation that did not give a number
+                raise RuntimeError(str(e)) from None
+            print(f"wrote {path}")
+
+
 def model_arg(text):
     """A --model (or simulate's --preset): a preset's name or the path of an existing device file (.toml)."""
     from .._device.file import is_device_file

@@ -9,13 +9,14 @@ from .._text import safe_name, safe_text
 from .common import (
     EXIT_FAILED,
     EXIT_OK,
-    check_outputs,
+    check_result_outputs,
     device_names,
     effects_module_option,
     model_arg,
     positive_int,
+    result_options,
     table_and_fit,
-    write_json,
+    write_result_files,
 )
 
 
@@ -51,8 +52,7 @@ def handle(args):
                          "description and candidate, and each step's fit are decided for the lot as a whole. Fit a "
                          "large lot with gyrojax identify --workers, and diagnose a sample of its devices (a few "
                          "hundred) in one process.")
-    check_outputs(("--json", args.json, False), ("--report", args.report, True),
-                   ("--draft-effect", args.draft_effect, False))
+    check_result_outputs(args, ("--report", args.report, True), ("--draft-effect", args.draft_effect, False))
     table, fit = table_and_fit(args)
     diag = diagnose(args.model, table, alpha=args.alpha, fit=fit, progress=not args.quiet)
     names = device_names(table)
@@ -62,9 +62,7 @@ def handle(args):
             write_report(diag, folder)
             _escape_markdown(folder, names)
         print(f"wrote report to {args.report}")
-    if args.json:
-        write_json(diag.to_json(), args.json)
-        print(f"wrote {args.json}")
+    write_result_files(args, diag)
     if args.draft_effect:
         from .._diagnose.draft import DraftError, write_draft
 
@@ -98,6 +96,7 @@ def add_parser(sub) -> None:
     diag.add_argument("--alpha", type=_alpha, default=0.01,
                       help="family-wise significance per step, in (0, 0.5] (default 0.01)")
     diag.add_argument("--json", help="write the diagnosis as JSON here (keys in docs/diagnosis.md)")
+    result_options(diag, "diagnosis")
     diag.add_argument("--report", metavar="DIR",
                       help="write a Markdown report with PNG plots into the folder DIR (new, empty, or written by "
                            "gyrojax before: it is replaced as a whole)")

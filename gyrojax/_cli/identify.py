@@ -7,14 +7,15 @@ from .._text import safe_name, safe_text
 from .common import (
     EXIT_FAILED,
     check_finite_effects,
-    check_outputs,
+    check_result_outputs,
     device_and_free,
     device_names,
     effects_module_option,
     load_effects,
     model_arg,
     positive_int,
-    write_json,
+    result_options,
+    write_result_files,
 )
 
 
@@ -28,13 +29,12 @@ def _name_list(text):
 def handle(args):
     from .._data.files import read_table
     from .._device.check import checked_start
-    from .._diagnose.compare import compare
     from .._identify import PopulationFit, PopulationSolve, identify
     from .._identify.fitio import save_fit
-    from .._identify.report import fit_report
+    from .._identify.report import IdentifyReport
     from .._model.parameters import DEFAULT_FREE, Model, zero_effect
 
-    check_outputs(("--json", args.json, False), ("--save", args.save, False))
+    check_result_outputs(args, ("--save", args.save, False))
     load_effects(args)
     if args.workers is not None or args.scheduler is not None:
         return _identify_distributed(args)
@@ -46,19 +46,10 @@ def handle(args):
     # --population: a population fit (random effects: the lot's mean and spread estimated with the devices).
     lot_solve = "vmap" if args.population is None else PopulationSolve(random=args.population or None)
     result = identify(model, table, free=args.free or free or DEFAULT_FREE, lot_solve=lot_solve)
-    population = result if isinstance(result, PopulationFit) else None
-    fit = result.fit if population is not None else result
-    names = device_names(table)
-    print(safe_text(fit.summary(), names))
-    print(safe_text(compare(fit).summary(), names))
-    if population is not None:
-        print(safe_text(population.summary(), names))
-    if args.json:
-        report = fit_report(fit)
-        if population is not None:
-            report["population"] = population.report()
-        write_json(report, args.json)
-        print(f"wrote {args.json}")
+    population, fit = (result, result.fit) if isinstance(result, PopulationFit) else (None, result)
+    report = IdentifyReport(fit, population)
+    print(safe_text(report.summary(), device_names(table)))
+    write_result_files(args, report)
     if args.save:
         save_fit(fit, args.save)
         print(f"wrote {args.save}")
@@ -82,6 +73,7 @@ def _identify_distributed(args):
     refused = [(args.workers is not None and args.scheduler is not None, "--scheduler (give one of the two)"),
                (args.population is not None, "--population (a population fit couples the devices)"),
                (args.save, "--save (the merged result is --json's report; each chunk's is in its results folder)"),
+               (args.out, "--out (the merged result is --json's report)"),
                (args.start_from_data, "--start-from-data (it reads the whole file)")]
     for bad, what in refused:
         if bad:
@@ -131,6 +123,7 @@ def add_parser(sub) -> None:
                           "them; each device is shrunk toward the lot, a device missing sweeps gets a prediction "
                           "interval (docs/population.md; the JSON gets a 'population' section)")
     idf.add_argument("--json", help="write the report (keys in docs/cli.md) as JSON here")
+    result_options(idf, "report")
     idf.add_argument("--save", metavar="FIT", help="save the fit here (read back with gyrojax.load_fit)")
     idf.add_argument("--start-from-data", action="store_true",
                      help="before the fit, move the device's drive resonance, DAC full scale and scale-factor gain "

@@ -7,19 +7,20 @@ import math
 from .._text import safe_text
 from .common import (
     EXIT_OK,
-    check_outputs,
+    check_result_outputs,
     device_names,
     effects_module_option,
     model_arg,
+    result_options,
     table_and_fit,
-    write_json,
+    write_result_files,
 )
 
 
 def handle(args):
     from .._plan import plan
 
-    check_outputs(("--json", args.json, False))
+    check_result_outputs(args)
     if args.rate_table_target is not None:
         return _cmd_rate_table_plan(args)
     if args.data is None:
@@ -28,9 +29,7 @@ def handle(args):
     table, fit = table_and_fit(args)
     result = plan(args.model, table, fit=fit, budget_min=args.budget_min, progress=not args.quiet)
     print(safe_text(result.summary(), device_names(table)))
-    if args.json:
-        write_json(result.to_json(), args.json)
-        print(f"wrote {args.json}")
+    write_result_files(args, result)
     return EXIT_OK
 
 
@@ -55,9 +54,7 @@ def _cmd_rate_table_plan(args):
         spread = args.lot_spread
     result = rate_table_plan(spread, args.rate_table_target, devices=devices or 64, own=args.own)
     print(result.summary())
-    if args.json:
-        write_json(result.report(), args.json)
-        print(f"wrote {args.json}")
+    write_result_files(args, result)
     return EXIT_OK
 
 
@@ -103,6 +100,7 @@ def add_parser(sub) -> None:
                      help="test time for the scale factor's design, minutes (default 135: three runs of seed "
                           "000's protocol; at least one run, 45 min)")
     pln.add_argument("--json", help="write the plan as JSON here (keys in docs/planning.md)")
+    result_options(pln, "plan")
     pln.add_argument("--quiet", action="store_true", help="no progress messages (on standard error)")
     rt = pln.add_argument_group("how many devices to rate-table (the rest predicted by a population fit; no DATA)")
     rt.add_argument("--rate-table-target", type=_relative, metavar="R",

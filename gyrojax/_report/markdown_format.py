@@ -21,7 +21,7 @@ class MarkdownFormat(AbstractFormat):
 
     def render(self, result: AbstractResult) -> bytes:
         own = getattr(result, "markdown", None)
-        text = own() if callable(own) else generic_markdown(result)
+        text = str(own()) if callable(own) else generic_markdown(result)
         for title, image in self.figures:
             text += "\n" + "\n".join([f"## {title}", "", f"![{title}]({image})", ""])
         return text.encode()
