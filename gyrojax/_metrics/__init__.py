@@ -18,7 +18,8 @@ standard deviation), the choice is gyrojax's and is written down here. (The word
 memory of their definitions, not checked against their text here.)
 
 One concept per file: `arrays.py` (what every metric shares), `scale_factor.py`, `asymmetry.py`,
-`repeatability.py`, `bandwidth.py`, and `report.py` (`metrics_report` over a table).
+`repeatability.py`, `bandwidth.py`, `report.py` (`metrics_report` over a table) and `result.py` (`MetricsReport`,
+what it returns).
 """
 
 from .asymmetry import asymmetry as asymmetry
