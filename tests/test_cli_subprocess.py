@@ -59,8 +59,8 @@ def test_bad_inputs_exit_cleanly_without_traceback(tmp_path, argv, code, message
 SLOW_JSON = textwrap.dedent("""
     import sys, time
     import gyrojax.cli as cli
-    from gyrojax._cli import common
     from gyrojax._data import io as _io
+    from gyrojax._report import json_format
     def slow(obj, path):
         with _io.atomic_open(path, "w") as f:
             f.write("{\\n")
@@ -72,7 +72,7 @@ SLOW_JSON = textwrap.dedent("""
                 time.sleep(0.01)
             f.write('  "end": 0\\n}\\n')
 
-    common.atomic_write_json = slow  # the subcommands' JSON writer (gyrojax/_cli/common.py)
+    json_format.atomic_write_json = slow  # the JSON format's writer (gyrojax/_report/json_format.py)
     sys.exit(cli.main(sys.argv[1:]))
 """)
 
