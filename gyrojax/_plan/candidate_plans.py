@@ -37,7 +37,7 @@ def typical(fit: Fit, name: str, cols) -> np.ndarray:
     """The effect at its typical size in internal units: typical(1.0) over each element's scale."""
     entries = [e for e in fit.entries if e.effect_index is not None and e.label.split(".")[0] == name]
     typ = EFFECTS[name].typical(1.0)
-    out = [np.ravel(np.asarray(getattr(typ, e.field), dtype=float)) / np.asarray(e.scale) for e in entries]
+    out = [np.ravel(np.asarray(getattr(typ, e.effect_field), dtype=float)) / np.asarray(e.scale) for e in entries]
     theta = np.concatenate(out) if out else np.zeros(0)
     if theta.size != len(cols):
         raise ValueError(f"effect {name!r}: {len(cols)} columns in the fit, {theta.size} typical values.")

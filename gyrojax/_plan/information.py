@@ -19,7 +19,8 @@ def reduce_rows(rows: np.ndarray) -> np.ndarray:
     rows = np.asarray(rows, dtype=float)
     if rows.shape[0] == 0:
         return np.zeros((0, rows.shape[1]))
-    return np.linalg.qr(rows, mode="r")
+    # numpy's stubs type every mode's result as QRResult; mode="r" returns the array R.
+    return np.linalg.qr(rows, mode="r")  # pyright: ignore[reportReturnType]
 
 
 def kept_columns(blocks, cols, threshold):

@@ -24,12 +24,15 @@ keeps the best; seed 000's 22-rate protocol at equal time is the reference.
 
 import dataclasses
 import math
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax
 import numpy as np
 
+from .._data.table import Table
 from .._diagnose.candidates import baseline_fit, baseline_model, candidate_effects
+from .._gyroscope import Gyroscope
 from .._identify import Fit
 from .._identify.fit import p_text
 from .._identify.order import DEFAULT_MODEL, model_and_data
@@ -37,8 +40,8 @@ from .._identify.problem import sf_temperature
 from .._identify.spec import FitSpec, fit_spec
 from .._lots.noise import RateNoise
 from .._model.fitdata import FitData, fit_data
-from .._model.parameters import DEFAULT_FREE, as_model
-from .._progress import as_progress
+from .._model.parameters import DEFAULT_FREE, Model, as_model
+from .._progress import ProgressArg, as_progress
 from .._sweeps.protocol import Protocol
 from .._sweeps.rate_table import RateTable
 from .._sweeps.registry import SWEEP_KINDS
@@ -106,10 +109,12 @@ def _baseline(data, model, fit, candidates, spec, reads, say):
     return fit, candidates, added
 
 
-def plan(model=DEFAULT_MODEL, data=None, *, fit: Fit | None = None, candidates=None, experiments=None,
-         budget_min: float | None = None, alpha: float = 0.01, target_power: float = 0.9, max_repeats: int = 3,
-         protocol: Protocol = Protocol(), free=DEFAULT_FREE, identifiability_threshold: float = 1.0,
-         scale_factor: bool = True, spec: FitSpec | None = None, progress=True) -> Plan:
+def plan(model: Model | Gyroscope | str = DEFAULT_MODEL, data: Table | FitData | None = None, *,
+         fit: Fit | None = None, candidates: Sequence[str] | None = None,
+         experiments: Sequence[CandidateExperiment] | None = None, budget_min: float | None = None,
+         alpha: float = 0.01, target_power: float = 0.9, max_repeats: int = 3, protocol: Protocol = Protocol(),
+         free: Sequence[str] = DEFAULT_FREE, identifiability_threshold: float = 1.0, scale_factor: bool = True,
+         spec: FitSpec | None = None, progress: ProgressArg = True) -> Plan:
     r"""Plan the measurements that make each candidate effect testable, and the scale factor's calibration.
 
     **Arguments:**

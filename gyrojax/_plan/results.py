@@ -2,12 +2,14 @@
 the scale factor's `ScaleFactorDesign`; their summaries and JSON."""
 
 import math
-from typing import ClassVar
+from collections.abc import Sequence
+from typing import ClassVar, overload
 
 import equinox as eqx
 import numpy as np
 
 from .._data.table import Table
+from .._gyroscope import Gyroscope
 from .._identify import Fit
 from .._model.parameters import DEFAULT_FREE
 from .._numerics.testability import MIN_TYPICAL_CHI2
@@ -149,13 +151,13 @@ class Plan(eqx.Module):
                 out[r.experiment.name] = (e, max(k, r.runs), who + (c.effect,))
         return out
 
-    def free(self, free=DEFAULT_FREE) -> tuple:
+    def free(self, free: Sequence[str] = DEFAULT_FREE) -> tuple:
         """The `free` argument of `gyrojax.diagnose` (or `identify`) for the data given plus `runs()`: `free`
         and the parameters those runs read (`CandidateExperiment.reads`), as the plan's expected chi2 assumes."""
         read = (p for e, _, _ in self.runs().values() for p in e.reads)
         return tuple(dict.fromkeys(tuple(free) + tuple(read)))
 
-    def simulate(self, gyro, table=None, *, devices: int = 1, runs: int = 1, seed: int = 0,
+    def simulate(self, gyro: Gyroscope, table: Table | None = None, *, devices: int = 1, runs: int = 1, seed: int = 0,
                  noise_seed: int = 1000) -> Table:
         """A simulation study's next step: `runs()` simulated for the lot that `gyrojax.simulate_table(gyro,
         devices=devices, runs=runs, seed=seed)` drew (`gyrojax.campaign_lot`), each device on its own with
@@ -232,7 +234,15 @@ def _data_sf_text(s: ScaleFactorDesign, devices) -> str:
     return text
 
 
-def _finite(obj):
+@overload
+def _finite(obj: dict) -> dict: ...
+
+
+@overload
+def _finite(obj: object) -> object: ...
+
+
+def _finite(obj: object) -> object:
     if isinstance(obj, dict):
         return {k: _finite(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):

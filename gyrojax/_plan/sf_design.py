@@ -79,6 +79,9 @@ def sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thre
             current, sets, used = _greedy_points(variance, levels, runs, used, budget, dwell)
             if best is None or current < best[0]:
                 best = (current, dict(sets), dict(runs), used)
+    if best is None:
+        raise ValueError(f"scale-factor design: a budget of {budget:g} min holds no rate-table run (a warm-up and "
+                         f"two points take {warm + 2 * dwell:g} min).")
     _, sets, runs, used = best
     stderr = [math.sqrt(per_device(sets, runs, d)) for d in range(n_dev)]
     data_se, undetermined = _data_sf_errors(fit, jac0, g)
@@ -96,7 +99,7 @@ def _greedy_points(variance, levels, runs, used, budget, dwell):
     starts with its best pair of opposite levels, then single points are added by the largest variance drop
     per minute while `budget` allows. Returns (the scale factor's variance, the points per kind, minutes)."""
     kinds = list(levels)
-    sets = {k: () for k in kinds}
+    sets: dict[str, tuple[int, ...]] = {k: () for k in kinds}
     for kind in kinds:
         if not runs.get(kind):
             continue
