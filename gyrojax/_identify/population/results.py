@@ -74,7 +74,7 @@ class PopulationFit(eqx.Module):
     def devices(self) -> tuple[str, ...]:
         return self.fit.devices
 
-    def interval(self, level: float = 0.95):
+    def interval(self, level: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
         """(low, high) per device: the scale factor's `level` interval (a prediction interval where sweeps are
         missing), Student-t with `sf_dof` degrees of freedom."""
         if not 0.0 < level < 1.0:
