@@ -65,17 +65,19 @@ def handle(args):
     write_result_files(args, diag)
     if args.draft_effect:
         from .._diagnose.draft import DraftError, write_draft
+        from .._diagnose.formula import Formula
 
-        if diag.formula is None:
+        formula = diag.formula  # a Formula or None (Diagnosis types it as object)
+        if not isinstance(formula, Formula):
             print("gyrojax diagnose: no draft written: no term of the dictionary is significant in what is left "
                   f"(verdict: {diag.verdict})", file=sys.stderr)
             return EXIT_FAILED
         try:
-            write_draft(diag.formula, args.draft_effect, source=str(args.data))
+            write_draft(formula, args.draft_effect, source=str(args.data))
         except DraftError as e:
             print(f"gyrojax diagnose: no draft written: {e}", file=sys.stderr)
             return EXIT_FAILED
-        print(f"wrote {args.draft_effect}: {diag.formula.description}; load it with --effects-module")
+        print(f"wrote {args.draft_effect}: {formula.description}; load it with --effects-module")
     if "not converged" in diag.final.status:
         bad = [f"{safe_name(d)}: {m}" for d, m, st in zip(diag.final.devices, diag.final.result_message,
                                                             diag.final.status) if st == "not converged"]
