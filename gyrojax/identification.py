@@ -2,7 +2,8 @@
 first solve (`MultiStart`), the recovery policies tried after it (`AbstractRecovery`, the built-in ones and their
 default tuple `RECOVERY`) with what a policy receives and returns (`Solving`, `Solution`, its `Evaluation`, the
 integer codes of `result_code`), the lot strategies (`AbstractLotSolve` and its kinds) and the population records
-(`PopulationParameter`). A new recovery policy is one `AbstractRecovery` (docs: "Extending", "A recovery policy").
+(`PopulationParameter`), and `IdentifyReport` (what `gyrojax identify` prints and writes: the fit, where the
+model fails, the population). A new recovery policy is one `AbstractRecovery` (docs: "Extending", "A recovery policy").
 
 This module only re-exports; the code lives in the private modules it imports from.
 """
@@ -23,6 +24,7 @@ from ._identify.recovery import (
     Solution as Solution,
     Solving as Solving,
 )
+from ._identify.report import IdentifyReport as IdentifyReport
 from ._identify.spec import FitSpec as FitSpec
 from ._identify.strategies import (
     AbstractLotSolve as AbstractLotSolve,
@@ -39,6 +41,7 @@ __all__ = [
     "DecrementCertificate",
     "Evaluation",
     "FitSpec",
+    "IdentifyReport",
     "JointSolve",
     "LoopSolve",
     "MultiStart",

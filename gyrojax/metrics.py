@@ -1,12 +1,13 @@
 """Figures of merit of a rate sensor: the scale factor fit with its nonlinearity (`fit_scale_factor`,
-`FULL_SCALE_CONVENTIONS`), asymmetry, repeatability, rate bandwidth, the whole-lot `metrics_report`, and the
-nonlinearity budget over a device's effects.
+`FULL_SCALE_CONVENTIONS`), asymmetry, repeatability, rate bandwidth, the whole-lot `metrics_report` (a
+`MetricsReport`), and the nonlinearity budget over a device's effects.
 
 This module only re-exports; the code lives in the private modules it imports from.
 """
 
 from ._metrics import (
     FULL_SCALE_CONVENTIONS as FULL_SCALE_CONVENTIONS,
+    MetricsReport as MetricsReport,
     RateBandwidth as RateBandwidth,
     ScaleFactorFit as ScaleFactorFit,
     asymmetry as asymmetry,
@@ -25,6 +26,7 @@ from ._sensitivity import (
 __all__ = [
     "EffectContribution",
     "FULL_SCALE_CONVENTIONS",
+    "MetricsReport",
     "NonlinearityBudget",
     "RateBandwidth",
     "ScaleFactorFit",

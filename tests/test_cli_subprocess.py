@@ -60,6 +60,7 @@ SLOW_JSON = textwrap.dedent("""
     import sys, time
     import gyrojax.cli as cli
     from gyrojax._data import io as _io
+    from gyrojax._report import json_format
     def slow(obj, path):
         with _io.atomic_open(path, "w") as f:
             f.write("{\\n")
@@ -71,7 +72,7 @@ SLOW_JSON = textwrap.dedent("""
                 time.sleep(0.01)
             f.write('  "end": 0\\n}\\n')
 
-    cli.atomic_write_json = slow
+    json_format.atomic_write_json = slow  # the JSON format's writer (gyrojax/_report/json_format.py)
     sys.exit(cli.main(sys.argv[1:]))
 """)
 

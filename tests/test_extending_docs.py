@@ -32,8 +32,8 @@ CONTRACTS = {
                     "gyrojax.identification.RECOVERY"),
     "compensator.md": ("gyrojax.compensation.AbstractCompensator", "gyrojax.compensation.AbstractCompensation",
                        "gyrojax.compensation.RatePoints"),
-    "output_format.md": ("gyrojax.io.atomic_write_bytes", "gyrojax.io.atomic_write_json",
-                         "gyrojax.io.atomic_directory"),
+    "output_format.md": ("gyrojax.io.AbstractFormat", "gyrojax.io.AbstractResult", "gyrojax.io.register_format",
+                         "gyrojax.io.write_result", "gyrojax.io.FORMATS", "gyrojax.io.atomic_write_bytes"),
     "../adding_an_effect.md": ("gyrojax.AbstractEffect", "gyrojax.effects.AbstractEffect",
                                "gyrojax.effects.register_effect"),
 }

@@ -15,8 +15,9 @@ from gyrojax._model.parameters import Model, batched, build_entries, zero_effect
 from gyrojax._numerics.stats import chi2_isf, ncx2_sf
 from gyrojax._plan import experiment as plan_experiment
 from gyrojax._plan.experiment import NoiseLevel, jacobians, predict, weighted_rows, window_correlation
-from gyrojax._plan.plan import Recommendation, _kept, _nuisances, _reduce, _residual_chi2, _run_info, _sf_variance
+from gyrojax._plan.information import kept_columns, nuisances, reduce_rows, residual_chi2, run_info, sf_variance
 from gyrojax._plan.power import power, required_noncentrality
+from gyrojax._plan.results import Recommendation
 from gyrojax.cli import main
 
 
@@ -59,8 +60,8 @@ def test_expected_chi2_equals_a_refit_on_a_noise_free_linear_case():
     theta = np.array([0.7, -1.3])
     nuis, eff = [0, 1, 2, 3], [4, 5]
     exp = _experiment(9)
-    blocks = [np.concatenate([_reduce(j0), _reduce(weighted_rows(exp, jn, sig))])]
-    lam = _residual_chi2(blocks[0], nuis, eff, theta)
+    blocks = [np.concatenate([reduce_rows(j0), reduce_rows(weighted_rows(exp, jn, sig))])]
+    lam = residual_chi2(blocks[0], nuis, eff, theta)
     # brute force: the whole design with an explicit bias column for the new run, refitted without the effect
     y = np.concatenate([j0[:, eff] @ theta, (jn[:, eff] @ theta) / sig])
     x = np.zeros((39, 5))
@@ -71,8 +72,8 @@ def test_expected_chi2_equals_a_refit_on_a_noise_free_linear_case():
     assert lam == pytest.approx(float(resid @ resid), rel=1e-9)
     assert lam > 0.1
     # the existing data alone: the duplicated column is held by identification's rule, and changes nothing
-    assert _kept([_reduce(j0)], nuis, 1.0) == [0, 1, 2]
-    alone = _residual_chi2(_reduce(j0), [0, 1, 2], eff, theta)
+    assert kept_columns([reduce_rows(j0)], nuis, 1.0) == [0, 1, 2]
+    alone = residual_chi2(reduce_rows(j0), [0, 1, 2], eff, theta)
     y0 = j0[:, eff] @ theta
     r0 = y0 - j0[:, :3] @ np.linalg.lstsq(j0[:, :3], y0, rcond=None)[0]
     assert alone == pytest.approx(float(r0 @ r0), rel=1e-9)
@@ -174,12 +175,12 @@ def test_sandwich_variance_of_a_slope_under_correlated_noise():
     x = np.linspace(-1.0, 1.0, 5)
     rows, sig = x[:, None], np.full(5, 2.0)
     corr = np.array([[0.3 ** abs(i - j) for j in range(5)] for i in range(5)])
-    info, meat = _run_info(rows, sig, list(range(5)), lambda n: corr)
+    info, meat = run_info(rows, sig, list(range(5)), lambda n: corr)
     xc = x - x.mean()
     c = xc / np.sum(xc**2)  # the slope's weights
     exact = float(c @ (4.0 * corr) @ c)
-    assert _sf_variance(info, np.ones(1), [0], 0.0, meat) == pytest.approx(exact, rel=1e-12)
-    assert _sf_variance(info, np.ones(1), [0], 0.0) == pytest.approx(4.0 / np.sum(xc**2), rel=1e-12)
+    assert sf_variance(info, np.ones(1), [0], 0.0, meat) == pytest.approx(exact, rel=1e-12)
+    assert sf_variance(info, np.ones(1), [0], 0.0) == pytest.approx(4.0 / np.sum(xc**2), rel=1e-12)
 
 
 def test_plan_rejects_bad_arguments():
@@ -358,14 +359,14 @@ def test_a_drive_frequency_run_frees_omega_x_and_leaves_duffing_its_shape():
     (jac, _), (pred, sf) = jacobians(model, entries, (exp,), [25.0])
     rows = weighted_rows(exp, jac[0][0], exp.sigmas(NoiseLevel(abs(float(sf[0])), 1.0, 1e-4), pred[0][0]))
     data = np.diag([40.0, 0.0, 0.0])  # the data given fix k_vf, see neither omega_x nor the pull
-    blocks = [np.concatenate([data, _reduce(rows)])]
+    blocks = [np.concatenate([data, reduce_rows(rows)])]
     theta = np.atleast_1d(np.asarray(gj.EFFECTS["duffing_drive"].typical(1.0).kappa) / np.asarray(entries[2].scale))
-    assert _nuisances(blocks, (0,), [0], [0], [[1]], 1.0) == [0]  # nothing added: the baseline's free ones
-    held = _nuisances(blocks, (1,), [0], [0], [[]], 1.0)
-    freed = _nuisances(blocks, (1,), [0], [0], [[1]], 1.0)
+    assert nuisances(blocks, (0,), [0], [0], [[1]], 1.0) == [0]  # nothing added: the baseline's free ones
+    held = nuisances(blocks, (1,), [0], [0], [[]], 1.0)
+    freed = nuisances(blocks, (1,), [0], [0], [[1]], 1.0)
     assert held == [0] and freed == [0, 1]
-    lam_held = _residual_chi2(blocks[0], held, [2], theta)
-    lam_freed = _residual_chi2(blocks[0], freed, [2], theta)
+    lam_held = residual_chi2(blocks[0], held, [2], theta)
+    lam_freed = residual_chi2(blocks[0], freed, [2], theta)
     x, y = np.concatenate([data, rows])[:, :2], np.concatenate([data, rows])[:, 2] * theta[0]
     r = y - x @ np.linalg.lstsq(x, y, rcond=None)[0]
     assert lam_freed == pytest.approx(float(r @ r), rel=1e-6)
@@ -401,11 +402,11 @@ def test_a_reading_experiment_adds_its_columns_to_the_joint_fit_only_with_its_ru
     rng = np.random.default_rng(5)
     blocks = [np.concatenate([np.diag([30.0, 20.0, 0.0, 0.0]), rng.normal(size=(6, 4)) * 5.0])]
     reading = [[], [2]]
-    assert _nuisances(blocks, (0, 0), [0], [0, 1], reading, 1.0) == [0]
-    assert _nuisances(blocks, (2, 0), [0], [0, 1], reading, 1.0) == [0, 1]
-    assert _nuisances(blocks, (0, 1), [0], [0, 1], reading, 1.0) == [0, 1, 2]
+    assert nuisances(blocks, (0, 0), [0], [0, 1], reading, 1.0) == [0]
+    assert nuisances(blocks, (2, 0), [0], [0, 1], reading, 1.0) == [0, 1]
+    assert nuisances(blocks, (0, 1), [0], [0, 1], reading, 1.0) == [0, 1, 2]
     blocks[0][:, 2] = 1e-3  # too weak to fix: identification's rule holds it
-    assert _nuisances(blocks, (0, 1), [0], [0, 1], reading, 1.0) == [0, 1]
+    assert nuisances(blocks, (0, 1), [0], [0, 1], reading, 1.0) == [0, 1]
 
 
 def test_the_plans_runs_are_simulated_for_the_same_lot_and_appended(monkeypatch):

@@ -2,6 +2,7 @@
 points), registered like the built-in ones; registered effects are global, so every test removes its own."""
 
 import importlib.metadata
+import os
 import sys
 import textwrap
 import warnings
@@ -277,3 +278,11 @@ def test_a_saved_fit_records_its_user_code_and_warns_when_loaded_with_other_code
     load_effects_module(path)
     with pytest.warns(UserWarning, match=f"u.fit: effect 'user_gain': the code of its module {path} .*differs"):
         gj.load_fit(saved)
+
+
+def test_the_exported_program_key_hashes_every_file_of_the_package():
+    # an edit anywhere in gyrojax (a residual, a solver) must not be served an exported program of the old code
+    from gyrojax._compile import program_key
+
+    relative = {r.replace(os.sep, "/") for r, *_ in program_key._gyrojax_files()}
+    assert {"__init__.py", "_identify/identify.py", "_diagnose/diagnose.py", "_compile/export.py"} <= relative

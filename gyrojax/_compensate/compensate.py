@@ -3,7 +3,7 @@
 import math
 import warnings
 from collections.abc import Callable, Iterable, Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 import numpy as np
@@ -18,6 +18,7 @@ from .._metrics import (
     repeatability,
 )
 from .._progress import ProgressArg, as_progress
+from .._text import safe_name
 from .base import AbstractCompensation, AbstractCompensator
 from .composite import CompositeCompensator
 from .model import ModelCompensator
@@ -74,6 +75,27 @@ class CompensationResult(eqx.Module):
     solutions: dict[str, AbstractCompensation]
     full_scale: str = eqx.field(static=True, default="half_range")
 
+    kind: ClassVar[str] = "compensation"
+
+    def summary(self) -> str:
+        """Per run the worst nonlinearity before and after ("n/a" with the reason where there is none), and per
+        device with several runs the repeatability before and after."""
+        lines = [f"{'device':>16} {'run':>4} {'use':>8}  worst nonlinearity before -> after (ppm)"]
+        for r in self.runs:
+            before, after = r["nonlinearity_max_ppm_before"], r["nonlinearity_max_ppm_after"]
+            use = "train" if r["used_for_training"] else "held-out"
+            lines.append(f"{safe_name(r['device']):>16} {r['run']:>4} {use:>8}  "
+                         f"{_na(before, '10.2f', _why_na(r, 'before'))} -> {_na(after, '.2f', _why_na(r, 'after'))}")
+        for d in self.devices:
+            if d["n_runs"] < 2:
+                continue
+            before, after = d["repeatability_ppm_before"], d["repeatability_ppm_after"]
+            lines.append(f"{safe_name(d['device']):>16} repeatability over {d['n_runs']} runs: "
+                         f"{_na(before, '.2f', 'not determined', ' ppm')} -> "
+                         f"{_na(after, '.2f', 'not determined', ' ppm')} ({self.method}, trained on runs "
+                         f"{', '.join(map(str, d['train_runs']))})")
+        return "\n".join(lines)
+
     def to_json(self) -> dict[str, Any]:
         """The `compensate` JSON of docs/cli.md (Python numbers, None for "not applicable")."""
         return {"method": self.method, "runs": [dict(r) for r in self.runs],
@@ -84,6 +106,23 @@ class CompensationResult(eqx.Module):
                     "repeatability": "sample std (ddof=1) of the runs' scale factors over their mean (ppm), "
                                      "seed 000 §5",
                     "scale_factor_after_units": "compensated deg/s per table deg/s"}}
+
+
+def _na(value, spec: str, reason: str | None = None, unit: str = "") -> str:
+    """`value` formatted with `spec` and followed by `unit`, or "n/a" (with the reason) when it is None."""
+    if value is None:
+        return "n/a" + (f" ({reason})" if reason else "")
+    return format(value, spec) + unit
+
+
+def _why_na(run: dict, when: str) -> str:
+    """Why a run's nonlinearity before/after compensation is None."""
+    if when == "after" and run.get("converged") is False:
+        return "the compensation did not converge for this device (see its message)"
+    if run.get(f"scale_factor_{when}") == 0:
+        return ("the outputs do not change with the input" if when == "before"
+                else "the compensated rates do not change with the input")
+    return "not determined"
 
 
 def _num(v) -> float | None:

@@ -55,7 +55,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._compile.jit import jit
 from .balance import balance_offset, balance_word, describing_weight, fundamental, inl_term, newton
@@ -129,28 +129,30 @@ class ModelCompensation(AbstractCompensation):
         """`(converged, message)`: see the class docstring."""
         return bool(self.converged), self.message
 
-    def scale_factor(self, drive_freq_hz):
+    def scale_factor(self, drive_freq_hz: Float[ArrayLike, " n"]) -> Float[Array, " n"]:
         """$K(f)$, LSB per deg/s at drive frequency `drive_freq_hz` (Hz)."""
         f = jnp.asarray(drive_freq_hz, dtype=jnp.float64)
         return self.sf_ref * (f / self.f_ref_hz) ** self.frequency_exponent
 
-    def bias(self, drive_freq_hz):
+    def bias(self, drive_freq_hz: Float[ArrayLike, " n"]) -> Float[Array, " n"]:
         """The bias (LSB) at drive frequency `drive_freq_hz`: mean training bias plus its thermal drift."""
         f = jnp.asarray(drive_freq_hz, dtype=jnp.float64)
         return self.bias_lsb + self.bias_drift_lsb_per_ppm * 1e6 * (f / self.f_ref_hz - 1.0)
 
-    def fundamental(self, word):
+    def fundamental(self, word: Float[ArrayLike, " n"]) -> Float[Array, " n"]:
         """$D(W)$ in word LSB: what the DAC puts on the carrier fundamental for a carrier of amplitude `word`."""
         return fundamental(jnp.asarray(word, dtype=jnp.float64), self.inl_lsb, self)
 
-    def output(self, rate_dps, *, drive_freq_hz, bias_lsb=None) -> Float[Array, " n"]:
+    def output(self, rate_dps: Float[ArrayLike, " n"], *, drive_freq_hz: Float[ArrayLike, " n"],
+               bias_lsb: Float[ArrayLike, " n"] | None = None) -> Float[Array, " n"]:
         """The model's output (LSB) at table rate `rate_dps` and drive frequency `drive_freq_hz`: the word
         solving the balance by Newton steps, plus the bias (default: `bias(drive_freq_hz)`)."""
         v = self.scale_factor(drive_freq_hz) * jnp.asarray(rate_dps, dtype=jnp.float64)
         w = balance_word(v, self.inl_lsb, self, self.newton_steps)
         return w + (self.bias(drive_freq_hz) if bias_lsb is None else bias_lsb)
 
-    def rate(self, output, *, drive_freq_hz=None, temperature_c=None) -> Float[Array, " n"]:
+    def rate(self, output: Float[ArrayLike, " n"], *, drive_freq_hz: Float[ArrayLike, " n"] | None = None,
+             temperature_c: Float[ArrayLike, " n"] | None = None) -> Float[Array, " n"]:
         """The rate estimate (deg/s): the balance solved for the rate by Newton steps; needs `drive_freq_hz`."""
         f = check_side("model", "drive_freq_hz", drive_freq_hz)
         d = self.fundamental(jnp.asarray(output, dtype=jnp.float64) - self.bias(f))
@@ -430,7 +432,9 @@ def _fit_arrays(cfg: ModelCompensator, n_runs: int, with_tcf: bool, free: tuple[
     # than the resolution of the data themselves: float64 stores y to eps |y|.
     floor = jnp.finfo(jnp.float64).eps * jnp.max(jnp.abs(y)) / jnp.min(sigma)
     atol = jnp.maximum(cfg.atol, floor)
-    sol = optx.least_squares(fn, optx.LevenbergMarquardt(rtol=cfg.rtol, atol=atol), jnp.zeros(len(idx)),
+    # optimistix annotates atol as a float; a traced array is what it gets here, and works.
+    solver = optx.LevenbergMarquardt(rtol=cfg.rtol, atol=atol)  # pyright: ignore[reportArgumentType]
+    sol = optx.least_squares(fn, solver, jnp.zeros(len(idx)),
                              args=basis, max_steps=cfg.max_steps, throw=False)
     delta = delta_of(sol.value, basis)
     theta = theta0 + delta

@@ -10,6 +10,7 @@ import hmac
 import json
 
 import jax
+import jax.core  # ShapedArray: jax.core is not imported by `import jax` for type checkers
 import numpy as np
 from jax import export
 

@@ -54,7 +54,7 @@ from jax import export
 from .._data.io import atomic_write_bytes
 from .._data.reading import open_regular, read_exactly
 from .artifact import deserialize, serialize
-from .cache import folder_problem, warn_once
+from .cache import folder_problem, jax_flag, warn_once
 from .jit import compiler_options, jit, top_level
 from .program_key import Unhashable, program_key
 
@@ -74,8 +74,8 @@ _loaded: dict[str, Callable | None] = {}  # key -> jitted call of the exported p
 
 def _folder() -> str | None:
     """The compilation cache folder, or None when it is off."""
-    cache = jax.config.jax_compilation_cache_dir
-    if not cache or not jax.config.jax_enable_compilation_cache:
+    cache = jax_flag("jax_compilation_cache_dir")
+    if not cache or not jax_flag("jax_enable_compilation_cache"):
         return None
     return cache
 
@@ -290,7 +290,7 @@ def cached_program(name: str, fn: Callable) -> Callable:
         if not top_level():
             return plain(*args)
         call, key, leaves = _exported_call(name, fn, args)
-        if call is None:
+        if call is None or key is None:  # (a call always comes with its key)
             return plain(*args)
         try:
             return call(*leaves)

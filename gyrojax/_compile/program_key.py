@@ -31,9 +31,12 @@ import types
 
 import equinox as eqx
 import jax
+import jax.core  # Tracer: jax.core is not imported by `import jax` for type checkers
 import numpy as np
+from jax._src import config as jax_config  # noqa: PLC2701 - trace_context has no public form
 
 from .._version import __version__
+from .cache import jax_flag
 
 
 _VERSIONED = ("gyrojax", "jax", "jaxlib", "numpy", "equinox", "lineax", "optimistix", "diffrax")
@@ -78,7 +81,12 @@ def _package_versions() -> tuple:
 
 def _gyrojax_files_hash() -> str:
     """A hash of every file of the gyrojax package (its code and data)."""
-    root = os.path.dirname(os.path.abspath(__file__))
+    return _files_hash(_gyrojax_files())
+
+
+def _gyrojax_files() -> tuple:
+    """(path relative to the package, path, mtime, size) of every file of the gyrojax package, in order."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # gyrojax/, not this wing's folder
     files = []
     for folder, dirs, names in os.walk(root):
         dirs[:] = sorted(d for d in dirs if d != "__pycache__")
@@ -87,7 +95,7 @@ def _gyrojax_files_hash() -> str:
                 path = os.path.join(folder, name)
                 st = _stat(path)
                 files.append((os.path.relpath(path, root), path, st.st_mtime_ns, st.st_size))
-    return _files_hash(tuple(files))
+    return tuple(files)
 
 
 @functools.cache
@@ -194,8 +202,8 @@ def _describe_object(obj, out: list, active: set) -> None:
         out.append("]")
     elif type(obj) is functools.partial:
         out.append("partial(")
-        for part in (obj.func, obj.args, obj.keywords):
-            _describe(part, out, active)
+        for item in (obj.func, obj.args, obj.keywords):
+            _describe(item, out, active)
         out.append(")")
     elif isinstance(obj, types.MethodType):
         out.append("method(")
@@ -205,9 +213,9 @@ def _describe_object(obj, out: list, active: set) -> None:
     elif isinstance(obj, types.FunctionType):
         # Two lambdas of one function share a qualified name: the line tells them apart.
         out.append(f"function:{_name(obj)}:{obj.__code__.co_firstlineno}(")
-        for part in (obj.__defaults__, obj.__kwdefaults__,
+        for item in (obj.__defaults__, obj.__kwdefaults__,
                      tuple(c.cell_contents for c in obj.__closure__ or ())):
-            _describe(part, out, active)
+            _describe(item, out, active)
         out.append(")")
     elif dataclasses.is_dataclass(obj):  # equinox.Module included: every field, static or not
         out.append(f"{_class(type(obj))}(")
@@ -265,7 +273,7 @@ def _installed(value) -> bool:
 def _trace_context() -> str:
     """JAX's configuration that changes traced programs, without the (empty, top-level) axis environment."""
     parts = []
-    for x in jax._src.config.trace_context():  # noqa: SLF001 - JAX's own jit cache key for the configuration
+    for x in jax_config.trace_context():  # JAX's own jit cache key for the configuration
         if type(x).__name__ == "AxisEnv":
             if x.axis_sizes or x.spmd_axis_names or x.explicit_mesh_axis_names:
                 raise Unhashable("a non-empty axis environment")
@@ -274,7 +282,7 @@ def _trace_context() -> str:
         if " at 0x" in text:
             raise Unhashable(f"configuration value {text}")
         parts.append(text)
-    return repr((jax.config.jax_enable_x64, tuple(parts)))
+    return repr((jax_flag("jax_enable_x64"), tuple(parts)))
 
 
 def program_key(name: str, args: tuple) -> str:

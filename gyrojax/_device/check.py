@@ -16,10 +16,13 @@ reported again as a scale factor 2x off. `start_from_data` moves the leaves each
 import dataclasses
 import math
 import sys
+from typing import TextIO
 
 import equinox as eqx
 import numpy as np
 
+from .._data.table import Table
+from .._gyroscope import Gyroscope, closed_loop_parts
 from .._units import DEG, rad_s_to_hz
 
 
@@ -127,7 +130,7 @@ def _ratio_text(file_value, data_value) -> str:
     return f"{ratio:.3f}x the file's" if 0.1 <= abs(ratio) < 10 else f"{ratio:.3g}x the file's"
 
 
-def check_start(gyro, table) -> tuple[tuple[StartReading, ...], object]:
+def check_start(gyro: Gyroscope, table: Table) -> tuple[tuple[StartReading, ...], Gyroscope]:
     """Compare one device with what `table` reveals directly; returns `(readings, moved)`: one `StartReading` per
     number the data give (a sweep the data lack gives none) and the device with every far reading moved to the
     data's (`start_from_data`'s result)."""
@@ -158,19 +161,20 @@ def check_start(gyro, table) -> tuple[tuple[StartReading, ...], object]:
     slopes = _slopes(table, "dac") if moved.closed_loop else []
     if slopes:
         per_word = _dac_volts_per_word(moved)
-        fs_file = _f(moved.excitation.dac.full_scale)
+        dac = closed_loop_parts(moved, "the DAC sweep's check").excitation.dac
+        fs_file = _f(dac.full_scale)
         fs_data = fs_file * float(np.median(slopes)) / per_word
         far = not abs(fs_data / fs_file - 1.0) <= DAC_TOLERANCE
         names = ()
         if far and fs_data > 0:
             moved = eqx.tree_at(lambda g: g.excitation.dac.full_scale, moved,
-                                moved.excitation.dac.full_scale * (fs_data / fs_file))
+                                dac.full_scale * (fs_data / fs_file))
             names = ("excitation.dac.full_scale",)
         readings.append(StartReading(
             "DAC full scale", "V", fs_file, fs_data, far, names,
             f"the file's DAC full scale {fs_file:.4g} V, the data's {fs_data:.4g} V (the DAC sweep's "
             f"{float(np.median(slopes)):.4g} V per word over {per_word / fs_file:.4g} per volt of full scale for "
-            f"{moved.excitation.dac.bits} bits fed from {moved.excitation.dac.word_bits}): "
+            f"{dac.bits} bits fed from {dac.word_bits}): "
             f"{_ratio_text(fs_file, fs_data)}"))
     # 3. the scale factor's size, from the rate table
     slopes = _slopes(table, "rate_table")
@@ -208,7 +212,7 @@ def start_lines(readings, *, moved: bool, label: str) -> list[str]:
     return lines
 
 
-def checked_start(gyro, table, *, move: bool, label: str, file=None):
+def checked_start(gyro: Gyroscope, table: Table, *, move: bool, label: str, file: TextIO | None = None) -> Gyroscope:
     """identify's checked start: compare the device with what `table` reveals (`check_start`), print each far
     reading on `file` (standard error by default) as `label: warning: ...`, and return the device, with the far
     readings' leaves moved to the data's when `move` (`--start-from-data`)."""

@@ -13,15 +13,20 @@ def write_report(diagnosis, out_dir) -> dict:
     JSON."""
     import os
 
-    from .._data.io import atomic_directory, atomic_write_bytes, atomic_write_json
+    from .._data.io import atomic_directory
+    from .._report import MarkdownFormat, write_result
 
     with atomic_directory(out_dir) as folder:
         figures = _figures(diagnosis, folder)
         report = diagnosis.to_json()
-        atomic_write_json(report, os.path.join(folder, "diagnosis.json"))
-        lines = _markdown(diagnosis, figures)
-        atomic_write_bytes(os.path.join(folder, "diagnosis.md"), "\n".join(lines).encode())
+        write_result(diagnosis, os.path.join(folder, "diagnosis.json"))
+        write_result(diagnosis, os.path.join(folder, "diagnosis.md"), MarkdownFormat(figures=tuple(figures)))
     return report
+
+
+def markdown_text(diagnosis) -> str:
+    """`diagnosis.md` without its plots (the `markdown` output format appends them where there are some)."""
+    return "\n".join(_markdown(diagnosis, []))
 
 
 def _figures(diagnosis, folder) -> list[tuple[str, str]]:

@@ -4,6 +4,7 @@ JSON."""
 import dataclasses
 import math
 import os
+from typing import ClassVar
 
 import numpy as np
 
@@ -12,7 +13,7 @@ from .._identify import Fit
 from .compare import nonlinearity_residual_ppm
 from .formula import Formula
 from .guards import MAX_TYPICAL_MULTIPLE
-from .report import discrepancy_text, nonlinearity_not_determined, write_report
+from .report import discrepancy_text, markdown_text, nonlinearity_not_determined, write_report
 
 
 # ASSUMPTION: each effect's `typical(1.0)` is a realistic size with a provenance; a device more than 20 times
@@ -73,6 +74,8 @@ class Diagnosis:
     max_typical_multiple: float = MAX_TYPICAL_MULTIPLE
     formula: Formula | None = None  # proposed for the leading discrepancy
     notes: tuple = ()  # coordinates the localisation did not describe along, and why
+
+    kind: ClassVar[str] = "diagnosis"  # the result's name for output formats (gyrojax.io.AbstractResult)
 
     @property
     def selected(self) -> tuple[str, ...]:
@@ -190,6 +193,10 @@ class Diagnosis:
             raise DraftError(f"no term of the dictionary is significant in what is left (verdict: {self.verdict}): "
                              "there is no formula to draft.")
         return write_draft(self.formula, path, name=name, source=str(self.baseline.data.source or ""))
+
+    def markdown(self) -> str:
+        """The Markdown page of the report folder (`diagnosis.md`) without its plots."""
+        return markdown_text(self)
 
     def write_report(self, out_dir: str | os.PathLike) -> dict:
         """The report folder (Markdown, JSON, PNG plots) of `write_report`; returns the JSON."""

@@ -2,6 +2,7 @@
 says whether they are a measurement (`STATUSES`), and the exit code a command reports for it (`EXIT_CODES`)."""
 
 import math
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -183,6 +184,61 @@ class Fit(eqx.Module):
             raise RuntimeError(". ".join(parts))
         return self
 
+    kind: ClassVar[str] = "fit"
+
+    def to_json(self) -> dict[str, Any]:
+        """The fit as JSON: the `gyrojax identify --json` report less its `compare` section (which
+        `gyrojax.fit_report` adds).
+
+        **Returns:** a dict with
+
+        - `devices`: per device `device`, `status` (`"ok"`, `"model rejected"`, `"not determined"`,
+          `"not converged"`; `"unknown"` for a fit file that predates the checks), `warnings` (sentences: why the
+          status is not `"ok"`, the noise estimate, implausible values), `parameters` {name: {`value`, `stderr`,
+          `held`} (held ones also `note`: held at the design value, not determined by the data)},
+          `parameter_stderr_scaled` {name: stderr times sqrt(chi2_red) where the model is rejected, else the
+          stderr}, `scale_factor_lsb_per_dps` and `scale_factor_stderr` (null where the data do not determine
+          it), `scale_factor_stderr_scaled`, `chi2_red`, `p_value` (null without degrees of freedom),
+          `noise_dof` (effective degrees of freedom of an estimated noise; null where the data gave
+          output_sigma), `converged`, `message`;
+        - `lot`: shared parameters {name: {`value`, `stderr`, `stderr_scaled`}};
+        - `unidentifiable`: every parameter name taking part in a direction the data cannot fix;
+          `unidentifiable_directions` (each with `parameters`, `held`, `singular_value`);
+        - `chi2_red`, `p_value` (whole lot), `reject_alpha`, `exit_status` (see `Fit.exit_status`), `source`.
+        """
+        values, stderr = np.asarray(self.values), np.asarray(self.stderr)
+        scaled = np.asarray(self.stderr_scaled)
+        chi2_red, p_value = np.asarray(self.chi2_red), self.p_value
+        devices = []
+        for i, d in enumerate(self.devices):
+            params = {}
+            for k, nm in enumerate(self.names):
+                params[nm] = {"value": _num(values[i, k]), "stderr": _num(stderr[i, k]), "held": not self.free[k]}
+                if not self.free[k]:
+                    params[nm]["note"] = HELD_LABEL
+            devices.append({
+                "device": d, "status": self.status[i], "warnings": list(self.warnings[i]), "parameters": params,
+                "parameter_stderr_scaled": {nm: _num(scaled[i, k]) for k, nm in enumerate(self.names)},
+                "scale_factor_lsb_per_dps": _num(self.scale_factor[i]),
+                "scale_factor_stderr": _num(self.scale_factor_stderr[i]),
+                "scale_factor_stderr_scaled": _num(self.scale_factor_stderr_scaled[i]),
+                "chi2_red": _num(chi2_red[i]), "p_value": _num(p_value[i]), "noise_dof": _num(self.noise_dof[i]),
+                "converged": bool(self.converged[i]), "message": self.result_message[i],
+            })
+        lot = {nm: {"value": _num(self.lot_values[k]), "stderr": _num(self.lot_stderr[k]),
+                    "stderr_scaled": _num(self.lot_stderr_scaled[k])}
+               for k, nm in enumerate(self.lot_names)}
+        names = []
+        for u in self.unidentifiable:
+            names.extend(p for p in u.parameters if p not in names)
+        return {
+            "source": self.data.source, "chi2_red": _num(self.chi2_red_total), "p_value": _num(self.p_value_total),
+            "reject_alpha": _num(self.reject_alpha), "exit_status": self.exit_status, "devices": devices,
+            "lot": lot, "unidentifiable": names,
+            "unidentifiable_directions": [{"parameters": list(u.parameters), "held": u.held,
+                                           "singular_value": _num(u.singular_value)} for u in self.unidentifiable],
+        }
+
     def summary(self) -> str:
         """A few lines for a terminal: per device its status, and the scale factor only where the data
         determine it."""
@@ -226,3 +282,10 @@ def p_text(p) -> str:
     if not math.isfinite(p):
         return "no degrees of freedom to test the model"
     return "p < 1e-300" if p == 0.0 else f"p = {p:.2g}"
+
+
+def _num(x) -> float | None:
+    """A float for JSON: None for NaN or infinity (held parameters have no standard error, a scale factor the
+    data do not determine has no value)."""
+    x = float(x)
+    return None if not math.isfinite(x) else x

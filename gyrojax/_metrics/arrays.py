@@ -4,9 +4,11 @@ points (a `DataError` when concrete, `eqx.error_if` under `jit`), the weights an
 from __future__ import annotations
 
 from collections.abc import Callable
+from types import ModuleType
 
 import equinox as eqx
 import jax
+import jax.core  # Tracer: jax.core is not imported by `import jax` for type checkers
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
@@ -14,17 +16,17 @@ from jaxtyping import Array
 from .._data.cells import DataError
 
 
-def xp_of(*arrays):
+def xp_of(*arrays: object) -> ModuleType:
     """jax.numpy if any argument is a JAX array or tracer, else NumPy: traceable with JAX inputs, and no
     compilation (seconds for a first call) when a report runs on host data."""
     return jnp if any(isinstance(a, jax.Array) for a in arrays) else np
 
 
-def as_f64(x, xp) -> Array:
+def as_f64(x, xp: ModuleType) -> Array | np.ndarray:
     return xp.asarray(x, dtype=xp.float64)
 
 
-def mask_like(mask, x, xp) -> Array:
+def mask_like(mask, x, xp: ModuleType) -> Array | np.ndarray:
     if mask is None:
         return xp.ones(xp.shape(x), dtype=bool)
     mask = xp.asarray(mask)
@@ -51,7 +53,7 @@ def at_index(index) -> str:
     return "" if not index else f" at batch index {index}"
 
 
-def fit_weights(mask, sigmas, x, xp) -> Array:
+def fit_weights(mask, sigmas, x, xp: ModuleType) -> Array | np.ndarray:
     if sigmas is None:
         return xp.where(mask, 1.0, 0.0)
     sigmas = xp.broadcast_to(as_f64(sigmas, xp), xp.shape(x))
@@ -63,14 +65,14 @@ def fit_weights(mask, sigmas, x, xp) -> Array:
     return xp.where(mask, 1.0 / safe**2, 0.0)
 
 
-def outputs_flat(y, mask, xp):
+def outputs_flat(y, mask, xp: ModuleType):
     """True where a sweep's valid outputs are all equal: they do not change with the input."""
     hi = xp.max(xp.where(mask, y, -xp.inf), axis=-1)
     lo = xp.min(xp.where(mask, y, xp.inf), axis=-1)
     return hi == lo  # False for a fully masked sweep (-inf != inf)
 
 
-def weighted_line(x, y, w, xp):
+def weighted_line(x, y, w, xp: ModuleType):
     """Weighted least-squares line (centred sums); NaN where fewer than two distinct weighted inputs."""
     sw = xp.sum(w, axis=-1)
     ok = sw > 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .arrays import as_f64, at_index, fit_weights, mask_like, outputs_flat, raise_if, weighted_line, xp_of
@@ -10,7 +11,7 @@ from .arrays import as_f64, at_index, fit_weights, mask_like, outputs_flat, rais
 def asymmetry(inputs: Float[ArrayLike, "*batch point"], outputs: Float[ArrayLike, "*batch point"], *,
               mask: Bool[ArrayLike, "*batch point"] | None = None,
               sigmas: Float[ArrayLike, "*batch point"] | None = None,
-              common_bias: bool = True) -> Float[Array, "*batch"]:
+              common_bias: bool = True) -> Float[Array | np.ndarray, "*batch"]:
     r"""Scale-factor asymmetry in ppm.
 
     IEEE Std 528 defines scale-factor asymmetry as the difference between the scale factors measured with

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
+import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .arrays import as_f64, at_index, mask_like, raise_if, xp_of
@@ -17,9 +18,9 @@ class RateBandwidth(eqx.Module):
     """Result of [`gyrojax.metrics.rate_bandwidth`][]: `bandwidth_hz` (the -3 dB frequency), `phase_deg` (the phase
     there, NaN if no phase was given) and `low_frequency_gain` (the reference amplitude)."""
 
-    bandwidth_hz: Float[Array, "*batch"]
-    phase_deg: Float[Array, "*batch"]
-    low_frequency_gain: Float[Array, "*batch"]
+    bandwidth_hz: Float[Array | np.ndarray, "*batch"]
+    phase_deg: Float[Array | np.ndarray, "*batch"]
+    low_frequency_gain: Float[Array | np.ndarray, "*batch"]
 
 
 def rate_bandwidth(freqs_hz: Float[ArrayLike, "*batch point"], amplitudes: Float[ArrayLike, "*batch point"], *,

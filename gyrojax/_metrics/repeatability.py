@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .arrays import as_f64, mask_like, xp_of
 
 
 def repeatability(scale_factors: Float[ArrayLike, "*batch run"], *,
-                  mask: Bool[ArrayLike, "*batch run"] | None = None, ddof: int = 1) -> Float[Array, "*batch"]:
+                  mask: Bool[ArrayLike, "*batch run"] | None = None, ddof: int = 1
+                  ) -> Float[Array | np.ndarray, "*batch"]:
     r"""Scale-factor repeatability in ppm: the standard deviation of the runs' scale factors over their mean.
 
     $$10^6 \, \frac{\operatorname{std}_{\mathrm{ddof}}(K_1, \dots, K_R)}{|\bar K|}$$

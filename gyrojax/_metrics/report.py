@@ -16,6 +16,7 @@ from .._sweeps.registry import SWEEP_KINDS, sweep_kind
 from .asymmetry import asymmetry
 from .bandwidth import MIN_POINTS_BANDWIDTH, rate_bandwidth
 from .repeatability import repeatability
+from .result import MetricsReport
 from .scale_factor import FULL_SCALE_CONVENTIONS, MIN_POINTS_LINEAR, fit_scale_factor
 
 
@@ -99,7 +100,7 @@ def _why_not(rec: dict[str, Any], outputs: np.ndarray, inputs: np.ndarray) -> di
 
 
 def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bool = False,
-                   common_bias: bool = True, ddof: int = 1) -> dict[str, Any]:
+                   common_bias: bool = True, ddof: int = 1) -> MetricsReport:
     """The `metrics` JSON of docs/cli.md for a table: per-sweep metrics and per-device repeatability.
 
     **Arguments:**
@@ -113,7 +114,8 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
 
     **Returns:**
 
-    A JSON-ready dict (Python numbers, None for "not applicable"):
+    A `MetricsReport`: a JSON-ready dict (Python numbers, None for "not applicable") with the `summary()` the
+    command line prints:
 
     - `points`: one record per (device, run, sweep), in order of first appearance in the table: `device`,
       `run`, `sweep`, `n_points`, `scale_factor`, `bias`, `nonlinearity_max_ppm`, `nonlinearity_rms_ppm`,
@@ -162,7 +164,7 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
     for dev, _, sweep in groups:
         order.setdefault((dev, sweep), len(order))
     device_records.sort(key=lambda rec: order[(rec["device"], rec["sweep"])])
-    return {
+    return MetricsReport({
         "points": [records[key] for key in groups],
         "devices": device_records,
         "conventions": {
@@ -171,7 +173,7 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
             "nonlinearity_rms": "population RMS of residuals (divided by n)",
             "scale_factor_units": scale_factor_units(),
         },
-    }
+    })
 
 
 def _group_name(table: Table, key, rows) -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import equinox as eqx
+import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .arrays import as_f64, at_index, fit_weights, mask_like, outputs_flat, raise_if, weighted_line, xp_of
@@ -23,13 +24,13 @@ class ScaleFactorFit(eqx.Module):
     `nonlinearity_rms_ppm`, `n_points` (valid points per sweep).
     """
 
-    scale_factor: Float[Array, "*batch"]
-    bias: Float[Array, "*batch"]
-    residuals: Float[Array, "*batch point"]
-    full_scale: Float[Array, "*batch"]
-    nonlinearity_max_ppm: Float[Array, "*batch"]
-    nonlinearity_rms_ppm: Float[Array, "*batch"]
-    n_points: Float[Array, "*batch"]
+    scale_factor: Float[Array | np.ndarray, "*batch"]
+    bias: Float[Array | np.ndarray, "*batch"]
+    residuals: Float[Array | np.ndarray, "*batch point"]
+    full_scale: Float[Array | np.ndarray, "*batch"]
+    nonlinearity_max_ppm: Float[Array | np.ndarray, "*batch"]
+    nonlinearity_rms_ppm: Float[Array | np.ndarray, "*batch"]
+    n_points: Float[Array | np.ndarray, "*batch"]
 
 
 def fit_scale_factor(inputs: Float[ArrayLike, "*batch point"], outputs: Float[ArrayLike, "*batch point"], *,

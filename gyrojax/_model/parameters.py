@@ -126,10 +126,15 @@ class Entry(eqx.Module):
     def getter(self):
         if self.effect_index is None:
             return PARAMETERS[self.label].where
-        i, f = self.effect_index, self.field
-        if f is None:
-            raise ValueError(f"Entry {self.label!r}: an effect's entry needs the effect's field name, got None.")
+        i, f = self.effect_index, self.effect_field
         return lambda g, i=i, f=f: getattr(g, f)  # applied to the effect module
+
+    @property
+    def effect_field(self) -> str:
+        """The field of the effect this entry is; a ValueError for a physical parameter's entry."""
+        if self.field is None:
+            raise ValueError(f"Entry {self.label!r} is a physical parameter, not a field of an effect.")
+        return self.field
 
 
 def _effect_scale(eff_name: str, field: str) -> np.ndarray:

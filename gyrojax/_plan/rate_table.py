@@ -17,6 +17,7 @@ region of a wafer, whose rate path may differ from the lot's.
 
 import json
 import math
+from typing import ClassVar
 
 import equinox as eqx
 import numpy as np
@@ -37,6 +38,12 @@ class RateTablePlan(eqx.Module):
     target: float
     devices: int
     recommended: int | None
+
+    kind: ClassVar[str] = "rate_table_plan"
+
+    def to_json(self) -> dict:
+        """The plan as JSON (what `gyrojax plan --rate-table-target ... --json` writes)."""
+        return self.report()
 
     def report(self) -> dict:
         return {"spread": self.spread, "own": self.own, "target": self.target, "devices": self.devices,

@@ -2,6 +2,7 @@
 `PopulationFit` (the lot, its devices' shrunken estimates and scale factors with their intervals)."""
 
 import math
+from typing import Any, ClassVar
 
 import equinox as eqx
 import numpy as np
@@ -67,11 +68,13 @@ class PopulationFit(eqx.Module):
     refits: int
     warnings: tuple[str, ...]
 
+    kind: ClassVar[str] = "population_fit"
+
     @property
     def devices(self) -> tuple[str, ...]:
         return self.fit.devices
 
-    def interval(self, level: float = 0.95):
+    def interval(self, level: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
         """(low, high) per device: the scale factor's `level` interval (a prediction interval where sweeps are
         missing), Student-t with `sf_dof` degrees of freedom."""
         if not 0.0 < level < 1.0:
@@ -100,6 +103,10 @@ class PopulationFit(eqx.Module):
         return {"random": list(self.random), "parameters": [p.report() for p in self.parameters],
                 "scale_factor": self.scale_factor.report(), "devices": devices, "converged": self.converged,
                 "refits": self.refits, "warnings": list(self.warnings)}
+
+    def to_json(self) -> dict[str, Any]:
+        """The fit's JSON (`Fit.to_json()`) with the `population` section (`report()`)."""
+        return {**self.fit.to_json(), "population": self.report()}
 
     def summary(self) -> str:
         lines = [f"population fit of {len(self.fit.devices)} device(s), random: {', '.join(self.random)} "

@@ -3,9 +3,12 @@
 from typing import ClassVar
 
 import equinox as eqx
+from jaxtyping import Array, ArrayLike, Float
 
 from ..._model.parameters import PARAMETERS
-from ..strategies import AbstractLotSolve, VmapSolve
+from ..evaluation import Evaluation
+from ..problem import Problem
+from ..strategies import AbstractLotSolve, LotSpread, Solver, VmapSolve
 
 
 class PopulationSolve(AbstractLotSolve):
@@ -52,8 +55,10 @@ class PopulationSolve(AbstractLotSolve):
         if not (isinstance(self.start_spread, (int, float)) and self.start_spread > 0):
             raise ValueError(f"PopulationSolve: start_spread must be > 0, got {self.start_spread!r}.")
 
-    def spread(self, n):
+    def spread(self, n: int) -> LotSpread:
         return self.vmap.spread(n)
 
-    def solve(self, problem, spread, u0, u_lot0, solver, max_steps):
+    def solve(self, problem: Problem, spread: LotSpread, u0: Float[ArrayLike, "device dev"],
+              u_lot0: Float[ArrayLike, " lot"], solver: Solver, max_steps: int | Array
+              ) -> tuple[Array, Array, Array, Array, Array, Evaluation]:
         return self.vmap.solve(problem, spread, u0, u_lot0, solver, max_steps)

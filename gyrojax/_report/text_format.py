@@ -1,0 +1,16 @@
+"""The `text` format: a result's `summary()`, the terminal text, as a file."""
+
+from typing import ClassVar
+
+from .format import AbstractFormat
+from .result import AbstractResult
+
+
+class TextFormat(AbstractFormat):
+    """`result.summary()` with a final newline, UTF-8."""
+
+    name: ClassVar[str] = "text"
+    suffixes: ClassVar[tuple[str, ...]] = (".txt",)
+
+    def render(self, result: AbstractResult) -> bytes:
+        return (result.summary() + "\n").encode()
