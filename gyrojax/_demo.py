@@ -110,7 +110,7 @@ def _demo_hidden_effect(out_dir: str, log, progress: bool) -> dict:
 
     # diagnose's `progress` is unannotated (gyrojax/_diagnose, PENDING in tests/test_types.py), so pyright infers
     # bool from its default; it takes a callable as identify's does.
-    diag = diagnose("paper-qmg", lot_data, progress=detail if progress else False)  # pyright: ignore[reportArgumentType]
+    diag = diagnose("paper-qmg", lot_data, progress=detail if progress else False)
     write_report(diag, os.path.join(out_dir, "diagnosis"))
     for line in diag.summary().splitlines():
         log("      " + line)

@@ -18,7 +18,8 @@ from gyrojax.io import FORMATS, AbstractFormat, AbstractResult, register_format,
 
 
 # The verbs whose return values are results; their return annotations name the result types.
-VERBS = (gj.identify, gj.diagnose, gj.plan, gj.rate_table_plan, gj.compensate, gj.metrics.metrics_report)
+VERBS = (gj.identify, gj.diagnose, gj.plan, gj.rate_table_plan, gj.compensate, gj.metrics.metrics_report,
+         gj.compare)
 
 
 def _returned_types():
@@ -33,7 +34,7 @@ def test_every_verbs_result_type_declares_the_result_contract():
     types = _returned_types() + [IdentifyReport]
     names = {t.__name__ for t in types}
     assert names >= {"Fit", "PopulationFit", "Diagnosis", "Plan", "RateTablePlan", "CompensationResult",
-                     "MetricsReport", "IdentifyReport"}, names
+                     "MetricsReport", "IdentifyReport", "Comparison"}, names
     kinds = []
     for t in types:
         assert isinstance(getattr(t, "kind", None), str), f"{t.__name__} has no kind name"

@@ -18,6 +18,27 @@ class DraftError(ValueError):
     """The formula cannot be written as a readout term (the reason says why and what to do instead)."""
 
 
+def _term_line(i: int, t) -> str:
+    """The readout term's line of code for the formula's term `t` (coefficient `c[i]`), or a `DraftError`
+    where a readout term cannot hold it."""
+    for s in t.sweeps:
+        if not isinstance(sweep_kind(s), AbstractSteadySweep):
+            raise DraftError(f"the term {t.name} acts on the {s} sweep, which is not read through the readout "
+                             "(AbstractOutputTerm acts on settled rate outputs: rate_table, vcf_static): write "
+                             "it by hand as the kind of term that acts there (docs/adding_an_effect.md).")
+    symbols = set(re.findall(r"[A-Za-z_]+", t.expression))
+    if symbols & {"f", "run", "dTdt"}:
+        raise DraftError(f"the term {t.name} depends on the drive-frequency reading, the run or the rate of "
+                         "change of the temperature, which a readout term does not receive (PointConditions: "
+                         "input, temperature, time): write it by hand (docs/adding_an_effect.md).")
+    expr = " " + t.expression + " "
+    for a, b in _JAX:
+        expr = expr.replace(a, b)
+    expr = expr.strip()
+    return (f"        if conditions.sweep in {tuple(t.sweeps)!r}:\n"
+            f"            out = out + c[{i}] * {expr}  # {t.name}, {t.unit}")
+
+
 def draft_effect_source(formula: Formula, *, name: str = "drafted_term", source: str = "") -> str:
     """The text of an effect module for `formula` (see `write_draft`)."""
     if not re.fullmatch(r"[a-z_][a-z0-9_]*", name) or keyword.iskeyword(name):
@@ -26,25 +47,7 @@ def draft_effect_source(formula: Formula, *, name: str = "drafted_term", source:
         raise DraftError("the proposed formula leaves part of the located misfit unexplained (no term of the "
                          "dictionary has its shape): there is no formula to draft; write the term by hand from "
                          "the discrepancy's location and shape.")
-    lines = []
-    for i, t in enumerate(formula.terms):
-        for s in t.sweeps:
-            if not isinstance(sweep_kind(s), AbstractSteadySweep):
-                raise DraftError(f"the term {t.name} acts on the {s} sweep, which is not read through the readout "
-                                 "(AbstractOutputTerm acts on settled rate outputs: rate_table, vcf_static): write "
-                                 "it by hand as the kind of term that acts there (docs/adding_an_effect.md).")
-        symbols = set(re.findall(r"[A-Za-z_]+", t.expression))
-        if symbols & {"f", "run", "dTdt"}:
-            raise DraftError(f"the term {t.name} depends on the drive-frequency reading, the run or the rate of "
-                             "change of the temperature, which a readout term does not receive (PointConditions: "
-                             "input, temperature, time): write it by hand (docs/adding_an_effect.md).")
-        expr = " " + t.expression + " "
-        for a, b in _JAX:
-            expr = expr.replace(a, b)
-        expr = expr.strip()
-        lines.append(f"        if conditions.sweep in {tuple(t.sweeps)!r}:\n"
-                     f"            out = out + c[{i}] * {expr}  # {t.name}, {t.unit}")
-    body = "\n".join(lines)
+    body = "\n".join(_term_line(i, t) for i, t in enumerate(formula.terms))
     values = ", ".join(f"{float(c)!r}" for c in formula.coefficients)
     errors = ", ".join(f"{float(s):.3g}" for s in formula.stderr)
     cls = "".join(p.capitalize() for p in name.split("_")) or "DraftedTerm"
