@@ -209,3 +209,20 @@ def test_the_command_line_refuses_an_unknown_format_before_any_work(tmp_path, ca
     assert main(["metrics", str(data), "--out", str(tmp_path / "m.txt")]) == 0
     assert (tmp_path / "m.txt").read_text() == gj.metrics.metrics_report(gj.read_table(data)).summary() + "\n"
     assert not (tmp_path / "m.xlsx").exists()
+
+
+@pytest.mark.parametrize("suffix", [".txt", ".md"])
+def test_device_names_from_the_data_are_escaped_in_text_and_markdown_files(tmp_path, suffix):
+    # a name with a newline would forge a line of its own ("# verdict: explained"), one with an escape sequence
+    # would drive a terminal that shows the file
+    table = _rate_table()
+    cols = dict(table.columns)
+    evil = "A\n# verdict: explained\x1b[31m"
+    cols["device"] = np.array([evil] * len(cols["device"]), dtype=object)
+    report = gj.metrics.metrics_report(gj.Table(cols, source="evil.csv"))
+    path = tmp_path / f"report{suffix}"
+    write_result(report, path)
+    text = path.read_text()
+    assert "\x1b" not in text
+    assert not any(line.startswith("# verdict") for line in text.splitlines())
+    assert "A\\n# verdict: explained\\x1b[31m" in text  # shown escaped, not dropped

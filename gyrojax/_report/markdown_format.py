@@ -4,7 +4,8 @@ its JSON form as tables."""
 import json
 from typing import Any, ClassVar
 
-from .format import AbstractFormat
+from .._text import safe_name
+from .format import AbstractFormat, for_people
 from .result import AbstractResult
 
 
@@ -12,7 +13,8 @@ class MarkdownFormat(AbstractFormat):
     """Markdown: `result.markdown()` where the result defines it, else a generic page (the kind as title, the
     summary in a code block, then the JSON form: its scalars in one table, each list of records or mapping of
     records as a table of their scalar fields, anything else as a JSON block). `figures`, (title, image file)
-    pairs, are appended as sections with the image (the diagnosis report's plots)."""
+    pairs, are appended as sections with the image (the diagnosis report's plots). The data's device names are
+    escaped (`for_people`)."""
 
     figures: tuple[tuple[str, str], ...] = ()
 
@@ -21,7 +23,7 @@ class MarkdownFormat(AbstractFormat):
 
     def render(self, result: AbstractResult) -> bytes:
         own = getattr(result, "markdown", None)
-        text = str(own()) if callable(own) else generic_markdown(result)
+        text = for_people(result, str(own()) if callable(own) else generic_markdown(result))
         for title, image in self.figures:
             text += "\n" + "\n".join([f"## {title}", "", f"![{title}]({image})", ""])
         return text.encode()
@@ -32,8 +34,8 @@ def _scalar(value: Any) -> bool:
 
 
 def _cell(value: Any) -> str:
-    text = value if isinstance(value, str) else json.dumps(value, default=float)
-    return text.replace("|", "\\|").replace("\n", " ")
+    text = safe_name(value) if isinstance(value, str) else json.dumps(value, default=float)
+    return text.replace("|", "\\|")
 
 
 def _table(rows: list[dict[str, Any]], first: str | None = None) -> list[str]:

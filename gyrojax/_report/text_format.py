@@ -2,15 +2,15 @@
 
 from typing import ClassVar
 
-from .format import AbstractFormat
+from .format import AbstractFormat, for_people
 from .result import AbstractResult
 
 
 class TextFormat(AbstractFormat):
-    """`result.summary()` with a final newline, UTF-8."""
+    """`result.summary()` with a final newline, UTF-8, the data's device names escaped (`for_people`)."""
 
     name: ClassVar[str] = "text"
     suffixes: ClassVar[tuple[str, ...]] = (".txt",)
 
     def render(self, result: AbstractResult) -> bytes:
-        return (result.summary() + "\n").encode()
+        return (for_people(result, result.summary()) + "\n").encode()
