@@ -86,7 +86,7 @@ def _run_page(name: str):
     page = PAGES / name
     blocks = _blocks(page)
     assert len(blocks) >= 2, f"{name}: expected the example and its test, found {len(blocks)} blocks"
-    kinds, effects = dict(gj.sweeps.SWEEP_KINDS), dict(gj.EFFECTS)
+    kinds, effects, formats = dict(gj.sweeps.SWEEP_KINDS), dict(gj.EFFECTS), dict(gj.io.FORMATS)
     namespace = {"__name__": f"extending_{page.stem}"}
     try:
         for block in blocks:
@@ -96,7 +96,7 @@ def _run_page(name: str):
         for test in tests:
             test()
     finally:  # what a page registered is not left for the next test
-        for registry, before in ((gj.sweeps.SWEEP_KINDS, kinds), (gj.EFFECTS, effects)):
+        for registry, before in ((gj.sweeps.SWEEP_KINDS, kinds), (gj.EFFECTS, effects), (gj.io.FORMATS, formats)):
             for key in [k for k in registry if k not in before]:
                 del registry[key]
     return namespace
