@@ -95,3 +95,21 @@ def test_a_dac_inl_taken_for_a_feedback_compression_at_low_snr_is_declared_ambig
     d = gj.diagnose("paper-qmg", table, progress=False)
     assert d.selected == ("feedback_compression",)
     assert ("feedback_compression", "dac_inl") in d.ambiguous
+
+
+def test_noise_larger_than_stated_confirms_nothing():
+    # a null lot whose rate and VCF rows carry extra heavy-tailed noise (Student t, 3 dof, unit variance: the
+    # stated sigma is sqrt(2) too small): read against the stated sigma, a temperature tempco's chi2 drop looked
+    # significant (zro_tempco confirmed on this lot); read against the refit's own scatter, it is not
+    import numpy as np
+
+    table, _ = discovery_lot(None, snr="mid", design="a", seed=1)
+    cols = dict(table.columns)
+    sigma = np.asarray(cols["output_sigma"], float)
+    rng = np.random.default_rng(101)
+    rng.choice(np.flatnonzero(np.asarray(cols["sweep"]) == "rate_table"))  # the draw the study made first
+    t3 = rng.standard_t(3, size=sigma.size) / np.sqrt(3.0)
+    cols["output"] = np.asarray(cols["output"], float) + sigma * t3 * (np.asarray(cols["sweep"]) != "dac")
+    d = gj.diagnose("paper-qmg", gj.Table(cols, source="<null lot, noise sqrt(2) x stated>"), progress=False)
+    assert d.selected == ()
+    assert d.final.chi2_red_total > 1.5  # the scatter is said, not explained away

@@ -273,11 +273,13 @@ def _interchangeable(fit, a: str, b: str, alpha: float) -> bool:
 
 def _likelihood_ratio(fit, new, data):
     """The likelihood-ratio test of the refit `new` against `fit`: (chi2 drop, parameters added per device,
-    over the lot, p-value, delta BIC)."""
+    over the lot, p-value, delta BIC). Where the refit leaves more scatter than the stated uncertainties
+    (chi2_red > 1), the drop is read against that scatter, as an F-test does: noise larger than stated, or a misfit
+    the step does not take, is not evidence for it."""
     lr = fit.chi2_total - new.chi2_total
     df = int(np.sum(new.free)) - int(np.sum(fit.free))
     df_total = df * len(data.devices)
-    p_lr = chi2_sf(lr, df_total)
+    p_lr = chi2_sf(lr / max(float(new.chi2_red_total), 1.0), df_total)
     n_points = int(np.sum([np.asarray(b.mask).sum() for b in data.blocks.values()]))
     delta_bic = -lr + df_total * math.log(max(n_points, 2))
     return lr, df, df_total, p_lr, delta_bic
