@@ -176,6 +176,7 @@ def describe(space: ResidualSpace) -> tuple[list, list]:
         d = _periodic_scan(space, sweep, np.asarray(block.inputs, float), mask)
         if d is not None:
             out.append(d)
+        out.extend(_point_scans(space, sweep, block, mask))
     return out, notes
 
 
@@ -282,10 +283,67 @@ def _periodic_scan(space, sweep, x, mask):
     return Description(sweep, "input", "periodic", cols, sc, min(1.0, PERIODS * sc.p_value), {"period": period})
 
 
+POINT_CANDIDATES = 3  # the largest residuals scored exactly as single points (their projections differ little)
+
+
+def _point_scans(space, sweep, block, mask) -> list:
+    """Two narrow descriptions, each scored at the residuals most off the model: *one point* of one device (an
+    outlier: a glitch in the recording, a transient), whose look-elsewhere correction is the number of points, and
+    *one input value* in every device (a narrow error at one setting, as a DAC's missing code), corrected by the
+    number of input values. A smooth shape spreads over many points and is outdone here by the splines."""
+    i, j = space.blocks[sweep]
+    n_dev, n_run, n_pt = mask.shape
+    r = np.where(mask.reshape(n_dev, -1), space.residuals[:, i:j], 0.0)
+    n_points = int(mask.sum())
+    if n_points < 8:
+        return []
+    out = []
+    best = None
+    for flat in np.argsort(-np.abs(r), axis=None)[:POINT_CANDIDATES]:
+        dv, row = np.unravel_index(int(flat), r.shape)
+        rn, pt = divmod(int(row), n_pt)
+        g = np.zeros((n_dev, n_run, n_pt, 1))
+        g[dv, rn, pt, 0] = 1.0
+        cols = space.columns({sweep: g})
+        sc = space.score(cols)
+        if sc.df and (best is None or sc.statistic > best[0].statistic):
+            best = (sc, cols, dv, rn, pt)
+    if best is not None:
+        sc, cols, dv, rn, pt = best
+        coords = {"input": float(np.asarray(block.inputs)[dv, rn, pt]),
+                  **{k: float(v[dv, rn, pt]) for k, v in coordinates(block).items() if k in ("time_s", "temperature_c")}}
+        where = {"runs": [[space.fit.devices[dv], space.fit.data.run_ids(sweep)[dv][rn]]], "point": coords,
+                 "positions": n_points}
+        out.append(Description(sweep, "point", "single point", cols, sc, min(1.0, n_points * sc.p_value), where))
+    x = np.asarray(block.inputs, float)
+    values = np.unique(x[mask])
+    if values.size >= 8:
+        worst = {}
+        for v in values:  # each input value: its residuals' chi2 over the lot, the candidates scored exactly
+            worst[float(v)] = float(np.sum(np.where((x == v) & mask, r.reshape(mask.shape), 0.0) ** 2))
+        best = None
+        for v in sorted(worst, key=worst.get, reverse=True)[:POINT_CANDIDATES]:
+            g = np.zeros((n_dev, n_run, n_pt, n_dev))
+            for dv in range(n_dev):
+                g[dv, ..., dv] = np.where(mask[dv] & (x[dv] == v), 1.0, 0.0)
+            cols = space.columns({sweep: g})
+            sc = space.score(cols)
+            if sc.df and (best is None or _log_p(sc.statistic, sc.df) < _log_p(best[0].statistic, best[0].df)):
+                best = (sc, cols, v)
+        if best is not None:
+            sc, cols, v = best
+            out.append(Description(sweep, "input", "at one input", cols, sc, min(1.0, values.size * sc.p_value),
+                                   {"at": v, "positions": int(values.size), "within_device": 1.0}))
+    return out
+
+
+NARROW = ("step", "single point", "at one input")  # scans whose p carries their own look-elsewhere correction
+
+
 def strength(d: Description) -> float:
     """-log p of a description (with the scan's look-elsewhere correction), for ranking."""
     lp = _log_p(d.scored.statistic, d.scored.df)
-    if d.family == "step":
+    if d.family in NARROW:
         lp += math.log(max(d.p_value / max(d.scored.p_value, 1e-300), 1.0))
     elif d.family == "periodic":
         lp += math.log(PERIODS)

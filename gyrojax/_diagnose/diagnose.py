@@ -338,8 +338,9 @@ def _final_discrepancy(s: _Selection, final_scores, max_typical_multiple, alpha)
     fit, located = s.fit, s.located
     discrepancy = with_shapes(fit, located.locations, s.discrepancy, s.designs, final_scores, s.rejected,
                               max_typical_multiple, alpha)
+    # a single point off the model (an outlier) has no closed form in the recorded coordinates to propose
     formula = propose_along(fit, discrepancy[0], step_at=located.step_at, period=located.period, alpha=alpha) \
-        if discrepancy else None
+        if discrepancy and getattr(discrepancy[0], "family", "") != "single point" else None
     along = formula_coordinate(formula)
     if along is not None and along != discrepancy[0].coordinate and along != "model":
         # a closed form of one coordinate that explains the whole location (fewer degrees of freedom than the

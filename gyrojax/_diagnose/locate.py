@@ -37,6 +37,8 @@ from .space import ResidualSpace
 
 SIZE_REL_STDERR = 0.5
 MAX_LOCATIONS = 3
+# Scans (one position, one period, one point): described alone, never joined across sweeps or confounded.
+SCANS = ("step", "periodic", "single point", "at one input")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -121,6 +123,8 @@ def _location_text(loc: dict) -> str:
         parts.append(f"over {loc['coordinate']} {lo:.4g} to {hi:.4g}")
     if "at" in loc:
         parts.append(f"at {loc['coordinate']} {loc['at']:.4g}")
+    if "point" in loc:
+        parts.append("at " + ", ".join(f"{k} {v:.4g}" for k, v in loc["point"].items()))
     if loc.get("runs"):
         parts.append("in " + ", ".join(f"{clean(d)} run {r}" for d, r in loc["runs"][:3])
                      + (" ..." if len(loc["runs"]) > 3 else ""))
@@ -170,7 +174,7 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS) -> L
         for d in sorted(significant, key=strength, reverse=True):
             if d.sweep in {m.sweep for m in members} or (d.coordinate, d.family) != (best.coordinate, best.family):
                 continue
-            if d.family in ("step", "periodic"):
+            if d.family in SCANS:
                 continue
             if joined.score(d.columns).p_value < cut:
                 members.append(d)
@@ -228,13 +232,13 @@ def _confounded(space, best, descs, cut) -> list:
     """The descriptions of `best`'s sweep along other coordinates that the data cannot tell from it: neither is
     significant beyond the other (of each coordinate, its first such description)."""
     out = []
-    if best.family in ("step", "periodic"):
+    if best.family in SCANS:
         return out
     beyond_best = space.with_columns(best.columns)
     for d in descs:
         if d.coordinate in {best.coordinate, *(o.coordinate for o in out)} or d.sweep != best.sweep:
             continue
-        if d.family in ("step", "periodic"):
+        if d.family in SCANS:
             continue
         if (beyond_best.score(d.columns).p_value >= cut
                 and space.with_columns(d.columns).score(best.columns).p_value >= cut):
@@ -259,6 +263,10 @@ def _location(space, fit, members, confounded) -> Location:
 def _shape_words(d: Description) -> str:
     if d.family == "step":
         return "a step of the output partway through a run"
+    if d.family == "single point":
+        return "a single point off the model (an outlier: a glitch in the recording or a transient)"
+    if d.family == "at one input":
+        return "an error at one input value in every device (a narrow feature: a missing code, a resonance)"
     if d.family == "input x":
         return f"an offset along the input whose size changes with {d.coordinate}"
     if d.family == "offset in each run":
@@ -277,7 +285,7 @@ def _measured_shares(space, fit, best: Description, sc) -> tuple:
     Where those fits together find under `MEASURED_FLOOR` of the location's chi2 `sc` (a misfit seen only beyond
     the fit's own span: a gain that changes with a coordinate the fit's gains nearly follow), the shares of the
     location's own description (`sc`'s fingerprint) instead: a sweep's residuals as they are say nothing there."""
-    if best.family in ("step", "periodic"):
+    if best.family in SCANS:
         return ((best.sweep, 1.0),)
     found = {}
     for sweep in fit.data.sweeps:
@@ -329,6 +337,12 @@ def _where(fit, space, best, members, sc) -> dict:
         return out
     if best.family == "periodic":
         out["period"] = best.where["period"]
+        return out
+    if best.family == "single point":
+        out.update(runs=best.where["runs"], point=best.where["point"])
+        return out
+    if best.family == "at one input":
+        out.update(at=best.where["at"])
         return out
     fp = sc.fingerprint
     chi_dev_run = []
