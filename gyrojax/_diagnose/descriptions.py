@@ -311,7 +311,8 @@ def _point_scans(space, sweep, block, mask) -> list:
     if best is not None:
         sc, cols, dv, rn, pt = best
         coords = {"input": float(np.asarray(block.inputs)[dv, rn, pt]),
-                  **{k: float(v[dv, rn, pt]) for k, v in coordinates(block).items() if k in ("time_s", "temperature_c")}}
+                  **{k: float(v[dv, rn, pt]) for k, v in coordinates(block).items()
+                     if k in ("time_s", "temperature_c")}}
         where = {"runs": [[space.fit.devices[dv], space.fit.data.run_ids(sweep)[dv][rn]]], "point": coords,
                  "positions": n_points}
         out.append(Description(sweep, "point", "single point", cols, sc, min(1.0, n_points * sc.p_value), where))

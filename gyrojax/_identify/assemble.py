@@ -18,6 +18,7 @@ from .._solution import RESULTS, result_code, result_message
 from .covariance import chi2_p_value, covariance, joint_jacobian
 from .fit import Fit, p_text
 from .identifiability import sf_determinacy, undetermined_reason, weak_at_solution
+from .noise import null_p_values
 from .plausibility import ASTRONOMICAL_CHI2_RED, implausible_values, scale_hint
 from .problem import Layout, Problem
 from .recovery import Solution
@@ -101,6 +102,21 @@ def _weighted(data: FitData) -> bool:
     return data.weighted
 
 
+def _chi2_test(data: FitData, final, chi2, dof, n_lot: int, noise):
+    """The chi2 test per device and for the lot: against chi2(dof) with given sigmas (`noise` None), else the
+    refit's chi2 over the data rows against the estimated noise's null draws (`null_p_values`). Returns
+    (noise_dof, noise notes, noise determined, p-values, the lot's p-value)."""
+    n = len(chi2)
+    if noise is None:
+        noise_dof = np.full(n, np.inf)
+        p_lot = float(chi2_p_value(np.asarray(chi2.sum()), np.asarray(int(dof.sum()) - n_lot), np.asarray(np.inf)))
+        return noise_dof, [()] * n, [True] * n, chi2_p_value(chi2, dof, noise_dof), p_lot
+    noise_dof, noise_notes, noise_ok, draws = noise
+    rows = sum(int(np.prod(data.blocks[s].inputs.shape[1:])) for s in data.sweeps)  # the prior rows left out
+    p_value, p_lot = null_p_values(np.sum(np.asarray(final.residuals)[:, :rows] ** 2, axis=-1), dof, noise_dof, draws)
+    return noise_dof, noise_notes, noise_ok, p_value, p_lot
+
+
 def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index, solution: Solution, held_reports,
                  threshold: float, reject_alpha: float, noise) -> Fit:
     """The `Fit` of `solution`: covariance and physical values with standard errors (free parameters
@@ -146,12 +162,7 @@ def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index
     determined, weak_part, _ = sf_determinacy(
         np.asarray(final.jac)[:, :, cand], jac_lot if n_lot else None, np.asarray(final.sf_grad)[:, cand],
         g_lot if n_lot else None, sf_stderr, threshold)
-    if noise is None:
-        noise_dof, noise_notes, noise_ok = np.full(n, np.inf), [()] * n, [True] * n
-        p_value = chi2_p_value(chi2, dof, noise_dof)
-        p_lot = float(chi2_p_value(np.asarray(chi2.sum()), np.asarray(int(dof.sum()) - n_lot), np.asarray(np.inf)))
-    else:
-        noise_dof, noise_notes, noise_ok, p_value, p_lot = noise
+    noise_dof, noise_notes, noise_ok, p_value, p_lot = _chi2_test(data, final, chi2, dof, n_lot, noise)
     chi2_red = chi2 / np.maximum(dof, 1)
     rejected = np.nan_to_num(p_value, nan=1.0) < reject_alpha
     implausible = implausible_values(entries, problem_all.start, values, lot_values[0], free_mask, n)

@@ -199,8 +199,8 @@ def _fit_once(model, data, *, free, shared, priors, hold, tier, solver, solver_n
               max_steps, threshold, reject_alpha, noise) -> Fit:
     """One fit of `identify` (arguments checked there) with the data's sigmas as they are: the problem, the lot
     strategy, what to hold, the first solve (`first`; None: evaluate at the start) and the `recoveries` in
-    turn. `noise`: the estimated noise's `(degrees of freedom, warnings, determined, p-values)` per device and
-    the lot's p-value (`estimated_noise`), or None for given sigmas."""
+    turn. `noise`: the estimated noise's `(degrees of freedom, warnings, determined, null draws of the chi2)` per
+    device (`estimated_noise`), or None for given sigmas."""
     n = len(data.devices)
     problem_all, layout = make_problem(model, data, free=free, shared=shared, hold=hold, priors=priors, tier=tier)
     n_dev, n_lot = len(layout.names_dev), len(layout.names_lot)

@@ -189,10 +189,10 @@ _NULL_DRAWS = 4000
 
 def estimated_noise(fit: Fit, seed: int, first_device: int = 0):
     """Per device, the noise of each sweep estimated from `fit` (`noise_scales`): `(kappa (device, sweep),
-    (noise_dof (device,), warnings per device, determined per device, p-values (device,), the lot's
-    p-value))`, the p-values of the chi2 in units of the estimated noise against its null distribution, drawn
-    per device with `seed` and its position in the lot (`first_device` + its index: a chunk of a lot draws
-    what the whole lot draws for the same devices)."""
+    (noise_dof (device,), warnings per device, determined per device, null draws per device))`, the draws of the
+    chi2 in units of the estimated noise under its null distribution (None where not tested; `null_p_values`
+    reads the refit's chi2 against them), drawn per device with `seed` and its position in the lot
+    (`first_device` + its index: a chunk of a lot draws what the whole lot draws for the same devices)."""
     data = fit.data
     sweeps = data.sweeps
     rows = sum(int(np.prod(data.blocks[s].inputs.shape[1:])) for s in sweeps)
@@ -201,8 +201,7 @@ def estimated_noise(fit: Fit, seed: int, first_device: int = 0):
     n = len(data.device_names())
     kappa = np.ones((n, len(sweeps)))
     noise_dof = np.full(n, np.inf)
-    p_value = np.full(n, np.nan)
-    notes, determined, nulls = [], [], []
+    notes, determined, draws = [], [], []
     for d in range(n):
         blocks = [(np.asarray(data.blocks[s].inputs[d]), np.asarray(data.blocks[s].mask[d]),
                    1.0 / np.asarray(data.blocks[s].fit_sigmas()[d]), sweep_kind(s).biased) for s in sweeps]
@@ -218,9 +217,7 @@ def estimated_noise(fit: Fit, seed: int, first_device: int = 0):
         ok = present & np.isfinite(k) & (k > 0) & np.isfinite(nu)
         kappa[d] = np.where(ok, k, 1.0)
         noise_dof[d] = pooled_dof(np.where(ok, nu, 0.0)[present], points[present])
-        if null is not None and ok[present].all() and dof[d] > 0:
-            p_value[d] = mc_p_value(null[0], null[1], dof[d], noise_dof[d])
-            nulls.append(null)
+        draws.append(null[1] if null is not None and ok[present].all() and dof[d] > 0 else None)
         unit = "x the given output_sigma" if data.weighted else "output units"
         # Without output_sigma the first fit's sigmas are a scale (`first_fit_scale`): the noise is k times it.
         base = [1.0 if data.weighted else float(np.max(np.where(np.asarray(data.blocks[s].mask[d]),
@@ -240,11 +237,26 @@ def estimated_noise(fit: Fit, seed: int, first_device: int = 0):
                         "from (too few points, or a first fit that failed): the uncertainties are not determined")
         notes.append(tuple(text))
         determined.append(not bad)
+    return kappa, (noise_dof, notes, determined, tuple(draws))
+
+
+def null_p_values(chi2, dof, noise_dof, draws) -> tuple[np.ndarray, float]:
+    """The p-values of the refit's chi2 per device over its data rows, `chi2` (device,), in units of the estimated
+    noise (the refit's sigmas are it), against the null `draws` of `estimated_noise` (None where a device was not
+    tested), and the lot's. The refit's chi2, not the first fit's: the first fit, weighted by a unit guess, may
+    leave a misfit the contrasts cancel (a sweep in volts beside one in LSB) that the refit removes."""
+    n = len(draws)
+    p_value = np.full(n, np.nan)
+    for d in range(n):
+        if draws[d] is not None:
+            p_value[d] = mc_p_value(float(chi2[d]), draws[d], dof[d], noise_dof[d])
     # The lot: the devices' chi2 draws are independent, so their sums sample the lot's null distribution.
-    tested = np.isfinite(p_value)
-    p_lot = (mc_p_value(sum(c for c, _ in nulls), sum(dr for _, dr in nulls), int(dof[tested].sum()),
-                         pooled_dof(noise_dof[tested], dof[tested])) if nulls else float("nan"))
-    return kappa, (noise_dof, notes, determined, p_value, p_lot)
+    tested = [d for d in range(n) if draws[d] is not None]
+    p_lot = (mc_p_value(float(sum(chi2[d] for d in tested)), sum(draws[d] for d in tested),
+                        int(np.asarray(dof)[tested].sum()), pooled_dof(np.asarray(noise_dof)[tested],
+                                                                       np.asarray(dof)[tested]))
+             if tested else float("nan"))
+    return p_value, p_lot
 
 
 def first_fit_scale(data: FitData, predictions) -> FitData:
