@@ -109,9 +109,11 @@ def diagnose(model: Model | Gyroscope | str = DEFAULT_MODEL, data: Table | FitDa
     if verdict == "explained" and discrepancy:  # a located misfit is a failure the omnibus test missed
         verdict = "partly explained" if s.steps else "unexplained"
     say(f"done: {verdict}; selected {', '.join(s.selected) or 'none'}")
-    return Diagnosis(baseline, s.fit, tuple(s.fits), ranking0, tuple(s.steps), tuple(s.ambiguous), s.untestable,
-                     tuple(s.rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2, comparisons,
-                     baseline_discrepancy, discrepancy, verdict, max_typical_multiple, formula=formula,
+    return Diagnosis(baseline=baseline, final=s.fit, fits=tuple(s.fits), ranking=ranking0, steps=tuple(s.steps),
+                     ambiguous=tuple(s.ambiguous), untestable=s.untestable, rejected=tuple(s.rejected), alpha=alpha,
+                     baseline_nonlinearity_ppm=nonlinearity_residual_ppm(baseline), min_typical_chi2=min_typical_chi2,
+                     comparisons=comparisons, baseline_discrepancy=baseline_discrepancy, discrepancy=discrepancy,
+                     verdict=verdict, max_typical_multiple=max_typical_multiple, formula=formula,
                      notes=s.located.notes)
 
 
@@ -228,9 +230,11 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
         s.fits.append(s.fit)
         cols = effect_columns(s.fit, best.effect)
         multiple = float(np.max(np.abs(np.asarray(s.fit.u)[:, cols])))
-        s.steps.append(Step(best.effect, best.statistic, best.p_value, lr, df_total, p_lr, delta_bic,
-                            s.fit.chi2_red_total, nonlinearity_residual_ppm(s.fit), scores, group, separated,
-                            multiple, best.implied_multiple, look_alikes=alike,
+        s.steps.append(Step(effect=best.effect, statistic=best.statistic, p_value=best.p_value, lr_statistic=lr,
+                            lr_df=df_total, lr_p_value=p_lr, delta_bic=delta_bic, chi2_red_after=s.fit.chi2_red_total,
+                            nonlinearity_ppm_after=nonlinearity_residual_ppm(s.fit), ranking=scores,
+                            ambiguous_with=group, separated_by=separated, typical_multiple=multiple,
+                            implied_multiple=best.implied_multiple, look_alikes=alike,
                             q_value=q if q is not None else math.nan))
         s.discrepancy, s.designs = score_probes(s.fit, probes, alpha=alpha)
         s.located = locate(s.fit, alpha=alpha)
