@@ -27,7 +27,6 @@ import dataclasses
 
 import numpy as np
 
-from .._sweeps.registry import sweep_kind
 from .descriptions import SIGNED, coordinates, spread
 from .locate import PREFERENCE
 from .space import ResidualSpace
@@ -144,7 +143,8 @@ class _Group:
         self.preds = {s: np.asarray(fit.predictions[s], float) for s in group}
         self.coords = {s: coordinates(b) for s, b in blocks.items()}
         self.names = set.intersection(*(set(c) for c in self.coords.values()))
-        self.out_unit = sweep_kind(group[0]).output_unit
+        self.kinds = {s: fit.data.kind(s) for s in group}
+        self.out_unit = self.kinds[group[0]].output_unit
 
     def values(self, c, *, centred=False):
         x = {s: np.asarray(self.coords[s][c], float) for s in self.group}
@@ -152,7 +152,7 @@ class _Group:
 
     def add(self, name, expr, fn, coordinate, *, gain_too=True, offset=True, unit_power=1, unit=None):
         cu = self.out_unit if coordinate == "model" else (_UNITS.get(coordinate)
-                                                          or sweep_kind(self.group[0]).input_unit)
+                                                          or self.kinds[self.group[0]].input_unit)
         per = f"/{cu}" if unit_power == 1 else (f"/{cu}^{unit_power}" if unit_power else "")
         for gain in ((False, True) if gain_too else (False,)):
             if not gain and not offset:
@@ -226,7 +226,7 @@ def _output_terms(g: _Group):
     p = g.preds
     for basis, k in (("sq", 2), ("cube", 3)):
         g.add(f"{basis}(model)", f"output**{k}", lambda s, k=k: p[s] ** k, "model", gain_too=False, unit_power=k - 1)
-    if len({sweep_kind(s).input_unit for s in g.group}) < 2:
+    if len({g.kinds[s].input_unit for s in g.group}) < 2:
         return
     g.add("abs(model)", "abs(output)", lambda s: np.abs(p[s]), "model", gain_too=False, unit_power=0, unit="1")
     for c in ("temperature_c", "time_s"):
