@@ -12,7 +12,8 @@ import numpy as np
 from .._data.cells import DataError
 from .._data.table import Table, padded_columns
 from .._data.validate import check_outputs_change
-from .._sweeps.registry import SWEEP_KINDS, sweep_kind
+from .._sweeps.base import AbstractSweep
+from .._sweeps.registry import SWEEP_KINDS
 from .asymmetry import asymmetry
 from .bandwidth import MIN_POINTS_BANDWIDTH, rate_bandwidth
 from .repeatability import repeatability
@@ -56,11 +57,10 @@ _METRIC_KEYS = {
 }
 
 
-def _drop_inapplicable(rec: dict[str, Any], sweep: str, brief: bool = False) -> dict[str, str]:
-    """Set to None the numbers of `rec` that are no measurement on this sweep kind (its `applicable_metrics`);
+def _drop_inapplicable(rec: dict[str, Any], kind: AbstractSweep, brief: bool = False) -> dict[str, str]:
+    """Set to None the numbers of `rec` that are no measurement on its sweep `kind` (its `applicable_metrics`);
     returns the reason for each (`brief`: the kind's reason in full for the first key only, the others refer to
     it, so that a line of text says it once)."""
-    kind = sweep_kind(sweep)
     applies = kind.applicable_metrics()
     reasons = {}
     for metric, keys in _METRIC_KEYS.items():
@@ -70,19 +70,19 @@ def _drop_inapplicable(rec: dict[str, Any], sweep: str, brief: bool = False) -> 
             if key in rec:
                 rec[key] = None
                 first = next(iter(reasons), None)
-                reasons[key] = (f"not a measurement on a {sweep} sweep (see {first})" if brief and first
+                reasons[key] = (f"not a measurement on a {kind.name} sweep (see {first})" if brief and first
                                 else kind.metric_not_applicable(metric))
     return reasons
 
 
-def _why_not(rec: dict[str, Any], outputs: np.ndarray, inputs: np.ndarray) -> dict[str, str]:
-    """The reason for each None among a point record's numbers (see `metrics_report`)."""
+def _why_not(rec: dict[str, Any], outputs: np.ndarray, inputs: np.ndarray, kind: AbstractSweep) -> dict[str, str]:
+    """The reason for each None among a point record's numbers (see `metrics_report`); `kind` is its sweep's."""
     flat = bool(np.all(outputs == outputs[0]))
     reasons = {}
     for key, value in rec.items():
         if value is not None or key in ("device", "run", "sweep", "n_points"):
             continue
-        if not sweep_kind(rec["sweep"]).straight_line:
+        if not kind.straight_line:
             why = ("no phase_deg was given for every point of this sweep" if key == "phase_deg_at_bandwidth"
                    else f"a {rec['sweep']} sweep gives a bandwidth, not a straight-line fit")
         elif flat and key.startswith("nonlinearity"):
@@ -149,11 +149,9 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
 
     records: dict[tuple, dict[str, Any]] = {}
     device_records: list[dict[str, Any]] = []
-    for sweep in SWEEP_KINDS:
-        if not any(k[2] == sweep for k in groups):
-            continue
+    for sweep in table.kinds():
         arr = SimpleNamespace(**padded_columns(table, sweep))  # NumPy: no compilation for a report
-        if not sweep_kind(sweep).straight_line:
+        if not arr.kind.straight_line:
             records.update(_bandwidth_records(table, groups, arr, sweep))
             continue
         sig = arr.sigmas if weighted else None
@@ -188,9 +186,10 @@ def _group_name(table: Table, key, rows) -> str:
 def _check_groups(table: Table, groups, weighted: bool) -> None:
     """Checks with names, before any arithmetic: enough points per group, a positive `output_sigma` on every
     point of a weighted fit, `rate_dps` on all or none of a group's points where the kind is fitted against it."""
+    kinds = table.kinds()
     for key, rows in groups.items():
-        sweep = key[2]
-        line = sweep_kind(sweep).straight_line
+        kind = kinds[key[2]]
+        line = kind.straight_line
         need = MIN_POINTS_LINEAR if line else MIN_POINTS_BANDWIDTH
         what = "a scale factor with a nonlinearity" if line else "a rate bandwidth"
         if len(rows) < need:
@@ -204,7 +203,7 @@ def _check_groups(table: Table, groups, weighted: bool) -> None:
                 raise DataError(f"{table.locate(int(bad[0]), 'output_sigma')}: weighted=True needs a positive "
                                 f"output_sigma on every point; {_group_name(table, key, rows)} lacks one.",
                                 source=table.source, row=int(bad[0]) + 1, column="output_sigma")
-        if sweep_kind(sweep).fit_against_rate and "rate_dps" in table:
+        if kind.fit_against_rate and "rate_dps" in table:
             given = ~np.isnan(table["rate_dps"][rows])
             if given.any() and not given.all():
                 r = int(rows[~given][0])
@@ -240,7 +239,7 @@ def _bandwidth_records(table: Table, groups, arr, sweep: str) -> dict:
             "phase_deg_at_bandwidth": _num(bw.phase_deg[d, k]) if has_phase else None,
             "low_frequency_gain": _num(bw.low_frequency_gain[d, k])}
         sel = arr.mask[d, k]
-        why = _why_not(records[(dev, r, sweep)], arr.outputs[d, k][sel], arr.inputs[d, k][sel])
+        why = _why_not(records[(dev, r, sweep)], arr.outputs[d, k][sel], arr.inputs[d, k][sel], arr.kind)
         records[(dev, r, sweep)]["undetermined"] = [key for key in why if key in _DETERMINED]
         records[(dev, r, sweep)]["not_applicable"] = why
     return records
@@ -251,7 +250,7 @@ def _linear_records(arr, sweep: str, fit, sig, full_scale: str, common_bias: boo
     per run, and against `rate_dps` where the kind is fitted against it and the data give it."""
     asym = asymmetry(arr.inputs, arr.outputs, mask=arr.mask, sigmas=sig, common_bias=common_bias)
     vs_rate = None
-    if sweep_kind(sweep).fit_against_rate and "rate_dps" in arr.aux:
+    if arr.kind.fit_against_rate and "rate_dps" in arr.aux:
         rate = arr.aux["rate_dps"]
         has = arr.mask & ~np.isnan(rate)
         vs_rate = fit_scale_factor(np.where(has, rate, 0.0), arr.outputs, mask=has, sigmas=sig,
@@ -269,9 +268,9 @@ def _linear_records(arr, sweep: str, fit, sig, full_scale: str, common_bias: boo
                         "nonlinearity_max_ppm_vs_rate": _num(vs_rate.nonlinearity_max_ppm[d, k]),
                         "nonlinearity_rms_ppm_vs_rate": _num(vs_rate.nonlinearity_rms_ppm[d, k])})
         sel = arr.mask[d, k]
-        kind_reasons = _drop_inapplicable(rec, sweep, brief=True)
+        kind_reasons = _drop_inapplicable(rec, arr.kind, brief=True)
         why = _why_not({key: v for key, v in rec.items() if key not in kind_reasons}, arr.outputs[d, k][sel],
-                       arr.inputs[d, k][sel])
+                       arr.inputs[d, k][sel], arr.kind)
         rec["undetermined"] = [key for key in why if key in _DETERMINED]
         rec["not_applicable"] = {**why, **kind_reasons}
         records[(dev, r, sweep)] = rec
@@ -288,7 +287,7 @@ def _device_records(arr, sweep: str, fit, ddof: int) -> list:
         sf = fit.scale_factor[d][run_mask[d]]
         rec = {"device": dev, "sweep": sweep, "n_runs": int(n_runs[d]),
                "scale_factor_mean": _num(np.mean(sf)), "repeatability_ppm": _num(rep[d])}
-        rec["not_applicable"] = _drop_inapplicable(rec, sweep)
+        rec["not_applicable"] = _drop_inapplicable(rec, arr.kind)
         if rec["repeatability_ppm"] is None and "repeatability_ppm" not in rec["not_applicable"]:
             rec["not_applicable"]["repeatability_ppm"] = (
                 f"{int(n_runs[d])} run{'s' * (int(n_runs[d]) != 1)}: a repeatability needs at least {ddof + 1}"
