@@ -109,11 +109,9 @@ def diagnose(model: Model | Gyroscope | str = DEFAULT_MODEL, data: Table | FitDa
     if verdict == "explained" and discrepancy:  # a located misfit is a failure the omnibus test missed
         verdict = "partly explained" if s.steps else "unexplained"
     say(f"done: {verdict}; selected {', '.join(s.selected) or 'none'}")
-    return Diagnosis(baseline=baseline, final=s.fit, fits=tuple(s.fits), ranking=ranking0, steps=tuple(s.steps),
-                     ambiguous=tuple(s.ambiguous), untestable=s.untestable, rejected=tuple(s.rejected), alpha=alpha,
-                     baseline_nonlinearity_ppm=nonlinearity_residual_ppm(baseline), min_typical_chi2=min_typical_chi2,
-                     comparisons=comparisons, baseline_discrepancy=baseline_discrepancy, discrepancy=discrepancy,
-                     verdict=verdict, max_typical_multiple=max_typical_multiple, formula=formula,
+    return Diagnosis(baseline, s.fit, tuple(s.fits), ranking0, tuple(s.steps), tuple(s.ambiguous), s.untestable,
+                     tuple(s.rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2, comparisons,
+                     baseline_discrepancy, discrepancy, verdict, max_typical_multiple, formula=formula,
                      notes=s.located.notes)
 
 
