@@ -23,8 +23,8 @@ Canonical names: `basis(coordinate)` with basis in lin, sq, cube, abs, sign, ste
 gain per run. References: input 0, temperature 25 C, time 0 s, drive frequency the device's mean.
 """
 
-import dataclasses
 
+import equinox as eqx
 import numpy as np
 
 from .descriptions import SIGNED, coordinates, spread
@@ -43,17 +43,16 @@ _UNITS = {"input": None, "temperature_c": "K", "time_s": "s", "drive_freq_hz": "
           "dtemperature_dt": "(K/s)"}
 
 
-@dataclasses.dataclass(frozen=True)
-class Term:
+class Term(eqx.Module):
     """One dictionary term: its canonical `name`, the `sweeps` it acts on, how it reads in code (`expression`,
     in `x` the input, `T` the temperature, `t` the time), whether it is a gain, and its changes of the
     predictions per unit coefficient (sweep -> (device, run, point))."""
 
     name: str
-    sweeps: tuple
+    sweeps: tuple[str, ...]
     expression: str
     gain: bool
-    changes: dict
+    changes: dict[str, np.ndarray]  # per sweep: (device, run, point)
     unit: str
     coordinate: str = ""  # the recorded coordinate it runs along ("" for a gain per run)
 
@@ -62,12 +61,11 @@ class Term:
         return f"{self.name} [{'+'.join(self.sweeps)}]"
 
 
-@dataclasses.dataclass(frozen=True)
-class Formula:
+class Formula(eqx.Module):
     """The selected terms with their lot-wide coefficients, standard errors and the share of the excess chi2
     they remove together."""
 
-    terms: tuple  # Term
+    terms: tuple[Term, ...]
     coefficients: np.ndarray
     stderr: np.ndarray
     statistic: float
@@ -158,10 +156,10 @@ class _Group:
             if not gain and not offset:
                 continue
             changes = {s: np.where(self.masks[s], fn(s) * (self.preds[s] if gain else 1.0), 0.0) for s in self.group}
-            self.terms.append(Term(name + ("*model" if gain else ""), self.group,
-                                   f"output * ({expr})" if gain else f"({expr})", gain, changes,
-                                   unit or ("1" + per if gain else self.out_unit + per),
-                                   "" if coordinate == "order" else coordinate))
+            self.terms.append(Term(name=name + ("*model" if gain else ""), sweeps=self.group,
+                                   expression=f"output * ({expr})" if gain else f"({expr})", gain=gain,
+                                   changes=changes, unit=unit or ("1" + per if gain else self.out_unit + per),
+                                   coordinate="" if coordinate == "order" else coordinate))
 
 
 def _coordinate_terms(g: _Group, c, step_at, period):
@@ -319,8 +317,9 @@ def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, ma
     coef, err, spread = lot_mean(joint)
     share = min(max(joint.statistic - joint.df, 0.0) / space.excess, 1.0) if space.excess > 0 else 0.0
     left = current.score(location.columns)
-    return Formula(tuple(chosen), coef, err, joint.statistic, joint.df, share, size, left.statistic,
-                   left.df, left.p_value, left.p_value >= alpha, spread)
+    return Formula(terms=tuple(chosen), coefficients=coef, stderr=err, statistic=joint.statistic, df=joint.df,
+                   share=share, dictionary_size=size, left_statistic=left.statistic, left_df=left.df,
+                   left_p_value=left.p_value, complete=left.p_value >= alpha, spread=spread)
 
 
 def lot_mean(scored):
