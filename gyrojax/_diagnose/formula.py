@@ -27,6 +27,7 @@ gain per run. References: input 0, temperature 25 C, time 0 s, drive frequency t
 import equinox as eqx
 import numpy as np
 
+from .._sweeps.base import AbstractSweep
 from .descriptions import SIGNED, coordinates, spread
 from .locate import PREFERENCE
 from .space import ResidualSpace
@@ -44,17 +45,21 @@ _UNITS = {"input": None, "temperature_c": "K", "time_s": "s", "drive_freq_hz": "
 
 
 class Term(eqx.Module):
-    """One dictionary term: its canonical `name`, the `sweeps` it acts on, how it reads in code (`expression`,
-    in `x` the input, `T` the temperature, `t` the time), whether it is a gain, and its changes of the
-    predictions per unit coefficient (sweep -> (device, run, point))."""
+    """One dictionary term: its canonical `name`, the sweep `kinds` it acts on (the data's; `sweeps` their
+    names), how it reads in code (`expression`, in `x` the input, `T` the temperature, `t` the time), whether it
+    is a gain, and its changes of the predictions per unit coefficient (sweep -> (device, run, point))."""
 
     name: str
-    sweeps: tuple[str, ...]
+    kinds: tuple[AbstractSweep, ...]
     expression: str
     gain: bool
     changes: dict[str, np.ndarray]  # per sweep: (device, run, point)
     unit: str
     coordinate: str = ""  # the recorded coordinate it runs along ("" for a gain per run)
+
+    @property
+    def sweeps(self) -> tuple[str, ...]:
+        return tuple(k.name for k in self.kinds)
 
     @property
     def label(self) -> str:
@@ -156,7 +161,7 @@ class _Group:
             if not gain and not offset:
                 continue
             changes = {s: np.where(self.masks[s], fn(s) * (self.preds[s] if gain else 1.0), 0.0) for s in self.group}
-            self.terms.append(Term(name=name + ("*model" if gain else ""), sweeps=self.group,
+            self.terms.append(Term(name=name + ("*model" if gain else ""), kinds=tuple(self.kinds.values()),
                                    expression=f"output * ({expr})" if gain else f"({expr})", gain=gain,
                                    changes=changes, unit=unit or ("1" + per if gain else self.out_unit + per),
                                    coordinate="" if coordinate == "order" else coordinate))
