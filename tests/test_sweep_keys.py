@@ -27,11 +27,8 @@ NAMED_BY_USER = {
     "gyrojax/_plan/experiment.py::CandidateExperiment.__init__": "its `sweep` argument: a name or a kind",
     "gyrojax/_metrics/result.py::MetricsReport.summary": "a JSON document's records, which name their sweep",
     "gyrojax/_metrics/result.py::MetricsReport.undetermined": "a JSON document's records, which name their sweep",
-    # ASSUMPTION: a formula's Term holds the names of its sweeps only (formula.py is being reworked as a whole);
-    # the draft asks the registry which of them a readout term reaches. The list only shrinks.
-    "gyrojax/_diagnose/draft.py::_term_line": "a formula term's sweep names (Term carries no kinds yet)",
 }
-"""Functions outside `BOUNDARY` that turn a name a user (or a document) gives into a kind."""
+"""Functions outside `BOUNDARY` that turn a name a user (or a document) gives into a kind; the list only shrinks."""
 
 
 def _calls(tree: ast.AST, prefix: str = ""):
