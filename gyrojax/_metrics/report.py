@@ -17,7 +17,14 @@ from .._sweeps.registry import SWEEP_KINDS
 from .asymmetry import asymmetry
 from .bandwidth import MIN_POINTS_BANDWIDTH, rate_bandwidth
 from .repeatability import repeatability
-from .result import MetricsReport
+from .result import (
+    BandwidthMetrics,
+    DeviceMetrics,
+    MetricsConventions,
+    MetricsReport,
+    RateLineMetrics,
+    SweepMetrics,
+)
 from .scale_factor import FULL_SCALE_CONVENTIONS, MIN_POINTS_LINEAR, fit_scale_factor
 
 
@@ -114,10 +121,11 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
 
     **Returns:**
 
-    A `MetricsReport`: a JSON-ready dict (Python numbers, None for "not applicable") with the `summary()` the
-    command line prints:
+    A `MetricsReport` with the `summary()` the command line prints; its fields are typed records, its `to_json()`
+    the JSON below (Python numbers, None for "not applicable"):
 
-    - `points`: one record per (device, run, sweep), in order of first appearance in the table: `device`,
+    - `points`: one record per (device, run, sweep) (`SweepMetrics`; `vs_rate` and `bandwidth` hold the figures
+      below that only some kinds give), in order of first appearance in the table: `device`,
       `run`, `sweep`, `n_points`, `scale_factor`, `bias`, `nonlinearity_max_ppm`, `nonlinearity_rms_ppm`,
       `asymmetry_ppm` (None when the sweep lacks positive or negative inputs). For `dac` sweeps with a
       `rate_dps` column also `scale_factor_vs_rate`, `bias_vs_rate`, `nonlinearity_max_ppm_vs_rate`,
@@ -128,10 +136,10 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
       nonlinearities and asymmetry (a kind whose slope's sign a convention sets refuses it: see below).
       `not_applicable` maps each key that is None to the reason, in words; `undetermined` lists the keys of
       metrics that apply to the kind but that the points did not give.
-    - `devices`: one record per (device, sweep) with a linear fit: `device`, `sweep`, `n_runs`,
+    - `devices`: one record per (device, sweep) with a linear fit (`DeviceMetrics`): `device`, `sweep`, `n_runs`,
       `scale_factor_mean`, `repeatability_ppm` (None with a single run, or when the mean scale factor is 0),
       and `not_applicable` as above.
-    - `conventions`: the choices above and the unit of `scale_factor` per sweep kind.
+    - `conventions`: the choices above and the unit of `scale_factor` per sweep kind (`MetricsConventions`).
 
     Raises [`gyrojax.DataError`][] naming the device, run, sweep and rows when a run of a rate-table, VCF, DAC or
     drive-amplitude sweep has outputs that are all equal (a dead output, refused as `compensate` refuses it),
@@ -162,16 +170,36 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
     for dev, _, sweep in groups:
         order.setdefault((dev, sweep), len(order))
     device_records.sort(key=lambda rec: order[(rec["device"], rec["sweep"])])
-    return MetricsReport({
-        "points": [records[key] for key in groups],
-        "devices": device_records,
-        "conventions": {
-            "full_scale": full_scale, "weighted": weighted,
-            "asymmetry": "common_bias" if common_bias else "separate_fits", "repeatability_ddof": ddof,
-            "nonlinearity_rms": "population RMS of residuals (divided by n)",
-            "scale_factor_units": scale_factor_units(),
-        },
-    })
+    conventions = MetricsConventions(full_scale=full_scale, weighted=weighted,
+                                     asymmetry="common_bias" if common_bias else "separate_fits",
+                                     repeatability_ddof=ddof,
+                                     nonlinearity_rms="population RMS of residuals (divided by n)",
+                                     scale_factor_units=scale_factor_units())
+    return MetricsReport(points=tuple(_sweep_metrics(records[key]) for key in groups),
+                         devices=tuple(_device_metrics(rec) for rec in device_records), conventions=conventions)
+
+
+def _sweep_metrics(rec: dict[str, Any]) -> SweepMetrics:
+    """A point record (built as a dict, its keys those of the JSON) as the report's typed record."""
+    vs_rate = None if "scale_factor_vs_rate" not in rec else RateLineMetrics(
+        scale_factor=rec["scale_factor_vs_rate"], bias=rec["bias_vs_rate"],
+        nonlinearity_max_ppm=rec["nonlinearity_max_ppm_vs_rate"],
+        nonlinearity_rms_ppm=rec["nonlinearity_rms_ppm_vs_rate"])
+    bandwidth = None if "bandwidth_hz" not in rec else BandwidthMetrics(
+        bandwidth_hz=rec["bandwidth_hz"], phase_deg_at_bandwidth=rec["phase_deg_at_bandwidth"],
+        low_frequency_gain=rec["low_frequency_gain"])
+    return SweepMetrics(device=rec["device"], run=rec["run"], sweep=rec["sweep"], n_points=rec["n_points"],
+                        scale_factor=rec["scale_factor"], bias=rec["bias"],
+                        nonlinearity_max_ppm=rec["nonlinearity_max_ppm"],
+                        nonlinearity_rms_ppm=rec["nonlinearity_rms_ppm"], asymmetry_ppm=rec["asymmetry_ppm"],
+                        vs_rate=vs_rate, bandwidth=bandwidth, undetermined=tuple(rec["undetermined"]),
+                        not_applicable=dict(rec["not_applicable"]))
+
+
+def _device_metrics(rec: dict[str, Any]) -> DeviceMetrics:
+    return DeviceMetrics(device=rec["device"], sweep=rec["sweep"], n_runs=rec["n_runs"],
+                         scale_factor_mean=rec["scale_factor_mean"], repeatability_ppm=rec["repeatability_ppm"],
+                         not_applicable=dict(rec["not_applicable"]))
 
 
 def _group_name(table: Table, key, rows) -> str:
