@@ -138,7 +138,7 @@ def detection(effect, experiment, t0):
     exps = tuple(e for e in gj.default_experiments(gyro) if e.name == experiment)
     plan = gj.plan("paper-qmg", given, candidates=(effect,), experiments=exps, max_repeats=1, progress=False)
     cand = plan.candidate(effect)
-    lam_typical = dict((name, lam) for name, _, lam, _ in cand.per_experiment)[experiment]
+    lam_typical = {g.name: g.expected_chi2 for g in cand.per_experiment}[experiment]
     multiple, lam = size_for_power(lam_typical, cand.df, TARGET_POWER)
     print(f"[{time.time() - t0:.0f} s] {effect} with 1 x {experiment}: planner chi2 at typical size "
           f"{lam_typical:.4g} (df {cand.df}; {cand.expected_chi2:.3g} on the data given); size {multiple:.4g} x "

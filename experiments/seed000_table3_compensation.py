@@ -66,16 +66,16 @@ def leave_one_out(table: gj.Table, method) -> dict:
     worst, sf, curves = [], [], []
     for k in range(N_RUNS):
         res = gj.compensate(table, method=method, train_runs=[j for j in range(N_RUNS) if j != k])
-        rec = next(r for r in res.runs if r["run"] == k)
-        assert not rec["used_for_training"]
-        if not rec.get("converged", True):  # a figure the method did not produce is not reported
-            raise RuntimeError(f"{method} compensation of run {k} did not converge: {res.devices[0]['message']}")
-        worst.append(rec["nonlinearity_max_ppm_after"])
-        sf.append(rec["scale_factor_after"])
-        curves.append(rec["residuals_ppm_after"])
+        rec = next(r for r in res.runs if r.run == k)
+        assert not rec.used_for_training
+        if not rec.converged:  # a figure the method did not produce is not reported
+            raise RuntimeError(f"{method} compensation of run {k} did not converge: {res.devices[0].message}")
+        worst.append(rec.nonlinearity_max_ppm_after)
+        sf.append(rec.scale_factor_after)
+        curves.append(list(rec.residuals_ppm_after or ()))
     return {"runs_ppm": worst, "scale_factor": float(np.mean(sf)),
             "repeatability_ppm": float(gj.metrics.repeatability(np.asarray(sf))), "residuals_ppm": curves,
-            "compensator": res.devices[0]["compensator"]}
+            "compensator": res.devices[0].compensator}
 
 
 def uncompensated(table: gj.Table) -> dict:

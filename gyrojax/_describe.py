@@ -14,6 +14,7 @@ import dataclasses
 import inspect
 import re
 
+import equinox as eqx
 import jax
 import numpy as np
 
@@ -23,14 +24,13 @@ from ._gyroscope import Gyroscope
 from ._model.parameters import DEFAULT_FREE, PARAMETERS, Model, as_model
 
 
-@dataclasses.dataclass(frozen=True)
-class LeafRecord:
+class LeafRecord(eqx.Module):
     """One leaf: `path` (e.g. `"vcf_electrode.force_per_volt2"`), `value` (a float, or a tuple of floats for an
     array leaf), `unit` ("" where none is recorded or the number is dimensionless), `description` (the
     docstring's words for the field, "" if none) and `provenance` (the preset's record, "" if none)."""
 
     path: str
-    value: float | tuple
+    value: float | tuple[float, ...]
     unit: str
     description: str
     provenance: str
@@ -143,7 +143,8 @@ def _records(tree, prefix: str, preset: str | None, comments: dict, named: dict)
             desc = desc or named[path].description
         arr = np.asarray(leaf, dtype=float)
         value = float(arr) if arr.ndim == 0 else tuple(float(x) for x in arr.ravel())
-        out.append(LeafRecord(path, value, unit, desc, _provenance(preset, path, comments)))
+        out.append(LeafRecord(path=path, value=value, unit=unit, description=desc,
+                              provenance=_provenance(preset, path, comments)))
     return out
 
 
@@ -164,7 +165,7 @@ def _named_paths(gyro) -> dict:
     return out
 
 
-def describe(model: Model | Gyroscope | str = "paper-qmg") -> tuple:
+def describe(model: Model | Gyroscope | str = "paper-qmg") -> tuple[LeafRecord, ...]:
     """Every leaf of `model` (a preset name, a `Gyroscope` or a `gyrojax.Model`; effects included, as
     `<effect>.<field>`), in the device's order: a tuple of `LeafRecord` (path, value, unit, description,
     provenance). A preset (by name, or a device whose `name` is a preset's) carries the provenance recorded in

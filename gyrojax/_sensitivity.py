@@ -103,9 +103,9 @@ class NonlinearityBudget(eqx.Module):
     joint_rms_ppm: float
     effects: tuple[EffectContribution, ...]
     interaction_ppm: float
-    residual_ppm: dict
-    gradient: dict
-    relative_gradient: dict
+    residual_ppm: dict[str, Float[np.ndarray, " point"]]
+    gradient: dict[str, float | list]
+    relative_gradient: dict[str, float]
     full_scale: str = eqx.field(static=True)
 
     @property
@@ -295,8 +295,9 @@ def nonlinearity_budget(model: Model | Gyroscope | str, effects: Sequence | None
     own_max = [float(np.max(np.abs(own[k]))) for k in range(n)]
     stack = float(mx[0]) + sum(own_max) + interaction  # = NonlinearityBudget.stack_ppm
     contributions = tuple(
-        EffectContribution(e.name, float(mx[1 + k]), float(rms[1 + k]), own_max[k],
-                           float(np.sqrt(np.mean(own[k] ** 2))), _share(own_max[k], stack), own[k])
+        EffectContribution(name=e.name, alone_max_ppm=float(mx[1 + k]), alone_rms_ppm=float(rms[1 + k]),
+                           own_max_ppm=own_max[k], own_rms_ppm=float(np.sqrt(np.mean(own[k] ** 2))),
+                           share_pct=_share(own_max[k], stack), own_residual_ppm=own[k])
         for k, e in enumerate(effs))
     residual = {"base": res[0], "joint": res[n + 1]} | {e.name: res[1 + k] for k, e in enumerate(effs)}
     gradient, relative = {}, {}
@@ -315,5 +316,7 @@ def nonlinearity_budget(model: Model | Gyroscope | str, effects: Sequence | None
                     continue
                 val = np.asarray(val)
                 gradient[f"{e.name}.{f}"] = float(val) if val.ndim == 0 else val.tolist()
-    return NonlinearityBudget(x, float(mx[0]), float(rms[0]), joint_max, float(rms[n + 1]), contributions,
-                              interaction, residual, gradient, relative, full_scale)
+    return NonlinearityBudget(rates_dps=x, base_max_ppm=float(mx[0]), base_rms_ppm=float(rms[0]),
+                              joint_max_ppm=joint_max, joint_rms_ppm=float(rms[n + 1]), effects=contributions,
+                              interaction_ppm=interaction, residual_ppm=residual, gradient=gradient,
+                              relative_gradient=relative, full_scale=full_scale)

@@ -8,6 +8,8 @@ This module only re-exports; the code lives in the private modules it imports fr
 from ._compensate.base import AbstractCompensation as AbstractCompensation, AbstractCompensator as AbstractCompensator
 from ._compensate.compensate import (
     COMPENSATORS as COMPENSATORS,
+    CompensatedDevice as CompensatedDevice,
+    CompensatedRun as CompensatedRun,
     CompensationResult as CompensationResult,
     compensate as compensate,
     rate_points as rate_points,
@@ -28,6 +30,8 @@ __all__ = [
     "AbstractCompensation",
     "AbstractCompensator",
     "COMPENSATORS",
+    "CompensatedDevice",
+    "CompensatedRun",
     "CompensationResult",
     "CompositeCompensation",
     "CompositeCompensator",

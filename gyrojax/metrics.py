@@ -7,9 +7,14 @@ This module only re-exports; the code lives in the private modules it imports fr
 
 from ._metrics import (
     FULL_SCALE_CONVENTIONS as FULL_SCALE_CONVENTIONS,
+    BandwidthMetrics as BandwidthMetrics,
+    DeviceMetrics as DeviceMetrics,
+    MetricsConventions as MetricsConventions,
     MetricsReport as MetricsReport,
     RateBandwidth as RateBandwidth,
+    RateLineMetrics as RateLineMetrics,
     ScaleFactorFit as ScaleFactorFit,
+    SweepMetrics as SweepMetrics,
     asymmetry as asymmetry,
     fit_scale_factor as fit_scale_factor,
     metrics_report as metrics_report,
@@ -24,12 +29,17 @@ from ._sensitivity import (
 
 
 __all__ = [
+    "BandwidthMetrics",
+    "DeviceMetrics",
     "EffectContribution",
     "FULL_SCALE_CONVENTIONS",
+    "MetricsConventions",
     "MetricsReport",
     "NonlinearityBudget",
     "RateBandwidth",
+    "RateLineMetrics",
     "ScaleFactorFit",
+    "SweepMetrics",
     "asymmetry",
     "fit_scale_factor",
     "metrics_report",

@@ -10,7 +10,6 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ._diagnose.compare import nonlinearity_residual_ppm
-from ._sweeps.registry import sweep_kind
 
 
 PALETTE = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#F0E442", "#000000")
@@ -58,7 +57,7 @@ def residuals(fit, sweep: str = "rate_table", *, ax=None, device: int | None = N
                     zorder=0, label="+/- 1 sigma (noise)")
     ax.axhline(0.0, color="k", lw=0.6)
     _symlog_if_spread(ax, x[m])
-    kind = sweep_kind(sweep)
+    kind = block.kind
     ax.set_xlabel(kind.input_label)
     ax.set_ylabel(f"measurement - model ({kind.output_unit})")
     ax.set_title(f"{sweep}: residuals, chi2_red {fit.chi2_red_total:.3g}", fontsize=9)

@@ -137,13 +137,13 @@ def test_composite_is_exact_on_a_piecewise_cubic_with_its_own_calibration():
 @pytest.mark.slow
 def test_composite_removes_the_warmup_and_most_of_the_inl(warmup_table):
     res = gj.compensate(warmup_table, method="composite", train_runs=[0, 1])
-    held = [r for r in res.runs if not r["used_for_training"]]
-    assert [r["run"] for r in held] == [2]
-    before, after = held[0]["nonlinearity_max_ppm_before"], held[0]["nonlinearity_max_ppm_after"]
+    held = [r for r in res.runs if not r.used_for_training]
+    assert [r.run for r in held] == [2]
+    before, after = held[0].nonlinearity_max_ppm_before, held[0].nonlinearity_max_ppm_after
     assert 440 < before < 520 and after < 6.0  # a cubic per side of a u^3 + u^5 INL leaves ~4 ppm
     dev = res.devices[0]
     # the initial calibration takes out the run-to-run SF change that tracks the drive frequency
-    assert dev["repeatability_ppm_before"] > 50 and dev["repeatability_ppm_after"] < 1.0
+    assert dev.repeatability_ppm_before > 50 and dev.repeatability_ppm_after < 1.0
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -181,11 +181,11 @@ def test_model_recovers_inl_and_tcf_on_noise_free_data(warmup_table):
     t_ref = float(sol.t_ref_c)
     assert float(sol.tcf_per_k) == pytest.approx(TCF / (1 + TCF * (t_ref - 25.0)), rel=1e-7)
     assert bool(sol.converged) and sol.unidentifiable == ()
-    held = next(r for r in res.runs if r["run"] == 2)
+    held = next(r for r in res.runs if r.run == 2)
     # left: beta held at 1 (the DAC hold makes it 1.00007) and the unmodelled quadrature's A^2 = W^2 + Q^2
-    assert not held["used_for_training"] and held["nonlinearity_max_ppm_after"] < 0.01
-    assert held["nonlinearity_max_ppm_before"] > 400
-    assert res.devices[0]["repeatability_ppm_after"] < 0.01 and res.devices[0]["repeatability_ppm_before"] > 50
+    assert not held.used_for_training and held.nonlinearity_max_ppm_after < 0.01
+    assert held.nonlinearity_max_ppm_before > 400
+    assert res.devices[0].repeatability_ppm_after < 0.01 and res.devices[0].repeatability_ppm_before > 50
     # the output model (Newton on the balance) and its inverse are each other's
     pts = gj.compensation.rate_points(warmup_table, _device(warmup_table))
     y = sol.output(pts.rate_dps, drive_freq_hz=pts.drive_freq_hz)
@@ -248,18 +248,18 @@ def test_model_refuses_bad_settings():
 @pytest.mark.slow
 def test_compensate_flags_training_runs_and_defaults_to_the_first(warmup_table):
     res = gj.compensate(warmup_table, method="polynomial")
-    assert [(r["run"], r["used_for_training"]) for r in res.runs] == [(0, True), (1, False), (2, False)]
+    assert [(r.run, r.used_for_training) for r in res.runs] == [(0, True), (1, False), (2, False)]
     dev = res.devices[0]
-    assert dev["train_runs"] == [0] and dev["held_out_runs"] == [1, 2]
+    assert dev.train_runs == (0,) and dev.held_out_runs == (1, 2)
     # a fixed polynomial cannot change the ratio of two runs' scale factors: repeatability stays
-    assert dev["repeatability_ppm_after"] == pytest.approx(dev["repeatability_ppm_before"], rel=0.02)
+    assert dev.repeatability_ppm_after == pytest.approx(dev.repeatability_ppm_before, rel=0.02)
     # trained on the warm-up run, it bakes that run's drift in: worse on the settled held-out runs
     train, held = res.runs[0], res.runs[1]
-    assert held["nonlinearity_max_ppm_after"] > 2 * train["nonlinearity_max_ppm_after"]
-    assert dev["worst_nonlinearity_max_ppm_held_out_after"] == max(r["nonlinearity_max_ppm_after"]
+    assert held.nonlinearity_max_ppm_after > 2 * train.nonlinearity_max_ppm_after
+    assert dev.worst_nonlinearity_max_ppm_held_out_after == max(r.nonlinearity_max_ppm_after
                                                                    for r in res.runs[1:])
     rec = res.runs[1]
-    assert max(abs(v) for v in rec["residuals_ppm_after"]) == pytest.approx(rec["nonlinearity_max_ppm_after"])
+    assert max(abs(v) for v in rec.residuals_ppm_after) == pytest.approx(rec.nonlinearity_max_ppm_after)
     json.dumps(res.to_json(), allow_nan=False)
 
 

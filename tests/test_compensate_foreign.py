@@ -19,7 +19,7 @@ def lot():
 
 
 def _held_out_worst(res):
-    return {d["device"]: d["worst_nonlinearity_max_ppm_held_out_after"] for d in res.devices}
+    return {d.device: d.worst_nonlinearity_max_ppm_held_out_after for d in res.devices}
 
 
 def test_model_converges_on_the_foreign_lot_and_matches_composite(lot):
@@ -27,8 +27,8 @@ def test_model_converges_on_the_foreign_lot_and_matches_composite(lot):
     composite = gj.compensate(lot, method="composite", train_runs=(0,))
     polynomial = gj.compensate(lot, method="polynomial", train_runs=(0,))
     for dev in model.devices:
-        assert dev["converged"] and dev["message"] == ""
-        comp = dev["compensator"]
+        assert dev.converged and dev.message == ""
+        comp = dev.compensator
         assert comp["gauss_newton_decrement"] < DECREMENT_TOL
         assert comp["unidentifiable"] == []  # run 0's warm-up moves the drive frequency: the bias drift is fitted
         # the generator's INL is odd, but a forward polynomial in the rate, not the model's inverse one in the word
@@ -40,7 +40,7 @@ def test_model_converges_on_the_foreign_lot_and_matches_composite(lot):
         assert after < 1.5 * worst_composite[name]
         assert after < worst_polynomial[name] / 10
     for dev in model.devices:  # the drive frequency carries the thermal SF change: repeatability 83-85 -> ~2 ppm
-        assert dev["repeatability_ppm_after"] < 5.0 < 50.0 < dev["repeatability_ppm_before"]
+        assert dev.repeatability_ppm_after < 5.0 < 50.0 < dev.repeatability_ppm_before
 
 
 def test_model_fit_reaches_its_minimum_in_few_steps(lot):
@@ -50,8 +50,8 @@ def test_model_fit_reaches_its_minimum_in_few_steps(lot):
     full = gj.compensate(lot, method="model", train_runs=(0,))
     short = gj.compensate(lot, method=gj.compensation.ModelCompensator(max_steps=10), train_runs=(0,))
     for a, b in zip(full.devices, short.devices):
-        assert b["converged"], b["message"]
-        pa, pb = a["compensator"]["parameters"], b["compensator"]["parameters"]
+        assert b.converged, b.message
+        pa, pb = a.compensator["parameters"], b.compensator["parameters"]
         for name in ("sf_ref_lsb_per_dps", "inl_u3_lsb", "inl_u5_lsb", "bias_drift_lsb_per_ppm"):
             assert abs(pb[name]["value"] - pa[name]["value"]) < 1e-3 * pa[name]["stderr"]
 
@@ -65,22 +65,22 @@ def test_unconverged_device_is_reported_and_the_others_compensated():
                                             r"converge: Levenberg-Marquardt reached max_steps=1"):
         res = gj.compensate(table, method=gj.compensation.ModelCompensator(max_steps=1), train_runs=(0,))
     ok, bad = res.devices
-    assert ok["device"] == "linear-00" and ok["converged"] and ok["message"] == ""
+    assert ok.device == "linear-00" and ok.converged and ok.message == ""
     # left (measured 0.0018 / 0.0025 ppm): a held-out run's own turn-on bias, divided by a SF that drifts 60 ppm
     # through that run's 2 K warm-up
-    assert ok["worst_nonlinearity_max_ppm_held_out_after"] < 0.01 and ok["repeatability_ppm_after"] < 0.01
-    assert bad["device"] == "foreign-00" and not bad["converged"]
-    assert "Try more steps (ModelCompensator(max_steps=...))" in bad["message"]
+    assert ok.worst_nonlinearity_max_ppm_held_out_after < 0.01 and ok.repeatability_ppm_after < 0.01
+    assert bad.device == "foreign-00" and not bad.converged
+    assert "Try more steps (ModelCompensator(max_steps=...))" in bad.message
     # what was measured is reported; what the unconverged compensator would give is not
-    assert bad["worst_nonlinearity_max_ppm_held_out_before"] > 20 and bad["repeatability_ppm_before"] > 50
-    assert bad["worst_nonlinearity_max_ppm_held_out_after"] is None and bad["repeatability_ppm_after"] is None
+    assert bad.worst_nonlinearity_max_ppm_held_out_before > 20 and bad.repeatability_ppm_before > 50
+    assert bad.worst_nonlinearity_max_ppm_held_out_after is None and bad.repeatability_ppm_after is None
     for run in res.runs:
-        assert run["converged"] == (run["device"] == "linear-00")
-        assert (run["nonlinearity_max_ppm_after"] is None) == (not run["converged"])
-        assert run["nonlinearity_max_ppm_before"] is not None
+        assert run.converged == (run.device == "linear-00")
+        assert (run.nonlinearity_max_ppm_after is None) == (not run.converged)
+        assert run.nonlinearity_max_ppm_before is not None
     # the best fit reached is kept, with its status
     sol = res.solutions["foreign-00"]
-    assert sol.status() == (False, bad["message"]) and int(sol.num_steps) == 1
+    assert sol.status() == (False, bad.message) and int(sol.num_steps) == 1
     assert float(sol.decrement) > 1.0
     json.dumps(res.to_json(), allow_nan=False)
 

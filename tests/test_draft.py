@@ -10,6 +10,7 @@ import gyrojax as gj
 from gyrojax._diagnose.draft import DraftError, draft_effect_source, write_draft
 from gyrojax._diagnose.fdr import bh_q_values, selection_p
 from gyrojax._diagnose.formula import Formula, Term
+from gyrojax.sweeps import Dac, RateTable, VcfStatic
 
 
 def test_bh_q_values_by_hand():
@@ -26,9 +27,9 @@ def _formula(*terms, coefficients, complete=True):
                    1.0, 1, 0.3, complete)
 
 
-GAIN_T = Term("lin(temperature_c)*model", ("vcf_static",), "output * ((T - 25.0))", True, {}, "1/K",
+GAIN_T = Term("lin(temperature_c)*model", (VcfStatic(),), "output * ((T - 25.0))", True, {}, "1/K",
               "temperature_c")
-STEP = Term("step(time_s)", ("rate_table",), "(where(t >= 1440, 1, 0))", False, {}, "LSB", "time_s")
+STEP = Term("step(time_s)", (RateTable(),), "(where(t >= 1440, 1, 0))", False, {}, "LSB", "time_s")
 
 
 def _load(text, tmp_path):
@@ -60,10 +61,10 @@ def test_a_drafted_term_is_nested_at_zero_and_acts_only_where_it_was_found(tmp_p
 def test_a_draft_is_refused_where_a_readout_term_cannot_hold_it(tmp_path):
     with pytest.raises(DraftError, match="leaves part of the located misfit unexplained"):
         draft_effect_source(_formula(GAIN_T, coefficients=[1e-5], complete=False))
-    dac = Term("cube(input)", ("dac",), "(x**3)", False, {}, "V/LSB^3", "input")
+    dac = Term("cube(input)", (Dac(),), "(x**3)", False, {}, "V/LSB^3", "input")
     with pytest.raises(DraftError, match="acts on the dac sweep, which is not read through the readout"):
         draft_effect_source(_formula(dac, coefficients=[1e-12]))
-    freq = Term("lin(drive_freq_hz)*model", ("rate_table",), "output * (f)", True, {}, "1/Hz", "drive_freq_hz")
+    freq = Term("lin(drive_freq_hz)*model", (RateTable(),), "output * (f)", True, {}, "1/Hz", "drive_freq_hz")
     with pytest.raises(DraftError, match="drive-frequency reading, the run or the rate"):
         draft_effect_source(_formula(freq, coefficients=[1e-6]))
     with pytest.raises(DraftError, match="lower-case Python identifier"):

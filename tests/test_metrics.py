@@ -228,35 +228,35 @@ def lot_table():
 def test_metrics_report_structure_and_values():
     table, sfs = lot_table()
     report = metrics_report(table)
-    json.dumps(report)  # JSON-ready
-    keys = [(p["device"], p["run"], p["sweep"]) for p in report["points"]]
+    json.dumps(report.to_json())  # JSON-ready
+    keys = [(p.device, p.run, p.sweep) for p in report.points]
     assert keys == [("A", 0, "rate_table"), ("A", 1, "rate_table"), ("A", 2, "rate_table"),
                     ("B", 0, "rate_table"), ("A", 0, "dac"), ("B", 0, "vcf_dynamic")]
-    first = report["points"][0]
+    first = report.points[0]
     k, b, nl_max, nl_rms = numpy_nonlinearity(RATES, table["output"][:22])
-    assert first["scale_factor"] == pytest.approx(k, rel=1e-12)
-    assert first["bias"] == pytest.approx(b, rel=1e-9)
-    assert first["nonlinearity_max_ppm"] == pytest.approx(nl_max, rel=1e-9)
-    assert first["nonlinearity_rms_ppm"] == pytest.approx(nl_rms, rel=1e-9)
-    assert abs(first["asymmetry_ppm"]) < 1e-6  # odd cubic: symmetric
-    assert "nonlinearity_max_ppm_vs_rate" not in first
-    dac = report["points"][4]
-    assert dac["scale_factor"] == pytest.approx(5 / 2**23, rel=1e-4)
-    assert dac["scale_factor_vs_rate"] == pytest.approx(-13725.8 * 5 / 2**23, rel=1e-4)
+    assert first.scale_factor == pytest.approx(k, rel=1e-12)
+    assert first.bias == pytest.approx(b, rel=1e-9)
+    assert first.nonlinearity_max_ppm == pytest.approx(nl_max, rel=1e-9)
+    assert first.nonlinearity_rms_ppm == pytest.approx(nl_rms, rel=1e-9)
+    assert abs(first.asymmetry_ppm) < 1e-6  # odd cubic: symmetric
+    assert first.vs_rate is None and "nonlinearity_max_ppm_vs_rate" not in first.to_json()
+    dac = report.points[4]
+    assert dac.scale_factor == pytest.approx(5 / 2**23, rel=1e-4)
+    assert dac.vs_rate.scale_factor == pytest.approx(-13725.8 * 5 / 2**23, rel=1e-4)
     k_rate, _, max_rate, rms_rate = numpy_nonlinearity(RATES, table["output"][88:110])
-    assert dac["nonlinearity_max_ppm_vs_rate"] == pytest.approx(max_rate, rel=1e-9)
-    assert dac["nonlinearity_rms_ppm_vs_rate"] == pytest.approx(rms_rate, rel=1e-9)
-    dyn = report["points"][5]
-    assert dyn["scale_factor"] is None and dyn["bandwidth_hz"] == pytest.approx(120, rel=2e-3)
-    assert dyn["phase_deg_at_bandwidth"] == pytest.approx(-45, abs=0.3)
-    assert dyn["low_frequency_gain"] == pytest.approx(50 / math.hypot(1, 1 / 120), rel=1e-12)
+    assert dac.vs_rate.nonlinearity_max_ppm == pytest.approx(max_rate, rel=1e-9)
+    assert dac.vs_rate.nonlinearity_rms_ppm == pytest.approx(rms_rate, rel=1e-9)
+    dyn = report.points[5]
+    assert dyn.scale_factor is None and dyn.bandwidth.bandwidth_hz == pytest.approx(120, rel=2e-3)
+    assert dyn.bandwidth.phase_deg_at_bandwidth == pytest.approx(-45, abs=0.3)
+    assert dyn.bandwidth.low_frequency_gain == pytest.approx(50 / math.hypot(1, 1 / 120), rel=1e-12)
 
-    devices = {(d["device"], d["sweep"]): d for d in report["devices"]}
-    a_sf = [p["scale_factor"] for p in report["points"][:3]]
-    assert devices[("A", "rate_table")]["repeatability_ppm"] == pytest.approx(
+    devices = {(d.device, d.sweep): d for d in report.devices}
+    a_sf = [p.scale_factor for p in report.points[:3]]
+    assert devices[("A", "rate_table")].repeatability_ppm == pytest.approx(
         1e6 * np.std(a_sf, ddof=1) / np.mean(a_sf), rel=1e-10)
-    assert devices[("A", "rate_table")]["n_runs"] == 3
-    assert devices[("B", "rate_table")]["repeatability_ppm"] is None
+    assert devices[("A", "rate_table")].n_runs == 3
+    assert devices[("B", "rate_table")].repeatability_ppm is None
     assert ("B", "vcf_dynamic") not in devices
 
 
@@ -343,17 +343,17 @@ def test_metrics_report_says_why_a_number_is_missing():
     rows += [{"device": "C", "run": 0, "sweep": "quadrature_injection", "input": x, "output": 0.1}
              for x in (-1.0, 0.0, 1.0)]
     report = metrics_report(Table.from_records(rows, source="flat.csv"))
-    json.dumps(report, allow_nan=False)
-    good, straight, one_sided, flat = report["points"]
-    assert good["not_applicable"] == {} and straight["not_applicable"] == {}
-    assert flat["scale_factor"] == 0.0 and flat["nonlinearity_max_ppm"] is None and flat["asymmetry_ppm"] is None
-    assert flat["not_applicable"]["nonlinearity_max_ppm"].startswith("not a measurement on a quadrature_injection")
-    assert set(flat["not_applicable"]) == {"nonlinearity_max_ppm", "nonlinearity_rms_ppm", "asymmetry_ppm"}
-    assert one_sided["not_applicable"] == {
+    json.dumps(report.to_json(), allow_nan=False)
+    good, straight, one_sided, flat = report.points
+    assert good.not_applicable == {} and straight.not_applicable == {}
+    assert flat.scale_factor == 0.0 and flat.nonlinearity_max_ppm is None and flat.asymmetry_ppm is None
+    assert flat.not_applicable["nonlinearity_max_ppm"].startswith("not a measurement on a quadrature_injection")
+    assert set(flat.not_applicable) == {"nonlinearity_max_ppm", "nonlinearity_rms_ppm", "asymmetry_ppm"}
+    assert one_sided.not_applicable == {
         "asymmetry_ppm": "the sweep lacks positive or negative inputs; an asymmetry needs both signs"}
-    dev = {d["device"]: d for d in report["devices"]}
-    assert dev["A"]["repeatability_ppm"] is not None  # 3 and 0.1: measured, enormous
-    assert dev["B"]["not_applicable"] == {"repeatability_ppm": "1 run: a repeatability needs at least 2"}
+    dev = {d.device: d for d in report.devices}
+    assert dev["A"].repeatability_ppm is not None  # 3 and 0.1: measured, enormous
+    assert dev["B"].not_applicable == {"repeatability_ppm": "1 run: a repeatability needs at least 2"}
     opposite = [dict(r, output=float(r["input"]) * (1.0 if r["run"] == 0 else -1.0)) for r in rows[:10]]
-    (d,) = metrics_report(Table.from_records(opposite))["devices"]
-    assert d["repeatability_ppm"] is None and "mean scale factor is 0" in d["not_applicable"]["repeatability_ppm"]
+    (d,) = metrics_report(Table.from_records(opposite)).devices
+    assert d.repeatability_ppm is None and "mean scale factor is 0" in d.not_applicable["repeatability_ppm"]

@@ -380,7 +380,7 @@ def test_cli_simulates_every_sweep(tmp_path, qmg, vcf):
     back = gj.read_table(out)
     assert sorted(set(back["sweep"])) == sorted(ALL) and len(back) == len(qmg["noisy"])
     report = gj.metrics.metrics_report(back)
-    sf = {p["sweep"]: p["scale_factor"] for p in report["points"] if p["run"] == 1}
+    sf = {p.sweep: p.scale_factor for p in report.points if p.run == 1}
     assert sf["rate_table"] == pytest.approx(13709.853, rel=0.02)  # seed 000's SF, LSB/(deg/s), lot spread
     assert sf["vcf_static"] * 0.01 == pytest.approx(sf["rate_table"], rel=0.05)  # 2 V <-> 200 deg/s, K_svf spread
 

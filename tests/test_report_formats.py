@@ -62,8 +62,8 @@ def _rate_table(runs=2):
 
 def test_fast_results_round_trip_through_json():
     metrics = gj.metrics.metrics_report(_rate_table())
-    assert isinstance(metrics, dict) and metrics["points"][0]["device"] == "A"  # still read as a dict
-    assert _round_trips(metrics) == dict(metrics)
+    assert metrics.points[0].device == "A"  # typed records, read by attribute
+    assert _round_trips(metrics) == metrics.to_json()
     comp = gj.compensate(_rate_table(), method="polynomial", progress=False)
     assert _round_trips(comp)["method"] == "polynomial"
     assert "repeatability over 2 runs" in comp.summary()
@@ -128,7 +128,7 @@ def _csv(path):
 def test_write_result_picks_the_format_by_suffix_or_name(tmp_path):
     report = gj.metrics.metrics_report(_rate_table())
     write_result(report, tmp_path / "m.json")
-    gj.io.atomic_write_json(dict(report), tmp_path / "before.json")  # what the CLI's --json wrote before
+    gj.io.atomic_write_json(report.to_json(), tmp_path / "before.json")  # what the CLI's --json wrote before
     assert (tmp_path / "m.json").read_bytes() == (tmp_path / "before.json").read_bytes()
     write_result(report, tmp_path / "m.txt")
     assert (tmp_path / "m.txt").read_text() == report.summary() + "\n"

@@ -60,25 +60,25 @@ def test_metrics_that_do_not_apply_to_a_sweep_kind_are_null_with_the_reason():
     measures noise (the issue's NL 34,732,882 ppm, SF -4.87e-9 Hz/LSB): null, with the kind's reason, and not
     counted as a number the data failed to give; the rate table's metrics are unchanged."""
     report = gj.metrics.metrics_report(gj.Table.from_records(_revealing_rows(), source="rev.csv"))
-    points = {(p["sweep"], p["run"]): p for p in report["points"]}
+    points = {(p.sweep, p.run): p for p in report.points}
     rate = points["rate_table", 0]
-    assert rate["scale_factor"] == pytest.approx(13771.0) and rate["nonlinearity_max_ppm"] is not None
-    assert rate["not_applicable"] == {} and rate["undetermined"] == []
+    assert rate.scale_factor == pytest.approx(13771.0) and rate.nonlinearity_max_ppm is not None
+    assert rate.not_applicable == {} and rate.undetermined == ()
     freq = points["drive_frequency", 0]
     for key in ("scale_factor", "bias", "nonlinearity_max_ppm", "nonlinearity_rms_ppm", "asymmetry_ppm"):
-        assert freq[key] is None and key in freq["not_applicable"]
-    assert freq["not_applicable"]["scale_factor"].startswith("not a measurement on a drive_frequency sweep: the "
+        assert getattr(freq, key) is None and key in freq.not_applicable
+    assert freq.not_applicable["scale_factor"].startswith("not a measurement on a drive_frequency sweep: the "
                                                              "frequency changes with the set-point only by a cubic")
-    assert freq["not_applicable"]["nonlinearity_max_ppm"] == ("not a measurement on a drive_frequency sweep (see "
+    assert freq.not_applicable["nonlinearity_max_ppm"] == ("not a measurement on a drive_frequency sweep (see "
                                                               "scale_factor)")
-    assert freq["undetermined"] == []
+    assert freq.undetermined == ()
     ratio = points["branch_ratio", 1]
-    assert ratio["bias"] == pytest.approx(1.00002, rel=1e-5)  # the branches' mismatch: a measurement
-    assert ratio["scale_factor"] is None and ratio["nonlinearity_max_ppm"] is None
-    devices = {d["sweep"]: d for d in report["devices"]}
-    assert devices["rate_table"]["repeatability_ppm"] is not None
-    assert devices["drive_frequency"]["repeatability_ppm"] is None
-    assert "not a measurement on a drive_frequency sweep" in devices["drive_frequency"]["not_applicable"][
+    assert ratio.bias == pytest.approx(1.00002, rel=1e-5)  # the branches' mismatch: a measurement
+    assert ratio.scale_factor is None and ratio.nonlinearity_max_ppm is None
+    devices = {d.sweep: d for d in report.devices}
+    assert devices["rate_table"].repeatability_ppm is not None
+    assert devices["drive_frequency"].repeatability_ppm is None
+    assert "not a measurement on a drive_frequency sweep" in devices["drive_frequency"].not_applicable[
         "repeatability_ppm"]
     kinds = {name: gj.sweeps.sweep_kind(name).applicable_metrics() for name in gj.sweeps.SWEEP_KINDS}
     assert kinds["rate_table"] == kinds["dac"] == kinds["vcf_static"] == kinds["drive_amplitude"] == (

@@ -132,12 +132,12 @@ def test_suspect_words_diagnostic(result):
 
 
 def test_metrics_report_on_table2(table, result):
-    (point,) = metrics_report(table)["points"]
-    assert point["nonlinearity_rms_ppm_vs_rate"] == pytest.approx(result["nonlinearity"][("rate", "half_range")]["rms"],
+    (point,) = metrics_report(table).points
+    assert point.vs_rate.nonlinearity_rms_ppm == pytest.approx(result["nonlinearity"][("rate", "half_range")]["rms"],
                                                                   rel=1e-12)
-    assert point["nonlinearity_max_ppm"] == pytest.approx(1175.396, abs=0.01)
-    assert point["scale_factor_vs_rate"] == pytest.approx(-0.0081788, rel=1e-4)  # V per deg/s
-    assert point["bias_vs_rate"] == pytest.approx(np.mean([v for _, _, v in PRINTED]), abs=1e-15)
+    assert point.nonlinearity_max_ppm == pytest.approx(1175.396, abs=0.01)
+    assert point.vs_rate.scale_factor == pytest.approx(-0.0081788, rel=1e-4)  # V per deg/s
+    assert point.vs_rate.bias == pytest.approx(np.mean([v for _, _, v in PRINTED]), abs=1e-15)
 
 
 def test_script_prints_the_numbers(experiment, capsys):

@@ -102,9 +102,9 @@ def test_a_new_experiment_is_one_file(registered, tmp_path):
     np.testing.assert_allclose(shift, shift[0], rtol=1e-4)  # the two Coriolis forces add
     assert abs(shift[0]) > 1e3
     report = gj.metrics.metrics_report(back)
-    sf = {p["sweep"]: p["scale_factor"] for p in report["points"]}
+    sf = {p.sweep: p.scale_factor for p in report.points}
     np.testing.assert_allclose(sf[registered.name], sf["rate_table"], rtol=1e-4)
-    assert report["conventions"]["scale_factor_units"][registered.name] == "LSB/(deg/s)"
+    assert report.conventions.scale_factor_units[registered.name] == "LSB/(deg/s)"
 
 
 def test_an_unregistered_name_is_refused_by_the_data_layer(tmp_path):

@@ -34,12 +34,12 @@ def handle(args):
     result = compensate(read_table(args.data), method=args.method, train_runs=args.train_runs,
                         progress=not args.quiet)
     print(result.summary())  # device names escaped by the result
-    undetermined = sum(r["nonlinearity_max_ppm_before"] is None or r["nonlinearity_max_ppm_after"] is None
+    undetermined = sum(r.nonlinearity_max_ppm_before is None or r.nonlinearity_max_ppm_after is None
                        for r in result.runs)
     write_result_files(args, result)
     for d in result.devices:
-        if d.get("converged") is False:
-            print(f"gyrojax compensate: device {safe_name(d['device'])}: {safe_text(d['message'])}", file=sys.stderr)
+        if not d.converged:
+            print(f"gyrojax compensate: device {safe_name(d.device)}: {safe_text(d.message)}", file=sys.stderr)
     if undetermined:
         print(f"gyrojax compensate: {undetermined} run(s) gave no nonlinearity (n/a above)", file=sys.stderr)
         return EXIT_FAILED

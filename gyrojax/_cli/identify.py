@@ -47,7 +47,7 @@ def handle(args):
     lot_solve = "vmap" if args.population is None else PopulationSolve(random=args.population or None)
     result = identify(model, table, free=args.free or free or DEFAULT_FREE, lot_solve=lot_solve)
     population, fit = (result, result.fit) if isinstance(result, PopulationFit) else (None, result)
-    report = IdentifyReport(fit, population)
+    report = IdentifyReport(fit=fit, population=population)
     print(safe_text(report.summary(), device_names(table)))
     write_result_files(args, report)
     if args.save:

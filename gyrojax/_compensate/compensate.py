@@ -1,5 +1,6 @@
 """`compensate`: fit a compensator on training runs, judge it on held-out runs (seed 000's metrics)."""
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Callable, Iterable, Sequence
@@ -45,22 +46,73 @@ def rate_points(table: Table, device: str) -> RatePoints:
                       temperature_c=col("temperature_c"), output_sigma=col("output_sigma"), run=table["run"][rows])
 
 
+class CompensatedRun(eqx.Module):
+    """One (device, run) of [`gyrojax.compensate`][] judged before and after (a record of
+    `CompensationResult.runs`): seed 000's figures on the output (`_before`, LSB per deg/s) and on the compensated
+    rate (`_after`, compensated deg/s per table deg/s), None where one is not determined (every `_after` figure of a
+    device whose fit did not converge), and the curve: `rates_dps` and the residuals from the run's own straight
+    line over its full scale (ppm, signed: the worst |.| is the max nonlinearity)."""
+
+    device: str
+    run: int
+    used_for_training: bool
+    n_points: int
+    converged: bool  # the device's fit
+    scale_factor_before: float | None
+    scale_factor_after: float | None
+    nonlinearity_max_ppm_before: float | None
+    nonlinearity_max_ppm_after: float | None
+    nonlinearity_rms_ppm_before: float | None
+    nonlinearity_rms_ppm_after: float | None
+    rates_dps: tuple[float, ...]
+    residuals_ppm_before: tuple[float | None, ...] | None
+    residuals_ppm_after: tuple[float | None, ...] | None
+
+    def to_json(self) -> dict[str, Any]:
+        return _record_json(self)
+
+
+class CompensatedDevice(eqx.Module):
+    """One device of [`gyrojax.compensate`][] (a record of `CompensationResult.devices`): its training and held-out
+    runs, the repeatability before and after over all its runs and over the held-out runs only (`..._held_out`,
+    None with fewer than two), the worst held-out nonlinearity before and after, the fitted coefficients
+    (`compensator`, method-specific: `AbstractCompensation.summary()`), and whether the fit converged (`message`:
+    empty when it did; else what did not converge and what to try)."""
+
+    device: str
+    method: str
+    train_runs: tuple[int, ...]
+    held_out_runs: tuple[int, ...]
+    n_runs: int
+    repeatability_ppm_before: float | None
+    repeatability_ppm_after: float | None
+    repeatability_ppm_before_held_out: float | None
+    repeatability_ppm_after_held_out: float | None
+    worst_nonlinearity_max_ppm_held_out_before: float | None
+    worst_nonlinearity_max_ppm_held_out_after: float | None
+    compensator: dict[str, Any]  # JSON-ready coefficients, method-specific
+    converged: bool
+    message: str
+
+    def to_json(self) -> dict[str, Any]:
+        return _record_json(self)
+
+
+def _record_json(record: eqx.Module) -> dict[str, Any]:
+    """A record's fields in order, tuples as lists (its JSON form)."""
+    return {f.name: list(v) if isinstance(v := getattr(record, f.name), tuple) else v
+            for f in dataclasses.fields(record)}
+
+
 class CompensationResult(eqx.Module):
     """What [`gyrojax.compensate`][] returns.
 
     **Fields:**
 
     - `method`: the method's name.
-    - `runs`: one record per (device, run): `device`, `run`, `used_for_training`, `n_points`,
-      `scale_factor_before` (LSB per deg/s), `scale_factor_after` (compensated deg/s per table deg/s),
-      `nonlinearity_max_ppm_before` / `_after`, `nonlinearity_rms_ppm_before` / `_after`, and the curve:
-      `rates_dps`, `residuals_ppm_before` / `_after` (residual from the run's own straight line over its full
-      scale, ppm, signed: the worst |.| is the max nonlinearity), and `converged` (the device's fit).
-    - `devices`: one record per device: `device`, `train_runs`, `held_out_runs`, `repeatability_ppm_before`
-      / `_after` over all its runs, the same over the held-out runs only (`..._held_out`, None with fewer
-      than two), `worst_nonlinearity_max_ppm_held_out_before` / `_after`, `compensator` (the fitted
-      coefficients, method-specific), `converged` and `message` (empty when converged; else what did not
-      converge and what to try).
+    - `runs`: a [`gyrojax.compensation.CompensatedRun`][] per (device, run): the run before and after.
+    - `devices`: a [`gyrojax.compensation.CompensatedDevice`][] per device: repeatability before and after, the
+      fitted coefficients, convergence.
     - `solutions`: the fitted compensators by device, to apply to new data
       (`solution.rate(output, drive_freq_hz=...)`); for a device whose fit did not converge, its best fit.
     - `full_scale`: the nonlinearity full-scale convention (see [`gyrojax.fit_scale_factor`][]).
@@ -70,8 +122,8 @@ class CompensationResult(eqx.Module):
     """
 
     method: str = eqx.field(static=True)
-    runs: tuple[dict[str, Any], ...]
-    devices: tuple[dict[str, Any], ...]
+    runs: tuple[CompensatedRun, ...]
+    devices: tuple[CompensatedDevice, ...]
     solutions: dict[str, AbstractCompensation]
     full_scale: str = eqx.field(static=True, default="half_range")
 
@@ -82,24 +134,24 @@ class CompensationResult(eqx.Module):
         device with several runs the repeatability before and after."""
         lines = [f"{'device':>16} {'run':>4} {'use':>8}  worst nonlinearity before -> after (ppm)"]
         for r in self.runs:
-            before, after = r["nonlinearity_max_ppm_before"], r["nonlinearity_max_ppm_after"]
-            use = "train" if r["used_for_training"] else "held-out"
-            lines.append(f"{safe_name(r['device']):>16} {r['run']:>4} {use:>8}  "
+            before, after = r.nonlinearity_max_ppm_before, r.nonlinearity_max_ppm_after
+            use = "train" if r.used_for_training else "held-out"
+            lines.append(f"{safe_name(r.device):>16} {r.run:>4} {use:>8}  "
                          f"{_na(before, '10.2f', _why_na(r, 'before'))} -> {_na(after, '.2f', _why_na(r, 'after'))}")
         for d in self.devices:
-            if d["n_runs"] < 2:
+            if d.n_runs < 2:
                 continue
-            before, after = d["repeatability_ppm_before"], d["repeatability_ppm_after"]
-            lines.append(f"{safe_name(d['device']):>16} repeatability over {d['n_runs']} runs: "
+            before, after = d.repeatability_ppm_before, d.repeatability_ppm_after
+            lines.append(f"{safe_name(d.device):>16} repeatability over {d.n_runs} runs: "
                          f"{_na(before, '.2f', 'not determined', ' ppm')} -> "
                          f"{_na(after, '.2f', 'not determined', ' ppm')} ({self.method}, trained on runs "
-                         f"{', '.join(map(str, d['train_runs']))})")
+                         f"{', '.join(map(str, d.train_runs))})")
         return "\n".join(lines)
 
     def to_json(self) -> dict[str, Any]:
         """The `compensate` JSON of docs/cli.md (Python numbers, None for "not applicable")."""
-        return {"method": self.method, "runs": [dict(r) for r in self.runs],
-                "devices": [dict(d) for d in self.devices],
+        return {"method": self.method, "runs": [r.to_json() for r in self.runs],
+                "devices": [d.to_json() for d in self.devices],
                 "conventions": {
                     "full_scale": self.full_scale,
                     "nonlinearity": "residual from each run's own least-squares line over its full scale (ppm)",
@@ -115,11 +167,11 @@ def _na(value, spec: str, reason: str | None = None, unit: str = "") -> str:
     return format(value, spec) + unit
 
 
-def _why_na(run: dict, when: str) -> str:
+def _why_na(run: CompensatedRun, when: str) -> str:
     """Why a run's nonlinearity before/after compensation is None."""
-    if when == "after" and run.get("converged") is False:
+    if when == "after" and not run.converged:
         return "the compensation did not converge for this device (see its message)"
-    if run.get(f"scale_factor_{when}") == 0:
+    if getattr(run, f"scale_factor_{when}") == 0:
         return ("the outputs do not change with the input" if when == "before"
                 else "the compensated rates do not change with the input")
     return "not determined"
@@ -165,7 +217,7 @@ def _ppm_list(fit):
     full = float(fit.full_scale)
     if not (math.isfinite(full) and full > 0):
         return None
-    return [_num(v) for v in 1e6 * np.asarray(fit.residuals) / full]
+    return tuple(_num(v) for v in 1e6 * np.asarray(fit.residuals) / full)
 
 
 def _worst(values):
@@ -236,30 +288,29 @@ def _judge(dev, pts, compensator, solution, runs, train, full_scale):
         def post(name):
             return _num(getattr(after, name)) if after is not None else None
 
-        run_records.append({
-            "device": dev, "run": int(run), "used_for_training": bool(trained), "n_points": int(sel.sum()),
-            "converged": converged,
-            "scale_factor_before": _num(before.scale_factor), "scale_factor_after": post("scale_factor"),
-            "nonlinearity_max_ppm_before": _num(before.nonlinearity_max_ppm),
-            "nonlinearity_max_ppm_after": post("nonlinearity_max_ppm"),
-            "nonlinearity_rms_ppm_before": _num(before.nonlinearity_rms_ppm),
-            "nonlinearity_rms_ppm_after": post("nonlinearity_rms_ppm"),
-            "rates_dps": [float(v) for v in x],
-            "residuals_ppm_before": _ppm_list(before),
-            "residuals_ppm_after": _ppm_list(after) if after is not None else None,
-        })
+        run_records.append(CompensatedRun(
+            device=dev, run=int(run), used_for_training=bool(trained), n_points=int(sel.sum()), converged=converged,
+            scale_factor_before=_num(before.scale_factor), scale_factor_after=post("scale_factor"),
+            nonlinearity_max_ppm_before=_num(before.nonlinearity_max_ppm),
+            nonlinearity_max_ppm_after=post("nonlinearity_max_ppm"),
+            nonlinearity_rms_ppm_before=_num(before.nonlinearity_rms_ppm),
+            nonlinearity_rms_ppm_after=post("nonlinearity_rms_ppm"),
+            rates_dps=tuple(float(v) for v in x),
+            residuals_ppm_before=_ppm_list(before),
+            residuals_ppm_after=_ppm_list(after) if after is not None else None,
+        ))
     sf_before, sf_after, held = np.asarray(sf_before), np.asarray(sf_after), np.asarray(held)
     rep = _repeatability_or_none
-    device = {
-        "device": dev, "method": compensator.name, "train_runs": [int(r) for r in train],
-        "held_out_runs": [int(r) for r, h in zip(runs, held) if h], "n_runs": len(runs),
-        "repeatability_ppm_before": rep(sf_before), "repeatability_ppm_after": rep(sf_after),
-        "repeatability_ppm_before_held_out": rep(sf_before, held),
-        "repeatability_ppm_after_held_out": rep(sf_after, held),
-        "worst_nonlinearity_max_ppm_held_out_before": _worst(worst_before),
-        "worst_nonlinearity_max_ppm_held_out_after": _worst(worst_after),
-        "compensator": solution.summary(), "converged": converged, "message": message,
-    }
+    device = CompensatedDevice(
+        device=dev, method=compensator.name, train_runs=tuple(int(r) for r in train),
+        held_out_runs=tuple(int(r) for r, h in zip(runs, held) if h), n_runs=len(runs),
+        repeatability_ppm_before=rep(sf_before), repeatability_ppm_after=rep(sf_after),
+        repeatability_ppm_before_held_out=rep(sf_before, held),
+        repeatability_ppm_after_held_out=rep(sf_after, held),
+        worst_nonlinearity_max_ppm_held_out_before=_worst(worst_before),
+        worst_nonlinearity_max_ppm_held_out_after=_worst(worst_after),
+        compensator=solution.summary(), converged=converged, message=message,
+    )
     return run_records, device
 
 

@@ -10,7 +10,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from .cells import REQUIRED_COLUMNS, check_sweep_name
+from .._sweeps.base import AbstractSweep
+from .._sweeps.registry import sweep_kind
+from .cells import REQUIRED_COLUMNS
 
 
 COORDINATES = {"temperatures": "temperature_c", "times": "time_s", "drive_freqs": "drive_freq_hz"}
@@ -44,9 +46,12 @@ class SweepArrays(eqx.Module):
       one, else file order), padding 0.
     - `aux`: the other optional columns the table had (`n_samples`, `rate_dps`, ...), NaN where a value was
       not given, padding 0 (`FitData` keeps none).
-    - `sweep`: the sweep kind; `devices`, `runs` (run ids per device), `column_order`: labels for reports and
-      `Table.from_arrays`, static. `FitData.unlabelled()` sets `devices` and `runs` to None, so that compiled fits see
-      only arrays and shapes.
+    - `kind`: the sweep kind, an `AbstractSweep` (given by its `sweep` name, the kind with its default settings),
+      static: what the code that reads the arrays asks about them (its measurement model, whether runs carry a
+      bias, its units). `sweep` is its name, the key of `FitData.blocks`.
+    - `devices`, `runs` (run ids per device), `column_order`: labels for reports and `Table.from_arrays`, static.
+      `FitData.unlabelled()` sets `devices` and `runs` to None, so that compiled fits see only arrays, shapes and
+      the kinds (equal kinds, equal programs).
 
     `temperatures`, `times`, `drive_freqs` and `order` are None only in a fit read from a file of an early
     format (which did not store them).
@@ -61,13 +66,17 @@ class SweepArrays(eqx.Module):
     drive_freqs: Float[Array, "device run point"] | None = None
     order: Float[Array, "device run point"] | None = None
     aux: dict[str, Float[Array, "device run point"]] = eqx.field(default_factory=dict)
-    sweep: str = eqx.field(static=True, kw_only=True)
+    kind: AbstractSweep = eqx.field(static=True, kw_only=True, converter=sweep_kind)
     devices: tuple[str, ...] | None = eqx.field(static=True, kw_only=True, default=None)
     runs: tuple[tuple[int, ...], ...] | None = eqx.field(static=True, kw_only=True, default=None)
     column_order: tuple[str, ...] = eqx.field(static=True, kw_only=True, default=REQUIRED_COLUMNS)
 
     def __check_init__(self):
-        check_sweep_name(self.sweep)
+        try:
+            hash(self.kind)
+        except TypeError as e:  # a static field: compiled programs are looked up by it
+            raise ValueError(f"SweepArrays.kind must be hashable (its settings tuples and numbers, not arrays), got "
+                             f"{self.kind!r}: {e}") from None
         shape = self.mask.shape
         if len(shape) != 3:
             raise ValueError(f"SweepArrays.mask must have shape (device, run, point), got {shape}.")
@@ -91,6 +100,11 @@ class SweepArrays(eqx.Module):
                              f"{shape[0]} devices.")
         if self.runs is not None and any(len(r) > shape[1] for r in self.runs):
             raise ValueError(f"SweepArrays: a device has more run ids than the run axis ({shape[1]}).")
+
+    @property
+    def sweep(self) -> str:
+        """The kind's name: the `sweep` value of the table's rows."""
+        return self.kind.name
 
     @property
     def run_mask(self) -> Bool[Array, "device run"]:

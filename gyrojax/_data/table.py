@@ -13,6 +13,8 @@ from typing import Any, final
 import jax.numpy as jnp
 import numpy as np
 
+from .._sweeps.base import AbstractSweep
+from .._sweeps.registry import SWEEP_KINDS, sweep_kind
 from .arrays import ARRAY_FIELDS, COORDINATES, PADDING, SweepArrays, time_order
 from .cells import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, DataError, Where, check_sweep_name
 from .validate import group_rows, validate_columns
@@ -135,6 +137,13 @@ class Table:
             groups = {k: v for k, v in groups.items() if k[2] == sweep}
         return groups
 
+    def kinds(self) -> dict[str, AbstractSweep]:
+        """The sweep kinds the rows hold, by their `sweep` name, in the order of
+        [`gyrojax.sweeps.SWEEP_KINDS`][]: each with its default settings (a file names a kind, not its
+        settings). What code that reads the table asks its questions of (units, a straight-line fit or not)."""
+        present = set(self._columns["sweep"].tolist())
+        return {name: sweep_kind(name) for name in SWEEP_KINDS if name in present}
+
     def select(self, rows: Sequence[int] | np.ndarray) -> "Table":
         """A new table of the given 0-based rows (in the given order), same columns, same source."""
         rows = np.asarray(rows, dtype=np.int64)
@@ -239,6 +248,7 @@ def padded_columns(table: Table, sweep: str) -> dict[str, Any]:
             aux[c][d, k, :m] = columns[c][rows]
     return {**arrays, "sigmas": arrays["sigmas"] if "output_sigma" in columns else None,
             "mask": mask, "order": time_order(arrays["times"], mask), "aux": aux, "sweep": sweep,
+            "kind": sweep_kind(sweep),
             "devices": tuple(devices), "runs": tuple(tuple(runs[d]) for d in devices),
             "column_order": tuple(c for c in columns if c in REQUIRED_COLUMNS or c in OPTIONAL_COLUMNS)}
 
@@ -250,5 +260,5 @@ def sweep_arrays(table: Table, sweep: str) -> SweepArrays:
     return SweepArrays(inputs=jnp.asarray(p["inputs"]), outputs=jnp.asarray(p["outputs"]), sigmas=optional["sigmas"],
                        temperatures=optional["temperatures"], mask=jnp.asarray(p["mask"]), times=optional["times"],
                        drive_freqs=optional["drive_freqs"], order=optional["order"],
-                       aux={c: jnp.asarray(v) for c, v in p["aux"].items()}, sweep=sweep, devices=p["devices"],
+                       aux={c: jnp.asarray(v) for c, v in p["aux"].items()}, kind=p["kind"], devices=p["devices"],
                        runs=p["runs"], column_order=p["column_order"])

@@ -32,11 +32,12 @@ import dataclasses
 import math
 from typing import ClassVar
 
+import equinox as eqx
 import numpy as np
 
 from .._identify import Fit
 from .._numerics.stats import chi2_sf
-from .confounding import COORDINATE_WORDS, confounded_coordinates, confounded_groups
+from .confounding import COORDINATE_WORDS, Confounding, confounded_coordinates, confounded_groups
 
 
 def _normal_cdf(z):
@@ -86,8 +87,7 @@ def symmetric_parts(x, r, rtol: float = 1e-9):
     return np.asarray(odd), np.asarray(even)
 
 
-@dataclasses.dataclass(frozen=True)
-class Misfit:
+class Misfit(eqx.Module):
     """chi2 of a group of points (a sweep, a device, a run, an input band) and its share of the lot's excess."""
 
     label: str
@@ -100,8 +100,7 @@ class Misfit:
         return self.chi2 / self.points if self.points else float("nan")
 
 
-@dataclasses.dataclass(frozen=True)
-class Finding:
+class Finding(eqx.Module):
     """One structure test of one sweep along one coordinate: its statistic, degrees of freedom (runs: the
     number of runs tested), p-value, and whether it is flagged (p below alpha / number of tests)."""
 
@@ -161,21 +160,20 @@ def sign_gain_component(x, r):
     return float(q[:, 2] @ np.asarray(r, float))
 
 
-@dataclasses.dataclass(frozen=True)
-class Comparison:
+class Comparison(eqx.Module):
     """The solution of `compare`: misfit by sweep, device, run and input band, and the structure tests."""
 
     kind: ClassVar[str] = "comparison"  # the result's name for output formats (gyrojax.io.AbstractResult)
 
-    by_sweep: tuple
-    by_device: tuple
-    by_run: tuple  # label "sweep device run"
-    by_band: tuple  # label "sweep band"
-    findings: tuple
+    by_sweep: tuple[Misfit, ...]
+    by_device: tuple[Misfit, ...]
+    by_run: tuple[Misfit, ...]  # label "sweep device run"
+    by_band: tuple[Misfit, ...]  # label "sweep band"
+    findings: tuple[Finding, ...]
     chi2: float
     points: int
     alpha: float
-    confounded: tuple = ()  # `Confounding` per sweep and pair of coordinates
+    confounded: tuple[Confounding, ...] = ()  # per sweep and pair of coordinates
 
     @property
     def p_value(self) -> float:
@@ -234,7 +232,8 @@ class Comparison:
 def _shares(items):
     excess = [max(c - n, 0.0) for _, n, c in items]
     total = sum(excess)
-    return tuple(Misfit(label, n, c, e / total if total > 0 else 0.0) for (label, n, c), e in zip(items, excess))
+    return tuple(Misfit(label=label, points=n, chi2=c, share=e / total if total > 0 else 0.0)
+                 for (label, n, c), e in zip(items, excess))
 
 
 _BANDS = ((0.0, 1.0 / 3.0, "low"), (1.0 / 3.0, 2.0 / 3.0, "mid"), (2.0 / 3.0, np.inf, "high"))
@@ -332,13 +331,16 @@ def compare_residuals(residuals, inputs, masks, *, devices, run_ids=None, coordi
         tests += _sweep_tests(sweep, zs, comps, odd, even, signs, along, time_zs, x_all, coords, m_all)
         confounded += confounded_coordinates({"input": x_all, **coords}, m_all, sweep)
     cut = alpha / max(len(tests), 1)
-    findings = tuple(Finding(s, t, stat, df, p, p < cut,
-                             _MEANING[t] if coord == "input" else _coordinate_meaning(t, coord), coord)
+    findings = tuple(Finding(sweep=s, test=t, statistic=stat, df=df, p_value=p, flagged=p < cut,
+                             meaning=_MEANING[t] if coord == "input" else _coordinate_meaning(t, coord),
+                             coordinate=coord)
                      for s, t, stat, df, p, coord in tests)
     total_n = sum(n for _, n, _ in by_sweep)
     total_c = sum(c for _, _, c in by_sweep)
-    return Comparison(_shares(by_sweep), _shares([(k, n, c) for k, (n, c) in by_device.items()]),
-                      _shares(by_run), _shares(by_band), findings, total_c, total_n, alpha, tuple(confounded))
+    return Comparison(by_sweep=_shares(by_sweep),
+                      by_device=_shares([(k, n, c) for k, (n, c) in by_device.items()]),
+                      by_run=_shares(by_run), by_band=_shares(by_band), findings=findings, chi2=total_c,
+                      points=total_n, alpha=alpha, confounded=tuple(confounded))
 
 
 def _same_order(inputs, order, mask):

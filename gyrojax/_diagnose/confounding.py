@@ -2,9 +2,9 @@
 sweep (the input swept in one direction while the die warms up) cannot be told apart there; `compare` says so
 and what would separate them."""
 
-import dataclasses
 import math
 
+import equinox as eqx
 import numpy as np
 
 
@@ -17,8 +17,7 @@ COORDINATE_WORDS = {"input": "the input", "temperature_c": "the die temperature"
                      "order": "the point's order in its run"}
 
 
-@dataclasses.dataclass(frozen=True)
-class Confounding:
+class Confounding(eqx.Module):
     """Two coordinates that rise or fall together in every run of a sweep: a shape along one cannot be told
     from a shape along the other on this data."""
 
@@ -111,5 +110,5 @@ def confounded_coordinates(coords, mask, sweep, *, threshold: float = 0.95):
                 runs += 1
             if runs and worst >= threshold:
                 advice = _ADVICE.get(frozenset((a, b)), "change the protocol so that they vary apart")
-                out.append(Confounding(sweep, a, b, worst, advice))
+                out.append(Confounding(sweep=sweep, first=a, second=b, correlation=worst, advice=advice))
     return out

@@ -17,7 +17,6 @@ import math
 import numpy as np
 
 from .._numerics.stats import chi2_sf
-from .._sweeps.registry import sweep_kind
 from .compare import recorded_coordinates
 from .space import ResidualSpace, Scored
 
@@ -161,7 +160,7 @@ def describe(space: ResidualSpace) -> tuple[list, list]:
         if runs >= 2:
             eye = np.eye(runs)[None, :, None, :] * mask[..., None]
             per_run = [("gain per run", pred[..., None] * eye)]
-            if not sweep_kind(sweep).biased:
+            if not block.kind.biased:
                 per_run.append(("offset per run", eye.astype(float)))
             for family, g in per_run:
                 cols = space.columns({sweep: g})

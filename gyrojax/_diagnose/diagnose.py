@@ -228,9 +228,11 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
         s.fits.append(s.fit)
         cols = effect_columns(s.fit, best.effect)
         multiple = float(np.max(np.abs(np.asarray(s.fit.u)[:, cols])))
-        s.steps.append(Step(best.effect, best.statistic, best.p_value, lr, df_total, p_lr, delta_bic,
-                            s.fit.chi2_red_total, nonlinearity_residual_ppm(s.fit), scores, group, separated,
-                            multiple, best.implied_multiple, look_alikes=alike,
+        s.steps.append(Step(effect=best.effect, statistic=best.statistic, p_value=best.p_value, lr_statistic=lr,
+                            lr_df=df_total, lr_p_value=p_lr, delta_bic=delta_bic, chi2_red_after=s.fit.chi2_red_total,
+                            nonlinearity_ppm_after=nonlinearity_residual_ppm(s.fit), ranking=scores,
+                            ambiguous_with=group, separated_by=separated, typical_multiple=multiple,
+                            implied_multiple=best.implied_multiple, look_alikes=alike,
                             q_value=q if q is not None else math.nan))
         s.discrepancy, s.designs = score_probes(s.fit, probes, alpha=alpha)
         s.located = locate(s.fit, alpha=alpha)

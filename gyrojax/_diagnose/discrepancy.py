@@ -4,6 +4,7 @@ data, and which library effect has each significant shape."""
 import dataclasses
 import math
 
+import equinox as eqx
 import numpy as np
 
 from .._identify import Fit
@@ -24,15 +25,15 @@ SHAPE_SHARE_LEFT = 0.1
 
 
 
-@dataclasses.dataclass(frozen=True)
-class Discrepancy:
+class Discrepancy(eqx.Module):
     """Where an unexplained misfit lives: a generic shape (a probe) along a recorded coordinate, with the share
     of the misfit it explains and the size of the term it implies."""
 
     probe: str
     coordinate: str  # a data column (input, temperature_c, time_s, drive_freq_hz), "order" or "run"
     shape: str
-    sweeps: tuple  # (sweep, share of the probe's fingerprint) where it acts on this data, largest first
+    # (sweep, share of the probe's fingerprint) where it acts on this data, largest first
+    sweeps: tuple[tuple[str, float], ...]
     chi2_explained: float  # the score S: the chi2 it would remove
     df: int
     share: float  # of the chi2 in excess of the degrees of freedom
@@ -42,7 +43,7 @@ class Discrepancy:
     coefficient_spread: float  # standard deviation over the devices
     unit: str
     fingerprint: np.ndarray
-    same_shape_as: tuple = ()  # other significant probes this data cannot tell from it
+    same_shape_as: tuple[str, ...] = ()  # other significant probes this data cannot tell from it
     library: str = ""  # which library effect has this fingerprint, and at what size
     within: str = ""  # a more explanatory probe this one adds nothing beyond (it is part of that misfit)
 
@@ -93,9 +94,12 @@ def score_probes(fit: Fit, probes=PROBES, *, alpha: float = 0.01):
         coef = sc.coefficients
         mag = coef[:, np.argmax(np.max(np.abs(coef), axis=0))] if coef.shape[1] > 1 else coef[:, 0]
         share = min(max(sc.statistic - sc.df, 0.0) / excess, 1.0) if excess > 0 else 0.0
-        out.append(Discrepancy(probe.name, probe.coordinate, probe.shape, _sweep_shares(sc.fingerprint, fit.data),
-                               sc.statistic, sc.df, share, sc.p_value, sc.p_value < cut, float(np.mean(mag)),
-                               float(np.std(mag)) if len(mag) > 1 else 0.0, probe.unit, sc.fingerprint))
+        out.append(Discrepancy(probe=probe.name, coordinate=probe.coordinate, shape=probe.shape,
+                               sweeps=_sweep_shares(sc.fingerprint, fit.data), chi2_explained=sc.statistic,
+                               df=sc.df, share=share, p_value=sc.p_value, significant=sc.p_value < cut,
+                               coefficient=float(np.mean(mag)),
+                               coefficient_spread=float(np.std(mag)) if len(mag) > 1 else 0.0, unit=probe.unit,
+                               fingerprint=sc.fingerprint))
     out.sort(key=lambda d: (not d.significant, -d.chi2_explained))
     # A significant shape that adds nothing beyond a more explanatory one is part of it (a drift in time seen
     # through an input swept in time order); two that add nothing beyond each other are the same shape here.
@@ -119,8 +123,7 @@ def score_probes(fit: Fit, probes=PROBES, *, alpha: float = 0.01):
     return final, designs
 
 
-@dataclasses.dataclass(frozen=True)
-class LookAlike:
+class LookAlike(eqx.Module):
     """A significant shape that a confirmed effect takes whole on this data, though the two differ: by
     `separation_sigma` of the noise at the size the shape implies, on `sweeps` (sweep, share of the difference),
     so that the data cannot say which it is. `information_factor`: how many times its information the separating
@@ -128,7 +131,7 @@ class LookAlike:
 
     probe: str
     shape: str
-    sweeps: tuple
+    sweeps: tuple[tuple[str, float], ...]  # (sweep, share of the difference)
     separation_sigma: float
     information_factor: float
 
@@ -182,8 +185,9 @@ def look_alikes(fit: Fit, effect: str, discrepancy, designs, alpha: float) -> tu
             continue  # the data could tell them apart, and chose the effect
         if separation <= OWN_FORM_SHARE * float(np.sum(d.fingerprint**2)):
             continue  # the effect's own form here
-        out.append(LookAlike(d.probe, d.shape, _sweep_shares(diff, fit.data), math.sqrt(separation),
-                             SEPARATION_SIGMA**2 / max(separation, 1e-300)))
+        out.append(LookAlike(probe=d.probe, shape=d.shape, sweeps=_sweep_shares(diff, fit.data),
+                             separation_sigma=math.sqrt(separation),
+                             information_factor=SEPARATION_SIGMA**2 / max(separation, 1e-300)))
     return tuple(out)
 
 

@@ -5,7 +5,6 @@ import keyword
 import re
 
 from .._data.io import atomic_write_bytes
-from .._sweeps.registry import sweep_kind
 from .._sweeps.steady import AbstractSteadySweep
 from .formula import Formula
 
@@ -21,9 +20,9 @@ class DraftError(ValueError):
 def _term_line(i: int, t) -> str:
     """The readout term's line of code for the formula's term `t` (coefficient `c[i]`), or a `DraftError`
     where a readout term cannot hold it."""
-    for s in t.sweeps:
-        if not isinstance(sweep_kind(s), AbstractSteadySweep):
-            raise DraftError(f"the term {t.name} acts on the {s} sweep, which is not read through the readout "
+    for kind in t.kinds:
+        if not isinstance(kind, AbstractSteadySweep):
+            raise DraftError(f"the term {t.name} acts on the {kind.name} sweep, which is not read through the readout "
                              "(AbstractOutputTerm acts on settled rate outputs: rate_table, vcf_static): write "
                              "it by hand as the kind of term that acts there (docs/adding_an_effect.md).")
     symbols = set(re.findall(r"[A-Za-z_]+", t.expression))

@@ -23,11 +23,11 @@ Canonical names: `basis(coordinate)` with basis in lin, sq, cube, abs, sign, ste
 gain per run. References: input 0, temperature 25 C, time 0 s, drive frequency the device's mean.
 """
 
-import dataclasses
 
+import equinox as eqx
 import numpy as np
 
-from .._sweeps.registry import sweep_kind
+from .._sweeps.base import AbstractSweep
 from .descriptions import SIGNED, coordinates, spread
 from .locate import PREFERENCE
 from .space import ResidualSpace
@@ -44,31 +44,33 @@ _UNITS = {"input": None, "temperature_c": "K", "time_s": "s", "drive_freq_hz": "
           "dtemperature_dt": "(K/s)"}
 
 
-@dataclasses.dataclass(frozen=True)
-class Term:
-    """One dictionary term: its canonical `name`, the `sweeps` it acts on, how it reads in code (`expression`,
-    in `x` the input, `T` the temperature, `t` the time), whether it is a gain, and its changes of the
-    predictions per unit coefficient (sweep -> (device, run, point))."""
+class Term(eqx.Module):
+    """One dictionary term: its canonical `name`, the sweep `kinds` it acts on (the data's; `sweeps` their
+    names), how it reads in code (`expression`, in `x` the input, `T` the temperature, `t` the time), whether it
+    is a gain, and its changes of the predictions per unit coefficient (sweep -> (device, run, point))."""
 
     name: str
-    sweeps: tuple
+    kinds: tuple[AbstractSweep, ...]
     expression: str
     gain: bool
-    changes: dict
+    changes: dict[str, np.ndarray]  # per sweep: (device, run, point)
     unit: str
     coordinate: str = ""  # the recorded coordinate it runs along ("" for a gain per run)
+
+    @property
+    def sweeps(self) -> tuple[str, ...]:
+        return tuple(k.name for k in self.kinds)
 
     @property
     def label(self) -> str:
         return f"{self.name} [{'+'.join(self.sweeps)}]"
 
 
-@dataclasses.dataclass(frozen=True)
-class Formula:
+class Formula(eqx.Module):
     """The selected terms with their lot-wide coefficients, standard errors and the share of the excess chi2
     they remove together."""
 
-    terms: tuple  # Term
+    terms: tuple[Term, ...]
     coefficients: np.ndarray
     stderr: np.ndarray
     statistic: float
@@ -144,7 +146,8 @@ class _Group:
         self.preds = {s: np.asarray(fit.predictions[s], float) for s in group}
         self.coords = {s: coordinates(b) for s, b in blocks.items()}
         self.names = set.intersection(*(set(c) for c in self.coords.values()))
-        self.out_unit = sweep_kind(group[0]).output_unit
+        self.kinds = {s: fit.data.kind(s) for s in group}
+        self.out_unit = self.kinds[group[0]].output_unit
 
     def values(self, c, *, centred=False):
         x = {s: np.asarray(self.coords[s][c], float) for s in self.group}
@@ -152,16 +155,16 @@ class _Group:
 
     def add(self, name, expr, fn, coordinate, *, gain_too=True, offset=True, unit_power=1, unit=None):
         cu = self.out_unit if coordinate == "model" else (_UNITS.get(coordinate)
-                                                          or sweep_kind(self.group[0]).input_unit)
+                                                          or self.kinds[self.group[0]].input_unit)
         per = f"/{cu}" if unit_power == 1 else (f"/{cu}^{unit_power}" if unit_power else "")
         for gain in ((False, True) if gain_too else (False,)):
             if not gain and not offset:
                 continue
             changes = {s: np.where(self.masks[s], fn(s) * (self.preds[s] if gain else 1.0), 0.0) for s in self.group}
-            self.terms.append(Term(name + ("*model" if gain else ""), self.group,
-                                   f"output * ({expr})" if gain else f"({expr})", gain, changes,
-                                   unit or ("1" + per if gain else self.out_unit + per),
-                                   "" if coordinate == "order" else coordinate))
+            self.terms.append(Term(name=name + ("*model" if gain else ""), kinds=tuple(self.kinds.values()),
+                                   expression=f"output * ({expr})" if gain else f"({expr})", gain=gain,
+                                   changes=changes, unit=unit or ("1" + per if gain else self.out_unit + per),
+                                   coordinate="" if coordinate == "order" else coordinate))
 
 
 def _coordinate_terms(g: _Group, c, step_at, period):
@@ -226,7 +229,7 @@ def _output_terms(g: _Group):
     p = g.preds
     for basis, k in (("sq", 2), ("cube", 3)):
         g.add(f"{basis}(model)", f"output**{k}", lambda s, k=k: p[s] ** k, "model", gain_too=False, unit_power=k - 1)
-    if len({sweep_kind(s).input_unit for s in g.group}) < 2:
+    if len({g.kinds[s].input_unit for s in g.group}) < 2:
         return
     g.add("abs(model)", "abs(output)", lambda s: np.abs(p[s]), "model", gain_too=False, unit_power=0, unit="1")
     for c in ("temperature_c", "time_s"):
@@ -319,8 +322,9 @@ def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, ma
     coef, err, spread = lot_mean(joint)
     share = min(max(joint.statistic - joint.df, 0.0) / space.excess, 1.0) if space.excess > 0 else 0.0
     left = current.score(location.columns)
-    return Formula(tuple(chosen), coef, err, joint.statistic, joint.df, share, size, left.statistic,
-                   left.df, left.p_value, left.p_value >= alpha, spread)
+    return Formula(terms=tuple(chosen), coefficients=coef, stderr=err, statistic=joint.statistic, df=joint.df,
+                   share=share, dictionary_size=size, left_statistic=left.statistic, left_df=left.df,
+                   left_p_value=left.p_value, complete=left.p_value >= alpha, spread=spread)
 
 
 def lot_mean(scored):

@@ -19,7 +19,6 @@ import math
 
 import numpy as np
 
-from .._sweeps.registry import sweep_kind
 from .._text import safe_name as clean
 from .descriptions import (
     SIGNED,
@@ -387,7 +386,7 @@ def _size(fit, space, members, sc):
             g = pc[dv, i + row]
             var = float(g @ sc.covariance[dv] @ g)
             full = float(np.max(np.abs(np.asarray(fit.predictions[m.sweep])[dv][np.asarray(block.mask)[dv]])))
-            best = (value, math.sqrt(max(var, 0.0)) * float(sig[dv, row]), sweep_kind(m.sweep).output_unit, full,
+            best = (value, math.sqrt(max(var, 0.0)) * float(sig[dv, row]), fit.data.kind(m.sweep).output_unit, full,
                     m.sweep)
     if best is None:
         return None, "no coefficient of the description is on a recorded row"
@@ -399,6 +398,6 @@ def _size(fit, space, members, sc):
                       f"peak ({abs(value):.3g} {unit})")
     # ppm of full scale only where the output is proportional to the input by design (its nonlinearity is a
     # measurement there; a zero-rate output's "full scale" is its own small slope)
-    relative = "nonlinearity" in sweep_kind(sweep).applicable_metrics() and full > 0
+    relative = "nonlinearity" in fit.data.kind(sweep).applicable_metrics() and full > 0
     return {"value": abs(value), "unit": unit, "stderr": stderr, "measure": "peak of the fitted description",
             "sweep": sweep, "ppm_of_full_scale": 1e6 * abs(value) / full if relative else None}, ""

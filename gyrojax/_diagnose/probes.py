@@ -26,7 +26,6 @@ import numpy as np
 
 from .._identify import Fit
 from .._numerics.stats import chi2_sf
-from .._sweeps.registry import sweep_kind
 
 
 # Which sweep kinds a probe acts on, from what the kind reads (`AbstractSweep`'s class attributes), so that a
@@ -70,7 +69,7 @@ class AbstractProbe(eqx.Module):
 
     def acts_on(self, fit: Fit, sweep: str) -> bool:
         """Whether the probe acts on the data's sweep `sweep`."""
-        return sweep in fit.data.blocks and type(self).sweeps(sweep_kind(sweep))
+        return sweep in fit.data.blocks and type(self).sweeps(fit.data.kind(sweep))
 
     @abc.abstractmethod
     def changes(self, fit: Fit, sweep: str) -> np.ndarray | None:
@@ -223,7 +222,7 @@ class CubicAfterDac(AbstractProbe):
         f = np.asarray(fit.predictions[sweep])
         w = _full_scale_word(fit)
         if w is None:  # open loop: relative to the largest rate-table output of the device
-            table = next((s for s in fit.predictions if sweep_kind(s).rate_input), sweep)
+            table = next((s for s in fit.predictions if fit.data.kind(s).rate_input), sweep)
             ref, mask = fit.predictions[table], fit.data.blocks[table].mask
             w = np.max(np.where(np.asarray(mask), np.abs(np.asarray(ref)), 0.0), axis=(1, 2), keepdims=True)
             w = np.where(w > 0, w, 1.0)
@@ -245,7 +244,7 @@ class CubicOfDac(AbstractProbe):
         if w is None or not self.acts_on(fit, sweep):
             return None
         f = np.asarray(fit.predictions[sweep])
-        if sweep_kind(sweep).word_input:
+        if fit.data.kind(sweep).word_input:
             words = np.asarray(fit.data.blocks[sweep].inputs)
             return (f * (words / w) ** 2 * 1e-6)[..., None]
         return (-f * (f / w) ** 2 * 1e-6)[..., None]
@@ -299,7 +298,7 @@ def standardised(fit, sweep, g):
     mask = np.asarray(block.mask)[..., None]
     sig = np.asarray(block.sigmas)[..., None]
     g = np.where(mask, np.nan_to_num(np.asarray(g, float)), 0.0)
-    if sweep_kind(sweep).biased:
+    if fit.data.kind(sweep).biased:
         w = np.where(mask, 1.0 / sig**2, 0.0)
         g = g - np.sum(w * g, axis=2, keepdims=True) / np.maximum(np.sum(w, axis=2, keepdims=True), 1e-300)
     return np.where(mask, g / sig, 0.0)

@@ -25,7 +25,6 @@ import numpy as np
 
 from .._identify import Fit
 from .._simulate.tiers import Steady
-from .._sweeps.registry import sweep_kind
 from .._sweeps.steady import AbstractSteadySweep, steady_points
 
 
@@ -42,7 +41,7 @@ def _frequency_blocks(data):
     """The steady sweeps of `data` whose every real point records the drive frequency."""
     out = []
     for s, b in data.blocks.items():
-        if not isinstance(sweep_kind(s), AbstractSteadySweep) or b.drive_freqs is None:
+        if not isinstance(b.kind, AbstractSteadySweep) or b.drive_freqs is None:
             continue
         m = np.asarray(b.mask)
         if m.any() and np.all(np.isfinite(np.asarray(b.drive_freqs)[m])):
@@ -69,7 +68,7 @@ def predicted_drive_frequency(fit: Fit, tier=Steady()) -> dict:
         return {}
     blocks = [fit.data.blocks[s] for s in sweeps]
     out = _settled_frequency(fit.model, tuple(b.inputs for b in blocks), tuple(b.temperatures for b in blocks),
-                             tuple(b.times for b in blocks), tuple(sweep_kind(s) for s in sweeps), tier)
+                             tuple(b.times for b in blocks), tuple(b.kind for b in blocks), tier)
     return {s: np.asarray(f, float) for s, f in zip(sweeps, out)}
 
 

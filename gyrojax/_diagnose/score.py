@@ -1,9 +1,9 @@
 """The score test of each candidate effect at a fitted model, its fingerprint, what makes it testable, and
 the sweep on which two fingerprints differ most."""
 
-import dataclasses
 import math
 
+import equinox as eqx
 import numpy as np
 
 from .._effects.registry import EFFECTS
@@ -14,8 +14,7 @@ from .columns import effect_columns, row_blocks
 from .probes import score_columns
 
 
-@dataclasses.dataclass(frozen=True)
-class CandidateScore:
+class CandidateScore(eqx.Module):
     """One candidate effect scored against a fitted model (no refit)."""
 
     effect: str
@@ -29,7 +28,7 @@ class CandidateScore:
     # The same before the baseline's free parameters take their share (after the run biases), and the free
     # parameters that take it: what hides the candidate when it is not testable.
     visible_chi2: float = 0.0
-    absorbed_by: tuple = ()
+    absorbed_by: tuple[str, ...] = ()
 
     @property
     def implied_multiple(self) -> float:
@@ -87,9 +86,10 @@ def score_candidates(fit: Fit, candidates, *, rank_tol: float = TYPICAL_RANK_TOL
         order = np.argsort(-share)
         absorbed_by = tuple(names_free[k] for k in order if share[k] > 0.1 * max(np.sum(share), 0.0))
         testable = scored.df > 0 and is_testable(scored.information, min_typical_chi2)
-        out.append(CandidateScore(name, scored.statistic, scored.df, scored.p_value, testable,
-                                  scored.fingerprint, EFFECTS[name].description, scored.information, visible,
-                                  absorbed_by))
+        out.append(CandidateScore(effect=name, statistic=scored.statistic, df=scored.df, p_value=scored.p_value,
+                                  testable=testable, fingerprint=scored.fingerprint,
+                                  description=EFFECTS[name].description, typical_chi2=scored.information,
+                                  visible_chi2=visible, absorbed_by=absorbed_by))
     return tuple(sorted(out, key=lambda c: (not c.testable, c.p_value, -c.statistic)))
 
 

@@ -1,19 +1,22 @@
 """The solution of `diagnose`: the accepted steps and the `Diagnosis`, with its summary, verdict in words and
 JSON."""
 
-import dataclasses
 import math
 import os
 from typing import ClassVar
 
+import equinox as eqx
 import numpy as np
 
 from .._effects.registry import EFFECTS
 from .._identify import Fit
-from .compare import nonlinearity_residual_ppm
+from .compare import Comparison, nonlinearity_residual_ppm
+from .discrepancy import LookAlike
 from .formula import Formula
-from .guards import MAX_TYPICAL_MULTIPLE
+from .guards import MAX_TYPICAL_MULTIPLE, Rejection
+from .locate import Location
 from .report import discrepancy_text, markdown_text, nonlinearity_not_determined, write_report
+from .score import CandidateScore
 
 
 # ASSUMPTION: each effect's `typical(1.0)` is a realistic size with a provenance; a device more than 20 times
@@ -21,9 +24,9 @@ from .report import discrepancy_text, markdown_text, nonlinearity_not_determined
 IMPLAUSIBLE_MULTIPLE = 20.0
 
 
-@dataclasses.dataclass(frozen=True)
-class Step:
-    """One accepted effect: its score at selection, the refit's likelihood-ratio test and chi2 after."""
+class Step(eqx.Module):
+    """One accepted effect: its score at selection, the refit's likelihood-ratio test and chi2 after (a record of
+    `Diagnosis.steps`)."""
 
     effect: str
     statistic: float
@@ -34,15 +37,15 @@ class Step:
     delta_bic: float
     chi2_red_after: float
     nonlinearity_ppm_after: float
-    ranking: tuple
-    ambiguous_with: tuple
+    ranking: tuple[CandidateScore, ...]  # every candidate scored at this step, best first
+    ambiguous_with: tuple[str, ...]
     separated_by: str | None
     # Largest fitted parameter of the effect over the lot, in units of its typical size: far above 1, the
     # effect explains the data only at an implausible size (another effect may leave this fingerprint).
     typical_multiple: float = float("nan")
     implied_multiple: float = float("nan")  # at the score stage, before the refit
-    contradicted_by: tuple = ()  # sweeps whose misfit the step made significantly worse (none when accepted)
-    look_alikes: tuple = ()  # LookAlike: shapes the data cannot tell from this effect (`look_alikes`)
+    contradicted_by: tuple[str, ...] = ()  # sweeps whose misfit the step made significantly worse (none when accepted)
+    look_alikes: tuple[LookAlike, ...] = ()  # LookAlike: shapes the data cannot tell from this effect (`look_alikes`)
     # Benjamini-Hochberg q-value of the step's selection-corrected likelihood-ratio p-value over every refit
     q_value: float = float("nan")
 
@@ -50,30 +53,29 @@ class Step:
 VERDICTS = ("explained", "partly explained", "unexplained")
 
 
-@dataclasses.dataclass(frozen=True)
-class Diagnosis:
+class Diagnosis(eqx.Module):
     """The solution of `diagnose`: the baseline fit, the ranking at the first step, the accepted steps, the
     final fit, what was ambiguous, untestable or rejected, where the misfit that is left lives, and a
     verdict."""
 
     baseline: Fit
     final: Fit
-    fits: tuple  # baseline, then the fit after each step
-    ranking: tuple  # CandidateScore at the first step, best first
-    steps: tuple  # Step per accepted effect
-    ambiguous: tuple  # groups of names
-    untestable: tuple  # names not testable on this data at the first step
-    rejected: tuple  # Rejection per candidate that scored but was not confirmed
+    fits: tuple[Fit, ...]  # baseline, then the fit after each step
+    ranking: tuple[CandidateScore, ...]  # at the first step, best first
+    steps: tuple[Step, ...]  # per accepted effect
+    ambiguous: tuple[tuple[str, ...], ...]  # groups of names
+    untestable: tuple[str, ...]  # names not testable on this data at the first step
+    rejected: tuple[Rejection, ...]  # per candidate that scored but was not confirmed
     alpha: float
     baseline_nonlinearity_ppm: float
     min_typical_chi2: float = 1.0
-    comparisons: tuple = ()  # `Comparison` of each fit in `fits`: where it fails, structure in its residuals
-    baseline_discrepancy: tuple = ()  # Discrepancy per probe at the baseline, most explanatory first
-    discrepancy: tuple = ()  # the same at the final fit: where what is left lives
+    comparisons: tuple[Comparison, ...] = ()  # of each fit in `fits`: where it fails, structure in its residuals
+    baseline_discrepancy: tuple[Location, ...] = ()  # per probe at the baseline, most explanatory first
+    discrepancy: tuple[Location, ...] = ()  # the same at the final fit: where what is left lives
     verdict: str = "unexplained"
     max_typical_multiple: float = MAX_TYPICAL_MULTIPLE
     formula: Formula | None = None  # proposed for the leading discrepancy
-    notes: tuple = ()  # coordinates the localisation did not describe along, and why
+    notes: tuple[str, ...] = ()  # coordinates the localisation did not describe along, and why
 
     kind: ClassVar[str] = "diagnosis"  # the result's name for output formats (gyrojax.io.AbstractResult)
 

@@ -138,7 +138,7 @@ def _skeleton_block(sweep: str, fields, runs) -> SweepArrays:
     leaves = {f: (np.zeros(shape, dtype=bool if f == "mask" else np.float64) if f in fields else None)
               for f in ARRAY_FIELDS}
     # NumPy placeholders for the stored leaves (loaded as saved), in the fields' places: typed as what they become.
-    return SweepArrays(**cast(dict[str, Any], leaves), sweep=sweep, devices=tuple(d for d, _ in runs),
+    return SweepArrays(**cast(dict[str, Any], leaves), kind=sweep, devices=tuple(d for d, _ in runs),
                        runs=tuple(r for _, r in runs), column_order=FIT_COLUMNS)
 
 

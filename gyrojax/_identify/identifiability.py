@@ -6,7 +6,6 @@ along a direction the data leave open (its determinacy)."""
 import numpy as np
 
 from .._model.fitdata import FitData
-from .._sweeps.registry import sweep_kind
 from .covariance import joint_jacobian
 from .fit import Unidentifiable
 
@@ -67,9 +66,9 @@ def _count_text(data: FitData, d: int) -> tuple[str, int, int]:
         m = np.asarray(data.blocks[s].mask[d])
         k = int(m.sum())
         if k:
-            parts.append(f"{k} {sweep_kind(s).title} point{'s' if k != 1 else ''}")
+            parts.append(f"{k} {data.kind(s).title} point{'s' if k != 1 else ''}")
             points += k
-            if sweep_kind(s).biased:
+            if data.kind(s).biased:
                 biases += int(np.sum(np.any(m, axis=-1)))
     text = " and ".join([", ".join(parts[:-1]), parts[-1]] if len(parts) > 1 else parts) or "no points"
     return text, points, biases

@@ -9,7 +9,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._model.fitdata import FitData
-from .._sweeps.registry import sweep_kind
 from .covariance import mc_p_value, pooled_dof
 from .fit import Fit
 from .plausibility import output_scale_ratio
@@ -204,7 +203,7 @@ def estimated_noise(fit: Fit, seed: int, first_device: int = 0):
     notes, determined, draws = [], [], []
     for d in range(n):
         blocks = [(np.asarray(data.blocks[s].inputs[d]), np.asarray(data.blocks[s].mask[d]),
-                   1.0 / np.asarray(data.blocks[s].fit_sigmas()[d]), sweep_kind(s).biased) for s in sweeps]
+                   1.0 / np.asarray(data.blocks[s].fit_sigmas()[d]), data.kind(s).biased) for s in sweeps]
         res = np.asarray(fit.residual_vector[d])[:rows]
         jac = np.asarray(fit.jacobian[d])[:rows][:, free]
         if not (np.all(np.isfinite(res)) and np.all(np.isfinite(jac))):

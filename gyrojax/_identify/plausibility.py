@@ -8,7 +8,6 @@ import numpy as np
 
 from .._model.fitdata import FitData
 from .._model.parameters import PARAMETERS
-from .._sweeps.registry import sweep_kind
 
 
 # A reading this many times the largest other reading of its run is refused: a 24-bit readout spans 1.7e7
@@ -76,7 +75,7 @@ def check_signs(data: FitData, predictions, model_name: str):
         # A straight-line sweep's output runs with its input with the sign the model predicts where a convention
         # sets that sign; where an effect's sign sets it (the drive frequency against the set-point: a cubic
         # spring hardens or softens), a library effect at its typical size turns the model's slope over.
-        kind = sweep_kind(s)
+        kind = data.kind(s)
         if not (kind.straight_line and kind.sign_definite) or s not in predictions:
             continue
         block = data.blocks[s]

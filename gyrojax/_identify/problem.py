@@ -13,7 +13,6 @@ from .._model.fitdata import FitData
 from .._model.parameters import PARAMETERS, Entry, Model, apply_u, batched, build_entries, read_values
 from .._model.residuals import device_residuals
 from .._simulate.tiers import Steady
-from .._sweeps.registry import sweep_kind
 
 
 @contextlib.contextmanager
@@ -78,7 +77,7 @@ def evaluate_at(problem, u, u_lot):
 def sf_temperature(data):
     """Temperature at which the fit's scale factor is reported: the mean of the points of rate-input sweeps
     (a rate table; else of all recorded points, else the reference 25 C)."""
-    blocks = [b for s, b in data.blocks.items() if sweep_kind(s).rate_input] or list(data.blocks.values())
+    blocks = [b for b in data.blocks.values() if b.kind.rate_input] or list(data.blocks.values())
     # numpy: a few host operations, not a compiled program per operation
     used = [np.asarray(b.mask) & np.isfinite(np.asarray(b.temperatures)) for b in blocks]
     total = sum(np.sum(np.where(m, np.asarray(b.temperatures), 0.0), axis=(1, 2)) for m, b in zip(used, blocks))

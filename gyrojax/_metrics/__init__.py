@@ -19,14 +19,21 @@ memory of their definitions, not checked against their text here.)
 
 One concept per file: `arrays.py` (what every metric shares), `scale_factor.py`, `asymmetry.py`,
 `repeatability.py`, `bandwidth.py`, `report.py` (`metrics_report` over a table) and `result.py` (`MetricsReport`,
-what it returns).
+what it returns, and its records).
 """
 
 from .asymmetry import asymmetry as asymmetry
 from .bandwidth import RateBandwidth as RateBandwidth, rate_bandwidth as rate_bandwidth
 from .repeatability import repeatability as repeatability
 from .report import metrics_report as metrics_report, scale_factor_units as scale_factor_units
-from .result import MetricsReport as MetricsReport
+from .result import (
+    BandwidthMetrics as BandwidthMetrics,
+    DeviceMetrics as DeviceMetrics,
+    MetricsConventions as MetricsConventions,
+    MetricsReport as MetricsReport,
+    RateLineMetrics as RateLineMetrics,
+    SweepMetrics as SweepMetrics,
+)
 from .scale_factor import (
     FULL_SCALE_CONVENTIONS as FULL_SCALE_CONVENTIONS,
     MIN_POINTS_LINEAR as MIN_POINTS_LINEAR,

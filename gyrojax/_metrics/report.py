@@ -12,11 +12,19 @@ import numpy as np
 from .._data.cells import DataError
 from .._data.table import Table, padded_columns
 from .._data.validate import check_outputs_change
-from .._sweeps.registry import SWEEP_KINDS, sweep_kind
+from .._sweeps.base import AbstractSweep
+from .._sweeps.registry import SWEEP_KINDS
 from .asymmetry import asymmetry
 from .bandwidth import MIN_POINTS_BANDWIDTH, rate_bandwidth
 from .repeatability import repeatability
-from .result import MetricsReport
+from .result import (
+    BandwidthMetrics,
+    DeviceMetrics,
+    MetricsConventions,
+    MetricsReport,
+    RateLineMetrics,
+    SweepMetrics,
+)
 from .scale_factor import FULL_SCALE_CONVENTIONS, MIN_POINTS_LINEAR, fit_scale_factor
 
 
@@ -56,11 +64,10 @@ _METRIC_KEYS = {
 }
 
 
-def _drop_inapplicable(rec: dict[str, Any], sweep: str, brief: bool = False) -> dict[str, str]:
-    """Set to None the numbers of `rec` that are no measurement on this sweep kind (its `applicable_metrics`);
+def _drop_inapplicable(rec: dict[str, Any], kind: AbstractSweep, brief: bool = False) -> dict[str, str]:
+    """Set to None the numbers of `rec` that are no measurement on its sweep `kind` (its `applicable_metrics`);
     returns the reason for each (`brief`: the kind's reason in full for the first key only, the others refer to
     it, so that a line of text says it once)."""
-    kind = sweep_kind(sweep)
     applies = kind.applicable_metrics()
     reasons = {}
     for metric, keys in _METRIC_KEYS.items():
@@ -70,19 +77,19 @@ def _drop_inapplicable(rec: dict[str, Any], sweep: str, brief: bool = False) -> 
             if key in rec:
                 rec[key] = None
                 first = next(iter(reasons), None)
-                reasons[key] = (f"not a measurement on a {sweep} sweep (see {first})" if brief and first
+                reasons[key] = (f"not a measurement on a {kind.name} sweep (see {first})" if brief and first
                                 else kind.metric_not_applicable(metric))
     return reasons
 
 
-def _why_not(rec: dict[str, Any], outputs: np.ndarray, inputs: np.ndarray) -> dict[str, str]:
-    """The reason for each None among a point record's numbers (see `metrics_report`)."""
+def _why_not(rec: dict[str, Any], outputs: np.ndarray, inputs: np.ndarray, kind: AbstractSweep) -> dict[str, str]:
+    """The reason for each None among a point record's numbers (see `metrics_report`); `kind` is its sweep's."""
     flat = bool(np.all(outputs == outputs[0]))
     reasons = {}
     for key, value in rec.items():
         if value is not None or key in ("device", "run", "sweep", "n_points"):
             continue
-        if not sweep_kind(rec["sweep"]).straight_line:
+        if not kind.straight_line:
             why = ("no phase_deg was given for every point of this sweep" if key == "phase_deg_at_bandwidth"
                    else f"a {rec['sweep']} sweep gives a bandwidth, not a straight-line fit")
         elif flat and key.startswith("nonlinearity"):
@@ -114,10 +121,11 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
 
     **Returns:**
 
-    A `MetricsReport`: a JSON-ready dict (Python numbers, None for "not applicable") with the `summary()` the
-    command line prints:
+    A `MetricsReport` with the `summary()` the command line prints; its fields are typed records, its `to_json()`
+    the JSON below (Python numbers, None for "not applicable"):
 
-    - `points`: one record per (device, run, sweep), in order of first appearance in the table: `device`,
+    - `points`: one record per (device, run, sweep) (`SweepMetrics`; `vs_rate` and `bandwidth` hold the figures
+      below that only some kinds give), in order of first appearance in the table: `device`,
       `run`, `sweep`, `n_points`, `scale_factor`, `bias`, `nonlinearity_max_ppm`, `nonlinearity_rms_ppm`,
       `asymmetry_ppm` (None when the sweep lacks positive or negative inputs). For `dac` sweeps with a
       `rate_dps` column also `scale_factor_vs_rate`, `bias_vs_rate`, `nonlinearity_max_ppm_vs_rate`,
@@ -128,10 +136,10 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
       nonlinearities and asymmetry (a kind whose slope's sign a convention sets refuses it: see below).
       `not_applicable` maps each key that is None to the reason, in words; `undetermined` lists the keys of
       metrics that apply to the kind but that the points did not give.
-    - `devices`: one record per (device, sweep) with a linear fit: `device`, `sweep`, `n_runs`,
+    - `devices`: one record per (device, sweep) with a linear fit (`DeviceMetrics`): `device`, `sweep`, `n_runs`,
       `scale_factor_mean`, `repeatability_ppm` (None with a single run, or when the mean scale factor is 0),
       and `not_applicable` as above.
-    - `conventions`: the choices above and the unit of `scale_factor` per sweep kind.
+    - `conventions`: the choices above and the unit of `scale_factor` per sweep kind (`MetricsConventions`).
 
     Raises [`gyrojax.DataError`][] naming the device, run, sweep and rows when a run of a rate-table, VCF, DAC or
     drive-amplitude sweep has outputs that are all equal (a dead output, refused as `compensate` refuses it),
@@ -149,11 +157,9 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
 
     records: dict[tuple, dict[str, Any]] = {}
     device_records: list[dict[str, Any]] = []
-    for sweep in SWEEP_KINDS:
-        if not any(k[2] == sweep for k in groups):
-            continue
+    for sweep in table.kinds():
         arr = SimpleNamespace(**padded_columns(table, sweep))  # NumPy: no compilation for a report
-        if not sweep_kind(sweep).straight_line:
+        if not arr.kind.straight_line:
             records.update(_bandwidth_records(table, groups, arr, sweep))
             continue
         sig = arr.sigmas if weighted else None
@@ -164,16 +170,36 @@ def metrics_report(table: Table, *, full_scale: str = "half_range", weighted: bo
     for dev, _, sweep in groups:
         order.setdefault((dev, sweep), len(order))
     device_records.sort(key=lambda rec: order[(rec["device"], rec["sweep"])])
-    return MetricsReport({
-        "points": [records[key] for key in groups],
-        "devices": device_records,
-        "conventions": {
-            "full_scale": full_scale, "weighted": weighted,
-            "asymmetry": "common_bias" if common_bias else "separate_fits", "repeatability_ddof": ddof,
-            "nonlinearity_rms": "population RMS of residuals (divided by n)",
-            "scale_factor_units": scale_factor_units(),
-        },
-    })
+    conventions = MetricsConventions(full_scale=full_scale, weighted=weighted,
+                                     asymmetry="common_bias" if common_bias else "separate_fits",
+                                     repeatability_ddof=ddof,
+                                     nonlinearity_rms="population RMS of residuals (divided by n)",
+                                     scale_factor_units=scale_factor_units())
+    return MetricsReport(points=tuple(_sweep_metrics(records[key]) for key in groups),
+                         devices=tuple(_device_metrics(rec) for rec in device_records), conventions=conventions)
+
+
+def _sweep_metrics(rec: dict[str, Any]) -> SweepMetrics:
+    """A point record (built as a dict, its keys those of the JSON) as the report's typed record."""
+    vs_rate = None if "scale_factor_vs_rate" not in rec else RateLineMetrics(
+        scale_factor=rec["scale_factor_vs_rate"], bias=rec["bias_vs_rate"],
+        nonlinearity_max_ppm=rec["nonlinearity_max_ppm_vs_rate"],
+        nonlinearity_rms_ppm=rec["nonlinearity_rms_ppm_vs_rate"])
+    bandwidth = None if "bandwidth_hz" not in rec else BandwidthMetrics(
+        bandwidth_hz=rec["bandwidth_hz"], phase_deg_at_bandwidth=rec["phase_deg_at_bandwidth"],
+        low_frequency_gain=rec["low_frequency_gain"])
+    return SweepMetrics(device=rec["device"], run=rec["run"], sweep=rec["sweep"], n_points=rec["n_points"],
+                        scale_factor=rec["scale_factor"], bias=rec["bias"],
+                        nonlinearity_max_ppm=rec["nonlinearity_max_ppm"],
+                        nonlinearity_rms_ppm=rec["nonlinearity_rms_ppm"], asymmetry_ppm=rec["asymmetry_ppm"],
+                        vs_rate=vs_rate, bandwidth=bandwidth, undetermined=tuple(rec["undetermined"]),
+                        not_applicable=dict(rec["not_applicable"]))
+
+
+def _device_metrics(rec: dict[str, Any]) -> DeviceMetrics:
+    return DeviceMetrics(device=rec["device"], sweep=rec["sweep"], n_runs=rec["n_runs"],
+                         scale_factor_mean=rec["scale_factor_mean"], repeatability_ppm=rec["repeatability_ppm"],
+                         not_applicable=dict(rec["not_applicable"]))
 
 
 def _group_name(table: Table, key, rows) -> str:
@@ -188,9 +214,10 @@ def _group_name(table: Table, key, rows) -> str:
 def _check_groups(table: Table, groups, weighted: bool) -> None:
     """Checks with names, before any arithmetic: enough points per group, a positive `output_sigma` on every
     point of a weighted fit, `rate_dps` on all or none of a group's points where the kind is fitted against it."""
+    kinds = table.kinds()
     for key, rows in groups.items():
-        sweep = key[2]
-        line = sweep_kind(sweep).straight_line
+        kind = kinds[key[2]]
+        line = kind.straight_line
         need = MIN_POINTS_LINEAR if line else MIN_POINTS_BANDWIDTH
         what = "a scale factor with a nonlinearity" if line else "a rate bandwidth"
         if len(rows) < need:
@@ -204,7 +231,7 @@ def _check_groups(table: Table, groups, weighted: bool) -> None:
                 raise DataError(f"{table.locate(int(bad[0]), 'output_sigma')}: weighted=True needs a positive "
                                 f"output_sigma on every point; {_group_name(table, key, rows)} lacks one.",
                                 source=table.source, row=int(bad[0]) + 1, column="output_sigma")
-        if sweep_kind(sweep).fit_against_rate and "rate_dps" in table:
+        if kind.fit_against_rate and "rate_dps" in table:
             given = ~np.isnan(table["rate_dps"][rows])
             if given.any() and not given.all():
                 r = int(rows[~given][0])
@@ -240,7 +267,7 @@ def _bandwidth_records(table: Table, groups, arr, sweep: str) -> dict:
             "phase_deg_at_bandwidth": _num(bw.phase_deg[d, k]) if has_phase else None,
             "low_frequency_gain": _num(bw.low_frequency_gain[d, k])}
         sel = arr.mask[d, k]
-        why = _why_not(records[(dev, r, sweep)], arr.outputs[d, k][sel], arr.inputs[d, k][sel])
+        why = _why_not(records[(dev, r, sweep)], arr.outputs[d, k][sel], arr.inputs[d, k][sel], arr.kind)
         records[(dev, r, sweep)]["undetermined"] = [key for key in why if key in _DETERMINED]
         records[(dev, r, sweep)]["not_applicable"] = why
     return records
@@ -251,7 +278,7 @@ def _linear_records(arr, sweep: str, fit, sig, full_scale: str, common_bias: boo
     per run, and against `rate_dps` where the kind is fitted against it and the data give it."""
     asym = asymmetry(arr.inputs, arr.outputs, mask=arr.mask, sigmas=sig, common_bias=common_bias)
     vs_rate = None
-    if sweep_kind(sweep).fit_against_rate and "rate_dps" in arr.aux:
+    if arr.kind.fit_against_rate and "rate_dps" in arr.aux:
         rate = arr.aux["rate_dps"]
         has = arr.mask & ~np.isnan(rate)
         vs_rate = fit_scale_factor(np.where(has, rate, 0.0), arr.outputs, mask=has, sigmas=sig,
@@ -269,9 +296,9 @@ def _linear_records(arr, sweep: str, fit, sig, full_scale: str, common_bias: boo
                         "nonlinearity_max_ppm_vs_rate": _num(vs_rate.nonlinearity_max_ppm[d, k]),
                         "nonlinearity_rms_ppm_vs_rate": _num(vs_rate.nonlinearity_rms_ppm[d, k])})
         sel = arr.mask[d, k]
-        kind_reasons = _drop_inapplicable(rec, sweep, brief=True)
+        kind_reasons = _drop_inapplicable(rec, arr.kind, brief=True)
         why = _why_not({key: v for key, v in rec.items() if key not in kind_reasons}, arr.outputs[d, k][sel],
-                       arr.inputs[d, k][sel])
+                       arr.inputs[d, k][sel], arr.kind)
         rec["undetermined"] = [key for key in why if key in _DETERMINED]
         rec["not_applicable"] = {**why, **kind_reasons}
         records[(dev, r, sweep)] = rec
@@ -288,7 +315,7 @@ def _device_records(arr, sweep: str, fit, ddof: int) -> list:
         sf = fit.scale_factor[d][run_mask[d]]
         rec = {"device": dev, "sweep": sweep, "n_runs": int(n_runs[d]),
                "scale_factor_mean": _num(np.mean(sf)), "repeatability_ppm": _num(rep[d])}
-        rec["not_applicable"] = _drop_inapplicable(rec, sweep)
+        rec["not_applicable"] = _drop_inapplicable(rec, arr.kind)
         if rec["repeatability_ppm"] is None and "repeatability_ppm" not in rec["not_applicable"]:
             rec["not_applicable"]["repeatability_ppm"] = (
                 f"{int(n_runs[d])} run{'s' * (int(n_runs[d]) != 1)}: a repeatability needs at least {ddof + 1}"

@@ -10,6 +10,7 @@ import numpy as np
 from .._data.arrays import COORDINATES, SweepArrays
 from .._data.cells import REQUIRED_COLUMNS, DataError
 from .._data.table import Table
+from .._sweeps.base import AbstractSweep
 from .._sweeps.registry import SWEEP_KINDS
 
 
@@ -21,8 +22,11 @@ structure for every fit's data, as a fit file rebuilds it)."""
 class FitData(eqx.Module):
     """All sweeps of a lot, each a `SweepArrays` aligned on the same devices.
 
-    `blocks` maps each sweep kind to its arrays (without `aux`: the fit reads the model's coordinates only);
-    a device a sweep lacks has only padding there. `weighted` is False when the table had no `output_sigma`:
+    `blocks` maps each sweep kind's name to its arrays (without `aux`: the fit reads the model's coordinates
+    only); a device a sweep lacks has only padding there. Each block carries its kind (`SweepArrays.kind`):
+    code that reads the data asks `kind(sweep)` (or `kinds`), not the registry, so that the kind the data were
+    built with is the one that predicts them; the names are the keys users index (`blocks["rate_table"]`,
+    `Fit.residuals["rate_table"]`) and files store. `weighted` is False when the table had no `output_sigma`:
     then unit weights are used (`sigmas` 1) and the fit's covariance is scaled by its reduced chi2. `source`
     names the table, for messages.
 
@@ -35,9 +39,25 @@ class FitData(eqx.Module):
     weighted: bool | None = eqx.field(static=True)
     source: str | None = eqx.field(static=True, default=None)
 
+    def __check_init__(self):
+        for s, b in self.blocks.items():
+            if s != b.sweep:
+                raise ValueError(f"FitData.blocks[{s!r}] holds the arrays of sweep {b.sweep!r}; each sweep's "
+                                 "arrays are keyed by their kind's name.")
+
     @property
     def sweeps(self) -> tuple[str, ...]:
+        """The sweeps' names, in the order of `gyrojax.sweeps.SWEEP_KINDS` (the residuals' order)."""
         return tuple(s for s in SWEEP_KINDS if s in self.blocks)
+
+    @property
+    def kinds(self) -> dict[str, AbstractSweep]:
+        """The sweep kind of each sweep, by name, in the order of `sweeps`."""
+        return {s: self.blocks[s].kind for s in self.sweeps}
+
+    def kind(self, sweep: str) -> AbstractSweep:
+        """The sweep kind of the arrays of `sweep` (a name, a key of `blocks`)."""
+        return self.blocks[sweep].kind
 
     @property
     def devices(self) -> tuple[str, ...] | None:

@@ -18,7 +18,6 @@ from .._data.arrays import SweepArrays
 from .._gyroscope import Gyroscope
 from .._simulate.tiers import Steady
 from .._sweeps.rate_table import RateTable
-from .._sweeps.registry import sweep_kind
 from .._sweeps.steady import AbstractSettledSweep, steady_points
 from .fitdata import FitData
 
@@ -36,16 +35,16 @@ def predict_block(gyro: Gyroscope, sweep: str, block: SweepArrays, tier=Steady()
     if block.temperatures is None:
         raise ValueError(f"sweep {sweep!r}: the data carry no temperatures (a fit file of an early format); a "
                          "prediction needs each point's die temperature.")
-    pred, bad = sweep_kind(sweep).predict(gyro, jnp.ravel(block.inputs), jnp.ravel(block.temperatures),
-                                          None if block.times is None else jnp.ravel(block.times), tier)
+    pred, bad = block.kind.predict(gyro, jnp.ravel(block.inputs), jnp.ravel(block.temperatures),
+                                   None if block.times is None else jnp.ravel(block.times), tier)
     return jnp.reshape(pred, shape), jnp.reshape(bad & jnp.ravel(block.mask), shape)
 
 
 def _steady(gyro, blocks, tier, sf_temperature=None):
     """The steady sweeps' points (and the scale factor's two points at `sf_temperature`, if given) in one
     call of the tier: the settled points per block, and the scale factor (LSB per deg/s) or None."""
-    requests = [(sweep_kind(sweep), jnp.ravel(b.inputs), jnp.ravel(b.temperatures),
-                 None if b.times is None else jnp.ravel(b.times)) for sweep, b in blocks.items()]
+    requests = [(b.kind, jnp.ravel(b.inputs), jnp.ravel(b.temperatures),
+                 None if b.times is None else jnp.ravel(b.times)) for b in blocks.values()]
     return settle_with_scale_factor(gyro, requests, tier, sf_temperature)
 
 
@@ -65,7 +64,7 @@ def settle_with_scale_factor(gyro, requests, tier, sf_temperature=None):
 
 def run_biases(sweep: str, block: SweepArrays, pred):
     """Best bias per run (weighted mean of the raw residuals), shape (run,); zero for unbiased sweeps."""
-    if not sweep_kind(sweep).biased:
+    if not block.kind.biased:
         return jnp.zeros(block.inputs.shape[0])
     w = jnp.where(block.mask, 1.0 / block.fit_sigmas()**2, 0.0)
     raw = jnp.where(block.mask, block.outputs - pred, 0.0)
@@ -86,12 +85,12 @@ def device_residuals(gyro: Gyroscope, data: FitData, tier=Steady(), sf_temperatu
     settled sweeps (steady and set-point kinds) and the scale factor's points settle in one call (one compiled
     settle)."""
     steady = {sweep: data.blocks[sweep] for sweep in data.sweeps
-              if isinstance(sweep_kind(sweep), AbstractSettledSweep)}
+              if isinstance(data.kind(sweep), AbstractSettledSweep)}
     settled, sf = _steady(gyro, steady, tier, sf_temperature) if steady or sf_temperature is not None else ((), None)
     settled = dict(zip(steady, settled))
     parts, preds, failed = [], {}, jnp.zeros((), dtype=int)
     for sweep in data.sweeps:
-        block, kind = data.blocks[sweep], sweep_kind(sweep)
+        block, kind = data.blocks[sweep], data.kind(sweep)
         if sweep in settled and isinstance(kind, AbstractSettledSweep):
             pred, bad = kind.read(settled[sweep])
             pred, bad = jnp.reshape(pred, block.inputs.shape), bad & jnp.ravel(block.mask)
@@ -107,7 +106,7 @@ def num_biases(data: FitData):
     """Run biases per device (real runs of biased sweeps), shape (device,) (numpy: counted on the host)."""
     total = np.zeros(len(data.device_names()), dtype=int)
     for sweep in data.sweeps:
-        if sweep_kind(sweep).biased:
+        if data.kind(sweep).biased:
             total = total + np.sum(np.any(np.asarray(data.blocks[sweep].mask), axis=-1), axis=-1)
     return total
 

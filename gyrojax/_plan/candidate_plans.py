@@ -21,7 +21,7 @@ from .information import (
     residual_chi2,
 )
 from .power import power, required_noncentrality
-from .results import CandidatePlan, Recommendation
+from .results import CandidatePlan, ExperimentGain, Recommendation
 
 
 MAX_EXACT_COMBINATIONS = 4096
@@ -183,7 +183,7 @@ def candidate_plan(c: str, rows: _Rows, theta, amb, experiments, alpha, target_p
     for j, e in enumerate(experiments):
         counts = tuple(1 if i == j else 0 for i in range(len(experiments)))
         lj = lam(counts)
-        per.append((e.name, e.minutes, lj, power(lj, df, alpha)))
+        per.append(ExperimentGain(name=e.name, minutes=e.minutes, expected_chi2=lj, power=power(lj, df, alpha)))
     testable = is_testable(now)  # the diagnosis's rule (gyrojax/_numerics/testability.py)
     detected = p_now >= target_power
     recommended, rec_chi2, rec_power, reason = (), now, p_now, ""
@@ -202,12 +202,14 @@ def candidate_plan(c: str, rows: _Rows, theta, amb, experiments, alpha, target_p
                 if k:
                     only = tuple(k if i == j else 0 for i in range(len(experiments)))
                     lk = lam(only)
-                    recs.append(Recommendation(experiments[j], k, lk, power(lk, df, alpha)))
+                    recs.append(Recommendation(experiment=experiments[j], runs=k, expected_chi2=lk,
+                                               power=power(lk, df, alpha)))
             recommended = tuple(recs)
             reason = ("cheapest combination (exact search)" if combos is not None else
                       "greedy search (most chi2 per minute)")
-    return CandidatePlan(c, df, now, p_now, testable, amb, tuple(per), recommended, rec_chi2, rec_power, reason,
-                         detected)
+    return CandidatePlan(effect=c, df=df, expected_chi2=now, power=p_now, testable=testable, ambiguous_with=amb,
+                         per_experiment=tuple(per), recommended=recommended, recommended_chi2=rec_chi2,
+                         recommended_power=rec_power, reason=reason, detected=detected)
 
 
 def say_candidate(say, cp: CandidatePlan) -> None:

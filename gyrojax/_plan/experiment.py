@@ -64,12 +64,12 @@ class CandidateExperiment(eqx.Module):
 
     name: str = eqx.field(static=True)
     sweep: AbstractSweep = eqx.field(static=True)
-    inputs: tuple = eqx.field(static=True, converter=_floats)
-    temperatures_c: tuple = eqx.field(static=True, converter=_floats)
-    times_s: tuple = eqx.field(static=True, converter=_floats)
+    inputs: tuple[float, ...] = eqx.field(static=True, converter=_floats)
+    temperatures_c: tuple[float, ...] = eqx.field(static=True, converter=_floats)
+    times_s: tuple[float, ...] = eqx.field(static=True, converter=_floats)
     minutes: float = eqx.field(static=True)
     protocol: Protocol = eqx.field(static=True, default=Protocol())
-    settings: tuple = eqx.field(static=True, default=())
+    settings: tuple[tuple[str, object], ...] = eqx.field(static=True, default=())
 
     def __init__(self, name: str, sweep: AbstractSweep | str, inputs: Float[ArrayLike, " point"] | Sequence[float],
                  temperatures_c: Float[ArrayLike, " point"] | Sequence[float],
@@ -281,8 +281,8 @@ def default_experiments(gyro: Gyroscope, protocol: Protocol = Protocol(), ambien
     own = float(np.asarray(gyro.temperature(0.0)))
     ambient = own if ambient_c is None else float(ambient_c)
     out = []
-    for name in SWEEP_KINDS:
-        kind = given.get(name) or sweep_kind(name)
+    for name, cls in SWEEP_KINDS.items():
+        kind = given.get(name) or cls()
         try:
             kind.check_device(gyro)
         except ValueError:
@@ -297,14 +297,16 @@ def default_experiments(gyro: Gyroscope, protocol: Protocol = Protocol(), ambien
             times, temps = np.full(n, np.nan), np.full(n, np.nan)
         minutes = kind.run_minutes(protocol)
         settings = tuple(sorted(kind.run_settings(protocol).items()))
-        out.append(CandidateExperiment(name, kind, inputs, temps, times, minutes, protocol,
-                                       (("inputs", list(_floats(inputs))),) + settings
+        out.append(CandidateExperiment(name=name, sweep=kind, inputs=inputs, temperatures_c=temps, times_s=times,
+                                       minutes=minutes, protocol=protocol,
+                                       settings=(("inputs", list(_floats(inputs))),) + settings
                                        + ((("chamber_c", ambient),) if kind.timed else ())))
         if name in chamber_kinds and kind.timed:
             hot = ambient + CHAMBER_STEP_K
-            out.append(CandidateExperiment(f"{name}_hot", kind, inputs, temps + CHAMBER_STEP_K, times,
-                                           minutes + CHAMBER_SOAK_S / 60.0, protocol,
-                                           (("inputs", list(_floats(inputs))),) + settings
+            out.append(CandidateExperiment(name=f"{name}_hot", sweep=kind, inputs=inputs,
+                                           temperatures_c=temps + CHAMBER_STEP_K, times_s=times,
+                                           minutes=minutes + CHAMBER_SOAK_S / 60.0, protocol=protocol,
+                                           settings=(("inputs", list(_floats(inputs))),) + settings
                                            + (("chamber_c", hot), ("soak_s", CHAMBER_SOAK_S))))
     return tuple(out)
 
@@ -328,10 +330,9 @@ def noise_levels(data, lsb_per_dps: np.ndarray, protocol: Protocol = Protocol(),
             real = np.asarray(b.mask[d])
             if real.any():
                 measured[sweep] = float(np.median(np.asarray(b.sigmas[d])[real]))
-        for sweep in data.blocks:
-            cls = SWEEP_KINDS.get(sweep)
-            if cls is not None and issubclass(cls, AbstractSteadySweep) and sweep in measured:
-                dwell = sweep_kind(sweep).dwell_s(protocol)
+        for sweep, b in data.blocks.items():
+            if isinstance(b.kind, AbstractSteadySweep) and sweep in measured:
+                dwell = b.kind.dwell_s(protocol)
                 scale = measured[sweep] / (rate_noise.point_sigma_dps(dwell) * lsb)
                 break
         volt = measured.get("dac", DAC_VOLTMETER_SIGMA_V)

@@ -186,8 +186,9 @@ def plan(model: Model | Gyroscope | str = DEFAULT_MODEL, data: Table | FitData |
     warnings = _warnings(fit, design, len(fit.devices))
     for w in warnings:
         say(f"warning: {w}")
-    return Plan(tuple(plans), design, experiments, fit, float(alpha), float(target_power), max_repeats, fit.devices,
-                search, warnings)
+    return Plan(candidates=tuple(plans), scale_factor=design, experiments=experiments, baseline=fit,
+                alpha=float(alpha), target_power=float(target_power), max_repeats=max_repeats, devices=fit.devices,
+                search=search, warnings=warnings)
 
 
 def _check_arguments(alpha, target_power, max_repeats, protocol, data) -> None:

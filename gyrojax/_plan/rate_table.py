@@ -100,8 +100,8 @@ def rate_table_plan(spread: float, target: float, *, devices: int = 64, own: flo
     dof = (counts - 1).astype(float)
     half = t_quantile(0.975, dof) * np.sqrt(spread**2 * (1.0 + 1.0 / counts) + own**2)
     ok = np.flatnonzero(half <= target)
-    return RateTablePlan(counts, half, dof, float(spread), float(own), float(target), devices,
-                         int(counts[ok[0]]) if ok.size else None)
+    return RateTablePlan(counts=counts, halfwidth=half, dof=dof, spread=float(spread), own=float(own),
+                         target=float(target), devices=devices, recommended=int(counts[ok[0]]) if ok.size else None)
 
 
 def lot_spread_from_report(path: str, name: str | None = None) -> tuple[float, int, str]:

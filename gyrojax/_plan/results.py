@@ -39,6 +39,17 @@ class Recommendation(eqx.Module):
                 "expected_chi2": self.expected_chi2, "power": self.power}
 
 
+class ExperimentGain(eqx.Module):
+    """What one run of one experiment adds to a candidate's test (a record of `CandidatePlan.per_experiment`): the
+    experiment's `name`, its `minutes`, the expected chi2 of a typical-size effect with the run added to the data
+    given, and the test's power there."""
+
+    name: str = eqx.field(static=True)
+    minutes: float = eqx.field(static=True)
+    expected_chi2: float = eqx.field(static=True)
+    power: float = eqx.field(static=True)
+
+
 class CandidatePlan(eqx.Module):
     """What one candidate effect needs: its test on the data given, what one run of each experiment adds,
     and the cheapest set of runs with which its test reaches the target power.
@@ -52,9 +63,9 @@ class CandidatePlan(eqx.Module):
     expected_chi2: float = eqx.field(static=True)  # on the data given
     power: float = eqx.field(static=True)
     testable: bool = eqx.field(static=True)
-    ambiguous_with: tuple = eqx.field(static=True)
-    per_experiment: tuple = eqx.field(static=True)  # (name, minutes, expected chi2 with one run, power)
-    recommended: tuple = eqx.field(static=True)  # Recommendation per experiment of the cheapest set
+    ambiguous_with: tuple[str, ...] = eqx.field(static=True)
+    per_experiment: tuple[ExperimentGain, ...] = eqx.field(static=True)  # one run of each experiment
+    recommended: tuple[Recommendation, ...] = eqx.field(static=True)  # per experiment of the cheapest set
     recommended_chi2: float = eqx.field(static=True)
     recommended_power: float = eqx.field(static=True)
     reason: str = eqx.field(static=True)
@@ -68,9 +79,9 @@ class CandidatePlan(eqx.Module):
         return {"testable": self.testable, "detected": self.detected, "df": self.df,
                 "expected_chi2": self.expected_chi2, "power": self.power,
                 "ambiguous_with": list(self.ambiguous_with),
-                "experiments": {name: {"minutes": m, "expected_chi2": lam, "power": p,
-                                       "chi2_per_minute": (lam - self.expected_chi2) / m}
-                                for name, m, lam, p in self.per_experiment},
+                "experiments": {g.name: {"minutes": g.minutes, "expected_chi2": g.expected_chi2, "power": g.power,
+                                         "chi2_per_minute": (g.expected_chi2 - self.expected_chi2) / g.minutes}
+                                for g in self.per_experiment},
                 "recommended": [r.to_json() for r in self.recommended],
                 "recommended_minutes": self.minutes, "recommended_expected_chi2": self.recommended_chi2,
                 "recommended_power": self.recommended_power, "reason": self.reason}
@@ -82,20 +93,21 @@ class ScaleFactorDesign(eqx.Module):
     `summary`)."""
 
     budget_min: float = eqx.field(static=True)
-    rates_dps: tuple = eqx.field(static=True)
+    rates_dps: tuple[float, ...] = eqx.field(static=True)
     rate_runs: int = eqx.field(static=True)
-    vcf_rates_dps: tuple = eqx.field(static=True)
+    vcf_rates_dps: tuple[float, ...] = eqx.field(static=True)
     vcf_runs: int = eqx.field(static=True)
     minutes: float = eqx.field(static=True)
-    stderr: tuple = eqx.field(static=True)  # per device, LSB per deg/s
+    stderr: tuple[float, ...] = eqx.field(static=True)  # per device, LSB per deg/s
     seed000_runs: int = eqx.field(static=True)
     seed000_minutes: float = eqx.field(static=True)
-    seed000_stderr: tuple = eqx.field(static=True)
-    data_stderr: tuple = eqx.field(static=True)  # on the data given (NaN where identify does not determine it)
-    scale_factor: tuple = eqx.field(static=True)
+    seed000_stderr: tuple[float, ...] = eqx.field(static=True)
+    # on the data given (NaN where identify does not determine it)
+    data_stderr: tuple[float, ...] = eqx.field(static=True)
+    scale_factor: tuple[float, ...] = eqx.field(static=True)
     # identification's reason, per device, where the data given do not determine the scale factor ("" where
     # they do)
-    data_not_determined: tuple = eqx.field(static=True, default=())
+    data_not_determined: tuple[str, ...] = eqx.field(static=True, default=())
 
     @property
     def ratio(self) -> float:
@@ -123,16 +135,16 @@ class Plan(eqx.Module):
     """The solution of `plan`: per candidate effect a `CandidatePlan`, the scale-factor design, the
     experiments considered, the baseline fit, and how the search was made."""
 
-    candidates: tuple  # CandidatePlan
+    candidates: tuple[CandidatePlan, ...]
     scale_factor: ScaleFactorDesign | None  # None when plan was told not to design it
-    experiments: tuple  # CandidateExperiment
+    experiments: tuple[CandidateExperiment, ...]
     baseline: Fit  # the fit whose Jacobians the plan used (with every candidate at zero)
     alpha: float = eqx.field(static=True)
     target_power: float = eqx.field(static=True)
     max_repeats: int = eqx.field(static=True)
-    devices: tuple = eqx.field(static=True)
+    devices: tuple[str, ...] = eqx.field(static=True)
     search: str = eqx.field(static=True, default="exact")
-    warnings: tuple = eqx.field(static=True, default=())  # what the reader must know before acting on it
+    warnings: tuple[str, ...] = eqx.field(static=True, default=())  # what the reader must know before acting on it
 
     def candidate(self, name: str) -> CandidatePlan:
         for c in self.candidates:
@@ -193,8 +205,9 @@ class Plan(eqx.Module):
             lines.append(f"  {c.effect:<20} now: chi2 {c.expected_chi2:10.3g}, power {c.power:.2f}{amb}{state}")
             if c.detected:
                 continue
-            best = max(c.per_experiment, key=lambda x: (x[2] - c.expected_chi2) / x[1])
-            lines.append(f"  {'':<20} best per minute: {best[0]} (+{(best[2] - c.expected_chi2) / best[1]:.3g} "
+            best = max(c.per_experiment, key=lambda g: (g.expected_chi2 - c.expected_chi2) / g.minutes)
+            lines.append(f"  {'':<20} best per minute: {best.name} "
+                         f"(+{(best.expected_chi2 - c.expected_chi2) / best.minutes:.3g} "
                          "chi2/min)")
             if c.recommended:
                 what = " + ".join(f"{r.runs} x {r.experiment.name}" for r in c.recommended)

@@ -87,11 +87,14 @@ def sf_design(fit, jac0, g, sf, exps, jac_e, noise, pool, budget, protocol, thre
     data_se, undetermined = _data_sf_errors(fit, jac0, g)
     rates = tuple(float(levels[RATE][i]) for i in sets[RATE])
     vcf = tuple(float(levels[VCF][i]) for i in sets.get(VCF, ())) if runs.get(VCF) else ()
-    return ScaleFactorDesign(float(budget), rates, runs[RATE], vcf, runs.get(VCF, 0), float(used),
-                             tuple(stderr), seed_runs,
-                             seed_runs * (protocol.warmup_s + len(levels[RATE]) * protocol.dwell_s) / 60.0,
-                             tuple(math.sqrt(v) for v in seed_var), tuple(data_se),
-                             tuple(float(x) for x in np.asarray(sf)), tuple(undetermined))
+    return ScaleFactorDesign(budget_min=float(budget), rates_dps=rates, rate_runs=runs[RATE], vcf_rates_dps=vcf,
+                             vcf_runs=runs.get(VCF, 0), minutes=float(used), stderr=tuple(stderr),
+                             seed000_runs=seed_runs,
+                             seed000_minutes=seed_runs * (protocol.warmup_s + len(levels[RATE]) * protocol.dwell_s)
+                             / 60.0,
+                             seed000_stderr=tuple(math.sqrt(v) for v in seed_var), data_stderr=tuple(data_se),
+                             scale_factor=tuple(float(x) for x in np.asarray(sf)),
+                             data_not_determined=tuple(undetermined))
 
 
 def _greedy_points(variance, levels, runs, used, budget, dwell):

@@ -9,8 +9,8 @@ class AbstractResult(Protocol):
     """The contract of a result (`Fit`, `PopulationFit`, `Diagnosis`, `Plan`, `RateTablePlan`,
     `CompensationResult`, `MetricsReport`, ...): what an output format reads.
 
-    A protocol rather than an abstract `eqx.Module`: the results are equinox modules, frozen dataclasses and (the
-    metrics report) a dict, and each satisfies it by what it defines:
+    A protocol rather than an abstract `eqx.Module`: every gyrojax result is a final equinox module (its records
+    typed modules, built by keyword; `tests/test_result_convention.py`), and a user's result need only define:
 
     - `kind`: a class-level name, e.g. `"fit"` or `"diagnosis"` (a generic rendering's title);
     - `to_json()`: the result as JSON-safe Python (dicts, lists, strings, finite floats, ints, booleans, None;

@@ -101,8 +101,10 @@ def population_fit(identify, model, data, strategy: PopulationSolve, options: di
         warnings.append("not every device's conditional fit converged: see fit.status and fit.summary()")
     warnings += _undetermined_scale_factors(fit, sf, random)
     say("population fit: " + ("converged" if converged else "NOT converged") + f" after {refits} refit(s)")
-    return PopulationFit(fit, tuple(random), parameters, scale_factor, estimates, estimates_stderr, sf, sf_stderr,
-                         sf_dof, missing, hyper, hcov, bool(converged), refits, tuple(warnings))
+    return PopulationFit(fit=fit, random=tuple(random), parameters=parameters, scale_factor=scale_factor,
+                         estimates=estimates, estimates_stderr=estimates_stderr, sf=sf, sf_stderr=sf_stderr,
+                         sf_dof=sf_dof, missing=missing, hyper=hyper, hyper_covariance=hcov,
+                         converged=bool(converged), refits=refits, warnings=tuple(warnings))
 
 
 def _random_parameters(identify, model, data, random, user_priors, options) -> tuple:
@@ -225,8 +227,9 @@ def _scale_factor_distribution(sf, sf_var, sf_grad, hcov) -> PopulationParameter
     gbar = sf_grad[ok].mean(0)
     m_se = math.sqrt(var_sf / max(ok.sum(), 1) + float(gbar @ np.nan_to_num(hcov) @ gbar))
     sd_sf = math.sqrt(var_sf)
-    return PopulationParameter("scale_factor", "LSB/(deg/s)", m_sf, m_se, sd_sf,
-                               sd_sf / math.sqrt(2.0 * max(ok.sum() - 1, 1)), sd_sf / abs(m_sf), True)
+    return PopulationParameter(name="scale_factor", unit="LSB/(deg/s)", mean=m_sf, mean_stderr=m_se, spread=sd_sf,
+                               spread_stderr=sd_sf / math.sqrt(2.0 * max(ok.sum() - 1, 1)),
+                               relative_spread=sd_sf / abs(m_sf), resolved=True)
 
 
 def _lot_parameters(random, kinds, hyper, hcov) -> tuple:
@@ -237,11 +240,13 @@ def _lot_parameters(random, kinds, hyper, hcov) -> tuple:
         mu, s = hyper[j], math.exp(hyper[k + j])
         se_mu, se_ls = math.sqrt(hcov[j, j]), math.sqrt(hcov[k + j, k + j])
         if t == "log":
-            out.append(PopulationParameter(nm, unit, math.exp(mu), math.exp(mu) * se_mu, math.exp(mu) * s,
-                                           math.exp(mu) * s * se_ls, s, bool(se_ls < 0.5)))
+            out.append(PopulationParameter(name=nm, unit=unit, mean=math.exp(mu), mean_stderr=math.exp(mu) * se_mu,
+                                           spread=math.exp(mu) * s, spread_stderr=math.exp(mu) * s * se_ls,
+                                           relative_spread=s, resolved=bool(se_ls < 0.5)))
         else:
-            out.append(PopulationParameter(nm, unit, mu * sc, se_mu * sc, s * sc, s * sc * se_ls, math.nan,
-                                           bool(se_ls < 0.5)))
+            out.append(PopulationParameter(name=nm, unit=unit, mean=mu * sc, mean_stderr=se_mu * sc, spread=s * sc,
+                                           spread_stderr=s * sc * se_ls, relative_spread=math.nan,
+                                           resolved=bool(se_ls < 0.5)))
     return tuple(out)
 
 
