@@ -25,7 +25,7 @@ import equinox as eqx
 import numpy as np
 
 from .._identify import Fit
-from .._numerics.stats import chi2_sf
+from .._numerics.stats import score_p_value
 
 
 # Which sweep kinds a probe acts on, from what the kind reads (`AbstractSweep`'s class attributes), so that a
@@ -359,11 +359,35 @@ def project_out(cols, against):
     singular values above 1e-12 of the largest: a column at round-off (an effect term the data do not see) adds
     no direction, and cannot take part of the real columns' span with it (as an unpivoted QR's arbitrary
     direction there would)."""
-    if against.shape[1] == 0:
-        return cols
-    u, s, _ = np.linalg.svd(against, full_matrices=False)
-    u = u[:, s > 1e-12 * max(float(s[0]), 1e-300)]
+    u = span_basis(against)
     return cols - u @ (u.T @ cols)
+
+
+def span_basis(against):
+    """An orthonormal basis (rows, r) of the span of `against` (rows, m), as `project_out` takes it."""
+    if against.shape[1] == 0:
+        return np.zeros((against.shape[0], 0))
+    u, s, _ = np.linalg.svd(against, full_matrices=False)
+    return u[:, s > 1e-12 * max(float(s[0]), 1e-300)]
+
+
+class Beyond:
+    """The scatter the residuals keep beyond a column block on the rows it touches, summed over devices: their
+    chi2 beyond the absorbable span and its degrees of freedom (rows less their leverage), for
+    `score_p_value`'s reading of the block's statistic against it."""
+
+    def __init__(self):
+        self.chi2, self.dof = 0.0, 0.0
+
+    def add(self, cols, residual, u):
+        touched = np.any(cols != 0, axis=1)
+        if touched.any():
+            rb = residual - u @ (u.T @ residual)
+            self.chi2 += float(np.sum(rb[touched] ** 2))
+            self.dof += float(np.sum(1.0 - np.sum(u[touched] ** 2, axis=1)))
+
+    def p_value(self, stat, df):
+        return score_p_value(stat, df, self.chi2 - stat, self.dof - df)
 
 
 def score_columns(base, cols, residuals, *, rank_tol: float = 0.0,
@@ -378,10 +402,13 @@ def score_columns(base, cols, residuals, *, rank_tol: float = 0.0,
     n, rows, k = cols.shape
     fingerprint = np.zeros((n, rows))
     coef = np.zeros((n, k))
+    beyond = Beyond()
     for d in range(n):
         own = float(np.linalg.norm(cols[d], 2)) ** 2 if k else 0.0  # the columns' largest information
         floor = max(rank_tol, relative_rank_tol * own)
-        je = project_out(cols[d], base[d])
+        u = span_basis(base[d])
+        je = cols[d] - u @ (u.T @ cols[d])
+        beyond.add(cols[d], residuals[d], u)
         evals, evecs = np.linalg.eigh(je.T @ je)
         info += max(float(evals[-1]), 0.0) if evals.size else 0.0
         keep = evals > floor
@@ -393,4 +420,4 @@ def score_columns(base, cols, residuals, *, rank_tol: float = 0.0,
         df += int(keep.sum())
         coef[d] = inv @ s
         fingerprint[d] = je @ coef[d]
-    return Projected(stat, df, chi2_sf(stat, df), fingerprint, coef, info)
+    return Projected(stat, df, beyond.p_value(stat, df), fingerprint, coef, info)

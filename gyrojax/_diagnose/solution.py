@@ -109,6 +109,11 @@ class Diagnosis(eqx.Module):
         where = (f"; what is left: {discrepancy_text(left[0])}" if left else
                  "; no generic shape (bias or gain in temperature, time, run; cubics; bow; K+/K-) explains what "
                  "is left: see where the model fails")
+        if not left and final is not None and final.fails:
+            # every shape is read against the residuals' own scatter: none stands out of a uniform excess
+            where = (f"; the residuals scatter {math.sqrt(max(float(self.final.chi2_red_total), 0.0)):.3g} times "
+                     "the stated uncertainties with no shape along any recorded coordinate: the stated output_sigma "
+                     "is too small, or the noise is not white (correlated in time, heavy-tailed)")
         # A chi2 at the noise level is no failure: the verdict then rests on structure in the residuals alone.
         fails = final is None or final.fails
         if left and fails and round(100 * left[0].share) < 1:

@@ -10,9 +10,8 @@ import dataclasses
 import numpy as np
 
 from .._identify import Fit
-from .._numerics.stats import chi2_sf
 from .columns import base_columns, excess_chi2, row_blocks
-from .probes import standardised
+from .probes import Beyond, standardised
 
 
 # A projected direction carries information when its eigenvalue exceeds this share of the block's own largest
@@ -111,7 +110,9 @@ class ResidualSpace:
         own = np.array([float(np.linalg.norm(cols[d], 2)) ** 2 for d in range(n)])
         coefs, covs, stat, df = np.zeros((n, k)), np.zeros((n, k, k)), 0.0, 0
         fp = np.zeros(r.shape)
+        beyond = Beyond()
         for d in range(n):
+            beyond.add(cols[d], r[d], self._u[d])
             inv, df_d = _pinv(pc[d].T @ pc[d], RANK_TOL * own[d])
             if df_d == 0:
                 continue
@@ -120,7 +121,7 @@ class ResidualSpace:
             stat += float(b @ coefs[d])
             df += df_d
             fp[d] = pc[d] @ coefs[d]
-        return Scored(stat, df, chi2_sf(stat, df), coefs / scale, covs / np.outer(scale, scale), fp)
+        return Scored(stat, df, beyond.p_value(stat, df), coefs / scale, covs / np.outer(scale, scale), fp)
 
     def sweep_rows(self, sweep: str) -> slice:
         i, j = self.blocks[sweep]

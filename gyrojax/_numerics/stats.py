@@ -50,6 +50,24 @@ def chi2_sf(x: float, df: int) -> float:
     return float(_upper_gamma(df, max(float(x), 0.0) / 2.0, 1)[0])
 
 
+def score_p_value(stat: float, df: int, beyond_chi2: float, beyond_dof: float) -> float:
+    """p-value of a score statistic `stat` (the chi2 `df` columns would remove), read against the scatter the
+    residuals keep beyond them on the rows they touch (`beyond_chi2` over `beyond_dof` degrees of freedom) where
+    that scatter exceeds the stated uncertainties: the F test of (stat / df) / s^2. Residuals that scatter s^2 > 1
+    times the stated sigma everywhere (noise stated too small, or not white) make every flexible column block
+    remove ~df s^2; read as a chi2 it would be a shape, read against s^2 it is not. At s^2 <= 1 the chi2 test
+    (the stated sigmas are trusted: a scatter below them is no licence to find more)."""
+    if not isinstance(df, bool) and float(df) <= 0.0:
+        return 1.0
+    nu = float(beyond_dof)
+    if nu < 1.0 or not math.isfinite(beyond_chi2) or beyond_chi2 <= nu:
+        return chi2_sf(stat, df)
+    from scipy.special import betainc  # F(df, nu) survival at x = (stat / df) / s^2: I_{nu/(nu + stat/s^2)}
+
+    s2 = beyond_chi2 / nu
+    return float(betainc(nu / 2.0, df / 2.0, nu / (nu + max(float(stat), 0.0) / s2)))
+
+
 def ncx2_sf(x: float, df: int, nc: float) -> float:
     """Survival function of the noncentral chi-squared distribution (integer `df` >= 1, noncentrality `nc` >= 0):
     the Poisson mixture of central chi-squared survival functions over the Poisson weights' bulk (mean +/- 12
