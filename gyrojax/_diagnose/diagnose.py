@@ -202,7 +202,7 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
             s.rejected.append(_implausible(best, max_typical_multiple))
             remaining.remove(best.effect)
             continue
-        guard = probe_guard(s.fit, best, s.discrepancy, s.designs, threshold, alpha)
+        guard = probe_guard(s.fit, best, s.discrepancy, s.designs, threshold, alpha, s.located)
         if guard is not None:
             s.rejected.append(Rejection(best.effect, guard, kind="not its shape"))
             remaining.remove(best.effect)

@@ -16,29 +16,17 @@ import numpy as np
 
 from .._identify import Fit
 from .._numerics.stats import chi2_sf
-from .space import ResidualSpace
-
-
-# A location is taken by the candidate when, after the refit, its description keeps less than this share of its
-# chi2 (or nothing significant): the same rule as the probes' (`SHAPE_SHARE_LEFT`).
-EXPLAINED_SHARE_LEFT = 0.1
+from .space import EXPLAINED_SHARE_LEFT, ResidualSpace
 
 
 def encompassing_guard(before: Fit, after: Fit, effect: str, localisation, df: int, alpha: float) -> str | None:
     """A reason not to confirm `effect` (refitted from `before` to `after` with `df` new parameters over the lot),
     or None: what it removes beyond the locations it leaves (see the module docstring) is not significant at
     `alpha`."""
-    locations = localisation.locations
-    if not locations:
+    if not localisation.locations:
         return None
     space_after = ResidualSpace(after)
-    cut = alpha / len(locations)
-    left = []
-    for loc in locations:
-        now = space_after.score(loc.columns)
-        if now.p_value >= cut or now.statistic <= EXPLAINED_SHARE_LEFT * loc.chi2_explained:
-            continue  # the candidate took this misfit
-        left.append(loc)
+    left = left_locations(space_after, localisation, alpha)
     if not left:
         return None
     cols = np.concatenate([loc.columns for loc in left], axis=-1)
@@ -50,3 +38,36 @@ def encompassing_guard(before: Fit, after: Fit, effect: str, localisation, df: i
     where = "; ".join(f"{loc.shape} on {'+'.join(loc.located_on)}" for loc in left)
     return (f"it is not significant beyond the flexible description of the misfit it leaves ({where}): it removes "
             f"chi2 {d:.4g} beyond it (df {df}, p = {p:.2g}); what it takes is part of a misfit of another shape")
+
+
+def left_locations(space_after: ResidualSpace, localisation, alpha: float) -> list:
+    """The locations of `localisation` (before a refit) that the refit (`space_after`) leaves: still significant
+    after it, keeping more than `EXPLAINED_SHARE_LEFT` of their chi2, and beyond the other locations left."""
+    locations = localisation.locations
+    if not locations:
+        return []
+    cut = alpha / len(locations)
+    left = []
+    for loc in locations:
+        now = space_after.score(loc.columns)
+        if now.p_value >= cut or now.statistic <= EXPLAINED_SHARE_LEFT * loc.chi2_explained:
+            continue  # the candidate took this misfit
+        left.append((now.statistic, loc))
+    return _beyond_each_other(space_after, left, cut)
+
+
+def _beyond_each_other(space, left, cut) -> list:
+    """Of the locations left after the refit ((chi2 left, location) pairs), those that stay significant beyond the
+    others: a flexible description along the candidate's own coordinate (an offset along temperature around a
+    bias linear in it) keeps significance after the refit only through a second misfit it partly overlaps (a
+    step partway through a run, located on its own), which the other location says; with it, that is taken.
+    The weakest is tested first, so that of two descriptions of one misfit one stays."""
+    kept = [loc for _, loc in sorted(left, key=lambda x: x[0])]
+    for loc in list(kept):
+        others = [o.columns for o in kept if o is not loc]
+        if not others:
+            break
+        now = space.with_columns(np.concatenate(others, axis=-1)).score(loc.columns)
+        if now.p_value >= cut or now.statistic <= EXPLAINED_SHARE_LEFT * loc.chi2_explained:
+            kept.remove(loc)
+    return kept

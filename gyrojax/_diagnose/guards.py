@@ -10,6 +10,7 @@ from .._numerics.stats import chi2_isf
 from .columns import base_columns, effect_columns, excess_chi2
 from .probes import score_columns
 from .score import TYPICAL_RANK_TOL, CandidateScore
+from .space import EXPLAINED_SHARE_LEFT, ResidualSpace
 
 
 # ASSUMPTION: beyond 100 times its typical size an effect is not physical any more (a 16-bit DAC's INL at
@@ -28,13 +29,18 @@ class Rejection:
     kind: str = ""  # the reason in two words: "implausible size", "not its shape", "contradicted", ...
 
 
-def probe_guard(fit, candidate: CandidateScore, discrepancy, designs, candidate_cut, alpha):
+def probe_guard(fit, candidate: CandidateScore, discrepancy, designs, candidate_cut, alpha, localisation=None):
     """A reason not to confirm `candidate`, or None: a significant probe explains the misfit the candidate is
     credited with, and more (what the probe takes beyond the candidate is significant at alpha over the
-    probes), while the candidate adds nothing beyond the probe (not significant at `candidate_cut`)."""
-    base = base_columns(fit)
+    probes), while the candidate adds nothing beyond the probe (not significant at `candidate_cut`).
+
+    Both are compared beyond the misfit located elsewhere (`localisation`'s locations the candidate does not
+    take, `other_misfit`): a probe more flexible than the candidate (a bias in temperature per sweep) also takes
+    part of a second, unrelated misfit (a step partway through a run), which is no evidence against the
+    candidate's shape."""
     res = np.asarray(fit.residual_vector)
     je = np.asarray(fit.jacobian)[:, :, effect_columns(fit, candidate.effect)]
+    base = np.concatenate([base_columns(fit), other_misfit(fit, je, localisation, alpha)], axis=-1)
     probe_cut = alpha / max(len(discrepancy), 1)
     worst = None
     for d in (d for d in discrepancy if d.significant):
@@ -53,6 +59,24 @@ def probe_guard(fit, candidate: CandidateScore, discrepancy, designs, candidate_
             f"({', '.join(s for s, _ in d.sweeps)}) explains {100 * d.share:.0f} %, leaves chi2 {extra.statistic:.4g} "
             f"that {candidate.effect} cannot take (p = {extra.p_value:.2g}), and {candidate.effect} adds nothing "
             f"beyond it (S = {own.statistic:.3g}, df {own.df}, p = {own.p_value:.2g})")
+
+
+def other_misfit(fit, columns, localisation, alpha) -> np.ndarray:
+    """The columns (device, rows, k) of the locations of `localisation` that `columns` (a candidate's, in the
+    fit's residual layout) do not take: still significant beyond them, keeping more than `EXPLAINED_SHARE_LEFT` of
+    their chi2 (as the encompassing test reads what a refit leaves)."""
+    empty = np.zeros(np.shape(columns)[:2] + (0,))
+    if localisation is None or not localisation.locations:
+        return empty
+    space = ResidualSpace(fit)
+    joined = space.with_columns(np.asarray(columns, float))
+    cut = alpha / len(localisation.locations)
+    keep = []
+    for loc in localisation.locations:
+        now = joined.score(loc.columns)
+        if now.p_value < cut and now.statistic > EXPLAINED_SHARE_LEFT * space.score(loc.columns).statistic:
+            keep.append(loc.columns)
+    return np.concatenate(keep, axis=-1) if keep else empty
 
 
 def _sweep_chi2(fit: Fit) -> dict:

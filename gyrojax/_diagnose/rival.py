@@ -33,6 +33,7 @@ import numpy as np
 
 from .._identify import Fit
 from .discrepancy import LookAlike
+from .encompass import left_locations
 from .formula import Formula, formula_columns, propose
 from .space import ResidualSpace
 
@@ -76,6 +77,15 @@ def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float
     gain, loc = max(taken, key=lambda x: x[0])
     if gain <= 0:
         return None
+    # A second misfit the refit leaves (located apart) is described on both sides: the rival's formula is not
+    # credited with a term for it (a step beside a bias in temperature), nor the effect blamed for leaving it.
+    chi2_before, chi2_after = float(before.chi2_total), float(after.chi2_total)
+    other = [o.columns for o in left_locations(space_a, localisation, alpha) if o is not loc]
+    if other:
+        oc = np.concatenate(other, axis=-1)
+        chi2_before -= space_b.score(oc).statistic
+        chi2_after -= space_a.score(oc).statistic
+        space_b = space_b.with_columns(oc)
     f_effect = np.asarray(before.residual_vector, float) - np.asarray(after.residual_vector, float)
     # the rival is the best closed form of another shape: terms that alone reproduce the effect's change are
     # its own shape in the dictionary's words, not a rival
@@ -87,10 +97,10 @@ def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float
     sc = space_b.score(cols)
     f_formula = sc.fingerprint
     inside = _inside(space_b, cols, f_effect)
-    chi2_effect = float(after.chi2_total) + 2.0 * df_effect
+    chi2_effect = chi2_after + 2.0 * df_effect
     # the formula's terms were chosen among the dictionary's: each pays 2 ln(size) for that choice (the risk
     # inflation of a best-of-N selection), beside 2 per coefficient
-    chi2_formula = (float(before.chi2_total) - sc.statistic + 2.0 * sc.df
+    chi2_formula = (chi2_before - sc.statistic + 2.0 * sc.df
                     + 2.0 * math.log(max(formula.dictionary_size, 1)) * len(formula.terms))
     delta = chi2_effect - chi2_formula
     distance = float(np.sqrt(np.sum((f_effect - f_formula) ** 2)))

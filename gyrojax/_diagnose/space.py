@@ -19,6 +19,10 @@ from .probes import Beyond, standardised
 # a little coarser since flexible bases (hat functions, products) have nearly collinear members.
 RANK_TOL = 1e-9
 
+# A location is taken by a candidate when, beyond it, its description keeps less than this share of its chi2 (or
+# nothing significant): the same rule as the probes' (`SHAPE_SHARE_LEFT`).
+EXPLAINED_SHARE_LEFT = 0.1
+
 
 @dataclasses.dataclass(frozen=True)
 class Scored:
