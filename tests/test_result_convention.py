@@ -30,22 +30,10 @@ ENTRY_FUNCTIONS = (gyrojax.identify, gyrojax.diagnose, gyrojax.plan, gyrojax.com
 # and the fitted compensations (extension points, abstract).
 INPUT_TYPES = ("Model", "FitData", "Entry", "AbstractSweep", "Protocol", "AbstractCompensation")
 
-# Not converted yet, each with why: the file belongs to work merged later; these entries go when it lands.
-PENDING_CLASSES = {
-    "Rejection": "gyrojax/_diagnose/guards.py is being changed on another branch (a frozen dataclass until then)",
-    "Location": "gyrojax/_diagnose/locate.py is being changed on another branch (a frozen dataclass until then)",
-}
-PENDING_FIELDS = {
-    # arrays per sweep name, not records: being rekeyed by sweep kind (issue 37 point 1) in gyrojax/_identify/fit.py
-    ("Fit", "residuals"), ("Fit", "predictions"), ("Fit", "biases"), ("Fit", "unidentifiable"),
-}
-PENDING_CALLS = {  # (file, class) constructed positionally in a file owned by another branch
-    ("gyrojax/_diagnose/diagnose.py", "Rejection"), ("gyrojax/_diagnose/locate.py", "Location"),
-    ("gyrojax/_diagnose/rival.py", "LookAlike"), ("gyrojax/_diagnose/guards.py", "Rejection"),
-    # diagnose() is at the 80-line limit (test_architecture) and its 18 fields by keyword take 6 lines, not 4: the
-    # split of diagnose() on that branch names them
-    ("gyrojax/_diagnose/diagnose.py", "Diagnosis"),
-}
+# Not converted yet (empty: every result and record follows the convention); an entry names why.
+PENDING_CLASSES: dict[str, str] = {}
+PENDING_FIELDS: set[tuple[str, str]] = set()  # (class, field) not typed yet, each with why
+PENDING_CALLS: set[tuple[str, str]] = set()  # (file, class) constructed positionally, each with why
 
 
 def _result_classes() -> set[type]:

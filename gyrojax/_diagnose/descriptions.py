@@ -322,7 +322,7 @@ def _point_scans(space, sweep, block, mask) -> list:
         for v in values:  # each input value: its residuals' chi2 over the lot, the candidates scored exactly
             worst[float(v)] = float(np.sum(np.where((x == v) & mask, r.reshape(mask.shape), 0.0) ** 2))
         best = None
-        for v in sorted(worst, key=worst.get, reverse=True)[:POINT_CANDIDATES]:
+        for v in sorted(worst, key=lambda v: worst[v], reverse=True)[:POINT_CANDIDATES]:
             g = np.zeros((n_dev, n_run, n_pt, n_dev))
             for dv in range(n_dev):
                 g[dv, ..., dv] = np.where(mask[dv] & (x[dv] == v), 1.0, 0.0)

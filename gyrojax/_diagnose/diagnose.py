@@ -97,22 +97,33 @@ def diagnose(model: Model | Gyroscope | str = DEFAULT_MODEL, data: Table | FitDa
     _select(s, list(candidates), fit_with, comparison, data, probes, alpha=alpha, max_effects=max_effects,
             ambiguity=ambiguity, min_typical_chi2=min_typical_chi2, max_typical_multiple=max_typical_multiple,
             tier=spec.tier, say=say)
+    return _solution(s, candidates, located, discrepancy, designs, comparison, alpha=alpha,
+                     min_typical_chi2=min_typical_chi2, max_typical_multiple=max_typical_multiple, say=say)
+
+
+def _solution(s: "_Selection", candidates, located, discrepancy, designs, comparison, *, alpha: float,
+              min_typical_chi2: float, max_typical_multiple: float, say) -> Diagnosis:
+    """The `Diagnosis` of the selection `s`: what is left at its final fit (with the library's shapes and a
+    formula), each fit compared with the data, and the verdict."""
+    baseline = s.fits[0]
     ranking0 = () if s.ranking0 is None else s.ranking0
     # Which library effect has the shape of what is left: every candidate not selected, at the final fit.
     others = [c for c in candidates if c not in s.selected]
     final_scores = score_candidates(s.fit, others, min_typical_chi2=min_typical_chi2) if others else ()
     baseline_discrepancy = with_shapes(baseline, located.locations, discrepancy, designs, ranking0, s.rejected,
                                        max_typical_multiple, alpha)
-    discrepancy, formula = _final_discrepancy(s, final_scores, max_typical_multiple, alpha)
+    final_discrepancy, formula = _final_discrepancy(s, final_scores, max_typical_multiple, alpha)
     comparisons = tuple(comparison(f) for f in s.fits)
     verdict = verdict_of(comparisons[-1], s.steps)
-    if verdict == "explained" and discrepancy:  # a located misfit is a failure the omnibus test missed
+    if verdict == "explained" and final_discrepancy:  # a located misfit is a failure the omnibus test missed
         verdict = "partly explained" if s.steps else "unexplained"
     say(f"done: {verdict}; selected {', '.join(s.selected) or 'none'}")
-    return Diagnosis(baseline, s.fit, tuple(s.fits), ranking0, tuple(s.steps), tuple(s.ambiguous), s.untestable,
-                     tuple(s.rejected), alpha, nonlinearity_residual_ppm(baseline), min_typical_chi2, comparisons,
-                     baseline_discrepancy, discrepancy, verdict, max_typical_multiple, formula=formula,
-                     notes=s.located.notes)
+    return Diagnosis(baseline=baseline, final=s.fit, fits=tuple(s.fits), ranking=ranking0, steps=tuple(s.steps),
+                     ambiguous=tuple(s.ambiguous), untestable=s.untestable, rejected=tuple(s.rejected), alpha=alpha,
+                     baseline_nonlinearity_ppm=nonlinearity_residual_ppm(baseline),
+                     min_typical_chi2=min_typical_chi2, comparisons=comparisons,
+                     baseline_discrepancy=baseline_discrepancy, discrepancy=final_discrepancy, verdict=verdict,
+                     max_typical_multiple=max_typical_multiple, formula=formula, notes=s.located.notes)
 
 
 def _check_arguments(alpha, max_effects, max_typical_multiple) -> None:
@@ -130,7 +141,7 @@ def _usable_candidates(base, candidates) -> tuple[tuple[str, ...], list[Rejectio
     values (a user effect's bug), which are dropped with a note: (candidates, those notes)."""
     candidates = candidate_effects(base, candidates, "diagnose")
     one = first_device(base.device) if is_lot(base.device) else base.device
-    broken = [Rejection(c, f"{why}: dropped from the candidates", kind="non-finite model")
+    broken = [Rejection(effect=c, reason=f"{why}: dropped from the candidates", kind="non-finite model")
               for c in candidates if (why := nonfinite_effect(c, one)) is not None]
     candidates = tuple(c for c in candidates if c not in {r.effect for r in broken})
     return candidates, broken
@@ -204,7 +215,7 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
             continue
         guard = probe_guard(s.fit, best, s.discrepancy, s.designs, threshold, alpha, s.located)
         if guard is not None:
-            s.rejected.append(Rejection(best.effect, guard, kind="not its shape"))
+            s.rejected.append(Rejection(effect=best.effect, reason=guard, kind="not its shape"))
             remaining.remove(best.effect)
             continue
         group, separated = _ambiguity_group(s.fit, best, significant, ambiguity, alpha, data)
@@ -240,7 +251,7 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
 
 def _implausible(best, max_typical_multiple) -> Rejection:
     """The rejection of a candidate whose score implies a size beyond `max_typical_multiple` typical sizes."""
-    return Rejection(best.effect, (
+    return Rejection(effect=best.effect, reason=(
         f"it explains the misfit only at ~{best.implied_multiple:.3g}x its typical size, beyond "
         f"{max_typical_multiple:g}x, where its physics does not reach: another effect, perhaps not in the "
         "library, leaves a similar fingerprint"),
@@ -293,44 +304,44 @@ def _refit_rejection(fit, located, family, new, best, df, df_total, p_lr, delta_
     refit's false-discovery q-value where it was reached, a closed form of another shape about as good or None).
     `family` (every refit's selection-corrected p-value) gains this refit's where the control is reached."""
     if df <= 0:
-        return Rejection(best.effect, (
+        return Rejection(effect=best.effect, reason=(
             "the refit cannot fix its parameters: a change of its typical size moves the chi2 by less than the "
             f"noise does, so the score implies ~{best.implied_multiple:.3g}x its typical size"),
             kind="not determined by the data"), None, None
     if "not converged" in new.status:
-        return Rejection(best.effect, f"the refit did not converge: {new.result_message}",
+        return Rejection(effect=best.effect, reason=f"the refit did not converge: {new.result_message}",
                          kind="refit did not converge"), None, None
     if p_lr >= alpha:
-        return Rejection(best.effect, f"likelihood-ratio p = {p_lr:.3g} >= alpha: the refit does not "
+        return Rejection(effect=best.effect, reason=f"likelihood-ratio p = {p_lr:.3g} >= alpha: the refit does not "
                                       "confirm what the score promised", kind="refit rejects it"), None, None
     beyond = encompassing_guard(fit, new, best.effect, located, df_total, alpha)
     if beyond is not None:
-        return Rejection(best.effect, beyond, kind="not its shape"), None, None
+        return Rejection(effect=best.effect, reason=beyond, kind="not its shape"), None, None
     recorded = record_guard(fit, new, best.effect, tier)
     if recorded is not None:
-        return Rejection(best.effect, recorded, kind="contradicted by drive_freq_hz"), None, None
+        return Rejection(effect=best.effect, reason=recorded, kind="contradicted by drive_freq_hz"), None, None
     against, rival_alike = rival_guard(fit, new, best.effect, df_total, located, alpha=alpha)
     if against is not None:
-        return Rejection(best.effect, against[0], kind=against[1]), None, rival_alike
+        return Rejection(effect=best.effect, reason=against[0], kind=against[1]), None, rival_alike
     family.append(selection_p(p_lr, n_tried))
     q = float(bh_q_values(family)[-1])
     if q >= alpha:
-        return Rejection(best.effect, (
+        return Rejection(effect=best.effect, reason=(
             f"false-discovery control: the refit's p = {p_lr:.3g}, as the best of {n_tried} candidates "
             f"{family[-1]:.3g}, has q = {q:.3g} >= alpha over the {len(family)} refits of this diagnosis"),
             kind="not significant under false-discovery control"), q, rival_alike
     at_noise = not comparison(fit).fails and not located.locations
     if at_noise and delta_bic >= 0:
-        return Rejection(best.effect, (
+        return Rejection(effect=best.effect, reason=(
             f"the model before it already describes the data at the noise level, and the information "
             f"criterion does not prefer it (delta BIC {delta_bic:+.3g}; LR p = {p_lr:.2g})"),
             kind="not preferred at the noise level"), q, rival_alike
     worse = contradictions(fit, new, alpha, df_total)
     if worse:
-        return Rejection(best.effect, "contradicted by " + "; ".join(
+        sweeps = tuple(s for s, _, _, _ in worse)
+        return Rejection(effect=best.effect, reason="contradicted by " + "; ".join(
             f"{s} (its misfit rose from chi2 {a:.4g} to {b:.4g} over {n} points)" for s, a, b, n in worse),
-            tuple(s for s, _, _, _ in worse), kind="contradicted by " + ", ".join(s for s, _, _, _ in worse)), \
-            q, rival_alike
+            contradicted_by=sweeps, kind="contradicted by " + ", ".join(sweeps)), q, rival_alike
     return None, q, rival_alike
 
 

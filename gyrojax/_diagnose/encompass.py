@@ -69,5 +69,5 @@ def _beyond_each_other(space, left, cut) -> list:
             break
         now = space.with_columns(np.concatenate(others, axis=-1)).score(loc.columns)
         if now.p_value >= cut or now.statistic <= EXPLAINED_SHARE_LEFT * loc.chi2_explained:
-            kept.remove(loc)
+            kept = [o for o in kept if o is not loc]
     return kept

@@ -1,8 +1,7 @@
 """What stops a significant candidate from being confirmed (an implausible size, a probe that explains its
 misfit better, a sweep its refit makes worse), the `Rejection` that says why, and the verdict."""
 
-import dataclasses
-
+import equinox as eqx
 import numpy as np
 
 from .._identify import Fit
@@ -19,13 +18,12 @@ from .space import EXPLAINED_SHARE_LEFT, ResidualSpace
 MAX_TYPICAL_MULTIPLE = 100.0
 
 
-@dataclasses.dataclass(frozen=True)
-class Rejection:
+class Rejection(eqx.Module):
     """A candidate that scored but was not confirmed, and why (in physical words)."""
 
     effect: str
     reason: str
-    contradicted_by: tuple = ()  # sweeps whose misfit the refit made significantly worse
+    contradicted_by: tuple[str, ...] = ()  # sweeps whose misfit the refit made significantly worse
     kind: str = ""  # the reason in two words: "implausible size", "not its shape", "contradicted", ...
 
 

@@ -17,6 +17,7 @@ reason where the data do not determine it.
 import dataclasses
 import math
 
+import equinox as eqx
 import numpy as np
 
 from .._text import safe_name as clean
@@ -40,8 +41,7 @@ MAX_LOCATIONS = 3
 SCANS = ("step", "periodic", "single point", "at one input")
 
 
-@dataclasses.dataclass(frozen=True)
-class Location:
+class Location(eqx.Module):
     """Where one unexplained misfit lives, measured on the residuals (see the module docstring).
 
     The attributes `probe`, `coefficient`, `coefficient_spread`, `unit`, `same_shape_as` and `library` carry
@@ -50,24 +50,24 @@ class Location:
     coordinate: str
     family: str
     shape: str
-    sweeps: tuple  # (sweep, measured share), largest first
+    sweeps: tuple[tuple[str, float], ...]  # (sweep, measured share), largest first
     chi2_explained: float
     df: int
     share: float  # of the fit's chi2 in excess of its degrees of freedom
     p_value: float
     fingerprint: np.ndarray
     columns: np.ndarray
-    located_on: tuple  # the sweeps the description is significant on
-    location: dict
-    size: dict | None
+    located_on: tuple[str, ...]  # the sweeps the description is significant on
+    location: dict[str, object]  # the JSON's `location`: interval, runs, at, period, point
+    size: dict[str, object] | None  # the JSON's `size`: value, unit, stderr, measure, ppm_of_full_scale
     size_reason: str = ""
-    confounded_with: tuple = ()
-    notes: tuple = ()
+    confounded_with: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
     probe: str = ""
     coefficient: float = float("nan")
     coefficient_spread: float = 0.0
     unit: str = ""
-    same_shape_as: tuple = ()
+    same_shape_as: tuple[str, ...] = ()
     library: str = ""
     within: str = ""
     significant: bool = True
@@ -254,9 +254,11 @@ def _location(space, fit, members, confounded) -> Location:
     shares = _measured_shares(space, fit, best, sc)
     location = _where(fit, space, best, members, sc)
     size, reason = _size(fit, space, members, sc)
-    return Location(best.coordinate, best.family, _shape_words(best), shares, sc.statistic, sc.df, share,
-                    max(min(d.p_value for d in members), 0.0), sc.fingerprint, cols,
-                    tuple(m.sweep for m in members), location, size, reason, tuple(confounded))
+    return Location(coordinate=best.coordinate, family=best.family, shape=_shape_words(best), sweeps=shares,
+                    chi2_explained=sc.statistic, df=sc.df, share=share,
+                    p_value=max(min(d.p_value for d in members), 0.0), fingerprint=sc.fingerprint, columns=cols,
+                    located_on=tuple(m.sweep for m in members), location=location, size=size, size_reason=reason,
+                    confounded_with=tuple(confounded))
 
 
 def _shape_words(d: Description) -> str:

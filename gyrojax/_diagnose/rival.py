@@ -141,6 +141,7 @@ def rival_guard(before: Fit, after: Fit, effect: str, df_effect: int, localisati
                 f"by z = {-r.z:.2g} (chi2 + 2k {r.delta:+.4g}); a longer or wider sweep along the coordinate they "
                 f"differ on would decide)", "not told from a closed form of another shape"), None
     factor = (Z_CRIT / abs(r.z)) ** 2 if r.z != 0 else math.inf
-    return None, LookAlike(" + ".join(t.name for t in r.formula.terms),
-                           f"a closed form outside the library ({terms}), which fits {-r.delta:.3g} worse in chi2 + "
-                           f"2k (z = {r.z:.2g})", (), r.distance, factor)
+    return None, LookAlike(probe=" + ".join(t.name for t in r.formula.terms),
+                           shape=f"a closed form outside the library ({terms}), which fits {-r.delta:.3g} worse in "
+                                 f"chi2 + 2k (z = {r.z:.2g})", sweeps=(), separation_sigma=r.distance,
+                           information_factor=factor)

@@ -95,16 +95,16 @@ class Fit(eqx.Module):
     covariance: Float[Array | np.ndarray, "device param param"]
     u: Float[Array | np.ndarray, "device param"]
     u_lot: Float[Array | np.ndarray, " lot"]
-    residuals: dict
-    predictions: dict
-    biases: dict
+    residuals: dict[str, Float[Array | np.ndarray, "device run point"]]  # keyed by sweep name (the user's key)
+    predictions: dict[str, Float[Array | np.ndarray, "device run point"]]
+    biases: dict[str, Float[Array | np.ndarray, "device run"]]
     chi2: Float[Array | np.ndarray, " device"]
     dof: Int[Array | np.ndarray, " device"]
     converged: Bool[Array | np.ndarray, " device"]
     result_message: tuple[str, ...] = eqx.field(static=True)
     num_steps: Int[Array | np.ndarray, " device"]
     unsettled: Int[Array | np.ndarray, " device"]
-    unidentifiable: tuple = eqx.field(static=True)
+    unidentifiable: tuple[Unidentifiable, ...] = eqx.field(static=True)
     scale_factor: Float[Array | np.ndarray, " device"]
     scale_factor_stderr: Float[Array | np.ndarray, " device"]
     devices: tuple[str, ...] = eqx.field(static=True)

@@ -165,8 +165,8 @@ def _skeleton_fit(header: dict, model: Model) -> Fit:
                stderr=z, lot_values=z, lot_stderr=z, free=tuple(bool(f) for f in header["free"]), covariance=z,
                u=z, u_lot=z, residuals=dict(per_sweep), predictions=dict(per_sweep), biases=dict(per_sweep),
                chi2=z, dof=z, converged=z, result_message=tuple(header["result_message"]), num_steps=z,
-               unsettled=z, unidentifiable=tuple(Unidentifiable(tuple(u["parameters"]), u["held"],
-                                                                float(u["singular_value"]))
+               unsettled=z, unidentifiable=tuple(Unidentifiable(parameters=tuple(u["parameters"]), held=u["held"],
+                                                                singular_value=float(u["singular_value"]))
                                                  for u in header["unidentifiable"]),
                scale_factor=z, scale_factor_stderr=z, devices=tuple(header["devices"]), data=data,
                entries=tuple(_entry_from(e) for e in header["entries"]), weighted=bool(header["weighted"]),

@@ -158,7 +158,7 @@ def hold_unidentifiable(jac, names_free, threshold):
     for j in list(keep):
         s_j = float(columns[j])
         if s_j < threshold or s_j < 1e-12 * scale:
-            reports.append(Unidentifiable((names_free[j],), names_free[j], s_j))
+            reports.append(Unidentifiable(parameters=(names_free[j],), held=names_free[j], singular_value=s_j))
             keep.remove(j)
     while keep:
         s, vt = _singular(stacked[:, keep])
@@ -168,6 +168,7 @@ def hold_unidentifiable(jac, names_free, threshold):
             break
         involved = [keep[j] for j in _members(evecs[:, i])]
         held = max(involved)  # the last in order of preference
-        reports.append(Unidentifiable(tuple(names_free[j] for j in involved), names_free[held], float(s[i])))
+        reports.append(Unidentifiable(parameters=tuple(names_free[j] for j in involved), held=names_free[held],
+                                      singular_value=float(s[i])))
         keep.remove(held)
     return keep, tuple(reports)
