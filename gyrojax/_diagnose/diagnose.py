@@ -314,13 +314,15 @@ def _refit_rejection(fit, located, family, new, best, df, df_total, p_lr, delta_
     if p_lr >= alpha:
         return Rejection(effect=best.effect, reason=f"likelihood-ratio p = {p_lr:.3g} >= alpha: the refit does not "
                                       "confirm what the score promised", kind="refit rejects it"), None, None
-    beyond = encompassing_guard(fit, new, best.effect, located, df_total, alpha)
+    located_after = locate(new, alpha=alpha)  # what the refit leaves, for the encompassing test and the rival
+    beyond = encompassing_guard(fit, new, best.effect, located, df_total, alpha, located_after)
     if beyond is not None:
         return Rejection(effect=best.effect, reason=beyond, kind="not its shape"), None, None
     recorded = record_guard(fit, new, best.effect, tier)
     if recorded is not None:
         return Rejection(effect=best.effect, reason=recorded, kind="contradicted by drive_freq_hz"), None, None
-    against, rival_alike = rival_guard(fit, new, best.effect, df_total, located, alpha=alpha)
+    against, rival_alike = rival_guard(fit, new, best.effect, df_total, located, alpha=alpha,
+                                       located_after=located_after)
     if against is not None:
         return Rejection(effect=best.effect, reason=against[0], kind=against[1]), None, rival_alike
     family.append(selection_p(p_lr, n_tried))

@@ -16,17 +16,23 @@ import numpy as np
 
 from .._identify import Fit
 from .._numerics.stats import chi2_sf
+from .locate import locate
 from .space import EXPLAINED_SHARE_LEFT, ResidualSpace
 
 
-def encompassing_guard(before: Fit, after: Fit, effect: str, localisation, df: int, alpha: float) -> str | None:
+def encompassing_guard(before: Fit, after: Fit, effect: str, localisation, df: int, alpha: float,
+                       located_after=None) -> str | None:
     """A reason not to confirm `effect` (refitted from `before` to `after` with `df` new parameters over the lot),
     or None: what it removes beyond the locations it leaves (see the module docstring) is not significant at
     `alpha`."""
     if not localisation.locations:
         return None
     space_after = ResidualSpace(after)
-    left = left_locations(space_after, localisation, alpha)
+    # what the refit leaves, described afresh at the refit: a misfit of another shape the candidate took part of
+    # is described along the candidate's coordinate again (and spans it), a second misfit beside a right
+    # candidate along its own (a gain from run to run beside a bias in temperature); a description made before
+    # the refit may hold both in one flexible shape that spans the candidate
+    left = list((located_after if located_after is not None else locate(after, alpha=alpha)).locations)
     if not left:
         return None
     cols = np.concatenate([loc.columns for loc in left], axis=-1)

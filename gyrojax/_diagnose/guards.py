@@ -7,7 +7,7 @@ import numpy as np
 from .._identify import Fit
 from .._numerics.stats import chi2_isf
 from .columns import base_columns, effect_columns, excess_chi2
-from .probes import score_columns
+from .probes import score_columns, span_basis
 from .score import TYPICAL_RANK_TOL, CandidateScore
 from .space import EXPLAINED_SHARE_LEFT, ResidualSpace
 
@@ -74,7 +74,16 @@ def other_misfit(fit, columns, localisation, alpha) -> np.ndarray:
         now = joined.score(loc.columns)
         if now.p_value < cut and now.statistic > EXPLAINED_SHARE_LEFT * space.score(loc.columns).statistic:
             keep.append(loc.columns)
-    return np.concatenate(keep, axis=-1) if keep else empty
+    if not keep:
+        return empty
+    # without the candidate's own directions: a flexible description that also spans the candidate (an offset
+    # along the input growing with temperature, beside a bias in temperature) must not absorb it
+    out = np.concatenate(keep, axis=-1)
+    cand = np.asarray(columns, float)
+    for d in range(out.shape[0]):
+        u = span_basis(cand[d])
+        out[d] = out[d] - u @ (u.T @ out[d])
+    return out
 
 
 def _sweep_chi2(fit: Fit) -> dict:

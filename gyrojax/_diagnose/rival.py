@@ -65,7 +65,8 @@ class Rivalry:
         return "effect fits better"
 
 
-def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float) -> Rivalry | None:
+def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float,
+          located_after=None) -> Rivalry | None:
     """The closed form of the misfit that the refit from `before` to `after` (`df_effect` new parameters over
     the lot) takes most of, compared with the refit (see the module docstring); None when no location of
     `localisation` (at `before`) loses chi2 in the refit or no term is significant there."""
@@ -80,13 +81,18 @@ def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float
     # A second misfit the refit leaves (located apart) is described on both sides: the rival's formula is not
     # credited with a term for it (a step beside a bias in temperature), nor the effect blamed for leaving it.
     chi2_before, chi2_after = float(before.chi2_total), float(after.chi2_total)
-    other = [o.columns for o in left_locations(space_a, localisation, alpha) if o is not loc]
+    f_effect = np.asarray(before.residual_vector, float) - np.asarray(after.residual_vector, float)
+    other = ([o.columns for o in located_after.locations] if located_after is not None else
+             [o.columns for o in left_locations(space_a, localisation, alpha) if o is not loc])
     if other:
         oc = np.concatenate(other, axis=-1)
+        for d in range(oc.shape[0]):  # without the effect's own change: the other misfit only
+            norm = float(f_effect[d] @ f_effect[d])
+            if norm > 0:
+                oc[d] -= np.outer(f_effect[d], f_effect[d] @ oc[d]) / norm
         chi2_before -= space_b.score(oc).statistic
         chi2_after -= space_a.score(oc).statistic
         space_b = space_b.with_columns(oc)
-    f_effect = np.asarray(before.residual_vector, float) - np.asarray(after.residual_vector, float)
     # the rival is the best closed form of another shape: terms that alone reproduce the effect's change are
     # its own shape in the dictionary's words, not a rival
     formula = propose(before, loc, step_at=localisation.step_at, period=localisation.period, alpha=alpha,
@@ -122,10 +128,11 @@ def _inside(space, cols, f):
     return num / norm if norm > 0 else 1.0
 
 
-def rival_guard(before: Fit, after: Fit, effect: str, df_effect: int, localisation, *, alpha: float):
+def rival_guard(before: Fit, after: Fit, effect: str, df_effect: int, localisation, *, alpha: float,
+                located_after=None):
     """(a reason not to confirm `effect` and its kind in a few words, or None; a `LookAlike` naming the rival
-    the data cannot tell from it, or None)."""
-    r = rival(before, after, df_effect, localisation, alpha=alpha)
+    the data cannot tell from it, or None). `located_after`: the localisation at `after`, the misfit it leaves."""
+    r = rival(before, after, df_effect, localisation, alpha=alpha, located_after=located_after)
     if r is None or r.verdict in ("same shape", "effect fits better"):
         return None, None
     terms = " + ".join(f"{t.name} on {'+'.join(t.sweeps)}" for t in r.formula.terms)
