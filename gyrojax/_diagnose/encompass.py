@@ -28,11 +28,19 @@ def encompassing_guard(before: Fit, after: Fit, effect: str, localisation, df: i
     if not localisation.locations:
         return None
     space_after = ResidualSpace(after)
-    # what the refit leaves, described afresh at the refit: a misfit of another shape the candidate took part of
-    # is described along the candidate's coordinate again (and spans it), a second misfit beside a right
-    # candidate along its own (a gain from run to run beside a bias in temperature); a description made before
-    # the refit may hold both in one flexible shape that spans the candidate
-    left = list((located_after if located_after is not None else locate(after, alpha=alpha)).locations)
+    # What the refit leaves: the locations before it that it leaves, and the misfit described afresh at the
+    # refit. A location before it that holds a right candidate and a second misfit in one flexible shape (an
+    # offset along the input growing with temperature: a bias in temperature and a gain from run to run) keeps
+    # significance after the refit only through the second misfit, which the fresh description says alone
+    # (a gain per run): that location is taken. One that holds a misfit of another shape the candidate took part
+    # of keeps what the fresh description of the rest does not say.
+    fresh = list((located_after if located_after is not None else locate(after, alpha=alpha)).locations)
+    left = left_locations(space_after, localisation, alpha)
+    if fresh and left:
+        joined = space_after.with_columns(np.concatenate([f.columns for f in fresh], axis=-1))
+        cut = alpha / len(localisation.locations)
+        left = [loc for loc in left if _keeps(joined.score(loc.columns), loc, cut)]
+    left = fresh + left
     if not left:
         return None
     cols = np.concatenate([loc.columns for loc in left], axis=-1)
@@ -56,7 +64,7 @@ def left_locations(space_after: ResidualSpace, localisation, alpha: float) -> li
     left = []
     for loc in locations:
         now = space_after.score(loc.columns)
-        if now.p_value >= cut or now.statistic <= EXPLAINED_SHARE_LEFT * loc.chi2_explained:
+        if not _keeps(now, loc, cut):
             continue  # the candidate took this misfit
         left.append((now.statistic, loc))
     return _beyond_each_other(space_after, left, cut)
@@ -74,6 +82,12 @@ def _beyond_each_other(space, left, cut) -> list:
         if not others:
             break
         now = space.with_columns(np.concatenate(others, axis=-1)).score(loc.columns)
-        if now.p_value >= cut or now.statistic <= EXPLAINED_SHARE_LEFT * loc.chi2_explained:
+        if not _keeps(now, loc, cut):
             kept = [o for o in kept if o is not loc]
     return kept
+
+
+def _keeps(now, loc, cut) -> bool:
+    """Whether location `loc`, scored `now` beyond some columns, keeps its misfit there: still significant at
+    `cut` and more than `EXPLAINED_SHARE_LEFT` of its chi2."""
+    return now.p_value < cut and now.statistic > EXPLAINED_SHARE_LEFT * loc.chi2_explained

@@ -82,8 +82,11 @@ def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float
     # credited with a term for it (a step beside a bias in temperature), nor the effect blamed for leaving it.
     chi2_before, chi2_after = float(before.chi2_total), float(after.chi2_total)
     f_effect = np.asarray(before.residual_vector, float) - np.asarray(after.residual_vector, float)
-    other = ([o.columns for o in located_after.locations] if located_after is not None else
-             [o.columns for o in left_locations(space_a, localisation, alpha) if o is not loc])
+    # a second misfit: what the refit leaves along other coordinates than the misfit the effect takes (the rest
+    # of that misfit, along its own coordinates, is what the rival may explain better)
+    own = {loc.coordinate}
+    other = ([o.columns for o in located_after.locations if o.coordinate not in own] if located_after is not None
+             else [o.columns for o in left_locations(space_a, localisation, alpha) if o is not loc])
     if other:
         oc = np.concatenate(other, axis=-1)
         for d in range(oc.shape[0]):  # without the effect's own change: the other misfit only
