@@ -70,7 +70,10 @@ def test_a_zero_rate_tempco_outside_the_library_confirms_nothing_and_is_located(
     # the run confirmed vref_drift (p 2e-268, fitted at 0.44x) and dac_inl: now neither
     assert d.selected == () and d.verdict == "unexplained"
     why = {r.effect: r for r in d.rejected}
-    assert why["vref_drift"].kind == "not its shape" and "a bias linear in die temperature" in why["vref_drift"].reason
+    # not its shape: what it takes is part of a misfit along the temperature of another shape (said by the probe
+    # guard or by the encompassing test, whichever reads it first)
+    assert why["vref_drift"].kind == "not its shape"
+    assert "of the misfit" in why["vref_drift"].reason and "shape" in why["vref_drift"].reason
     # a typical damping coupling changes this lot's chi2 by ~0.002: not testable here (one rule with the planner)
     assert "damping_coupling" in d.untestable and "damping_coupling" not in why
     top = d.remaining[0]

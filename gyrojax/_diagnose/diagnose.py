@@ -218,7 +218,9 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
             s.rejected.append(Rejection(effect=best.effect, reason=guard, kind="not its shape"))
             remaining.remove(best.effect)
             continue
-        group, separated = _ambiguity_group(s.fit, best, significant, ambiguity, alpha, data)
+        # alternatives: any candidate significant at alpha alone (ambiguity names explanations, not discoveries)
+        alternatives = [best] + [c for c in scores if c.testable and c.p_value < alpha and c is not best]
+        group, separated = _ambiguity_group(s.fit, best, alternatives, ambiguity, alpha, data)
         say(f"refitting with {best.effect} (step {len(s.selected) + 1}; score S = {best.statistic:.4g}, "
             f"p = {best.p_value:.2g})")
         n_tried = len(remaining)

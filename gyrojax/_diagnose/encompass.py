@@ -2,9 +2,10 @@
 description of the misfit it does not explain (an encompassing test).
 
 The test uses the candidate's refit (its real, nonlinear effect) and the flexible descriptions linearly, as the
-score test does: the locations of the misfit before the step (`gyrojax._diagnose.locate`) that are still
-significant after the refit are the misfit the candidate does not explain, F. What the candidate removes beyond F
-is
+score test does: the misfit the candidate does not explain, F, is the localisation at the refit
+(`gyrojax._diagnose.locate`, described afresh) with the locations before the step that stay significant after the
+refit and beyond it (a location before the step that kept significance only through a second misfit the fresh
+localisation says along another shape is taken). What the candidate removes beyond F is
 
     D = (chi2_before - S_F(before)) - (chi2_after - S_F(after)) ~ chi2(df of the step)
 
