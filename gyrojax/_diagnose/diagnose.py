@@ -184,8 +184,16 @@ class _Selection:
     steps: list = dataclasses.field(default_factory=list)
     ambiguous: list = dataclasses.field(default_factory=list)
     family: list = dataclasses.field(default_factory=list)  # every refit's selection-corrected p-value (FDR)
+    localised: dict = dataclasses.field(default_factory=dict)  # id(fit) -> (fit, its localisation), see `located_at`
     ranking0: tuple | None = None
     untestable: tuple = ()
+
+    def located_at(self, fit: Fit, alpha: float) -> Localisation:
+        """`locate(fit)`, once per fit: a refit's localisation, read by the guards, is the step's when confirmed."""
+        known = self.localised.get(id(fit))
+        if known is None or known[0] is not fit:
+            known = self.localised[id(fit)] = (fit, locate(fit, alpha=alpha))
+        return known[1]
 
 
 def _first_ranking(scores):
@@ -227,8 +235,8 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
         new = fit_with(tuple(s.selected) + (best.effect,))
         lr, df, df_total, p_lr, delta_bic = _likelihood_ratio(s.fit, new, data)
         remaining.remove(best.effect)
-        rejection, q, rival_alike = _refit_rejection(s.fit, s.located, s.family, new, best, df, df_total, p_lr,
-                                                     delta_bic, n_tried, comparison, alpha, tier)
+        rejection, q, rival_alike = _refit_rejection(s, new, best, df, df_total, p_lr, delta_bic, n_tried,
+                                                     comparison, alpha, tier)
         if rejection is not None:
             s.rejected.append(rejection)
             continue
@@ -248,7 +256,7 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
                             implied_multiple=best.implied_multiple, look_alikes=alike,
                             q_value=q if q is not None else math.nan))
         s.discrepancy, s.designs = score_probes(s.fit, probes, alpha=alpha)
-        s.located = locate(s.fit, alpha=alpha)
+        s.located = s.located_at(s.fit, alpha)
 
 
 def _implausible(best, max_typical_multiple) -> Rejection:
@@ -300,11 +308,12 @@ def _likelihood_ratio(fit, new, data):
     return lr, df, df_total, p_lr, delta_bic
 
 
-def _refit_rejection(fit, located, family, new, best, df, df_total, p_lr, delta_bic, n_tried, comparison, alpha,
-                     tier):
-    """The guards after the refit `new` of `fit` with `best`, in order: (the first rejection or None, the
-    refit's false-discovery q-value where it was reached, a closed form of another shape about as good or None).
-    `family` (every refit's selection-corrected p-value) gains this refit's where the control is reached."""
+def _refit_rejection(s: "_Selection", new, best, df, df_total, p_lr, delta_bic, n_tried, comparison, alpha, tier):
+    """The guards after the refit `new` of the selection's fit with `best`, in order: (the first rejection or
+    None, the refit's false-discovery q-value where it was reached, a closed form of another shape about as good or
+    None). The selection's `family` (every refit's selection-corrected p-value) gains this refit's where the
+    control is reached."""
+    fit, located, family = s.fit, s.located, s.family
     if df <= 0:
         return Rejection(effect=best.effect, reason=(
             "the refit cannot fix its parameters: a change of its typical size moves the chi2 by less than the "
@@ -316,7 +325,7 @@ def _refit_rejection(fit, located, family, new, best, df, df_total, p_lr, delta_
     if p_lr >= alpha:
         return Rejection(effect=best.effect, reason=f"likelihood-ratio p = {p_lr:.3g} >= alpha: the refit does not "
                                       "confirm what the score promised", kind="refit rejects it"), None, None
-    located_after = locate(new, alpha=alpha)  # what the refit leaves, for the encompassing test and the rival
+    located_after = s.located_at(new, alpha)  # what the refit leaves, for the encompassing test and the rival
     beyond = encompassing_guard(fit, new, best.effect, located, df_total, alpha, located_after)
     if beyond is not None:
         return Rejection(effect=best.effect, reason=beyond, kind="not its shape"), None, None

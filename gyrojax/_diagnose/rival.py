@@ -33,8 +33,8 @@ import numpy as np
 
 from .._identify import Fit
 from .discrepancy import LookAlike
-from .encompass import left_locations
 from .formula import Formula, formula_columns, propose
+from .locate import locate
 from .space import ResidualSpace
 
 
@@ -78,15 +78,13 @@ def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float
     gain, loc = max(taken, key=lambda x: x[0])
     if gain <= 0:
         return None
-    # A second misfit the refit leaves (located apart) is described on both sides: the rival's formula is not
-    # credited with a term for it (a step beside a bias in temperature), nor the effect blamed for leaving it.
+    # A second misfit, what the refit leaves along other coordinates than the misfit the effect takes, is credited
+    # to both sides: the rival's formula is not credited with a term for it (a step beside a bias in temperature),
+    # nor the effect blamed for leaving it. (The rest of the effect's own misfit is what a rival may explain better.)
     chi2_before, chi2_after = float(before.chi2_total), float(after.chi2_total)
     f_effect = np.asarray(before.residual_vector, float) - np.asarray(after.residual_vector, float)
-    # a second misfit: what the refit leaves along other coordinates than the misfit the effect takes (the rest
-    # of that misfit, along its own coordinates, is what the rival may explain better)
-    own = {loc.coordinate}
-    other = ([o.columns for o in located_after.locations if o.coordinate not in own] if located_after is not None
-             else [o.columns for o in left_locations(space_a, localisation, alpha) if o is not loc])
+    left = (located_after if located_after is not None else locate(after, alpha=alpha)).locations
+    other = [o.columns for o in left if o.coordinate != loc.coordinate]
     if other:
         oc = np.concatenate(other, axis=-1)
         for d in range(oc.shape[0]):  # without the effect's own change: the other misfit only
