@@ -1,0 +1,30 @@
+"""The stress lots (experiments/stress_benchmark.py): the discovery benchmark's lots with the noise replaced
+(heavy-tailed, heteroscedastic, correlated) or sweeps and devices left out, scored as the benchmark scores."""
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "experiments"))
+
+
+def test_stress_lots_replace_the_noise_and_keep_what_the_sweeps_can_see():
+    from _discovery_lot import discovery_lot
+    from stress_benchmark import _noise_free, stress_lot
+
+    t3, info = stress_lot("t3", None, snr="mid", design="a", seed=0)
+    truth, sigma = _noise_free("a", 0, 6, 2)
+    z = (np.asarray(t3.columns["output"]) - truth) / sigma
+    force = np.asarray(t3.columns["sweep"]) != "dac"
+    assert 0.6 < np.mean(z[force] ** 2) < 1.6 and np.abs(z[force]).max() > 4.5  # unit variance, heavy tails
+    null, _ = discovery_lot(None, snr="mid", design="a", seed=0)
+    assert not np.allclose(z[force], ((np.asarray(null.columns["output"]) - truth) / sigma)[force])
+    only, info = stress_lot("rate_only", "vcf_gain_tempco", snr="mid", design="a", seed=0)
+    assert set(np.unique(only.columns["sweep"])) == {"rate_table"} and info["hidden"] is None
+    kept, info = stress_lot("no_dac", "zro_tempco", snr="mid", design="a", seed=0)
+    assert info["hidden"] == "zro_tempco" and info["visible_sweeps"] == ["rate_table", "vcf_static"]
+    with pytest.raises(ValueError, match="unknown variant 'gauss'"):
+        stress_lot("gauss", None, snr="mid", design="a", seed=0)
