@@ -28,3 +28,17 @@ def test_stress_lots_replace_the_noise_and_keep_what_the_sweeps_can_see():
     assert info["hidden"] == "zro_tempco" and info["visible_sweeps"] == ["rate_table", "vcf_static"]
     with pytest.raises(ValueError, match="unknown variant 'gauss'"):
         stress_lot("gauss", None, snr="mid", design="a", seed=0)
+
+
+@pytest.mark.slow
+def test_a_compression_under_correlated_noise_is_not_refused_for_want_of_a_direction_of_its_own():
+    # noise correlated along the sweep leaves a misfit along the input that differs from run to run; with it and a
+    # bias linear in time (the probe) both beside the compression, nothing of the compression's own direction was
+    # left, it "added nothing beyond the probe (S = 0, df 0)" and a DAC INL was confirmed in its place
+    import gyrojax as gj
+    from stress_benchmark import stress_lot
+
+    table, _ = stress_lot("ar1", "feedback_compression", snr="mid", design="b", seed=0)
+    d = gj.diagnose("paper-qmg", table, progress=False)
+    assert d.selected == ("feedback_compression",)
+    assert not any("df 0" in r.reason for r in d.rejected)
