@@ -38,8 +38,16 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from _discovery_lot import DESIGNS, HIDDEN, _rows, discovery_lot  # noqa: E402
-from discovery_benchmark import (GyrojaxMethod, Outcome, _git_describe, _parse_seeds, _write_atomic,  # noqa: E402
-                                 effect_class, score, score_rows)
+from discovery_benchmark import (  # noqa: E402
+    GyrojaxMethod,
+    Outcome,
+    _git_describe,
+    _parse_seeds,
+    _write_atomic,
+    effect_class,
+    score,
+    score_rows,
+)
 
 
 AR1_RHO = 0.6  # ASSUMPTION: a slow thermal or 1/f-like error spanning a few dwells

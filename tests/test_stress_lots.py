@@ -35,8 +35,9 @@ def test_a_compression_under_correlated_noise_is_not_refused_for_want_of_a_direc
     # noise correlated along the sweep leaves a misfit along the input that differs from run to run; with it and a
     # bias linear in time (the probe) both beside the compression, nothing of the compression's own direction was
     # left, it "added nothing beyond the probe (S = 0, df 0)" and a DAC INL was confirmed in its place
-    import gyrojax as gj
     from stress_benchmark import stress_lot
+
+    import gyrojax as gj
 
     table, _ = stress_lot("ar1", "feedback_compression", snr="mid", design="b", seed=0)
     d = gj.diagnose("paper-qmg", table, progress=False)
