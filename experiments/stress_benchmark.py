@@ -41,7 +41,9 @@ from _discovery_lot import DESIGNS, HIDDEN, _rows, discovery_lot  # noqa: E402
 from discovery_benchmark import (  # noqa: E402
     GyrojaxMethod,
     Outcome,
+    _cell,
     _git_describe,
+    _list,
     _parse_seeds,
     _write_atomic,
     effect_class,
@@ -128,18 +130,14 @@ def stress_lot(variant, hidden, *, snr, design, seed):
 VARIANTS = ("t3", "hetero", "ar1", "sigma_low", "no_dac", "rate_only", "small")
 
 
-def markdown(rows, variant_rows):
+def markdown(variant_rows):
     lines = ["| variant | class | lots | library effect found | wrong confirmation | confirmed as declared ambiguous | "
              "localised | localised or named as confounded | null explained | chi2_red (median) | s per lot |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
-
-    def cell(kn):
-        k, n = kn
-        return f"{k}/{n} ({100 * k / n:.0f} %)" if n else "-"
     for variant, r in variant_rows:
-        lines.append(f"| {variant} | {r['class']} | {r['lots']} | {cell(r['found'])} | {cell(r['wrong'])} | "
-                     f"{cell(r['ambiguous'])} | {cell(r['localised'])} | {cell(r['confounded'])} | "
-                     f"{cell(r['explained'])} | {r['chi2_red']:.3f} | {r['seconds']:.1f} |")
+        lines.append(f"| {variant} | {r['class']} | {r['lots']} | {_cell(r['found'])} | {_cell(r['wrong'])} | "
+                     f"{_cell(r['ambiguous'])} | {_cell(r['localised'])} | {_cell(r['confounded'])} | "
+                     f"{_cell(r['explained'])} | {r['chi2_red']:.3f} | {r['seconds']:.1f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -163,14 +161,15 @@ def main(argv=None):
     a = p.parse_args(argv)
     import gyrojax as gj
 
-    variants = list(VARIANTS) if a.variants == "all" else a.variants.split(",")
-    effects = [None] + (list(HIDDEN) if a.effects == "all" else a.effects.split(","))
+    variants = list(VARIANTS) if a.variants == "all" else _list(a.variants, list(VARIANTS), "variants")
+    effects = [None] + (list(HIDDEN) if a.effects == "all" else _list(a.effects, list(HIDDEN), "effects"))
+    designs = _list(a.designs, list(DESIGNS), "designs")
     os.makedirs(a.out, exist_ok=True)
     method = GyrojaxMethod(a.preset)
     settings = {"variants": variants, "designs": a.designs, "seeds": a.seeds, "snr": a.snr,
                 "gyrojax": gj.__version__, "tree": _git_describe(),
                 "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
-    lots = [(v, d, s, e) for v in variants for d in a.designs.split(",") for s in _parse_seeds(a.seeds)
+    lots = [(v, d, s, e) for v in variants for d in designs for s in _parse_seeds(a.seeds)
             for e in effects]
     records = []
     for i, (variant, design, seed, hidden) in enumerate(lots):
@@ -190,8 +189,8 @@ def main(argv=None):
         vr = _rows_by_variant(records)
         _write_atomic(os.path.join(a.out, "stress.json"),
                       json.dumps({"settings": settings, "rows": vr, "records": records}, indent=1, default=str))
-        _write_atomic(os.path.join(a.out, "stress.md"), markdown(None, vr))
-    print(markdown(None, _rows_by_variant(records)))
+        _write_atomic(os.path.join(a.out, "stress.md"), markdown(vr))
+    print(markdown(_rows_by_variant(records)))
 
 
 if __name__ == "__main__":

@@ -43,3 +43,10 @@ def test_a_compression_under_correlated_noise_is_not_refused_for_want_of_a_direc
     d = gj.diagnose("paper-qmg", table, progress=False)
     assert d.selected == ("feedback_compression",)
     assert not any("df 0" in r.reason for r in d.rejected)
+
+
+def test_an_unknown_variant_on_the_command_line_is_named_with_the_ones_there_are():
+    from stress_benchmark import main
+
+    with pytest.raises(SystemExit, match="--variants: unknown gauss; expected some of t3, hetero, ar1"):
+        main(["--variants", "gauss", "--out", os.devnull])
