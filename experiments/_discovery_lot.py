@@ -416,13 +416,17 @@ def discovery_lot(hidden: str | None = None, *, snr: str = "mid", design: str = 
     return table, info
 
 
+def noise_free(design: str, seed: int, n_devices: int, n_runs: int) -> tuple[np.ndarray, np.ndarray]:
+    """The noise-free output of a null lot of `seed` (biases included) and the stated sigma, per row."""
+    rows = _rows(DESIGNS[design], n_devices, n_runs, np.random.default_rng(seed))
+    return rows["clean"] + rows["bias"], rows["sigma"]
+
+
 def truth_chi2(table: Table, n_devices: int, n_runs: int, seed: int, design: str = "a") -> tuple[float, int]:
     """The chi2 of a null lot's outputs against the generator's own noise-free truth (biases included), and the
     number of points: the documented noise level makes it ~ n."""
-    rng = np.random.default_rng(seed)
-    rows = _rows(DESIGNS[design], n_devices, n_runs, rng)
-    y = np.asarray(table.columns["output"], dtype=float)
-    z = (y - rows["clean"] - rows["bias"]) / rows["sigma"]
+    truth, sigma = noise_free(design, seed, n_devices, n_runs)
+    z = (np.asarray(table.columns["output"], dtype=float) - truth) / sigma
     return float(np.sum(z**2)), int(z.size)
 
 

@@ -37,7 +37,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from _discovery_lot import DESIGNS, HIDDEN, _rows, discovery_lot  # noqa: E402
+from _discovery_lot import DESIGNS, HIDDEN, discovery_lot, noise_free  # noqa: E402
 from discovery_benchmark import (  # noqa: E402
     GyrojaxMethod,
     Outcome,
@@ -53,11 +53,6 @@ from discovery_benchmark import (  # noqa: E402
 
 
 AR1_RHO = 0.6  # ASSUMPTION: a slow thermal or 1/f-like error spanning a few dwells
-
-
-def _noise_free(design, seed, n_devices, n_runs):
-    rows = _rows(DESIGNS[design], n_devices, n_runs, np.random.default_rng(seed))
-    return rows["clean"] + rows["bias"], rows["sigma"]
 
 
 def _new_noise(kind, cols, sigma, rng):
@@ -98,7 +93,7 @@ def stress_lot(variant, hidden, *, snr, design, seed):
     cols = {k: np.array(v) for k, v in table.columns.items()}
     keep = np.ones(len(cols["output"]), bool)
     if variant in ("t3", "hetero", "ar1"):
-        truth, sigma = _noise_free(design, seed, n_devices, n_runs)
+        truth, sigma = noise_free(design, seed, n_devices, n_runs)
         null, _ = discovery_lot(None, snr=snr, design=design, seed=seed, n_devices=n_devices, n_runs=n_runs)
         old = np.asarray(null.columns["output"], float) - truth  # the generator's own noise
         rng = np.random.default_rng(10_000 + seed)
@@ -144,7 +139,7 @@ def markdown(variant_rows):
 def _rows_by_variant(records):
     out = []
     for v in VARIANTS:
-        rs = [dict(r, method="gyrojax") for r in records if r["variant"] == v]
+        rs = [r for r in records if r["variant"] == v]
         out += [(v, row) for row in score_rows(rs)] if rs else []
     return out
 
@@ -179,8 +174,8 @@ def main(argv=None):
         except Exception as exc:  # recorded as failing, never skipped
             out = Outcome([], "failed", set(), None, [], math.nan, math.nan, note=f"{type(exc).__name__}: {exc}")
         eff = info["hidden"]
-        rec = {"variant": variant, "design": design, "seed": seed, "hidden": hidden, "snr": a.snr,
-               "class": effect_class(eff), "info": info,
+        rec = {"method": method.name, "variant": variant, "design": design, "seed": seed, "hidden": hidden,
+               "snr": a.snr, "class": effect_class(eff), "info": info,
                "outcome": {**dataclasses.asdict(out), "located": sorted(out.located)}, "scores": score(out, info)}
         records.append(rec)
         print(f"[{i + 1}/{len(lots)}] {variant} design {design} seed {seed} {hidden or 'null'}: {out.verdict}, "

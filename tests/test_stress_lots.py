@@ -12,11 +12,11 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "experiments"))
 
 
 def test_stress_lots_replace_the_noise_and_keep_what_the_sweeps_can_see():
-    from _discovery_lot import discovery_lot
-    from stress_benchmark import _noise_free, stress_lot
+    from _discovery_lot import discovery_lot, noise_free
+    from stress_benchmark import stress_lot
 
     t3, info = stress_lot("t3", None, snr="mid", design="a", seed=0)
-    truth, sigma = _noise_free("a", 0, 6, 2)
+    truth, sigma = noise_free("a", 0, 6, 2)
     z = (np.asarray(t3.columns["output"]) - truth) / sigma
     force = np.asarray(t3.columns["sweep"]) != "dac"
     assert 0.6 < np.mean(z[force] ** 2) < 1.6 and np.abs(z[force]).max() > 4.5  # unit variance, heavy tails

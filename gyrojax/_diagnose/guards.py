@@ -38,21 +38,22 @@ def probe_guard(fit, candidate: CandidateScore, discrepancy, designs, candidate_
     candidate's shape."""
     res = np.asarray(fit.residual_vector)
     je = np.asarray(fit.jacobian)[:, :, effect_columns(fit, candidate.effect)]
-    beside = np.concatenate([base_columns(fit), other_misfit(fit, je, localisation, alpha)], axis=-1)
+    own = base_columns(fit)
+    other = other_misfit(fit, je, localisation, alpha)
+    beside = np.concatenate([own, other], axis=-1)
     probe_cut = alpha / max(len(discrepancy), 1)
     worst = None
     for d in (d for d in discrepancy if d.significant):
         gp = designs[d.probe]
         base = beside
         beyond_probe = score_columns(np.concatenate([base, gp], axis=-1), je, res, rank_tol=TYPICAL_RANK_TOL)
-        if beyond_probe.df == 0 and beside.shape[-1] > base_columns(fit).shape[-1]:
+        if beyond_probe.df == 0 and other.shape[-1]:
             # no direction of the candidate's own is left: where that is the other misfit's doing (it and the
             # probe together span the candidate, which the probe alone does not), the two are compared as they
             # stand, without it
-            alone = score_columns(np.concatenate([base_columns(fit), gp], axis=-1), je, res,
-                                  rank_tol=TYPICAL_RANK_TOL)
+            alone = score_columns(np.concatenate([own, gp], axis=-1), je, res, rank_tol=TYPICAL_RANK_TOL)
             if alone.df > 0:
-                base, beyond_probe = base_columns(fit), alone
+                base, beyond_probe = own, alone
         beyond_candidate = score_columns(np.concatenate([base, je], axis=-1), gp, res)
         if beyond_probe.p_value >= candidate_cut and beyond_candidate.p_value < probe_cut:
             if worst is None or beyond_candidate.statistic > worst[1].statistic:
