@@ -41,16 +41,16 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
-from ._compile.jit import jit
-from ._effects.base import AbstractEffect
-from ._effects.registry import EFFECTS, effect as _named_effect
-from ._gyroscope import Gyroscope
-from ._lots.stack import as_arrays
-from ._metrics import FULL_SCALE_CONVENTIONS, fit_scale_factor
-from ._model.parameters import PARAMETERS, Model, effect_leaves
-from ._simulate.tiers import Steady
-from ._sweeps.rate_table import DING_ZHOU_2025_RATES_DPS, rate_sweep
-from ._units import DEG
+from .._compile.jit import jit
+from .._effects.base import AbstractEffect
+from .._effects.registry import EFFECTS, effect as _named_effect
+from .._gyroscope import Gyroscope
+from .._lots.stack import as_arrays
+from .._metrics import FULL_SCALE_CONVENTIONS, fit_scale_factor
+from .._model.parameters import PARAMETERS, Model, effect_leaves
+from .._simulate.tiers import Steady
+from .._sweeps.rate_table import DING_ZHOU_2025_RATES_DPS, rate_sweep
+from .._units import DEG
 
 
 SEED000_BUDGET = {"dac_ppm": 460.679, "total_ppm": 539.281, "dac_share_pct": 85.424}
