@@ -342,6 +342,70 @@ HIDDEN_LIST = [
 HIDDEN = {h.name: h for h in HIDDEN_LIST}
 
 
+def _settling_memory(lot):
+    """The dwell before each point did not settle: the point keeps a share of the step from the previous set
+    point, gain x (previous input - input), each (device, run, sweep) starting from rest."""
+    c = lot.columns
+    x = _x(lot)
+    prev = np.zeros_like(x)
+    keys = np.char.add(np.char.add(np.asarray(c["device"]).astype(str), "|"),
+                       np.char.add(np.asarray(c["run"]).astype(str), np.asarray(c["sweep"]).astype(str)))
+    for k in np.unique(keys):
+        i = np.flatnonzero(keys == k)  # rows of a block are in time order
+        prev[i[1:]] = x[i[:-1]]
+    return lot.sf * (prev - x) * _mask(lot, *RV)
+
+
+def _zro_per_run(lot):
+    # a zero-rate output tempco that differs from power-on to power-on: +1 in run 0, -0.5 in run 1, per device sign
+    per_run = np.where(np.asarray(lot.columns["run"]) % 2 == 0, 1.0, -0.5)
+    return _zro(lot, _device_sign(lot, 7) * per_run)
+
+
+# Held-out effects: written after the benchmark's guards were tuned and never used to tune them; a measure of how
+# the diagnosis fares on shapes nobody designed it for (`discovery_benchmark.py --effects held-out`). All outside
+# the library.
+HELD_OUT_LIST = [
+    _h("gain_time_drift", RV, "time_s", None, ("lin(time_s)*model", "lin(time_s)*lin(input)"), "relative gain per h",
+       "a gain drifting linearly since power-on (charging of the feedback electrodes)")(
+        lambda lot: lot.clean * _t(lot) / 3600.0 * _mask(lot, *RV)),
+    _h("bias_periodic_time", RV, "time_s", None, None, "deg/s",
+       "a bias oscillating with the lab's air conditioning, period 20 min, phase locked to power-on")(
+        lambda lot: lot.fs_rate / OMEGA_FS_DPS * np.sin(2 * np.pi * _t(lot) / 1200.0) * _mask(lot, *RV)),
+    _h("dead_band", ("rate_table",), "input", None, None, "share of the rate lost",
+       "a dead band of the rate loop: the output loses c of the input for |rate| <= 0.5 deg/s")(
+        lambda lot: -lot.sf * _x(lot) * (np.abs(_x(lot)) <= 0.5) * _mask(lot, "rate_table")),
+    _h("even_quadratic_rate", ("rate_table",), "input", None, ("sq(input)", "sq(model)"), "fraction of FS",
+       "an even quadratic of the table rate on the rate rows only (centripetal pick-up of an off-axis mount)")(
+        lambda lot: lot.fs_rate * (_x(lot) / OMEGA_FS_DPS) ** 2 * _mask(lot, "rate_table")),
+    _h("temp_step_bias", RV, "temperature_c", None, None, "deg/s",
+       "a bias that jumps when the die passes 28 C (a mode hop of a parasitic resonance)")(
+        lambda lot: lot.fs_rate / OMEGA_FS_DPS * (_dT(lot) > 3.0) * _mask(lot, *RV)),
+    _h("vcf_cubic_only", ("vcf_static",), "input", None, ("cube(input)", "cube(model)"), "fraction of FS",
+       "a cubic of the virtual-Coriolis electrode alone (gap nonlinearity of the forcer), not of the rate path")(
+        lambda lot: -lot.fs_rate * _s(lot) ** 3 * _mask(lot, "vcf_static")),
+    _h("zro_per_run", RV, "temperature_c", None, None, "deg/s per K",
+       "a zero-rate-output tempco that differs from power-on to power-on (+1, -0.5 of it, sign per device)")(
+        _zro_per_run),
+    _h("gain_quadratic_temp", RV, "temperature_c", None, ("sq(temperature_c)*model",), "1/K^2",
+       "a rate and VCF gain quadratic in the die temperature (a reference with a parabolic tempco)")(
+        lambda lot: lot.clean * _dT(lot) ** 2 * _mask(lot, *RV)),
+    _h("dac_sign_gain", ("dac",), "input", None, ("abs(input)", "sign(input)*lin(input)"), "relative gain",
+       "a bipolar DAC whose negative half has its own gain (c of the word for negative words)")(
+        lambda lot: lot.sf * _x(lot) * (_x(lot) < 0) * _mask(lot, "dac")),
+    _h("vcf_bias_tempco", ("vcf_static",), "temperature_c", None, ("lin(temperature_c)",), "deg/s per K",
+       "a bias linear in the die temperature on the VCF rows only (the forcer's DC offset follows temperature)")(
+        lambda lot: _zro(lot) * _mask(lot, "vcf_static")),
+    _h("settling_memory", RV, "input", None, None, "share of the previous step",
+       "incomplete settling: each point keeps c of the step from the previous set point")(_settling_memory),
+    _h("gain_step_device", RV, "time_s", None, ("step(time_s)*model",), "relative gain",
+       "a gain that switches at t = 1500 s in every run of the first device (a range relay)")(
+        lambda lot: lot.clean * (_t(lot) > 1500.0) * (lot.dev == 0) * _mask(lot, *RV)),
+]
+HELD_OUT = {h.name: h for h in HELD_OUT_LIST}
+EFFECTS = {**HIDDEN, **HELD_OUT}  # every effect the generator can hide
+
+
 def visible_chi2(lot: Lot, delta: np.ndarray, sigma: np.ndarray) -> tuple[float, dict]:
     """The chi2 of an output change `delta` beyond what the baseline's free parameters take up, by a linear
     projection: per (device, run, sweep) a bias (rate and VCF), per device a gain on each sweep (the rate gain
@@ -384,8 +448,8 @@ def discovery_lot(hidden: str | None = None, *, snr: str = "mid", design: str = 
         raise ValueError(f"design must be one of {sorted(DESIGNS)}, got {design!r}.")
     if snr not in TARGET_CHI2:
         raise ValueError(f"snr must be one of {sorted(TARGET_CHI2)}, got {snr!r}.")
-    if hidden is not None and hidden not in HIDDEN:
-        raise ValueError(f"unknown hidden effect {hidden!r}; expected one of {', '.join(HIDDEN)} or None.")
+    if hidden is not None and hidden not in EFFECTS:
+        raise ValueError(f"unknown hidden effect {hidden!r}; expected one of {', '.join(EFFECTS)} or None.")
     if n_devices < 1 or n_runs < 1:
         raise ValueError(f"n_devices and n_runs must be >= 1, got {n_devices}, {n_runs}.")
     rng = np.random.default_rng(seed)
@@ -398,7 +462,7 @@ def discovery_lot(hidden: str | None = None, *, snr: str = "mid", design: str = 
     info = {"hidden": hidden, "snr": snr, "design": design, "seed": seed, "devices": n_devices, "runs": n_runs}
     delta = np.zeros_like(rows["clean"])
     if hidden is not None:
-        h = HIDDEN[hidden]
+        h = EFFECTS[hidden]
         unit_delta = h.fn(lot)
         chi2_unit, shares = visible_chi2(lot, unit_delta, rows["sigma"])
         size = float(np.sqrt(TARGET_CHI2[snr] / chi2_unit))

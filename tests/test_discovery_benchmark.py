@@ -63,14 +63,22 @@ def test_enough_hidden_effects_of_each_class():
         assert h.sweeps <= set(lotgen.SWEEPS)
 
 
-@pytest.mark.parametrize("name", list(lotgen.HIDDEN))
+def test_held_out_effects_are_apart_from_the_benchmark():
+    assert len(lotgen.HELD_OUT) >= 12 and not set(lotgen.HELD_OUT) & set(lotgen.HIDDEN)
+    assert all(h.library is None for h in lotgen.HELD_OUT_LIST)
+    for h in lotgen.HELD_OUT_LIST:
+        assert h.coordinate in ("input", "temperature_c", "dtemperature_dt", "time_s", "run")
+        assert h.sweeps <= set(lotgen.SWEEPS)
+
+
+@pytest.mark.parametrize("name", list(lotgen.EFFECTS))
 def test_hidden_effect_changes_only_its_sweeps(name):
     null, _ = lotgen.discovery_lot(None, n_devices=3, n_runs=2, seed=4)
     table, info = lotgen.discovery_lot(name, snr="mid", n_devices=3, n_runs=2, seed=4)
     diff = np.asarray(table.columns["output"]) - np.asarray(null.columns["output"])
     sweeps = table.columns["sweep"]
     changed = {s for s in lotgen.SWEEPS if np.any(diff[sweeps == s] != 0)}
-    assert changed == set(lotgen.HIDDEN[name].sweeps)
+    assert changed == set(lotgen.EFFECTS[name].sweeps)
     assert set(info["visible_sweeps"]) <= changed
     # its size is the one whose visible chi2 is the mid target
     lot_rows = lotgen._rows(lotgen.DESIGNS["a"], 3, 2, np.random.default_rng(4))
