@@ -4,7 +4,9 @@ For each sweep and each coordinate that moves within its runs (`input`, `tempera
 `dtemperature_dt`, `time_s`, `drive_freq_hz`, `order`) two descriptions are scored per device: an *offset* along
 the coordinate and a *gain* along it (the same basis times the model's prediction), each a piecewise-linear
 function on knots at the coordinate's quantiles (a linear spline whose effective degrees of freedom are the
-directions left after the fit's own columns are projected out). Beside them: a curve along the input whose size
+directions left after the fit's own columns are projected out), and the same two as one curve shared by every
+device on finer knots (`pooled`: the lot's coefficients, as most physical terms are the same in every device).
+Beside them: a curve along the input whose size
 grows with the temperature or the time, a *gain per run* (and an offset per run on sweeps read without a turn-on
 bias), an offset along time that differs from run to run, a *change-point scan* along time (a step in the
 output at one dwell) and a *spectral scan* along the input (a periodic error of the input or the DAC word).
@@ -22,6 +24,9 @@ from .space import ResidualSpace, Scored
 
 
 KNOTS = 6  # the linear spline's knots along a coordinate (quantiles): up to 6 directions per device
+# The knots of a curve shared by every device: its coefficients are the lot's, not each device's, so it can afford
+# to follow a narrow feature (a dead band around zero rate, a step between two set points).
+POOLED_KNOTS = 12
 # A coordinate whose spread within the runs is below this share of its spread over the lot is a property of runs
 # (or devices), not something the output can be described along within a run.
 WITHIN_RUN_SHARE = 1e-3
@@ -43,10 +48,7 @@ class Description:
     scored: Scored
     p_value: float  # after the scan's own look-elsewhere correction
     where: dict = dataclasses.field(default_factory=dict)
-
-    @property
-    def key(self) -> str:
-        return f"{self.sweep}:{self.coordinate}:{self.family}"
+    pooled: bool = False  # one curve for every device (its coefficients the lot's), not one per device
 
 
 # -- coordinates ---------------------------------------------------------------------------------------------
@@ -150,6 +152,16 @@ def describe(space: ResidualSpace) -> tuple[list, list]:
                 sc = space.score(cols)
                 if sc.df:
                     out.append(Description(sweep, name, family, cols, sc, sc.p_value, {"within_device": dev / lot}))
+            # the same curve in every device, on finer knots: what most physical terms are (in output units or
+            # as a gain), where a coordinate moves within the devices (not one that mostly tells them apart)
+            fine = (spline_basis(x, mask, knots=POOLED_KNOTS, signed=name in SIGNED)
+                    if dev >= WITHIN_DEVICE_SHARE * lot else None)
+            for family, g in (() if fine is None else (("offset", fine), ("gain", fine * pred[..., None]))):
+                cols = space.columns({sweep: g})
+                sc = space.score(cols, pooled=True)
+                if sc.df:
+                    out.append(Description(sweep, name, family, cols, sc, sc.p_value, {"within_device": dev / lot},
+                                           pooled=True))
         g = interactions(block, mask)
         for name, cols_g in g.items():
             cols = space.columns({sweep: cols_g})

@@ -217,7 +217,7 @@ def with_shapes(fit, locations, discrepancy, designs, scores, rejected, max_mult
         for d in discrepancy:  # most explanatory first
             if not d.significant or d.within:
                 continue
-            left = space.with_columns(designs[d.probe]).score(loc.columns)
+            left = space.with_columns(designs[d.probe]).score(loc.columns, loc.pooled)
             if left.p_value >= cut or left.statistic <= SHAPE_SHARE_LEFT * loc.chi2_explained:
                 matched = d
                 break

@@ -308,11 +308,11 @@ def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, ma
         current = current.with_columns(cols[id(best[0])])
     if not chosen:
         return None
-    if len(chosen) > 1 and current.score(location.columns).p_value >= alpha:
+    if len(chosen) > 1 and current.score(location.columns, location.pooled).p_value >= alpha:
         # greedy selection can need a second term to mend its first choice: one term that says it all is simpler
         whole = [(t, sc) for t in terms
                  if (sc := space.score(cols[id(t)])).df and sc.p_value < cut
-                 and space.with_columns(cols[id(t)]).score(location.columns).p_value >= alpha]
+                 and space.with_columns(cols[id(t)]).score(location.columns, location.pooled).p_value >= alpha]
         if whole:
             top = max(sc.statistic for _, sc in whole)
             near = [(t, sc) for t, sc in whole if sc.statistic >= top - max(TIE_CHI2, TIE_SHARE * top)]
@@ -321,7 +321,7 @@ def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, ma
     joint = space.score(np.concatenate([cols[id(t)] for t in chosen], axis=-1))
     coef, err, spread = lot_mean(joint)
     share = min(max(joint.statistic - joint.df, 0.0) / space.excess, 1.0) if space.excess > 0 else 0.0
-    left = current.score(location.columns)
+    left = current.score(location.columns, location.pooled)
     return Formula(terms=tuple(chosen), coefficients=coef, stderr=err, statistic=joint.statistic, df=joint.df,
                    share=share, dictionary_size=size, left_statistic=left.statistic, left_df=left.df,
                    left_p_value=left.p_value, complete=left.p_value >= alpha, spread=spread)

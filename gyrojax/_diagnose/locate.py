@@ -71,6 +71,7 @@ class Location(eqx.Module):
     library: str = ""
     within: str = ""
     significant: bool = True
+    pooled: bool = False  # its columns are one curve for every device (`ResidualSpace.score(..., pooled=True)`)
 
     @property
     def key(self) -> str:
@@ -171,11 +172,12 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS) -> L
             confounded = tuple(dict.fromkeys(confounded + run_properties(fit.data.blocks[best.sweep])))
         members, joined = [best], space.with_columns(best.columns)
         for d in sorted(significant, key=strength, reverse=True):
-            if d.sweep in {m.sweep for m in members} or (d.coordinate, d.family) != (best.coordinate, best.family):
+            if d.sweep in {m.sweep for m in members} or (d.coordinate, d.family, d.pooled) != (
+                    best.coordinate, best.family, best.pooled):
                 continue
             if d.family in SCANS:
                 continue
-            if joined.score(d.columns).p_value < cut:
+            if joined.score(d.columns, d.pooled).p_value < cut:
                 members.append(d)
                 joined = joined.with_columns(d.columns)
         found.append(_location(space, fit, members, confounded))
@@ -239,8 +241,8 @@ def _confounded(space, best, descs, cut) -> list:
             continue
         if d.family in SCANS:
             continue
-        if (beyond_best.score(d.columns).p_value >= cut
-                and space.with_columns(d.columns).score(best.columns).p_value >= cut):
+        if (beyond_best.score(d.columns, d.pooled).p_value >= cut
+                and space.with_columns(d.columns).score(best.columns, best.pooled).p_value >= cut):
             out.append(d)
     return out
 
@@ -248,7 +250,7 @@ def _confounded(space, best, descs, cut) -> list:
 def _location(space, fit, members, confounded) -> Location:
     best = members[0]
     cols = np.concatenate([m.columns for m in members], axis=-1)
-    sc = space.score(cols)
+    sc = space.score(cols, best.pooled)
     excess = space.excess
     share = min(max(sc.statistic - sc.df, 0.0) / excess, 1.0) if excess > 0 else 0.0
     shares = _measured_shares(space, fit, best, sc)
@@ -258,7 +260,7 @@ def _location(space, fit, members, confounded) -> Location:
                     chi2_explained=sc.statistic, df=sc.df, share=share,
                     p_value=max(min(d.p_value for d in members), 0.0), fingerprint=sc.fingerprint, columns=cols,
                     located_on=tuple(m.sweep for m in members), location=location, size=size, size_reason=reason,
-                    confounded_with=tuple(confounded))
+                    confounded_with=tuple(confounded), pooled=best.pooled)
 
 
 def _shape_words(d: Description) -> str:
@@ -278,7 +280,7 @@ def _shape_words(d: Description) -> str:
         return "a gain that changes from run to run" if d.family == "gain per run" else \
             "an offset that changes from run to run"
     what = "an offset" if d.family == "offset" else "a gain"
-    return f"{what} that varies smoothly along {d.coordinate}"
+    return f"{what} that varies smoothly along {d.coordinate}" + (", the same in every device" if d.pooled else "")
 
 
 def _measured_shares(space, fit, best: Description, sc) -> tuple:

@@ -98,9 +98,10 @@ class ResidualSpace:
         return out
 
     # -- scores -------------------------------------------------------------------------------------------
-    def score(self, cols: np.ndarray) -> Scored:
+    def score(self, cols: np.ndarray, pooled=False) -> Scored:
         """Fit `cols` (device, rows, k) to the residuals beyond the absorbable span, each device its own
-        coefficients."""
+        coefficients, or, for the columns `pooled` marks (True: all; or a boolean per column), one coefficient
+        for every device (a shape the same in every device)."""
         # each column to unit norm over the lot, so that the rank rule does not depend on the columns' units
         # (a cube of the output, ~1e19 LSB^3, beside a bias in LSB); the coefficients are scaled back below
         scale = np.sqrt(np.sum(cols**2, axis=(0, 1)))
@@ -111,6 +112,9 @@ class ResidualSpace:
         n, _, k = pc.shape
         if k == 0:
             return Scored(0.0, 0, 1.0, np.zeros((n, 0)), np.zeros((n, 0, 0)), np.zeros(r.shape))
+        mask = np.broadcast_to(np.asarray(pooled, bool), (k,))
+        if mask.any():
+            return self._score_pooled(cols, pc, scale, mask)
         own = np.array([float(np.linalg.norm(cols[d], 2)) ** 2 for d in range(n)])
         coefs, covs, stat, df = np.zeros((n, k)), np.zeros((n, k, k)), 0.0, 0
         fp = np.zeros(r.shape)
@@ -126,6 +130,38 @@ class ResidualSpace:
             df += df_d
             fp[d] = pc[d] @ coefs[d]
         return Scored(stat, df, beyond.p_value(stat, df), coefs / scale, covs / np.outer(scale, scale), fp)
+
+    def _score_pooled(self, cols, pc, scale, mask) -> Scored:
+        """`score` with the columns `mask` marks shared by every device: one least-squares fit over the lot's
+        stacked rows, the per-device columns block-diagonal beside them."""
+        r = self.residuals
+        n, rows, k = pc.shape
+        own_cols, pool_cols = np.flatnonzero(~mask), np.flatnonzero(mask)
+        blocks = [np.concatenate([pc[:, :, pool_cols]] + [np.where(np.arange(n)[:, None, None] == d,
+                                                                    pc[:, :, own_cols], 0.0) for d in range(n)],
+                                 axis=-1)]
+        x = blocks[0].reshape(n * rows, -1)
+        raw = np.concatenate([cols[:, :, pool_cols]] + [np.where(np.arange(n)[:, None, None] == d,
+                                                                  cols[:, :, own_cols], 0.0) for d in range(n)],
+                             axis=-1).reshape(n * rows, -1)
+        inv, df = _pinv(x.T @ x, RANK_TOL * float(np.linalg.norm(raw, 2)) ** 2)
+        b = x.T @ r.reshape(-1)
+        theta = inv @ b
+        stat = float(b @ theta)
+        fp = (x @ theta).reshape(n, rows)
+        beyond = Beyond()
+        for d in range(n):
+            beyond.add(cols[d], r[d], self._u[d])
+        # per device: the shared coefficients and the device's own, and their covariance, in `cols`' order
+        kp = pool_cols.size
+        coefs, covs = np.zeros((n, k)), np.zeros((n, k, k))
+        for d in range(n):
+            idx = np.concatenate([np.arange(kp), kp + d * own_cols.size + np.arange(own_cols.size)])
+            order = np.concatenate([pool_cols, own_cols])
+            coefs[d, order] = theta[idx]
+            covs[d][np.ix_(order, order)] = inv[np.ix_(idx, idx)]
+        return Scored(stat, df, beyond.p_value(stat, df) if df else 1.0, coefs / scale,
+                      covs / np.outer(scale, scale), fp)
 
     def sweep_rows(self, sweep: str) -> slice:
         i, j = self.blocks[sweep]
@@ -145,6 +181,14 @@ class ResidualSpace:
             b = c.T @ r
             total += float(b @ inv @ b) - df
         return max(total, 0.0)
+
+
+def stacked(blocks) -> tuple[np.ndarray, np.ndarray]:
+    """The columns of several descriptions or locations side by side, and which of them are `pooled` (one
+    coefficient for every device): the arguments of `ResidualSpace.score` for them together."""
+    cols = np.concatenate([b.columns for b in blocks], axis=-1)
+    pooled = np.concatenate([np.full(b.columns.shape[-1], bool(b.pooled)) for b in blocks])
+    return cols, pooled
 
 
 def _spans(base: np.ndarray) -> list:

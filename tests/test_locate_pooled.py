@@ -1,0 +1,62 @@
+"""A curve shared by every device (`pooled` descriptions): one coefficient per knot for the lot, so that a narrow
+feature the same in every device (a dead band around zero rate) is described on fine knots without paying their
+degrees of freedom once per device."""
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+import gyrojax as gj
+from gyrojax._diagnose.descriptions import coordinates, spline_basis
+from gyrojax._diagnose.locate import locate
+from gyrojax._diagnose.space import ResidualSpace
+
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "experiments"))
+from _discovery_lot import discovery_lot  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def null_fit():
+    table, _ = discovery_lot(None, snr="mid", design="a", seed=0)
+    return gj.identify("paper-qmg", table, progress=False)
+
+
+def _input_gain_columns(space, fit, knots=12):
+    block = fit.data.blocks["rate_table"]
+    mask = np.asarray(block.mask)
+    hats = spline_basis(np.where(mask, coordinates(block)["input"], 0.0), mask, knots=knots, signed=True)
+    return space.columns({"rate_table": hats * np.asarray(fit.predictions["rate_table"], float)[..., None]})
+
+
+def test_pooled_score_is_one_fit_for_every_device(null_fit):
+    space = ResidualSpace(null_fit)
+    cols = _input_gain_columns(space, null_fit)
+    own, pooled = space.score(cols), space.score(cols, pooled=True)
+    # nested in the per-device fit: never more chi2, never more directions
+    assert pooled.statistic <= own.statistic + 1e-9 and pooled.df < own.df
+    assert np.allclose(pooled.coefficients, pooled.coefficients[0])
+    # residuals that are exactly one shared curve beyond the span: both fits take all of it
+    shared = space.project(cols) @ np.linspace(-1.0, 1.0, cols.shape[-1])
+    space.residuals = shared
+    a, b = space.score(cols), space.score(cols, pooled=True)
+    assert b.statistic == pytest.approx(float(np.sum(shared**2)), rel=1e-8)
+    assert a.statistic == pytest.approx(b.statistic, rel=1e-8)
+    # a mask of no pooled column is the per-device fit; a mixed one lies between the two
+    none = space.score(cols, pooled=np.zeros(cols.shape[-1], bool))
+    assert none.statistic == pytest.approx(a.statistic, rel=1e-12) and none.df == a.df
+    half = np.arange(cols.shape[-1]) < cols.shape[-1] // 2
+    assert b.df < space.score(cols, pooled=half).df < a.df
+
+
+@pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.slow)])
+def test_a_dead_band_is_located_on_the_input_around_zero(seed):
+    # the independent generator's held-out dead band: the rate loop loses a share of the rate for |rate| <= 0.5 deg/s
+    table, info = discovery_lot("dead_band", snr="mid", design="a", seed=seed)
+    first = locate(gj.identify("paper-qmg", table, progress=False)).locations[0]
+    assert first.pooled and first.coordinate == "input" and first.located_on == ("rate_table",)
+    lo, hi = first.location["interval"]
+    assert -0.5 <= lo < 0 < hi <= 0.5
+    assert first.share > 0.8 and "the same in every device" in first.description
