@@ -18,7 +18,7 @@ import numpy as np
 from .._identify import Fit
 from .._numerics.stats import chi2_sf
 from .locate import locate
-from .space import EXPLAINED_SHARE_LEFT, ResidualSpace, stacked
+from .space import EXPLAINED_SHARE_LEFT, ResidualSpace
 
 
 def encompassing_guard(before: Fit, after: Fit, effect: str, localisation, df: int, alpha: float,
@@ -40,13 +40,15 @@ def encompassing_guard(before: Fit, after: Fit, effect: str, localisation, df: i
     if fresh and left:
         joined = space_after.with_columns(np.concatenate([f.columns for f in fresh], axis=-1))
         cut = alpha / len(localisation.locations)
-        left = [loc for loc in left if _keeps(joined.score(loc.columns, loc.pooled), loc, cut)]
+        left = [loc for loc in left if _keeps(joined.score(loc.columns), loc, cut)]
     left = fresh + left
     if not left:
         return None
-    cols, pooled = stacked(left)
-    d = (before.chi2_total - ResidualSpace(before).score(cols, pooled).statistic) - (
-        after.chi2_total - space_after.score(cols, pooled).statistic)
+    # each device its own coefficients, a pooled location's too: F is as flexible as the descriptions can be, so
+    # that a candidate is credited only with what no curve of the misfit's coordinates takes in any device
+    cols = np.concatenate([loc.columns for loc in left], axis=-1)
+    d = (before.chi2_total - ResidualSpace(before).score(cols).statistic) - (
+        after.chi2_total - space_after.score(cols).statistic)
     p = chi2_sf(max(d, 0.0), max(df, 1))
     if p < alpha:
         return None
@@ -64,7 +66,7 @@ def left_locations(space_after: ResidualSpace, localisation, alpha: float) -> li
     cut = alpha / len(locations)
     left = []
     for loc in locations:
-        now = space_after.score(loc.columns, loc.pooled)
+        now = space_after.score(loc.columns)
         if not _keeps(now, loc, cut):
             continue  # the candidate took this misfit
         left.append((now.statistic, loc))
@@ -82,7 +84,7 @@ def _beyond_each_other(space, left, cut) -> list:
         others = [o.columns for o in kept if o is not loc]
         if not others:
             break
-        now = space.with_columns(np.concatenate(others, axis=-1)).score(loc.columns, loc.pooled)
+        now = space.with_columns(np.concatenate(others, axis=-1)).score(loc.columns)
         if not _keeps(now, loc, cut):
             kept = [o for o in kept if o is not loc]
     return kept

@@ -81,8 +81,8 @@ def other_misfit(fit, columns, localisation, alpha) -> np.ndarray:
     cut = alpha / len(localisation.locations)
     keep = []
     for loc in localisation.locations:
-        now = joined.score(loc.columns, loc.pooled)
-        if now.p_value < cut and now.statistic > EXPLAINED_SHARE_LEFT * space.score(loc.columns, loc.pooled).statistic:
+        now = joined.score(loc.columns)
+        if now.p_value < cut and now.statistic > EXPLAINED_SHARE_LEFT * space.score(loc.columns).statistic:
             keep.append(loc.columns)
     if not keep:
         return empty

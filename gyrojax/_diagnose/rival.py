@@ -35,7 +35,7 @@ from .._identify import Fit
 from .discrepancy import LookAlike
 from .formula import Formula, formula_columns, propose
 from .locate import locate
-from .space import ResidualSpace, stacked
+from .space import ResidualSpace
 
 
 SAME_SHAPE = 0.99  # share of the effect's change (norm squared) inside the formula's span: the same shape
@@ -73,7 +73,7 @@ def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float
     if not localisation.locations:
         return None
     space_b, space_a = ResidualSpace(before), ResidualSpace(after)
-    taken = [(space_b.score(loc.columns, loc.pooled).statistic - space_a.score(loc.columns, loc.pooled).statistic, loc)
+    taken = [(space_b.score(loc.columns).statistic - space_a.score(loc.columns).statistic, loc)
              for loc in localisation.locations]
     gain, loc = max(taken, key=lambda x: x[0])
     if gain <= 0:
@@ -84,15 +84,15 @@ def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float
     chi2_before, chi2_after = float(before.chi2_total), float(after.chi2_total)
     f_effect = np.asarray(before.residual_vector, float) - np.asarray(after.residual_vector, float)
     left = (located_after if located_after is not None else locate(after, alpha=alpha)).locations
-    other = [o for o in left if o.coordinate != loc.coordinate]
+    other = [o.columns for o in left if o.coordinate != loc.coordinate]
     if other:
-        oc, pooled = stacked(other)
+        oc = np.concatenate(other, axis=-1)
         for d in range(oc.shape[0]):  # without the effect's own change: the other misfit only
             norm = float(f_effect[d] @ f_effect[d])
             if norm > 0:
                 oc[d] -= np.outer(f_effect[d], f_effect[d] @ oc[d]) / norm
-        chi2_before -= space_b.score(oc, pooled).statistic
-        chi2_after -= space_a.score(oc, pooled).statistic
+        chi2_before -= space_b.score(oc).statistic
+        chi2_after -= space_a.score(oc).statistic
         space_b = space_b.with_columns(oc)
     # the rival is the best closed form of another shape: terms that alone reproduce the effect's change are
     # its own shape in the dictionary's words, not a rival

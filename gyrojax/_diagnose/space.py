@@ -183,14 +183,6 @@ class ResidualSpace:
         return max(total, 0.0)
 
 
-def stacked(blocks) -> tuple[np.ndarray, np.ndarray]:
-    """The columns of several descriptions or locations side by side, and which of them are `pooled` (one
-    coefficient for every device): the arguments of `ResidualSpace.score` for them together."""
-    cols = np.concatenate([b.columns for b in blocks], axis=-1)
-    pooled = np.concatenate([np.full(b.columns.shape[-1], bool(b.pooled)) for b in blocks])
-    return cols, pooled
-
-
 def _spans(base: np.ndarray) -> list:
     """Each device's orthonormal basis of the span of `base` (device, rows, m), singular values above 1e-12 of
     the largest (as `gyrojax._diagnose.probes.project_out`)."""
