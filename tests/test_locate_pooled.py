@@ -55,7 +55,10 @@ def test_pooled_score_is_one_fit_for_every_device(null_fit):
 def test_a_dead_band_is_located_on_the_input_around_zero(seed):
     # the independent generator's held-out dead band: the rate loop loses a share of the rate for |rate| <= 0.5 deg/s
     table, info = discovery_lot("dead_band", snr="mid", design="a", seed=seed)
-    first = locate(gj.identify("paper-qmg", table, progress=False)).locations[0]
+    fit = gj.identify("paper-qmg", table, progress=False)
+    # what the guards read: the per-device descriptions alone
+    assert not any(loc.pooled for loc in locate(fit, pooled=False).locations)
+    first = locate(fit).locations[0]
     assert first.pooled and first.coordinate == "input" and first.located_on == ("rate_table",)
     lo, hi = first.location["interval"]
     assert -0.5 <= lo < 0 < hi <= 0.5

@@ -118,9 +118,9 @@ def _log_p(stat: float, df: int) -> float:
 
 
 # -- the descriptions ----------------------------------------------------------------------------------------
-def describe(space: ResidualSpace) -> tuple[list, list]:
+def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
     """Every flexible description of `space`'s residuals: (descriptions, notes on coordinates that were not
-    described along, and why)."""
+    described along, and why); with `pooled=False` no curve shared by every device."""
     fit, out, notes = space.fit, [], []
     for sweep in fit.data.sweeps:
         block = fit.data.blocks[sweep]
@@ -155,7 +155,7 @@ def describe(space: ResidualSpace) -> tuple[list, list]:
             # the same curve in every device, on finer knots: what most physical terms are (in output units or
             # as a gain), where a coordinate moves within the devices (not one that mostly tells them apart)
             fine = (spline_basis(x, mask, knots=POOLED_KNOTS, signed=name in SIGNED)
-                    if dev >= WITHIN_DEVICE_SHARE * lot else None)
+                    if pooled and dev >= WITHIN_DEVICE_SHARE * lot else None)
             for family, g in (() if fine is None else (("offset", fine), ("gain", fine * pred[..., None]))):
                 cols = space.columns({sweep: g})
                 sc = space.score(cols, pooled=True)

@@ -35,7 +35,7 @@ def encompassing_guard(before: Fit, after: Fit, effect: str, localisation, df: i
     # significance after the refit only through the second misfit, which the fresh description says alone
     # (a gain per run): that location is taken. One that holds a misfit of another shape the candidate took part
     # of keeps what the fresh description of the rest does not say.
-    fresh = list((located_after if located_after is not None else locate(after, alpha=alpha)).locations)
+    fresh = list((located_after if located_after is not None else locate(after, alpha=alpha, pooled=False)).locations)
     left = left_locations(space_after, localisation, alpha)
     if fresh and left:
         joined = space_after.with_columns(np.concatenate([f.columns for f in fresh], axis=-1))
@@ -44,8 +44,6 @@ def encompassing_guard(before: Fit, after: Fit, effect: str, localisation, df: i
     left = fresh + left
     if not left:
         return None
-    # each device its own coefficients, a pooled location's too: F is as flexible as the descriptions can be, so
-    # that a candidate is credited only with what no curve of the misfit's coordinates takes in any device
     cols = np.concatenate([loc.columns for loc in left], axis=-1)
     d = (before.chi2_total - ResidualSpace(before).score(cols).statistic) - (
         after.chi2_total - space_after.score(cols).statistic)

@@ -144,13 +144,14 @@ class Localisation:
     period: float | None
 
 
-def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS) -> Localisation:
-    """The misfit's locations at `fit`, most significant first (see the module docstring)."""
+def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS, pooled: bool = True) -> Localisation:
+    """The misfit's locations at `fit`, most significant first (see the module docstring); with `pooled=False`
+    from the per-device descriptions alone (what the diagnosis's guards read)."""
     space = ResidualSpace(fit)
     found = []
     notes, hints = (), None
     while len(found) < max_locations:
-        descs, new_notes = describe(space)
+        descs, new_notes = describe(space, pooled=pooled)
         if hints is None:
             hints = _hints(descs)
             notes = tuple(dict.fromkeys(new_notes))

@@ -83,7 +83,7 @@ def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float
     # nor the effect blamed for leaving it. (The rest of the effect's own misfit is what a rival may explain better.)
     chi2_before, chi2_after = float(before.chi2_total), float(after.chi2_total)
     f_effect = np.asarray(before.residual_vector, float) - np.asarray(after.residual_vector, float)
-    left = (located_after if located_after is not None else locate(after, alpha=alpha)).locations
+    left = (located_after if located_after is not None else locate(after, alpha=alpha, pooled=False)).locations
     other = [o.columns for o in left if o.coordinate != loc.coordinate]
     if other:
         oc = np.concatenate(other, axis=-1)
