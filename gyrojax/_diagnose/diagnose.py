@@ -110,10 +110,9 @@ def _solution(s: "_Selection", candidates, located, discrepancy, designs, compar
     # Which library effect has the shape of what is left: every candidate not selected, at the final fit.
     others = [c for c in candidates if c not in s.selected]
     final_scores = score_candidates(s.fit, others, min_typical_chi2=min_typical_chi2) if others else ()
-    # what is reported is described with the curves shared by every device too; the guards read the per-device
-    # descriptions alone (see `_Selection.located_at`)
-    baseline_discrepancy = with_shapes(baseline, locate(baseline, alpha=alpha).locations, discrepancy, designs,
-                                       ranking0, s.rejected, max_typical_multiple, alpha)
+    # what is reported is described with the curves shared by every device too (see `_Selection.located_at`)
+    baseline_discrepancy = with_shapes(baseline, s.located_at(baseline, alpha, pooled=True).locations, discrepancy,
+                                       designs, ranking0, s.rejected, max_typical_multiple, alpha)
     final_discrepancy, formula = _final_discrepancy(s, final_scores, max_typical_multiple, alpha)
     comparisons = tuple(comparison(f) for f in s.fits)
     verdict = verdict_of(comparisons[-1], s.steps)
@@ -186,18 +185,19 @@ class _Selection:
     steps: list = dataclasses.field(default_factory=list)
     ambiguous: list = dataclasses.field(default_factory=list)
     family: list = dataclasses.field(default_factory=list)  # every refit's selection-corrected p-value (FDR)
-    localised: dict = dataclasses.field(default_factory=dict)  # id(fit) -> (fit, its localisation), see `located_at`
+    localised: dict = dataclasses.field(default_factory=dict)  # (id(fit), pooled) -> (fit, ...), see `located_at`
     ranking0: tuple | None = None
     untestable: tuple = ()
 
-    def located_at(self, fit: Fit, alpha: float) -> Localisation:
-        """`locate(fit)`, once per fit: a refit's localisation, read by the guards, is the step's when confirmed."""
-        known = self.localised.get(id(fit))
+    def located_at(self, fit: Fit, alpha: float, *, pooled: bool = False) -> Localisation:
+        """`locate(fit)`, once per fit: a refit's localisation, read by the guards, is the step's when confirmed.
+        The guards read the per-device descriptions alone: a curve shared by every device is a less flexible
+        description of the misfit a candidate leaves, and read by the guards it credited candidates with what
+        per-device curves take (the two-effect benchmark's wrong confirmations 2 -> 6 of 80). What is reported
+        is described with the shared curves too (`pooled=True`)."""
+        known = self.localised.get((id(fit), pooled))
         if known is None or known[0] is not fit:
-            # per device only: a curve shared by every device is a less flexible description of the misfit a
-            # candidate leaves, and read by the guards it credited candidates with what per-device curves take
-            # (the two-effect benchmark's wrong confirmations 2 -> 6 of 80)
-            known = self.localised[id(fit)] = (fit, locate(fit, alpha=alpha, pooled=False))
+            known = self.localised[(id(fit), pooled)] = (fit, locate(fit, alpha=alpha, pooled=pooled))
         return known[1]
 
 
@@ -367,7 +367,7 @@ def _final_discrepancy(s: _Selection, final_scores, max_typical_multiple, alpha)
     """What is left at the final fit, with the library's shapes, a closed-form formula along its coordinate
     (which then names the coordinate) and the misfit's size as the term's coefficient: (discrepancy, formula)."""
     fit = s.fit
-    located = locate(fit, alpha=alpha)
+    located = s.located_at(fit, alpha, pooled=True)  # the baseline's, computed once, when nothing was confirmed
     discrepancy = with_shapes(fit, located.locations, s.discrepancy, s.designs, final_scores, s.rejected,
                               max_typical_multiple, alpha)
     # a single point off the model (an outlier) has no closed form in the recorded coordinates to propose

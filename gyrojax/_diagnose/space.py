@@ -137,31 +137,29 @@ class ResidualSpace:
         r = self.residuals
         n, rows, k = pc.shape
         own_cols, pool_cols = np.flatnonzero(~mask), np.flatnonzero(mask)
-        blocks = [np.concatenate([pc[:, :, pool_cols]] + [np.where(np.arange(n)[:, None, None] == d,
-                                                                    pc[:, :, own_cols], 0.0) for d in range(n)],
-                                 axis=-1)]
-        x = blocks[0].reshape(n * rows, -1)
-        raw = np.concatenate([cols[:, :, pool_cols]] + [np.where(np.arange(n)[:, None, None] == d,
-                                                                  cols[:, :, own_cols], 0.0) for d in range(n)],
-                             axis=-1).reshape(n * rows, -1)
-        inv, df = _pinv(x.T @ x, RANK_TOL * float(np.linalg.norm(raw, 2)) ** 2)
+        device = np.arange(n)[:, None, None]
+
+        def stack(a):  # (device, rows, k) -> (device x rows, shared + device x own)
+            return np.concatenate([a[:, :, pool_cols]] + [np.where(device == d, a[:, :, own_cols], 0.0)
+                                                          for d in range(n)], axis=-1).reshape(n * rows, -1)
+
+        x = stack(pc)
+        inv, df = _pinv(x.T @ x, RANK_TOL * float(np.linalg.norm(stack(cols), 2)) ** 2)
         b = x.T @ r.reshape(-1)
         theta = inv @ b
-        stat = float(b @ theta)
-        fp = (x @ theta).reshape(n, rows)
         beyond = Beyond()
         for d in range(n):
             beyond.add(cols[d], r[d], self._u[d])
         # per device: the shared coefficients and the device's own, and their covariance, in `cols`' order
-        kp = pool_cols.size
+        kp, order = pool_cols.size, np.concatenate([pool_cols, own_cols])
         coefs, covs = np.zeros((n, k)), np.zeros((n, k, k))
         for d in range(n):
             idx = np.concatenate([np.arange(kp), kp + d * own_cols.size + np.arange(own_cols.size)])
-            order = np.concatenate([pool_cols, own_cols])
             coefs[d, order] = theta[idx]
             covs[d][np.ix_(order, order)] = inv[np.ix_(idx, idx)]
-        return Scored(stat, df, beyond.p_value(stat, df) if df else 1.0, coefs / scale,
-                      covs / np.outer(scale, scale), fp)
+        stat = float(b @ theta)
+        return Scored(stat, df, beyond.p_value(stat, df), coefs / scale, covs / np.outer(scale, scale),
+                      (x @ theta).reshape(n, rows))
 
     def sweep_rows(self, sweep: str) -> slice:
         i, j = self.blocks[sweep]
