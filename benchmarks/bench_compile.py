@@ -5,7 +5,7 @@ process (a script, not a test).
 
     python benchmarks/bench_compile.py [--quick] [--entries simulate_table,identify,...] [--json PATH]
 
-Entry points, all on the demo's data (`gyrojax._demo.DEMO_LOT`: 3 paper-qmg devices x 2 runs, rate table +
+Entry points, all on the demo's data (`gyrojax._cli.demo_job.DEMO_LOT`: 3 paper-qmg devices x 2 runs, rate table +
 static virtual-Coriolis + DAC sweeps, with the demo's hidden `dac_inl`):
 
 - `simulate_table`: `gj.simulate_table(gj.add_effect(gj.paper_qmg(), "dac_inl"), **DEMO_LOT)` (it also writes
@@ -75,7 +75,7 @@ def _worker(entry, data_path, out_path):
 
     t = time.perf_counter()
     import gyrojax as gj
-    from gyrojax._demo import DEMO_LOT, HIDDEN_EFFECT, run_demo
+    from gyrojax._cli.demo_job import DEMO_LOT, HIDDEN_EFFECT, run_demo
     import_s = time.perf_counter() - t
 
     table = None if entry == "simulate_table" else gj.read_table(data_path)

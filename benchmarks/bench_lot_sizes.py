@@ -29,7 +29,7 @@ def _worker(entry, bucket, sizes, repeats, out):
     import numpy as np
 
     import gyrojax as gj
-    from gyrojax._demo import DEMO_LOT
+    from gyrojax._cli.demo_job import DEMO_LOT
 
     gyro = gj.add_effect(gj.paper_qmg(), "dac_inl") if entry == "diagnose" else gj.paper_qmg()
     if not bucket:  # as VmapSolve(bucket=False), for diagnose's fits and the settle too (nothing compiled yet)

@@ -51,7 +51,7 @@ def main():
     import gyrojax as gj
     from gyrojax._model.parameters import DEFAULT_FREE
     from gyrojax._plan.plan import _baseline  # the plan's own baseline fit, timed apart
-    from gyrojax._progress import as_progress
+    from gyrojax._runtime.progress import as_progress
 
     print(f"jax {jax.__version__}, gyrojax {gj.__version__}, load average {os.getloadavg()}")
     rows = []

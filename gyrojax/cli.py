@@ -32,10 +32,10 @@ import signal
 import sys
 import threading
 
-from . import _stop
 from ._cli import compensate, demo, describe, diagnose, identify, metrics, plan, simulate
 from ._cli.common import EXIT_FAILED, EXIT_USAGE
 from ._data.io import OutputPathError
+from ._runtime import stop as _stop
 
 
 EXIT_SIGNAL_BASE = 128
@@ -55,8 +55,8 @@ _SIGNALS = (signal.SIGTERM, signal.SIGINT)
 def _signals_raise():
     """Turn the first SIGTERM or SIGINT into `_Interrupted` for the block, restoring the old handlers after.
 
-    The first signal records the stop (`gyrojax._stop`, checked again at safe points: its exception may be lost),
-    raises, and restores the default handlers, so that a second signal kills the process whatever it is doing.
+    The first signal records the stop (`gyrojax._runtime.stop`, checked again at safe points: its exception may be
+    lost), raises, and restores the default handlers, so that a second signal kills the process whatever it is doing.
     An `_Interrupted` that Python could not raise (a signal in a garbage-collector hook) is not reported as an
     ignored exception: the safe points act on it.
     """

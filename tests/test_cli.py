@@ -96,7 +96,8 @@ def no_work(monkeypatch):
     def reached(*args, **kwargs):
         raise AssertionError("work was started before the output paths were checked")
 
-    from gyrojax import _demo, _diagnose
+    from gyrojax import _diagnose
+    from gyrojax._cli import demo_job as _demo
     from gyrojax._data import files as data_files
     from gyrojax._lots import campaign as _campaign
     monkeypatch.setattr(data_files, "read_table", reached)

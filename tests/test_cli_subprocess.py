@@ -110,7 +110,7 @@ def test_signal_during_a_write_keeps_the_old_file(tmp_path, signum):
 SLOW_DEMO = textwrap.dedent("""
     import os, sys, time
     import gyrojax.cli as cli
-    from gyrojax import _demo
+    from gyrojax._cli import demo_job as _demo
 
     def slow(out_dir, full_tier=False, log=print, progress=True):
         with open(os.path.join(out_dir, "report.md"), "w") as f:

@@ -11,7 +11,7 @@ import pytest
 from _experiments import load_experiment
 
 import gyrojax as gj
-from gyrojax._demo import DEMO_LOT
+from gyrojax._cli.demo_job import DEMO_LOT
 from gyrojax._diagnose.compare import nonlinearity_residual_ppm
 
 

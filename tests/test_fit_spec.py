@@ -5,7 +5,7 @@ import importlib
 import pytest
 
 import gyrojax as gj
-from gyrojax._demo import DEMO_LOT
+from gyrojax._cli.demo_job import DEMO_LOT
 
 
 identify_module = importlib.import_module("gyrojax._identify.identify")  # the module, not the function it exports

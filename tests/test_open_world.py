@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
-from gyrojax._demo import DEMO_LOT
+from gyrojax._cli.demo_job import DEMO_LOT
 
 
 pytestmark = pytest.mark.slow

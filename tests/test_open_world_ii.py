@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
-from gyrojax._demo import DEMO_LOT
+from gyrojax._cli.demo_job import DEMO_LOT
 from gyrojax._diagnose.draft import write_draft
 
 

@@ -16,7 +16,7 @@ import pytest  # noqa: E402
 
 import gyrojax as gj  # noqa: E402
 import gyrojax.plot as gplot  # noqa: E402
-from gyrojax._demo import table2_path  # noqa: E402
+from gyrojax._cli.demo_job import table2_path  # noqa: E402
 from gyrojax._diagnose.score import score_candidates, separating_sweep  # noqa: E402
 from gyrojax._numerics.testability import MIN_TYPICAL_CHI2, is_testable, separates  # noqa: E402
 from gyrojax._plan.plan import MAX_BUDGET_MIN, _warnings  # noqa: E402
@@ -193,7 +193,7 @@ def test_the_demos_default_folder_is_ignored_by_git():
 
 @pytest.mark.slow
 def test_the_demo_says_where_it_writes_names_its_lot_and_explains_the_bandwidth(tmp_path, capsys, monkeypatch):
-    from gyrojax._demo import BANDWIDTH_NOTE, LOT_SOURCE
+    from gyrojax._cli.demo_job import BANDWIDTH_NOTE, LOT_SOURCE
 
     monkeypatch.chdir(tmp_path)
     assert main(["demo", "--no-full", "--quiet"]) == 0  # the default folder, in the current one

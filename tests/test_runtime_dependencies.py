@@ -26,7 +26,7 @@ def test_only_runtime_dependencies_are_imported(tmp_path):
         "            raise ImportError(f'{name} is a test-only dependency')\n"
         "sys.meta_path.insert(0, Block())\n"
         "import gyrojax, gyrojax.cli, gyrojax.plot\n"
-        "import gyrojax._identify, gyrojax._diagnose, gyrojax._compensate.model, gyrojax._demo\n"
+        "import gyrojax._identify, gyrojax._diagnose, gyrojax._compensate.model, gyrojax._cli.demo_job\n"
         "gyrojax.cli.build_parser()\n"
         "print('ok')\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,

@@ -7,7 +7,7 @@ from .common import EXIT_OK, check_outputs
 
 
 def handle(args):
-    from .._demo import run_demo
+    from .demo_job import run_demo
 
     check_outputs(("--out", args.out, True))
     where = os.path.abspath(args.out)  # said in full: the default is a folder in the current one

@@ -18,7 +18,7 @@ from .._metrics import (
     fit_scale_factor,
     repeatability,
 )
-from .._progress import ProgressArg, as_progress
+from .._runtime.progress import ProgressArg, as_progress
 from .._text import safe_name
 from .base import AbstractCompensation, AbstractCompensator
 from .composite import CompositeCompensator

@@ -30,7 +30,7 @@ import stat
 import tempfile
 from collections.abc import Iterator
 
-from .._stop import check as _check_stop
+from .._runtime.stop import check as _check_stop
 
 
 FOLDER_MARKER = ".gyrojax-output"

@@ -16,7 +16,7 @@ from .._model.fitdata import FitData, fit_data
 from .._model.parameters import DEFAULT_FREE, Model, as_model
 from .._numerics.stats import chi2_sf
 from .._plugins import nonfinite_effect
-from .._progress import ProgressArg, as_progress
+from .._runtime.progress import ProgressArg, as_progress
 from .candidates import baseline_fit, baseline_model, candidate_effects, first_device, is_lot
 from .columns import base_columns, effect_columns
 from .compare import compare, nonlinearity_residual_ppm

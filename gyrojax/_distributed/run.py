@@ -16,7 +16,7 @@ from .._gyroscope import Gyroscope
 from .._identify.covariance import chi2_p_value
 from .._identify.fit import EXIT_CODES, EXIT_PRECEDENCE
 from .._model.parameters import DEFAULT_FREE, Model, as_model
-from .._progress import ProgressArg, as_progress
+from .._runtime.progress import ProgressArg, as_progress
 from .engine import DistributedSolve
 from .plan import Plan
 from .task import fit_chunk

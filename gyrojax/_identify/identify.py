@@ -33,7 +33,7 @@ from .._data.table import Table
 from .._gyroscope import Gyroscope
 from .._model.fitdata import FitData, fit_data
 from .._model.parameters import DEFAULT_FREE, Model, as_model
-from .._progress import ProgressArg, as_progress
+from .._runtime.progress import ProgressArg, as_progress
 from .._simulate.tiers import AbstractTier, Steady
 from .._solution import RESULTS, result_code
 from .assemble import assemble_fit

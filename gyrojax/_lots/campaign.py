@@ -19,7 +19,7 @@ from jaxtyping import ArrayLike, Float
 from .._data.cells import OPTIONAL_COLUMNS
 from .._data.table import Table
 from .._gyroscope import Gyroscope
-from .._progress import ProgressArg, as_progress
+from .._runtime.progress import ProgressArg, as_progress
 from .._simulate.tiers import AbstractTier, Steady
 from .._sweeps.base import AbstractSweep, float_tuple
 from .._sweeps.dac import Dac

@@ -41,7 +41,7 @@ from .._identify.spec import FitSpec, fit_spec
 from .._lots.noise import RateNoise
 from .._model.fitdata import FitData, fit_data
 from .._model.parameters import DEFAULT_FREE, Model, as_model
-from .._progress import ProgressArg, as_progress
+from .._runtime.progress import ProgressArg, as_progress
 from .._sweeps.protocol import Protocol
 from .._sweeps.rate_table import RateTable
 from .._sweeps.registry import SWEEP_KINDS

@@ -3,7 +3,7 @@
 The command line's signal handler raises `Interrupted` at once, but an exception raised by a signal handler is
 lost when the signal lands in code whose exceptions Python ignores (a `gc.callbacks` hook such as JAX's
 `_xla_gc_callback`, a `__del__`, a weak-reference callback). So the handler also records the stop here, and
-`check` raises it again from ordinary code: at every progress step (`gyrojax._progress.Progress`, called even
+`check` raises it again from ordinary code: at every progress step (`gyrojax._runtime.progress.Progress`, called even
 when silent) and just before an output file or folder is moved into place (`gyrojax._data.io`), so that a stopped
 command never writes its outputs. Nothing here is set outside the command line.
 """

@@ -12,7 +12,7 @@ import sys
 import time
 from collections.abc import Callable
 
-from ._stop import check as _check_stop
+from .stop import check as _check_stop
 
 
 _SEEN: set = set()  # what was compiled in this process (by key): later calls with it are fast
@@ -44,7 +44,7 @@ class Progress:
         return self._out is not None
 
     def __call__(self, message: str) -> None:
-        _check_stop()  # a safe point for a stop asked for by a signal (gyrojax._stop), silent or not
+        _check_stop()  # a safe point for a stop asked for by a signal (gyrojax._runtime.stop), silent or not
         if self._out is not None:
             self._out(f"{self.name}: {message} (t = {time.perf_counter() - self.start:.0f} s)")
 

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ._data.io import atomic_write_bytes
+from .._data.io import atomic_write_bytes
 
 
 HIDDEN_EFFECT = "dac_inl"
@@ -92,7 +92,7 @@ def _demo_hidden_effect(out_dir: str, log, progress: bool) -> dict:
     `out_dir`/diagnosis). Returns the diagnosis's summary."""
     import gyrojax as gj
 
-    from ._diagnose import diagnose, write_report
+    from .._diagnose import diagnose, write_report
 
     log(f"[1/4] a lot of {DEMO_LOT['devices']} paper-qmg devices x {DEMO_LOT['runs']} runs with a hidden effect: "
         f"simulating {', '.join(DEMO_LOT['sweeps'])}")
