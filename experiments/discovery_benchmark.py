@@ -496,6 +496,11 @@ def _list(text, allowed, what):
     return items
 
 
+def effect_names(text) -> list:
+    """`--effects`: 'all' (the benchmark's 26), 'held-out' (the 12 never used to tune the guards) or names."""
+    return {"all": list(HIDDEN), "held-out": list(HELD_OUT)}.get(text) or _list(text, list(EFFECTS), "effects")
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--methods", default="gyrojax,refit_ftest,pysindy")
@@ -516,8 +521,7 @@ def main(argv=None):
     methods = _list(a.methods, list(METHODS), "methods")
     snrs = _list(a.snr, list(TARGET_CHI2), "snr")
     designs = _list(a.designs, list(DESIGNS), "designs")
-    effects = ({"all": list(HIDDEN), "held-out": list(HELD_OUT)}.get(a.effects)
-               or _list(a.effects, list(EFFECTS), "effects"))
+    effects = effect_names(a.effects)
     seeds = _parse_seeds(a.seeds)
     os.makedirs(a.out, exist_ok=True)
     runners = []

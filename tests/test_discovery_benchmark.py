@@ -71,6 +71,14 @@ def test_held_out_effects_are_apart_from_the_benchmark():
         assert h.sweeps <= set(lotgen.SWEEPS)
 
 
+def test_effects_are_chosen_by_set_or_by_name():
+    assert bench.effect_names("all") == list(lotgen.HIDDEN)
+    assert bench.effect_names("held-out") == list(lotgen.HELD_OUT)
+    assert bench.effect_names("dead_band,zro_tempco") == ["dead_band", "zro_tempco"]
+    with pytest.raises(SystemExit, match="--effects: unknown nope; expected some of dac_inl_s_curve"):
+        bench.effect_names("nope,zro_tempco")
+
+
 @pytest.mark.parametrize("name", list(lotgen.EFFECTS))
 def test_hidden_effect_changes_only_its_sweeps(name):
     null, _ = lotgen.discovery_lot(None, n_devices=3, n_runs=2, seed=4)
