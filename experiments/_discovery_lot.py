@@ -378,7 +378,7 @@ HELD_OUT_LIST = [
     _h("even_quadratic_rate", ("rate_table",), "input", None, ("sq(input)", "sq(model)"), "fraction of FS",
        "an even quadratic of the table rate on the rate rows only (centripetal pick-up of an off-axis mount)")(
         lambda lot: lot.fs_rate * (_x(lot) / OMEGA_FS_DPS) ** 2 * _mask(lot, "rate_table")),
-    _h("temp_step_bias", RV, "temperature_c", None, None, "deg/s",
+    _h("temp_step_bias", RV, "temperature_c", None, ("step(temperature_c)",), "deg/s",
        "a bias that jumps when the die passes 28 C (a mode hop of a parasitic resonance)")(
         lambda lot: lot.fs_rate / OMEGA_FS_DPS * (_dT(lot) > 3.0) * _mask(lot, *RV)),
     _h("vcf_cubic_only", ("vcf_static",), "input", None, ("cube(input)", "cube(model)"), "fraction of FS",

@@ -9,8 +9,10 @@ device on finer knots (`pooled`: the lot's coefficients, as most physical terms 
 Beside them: a curve along the input whose size
 grows with the temperature or the time, a *gain per run* (and an offset per run on sweeps read without a turn-on
 bias), an offset along time that differs from run to run, a *change-point scan* along time (a step in the
-output at one dwell) and a *spectral scan* along the input (a periodic error of the input or the DAC word).
-Scans carry their own look-elsewhere correction (Bonferroni over the positions or periods scanned).
+output at one dwell), a *spectral scan* along the input (a periodic error of the input or the DAC word) and, with
+the pooled curves, a *threshold scan* along every coordinate that moves within the devices (a step of the output
+or of the gain where it passes one value: `gyrojax._diagnose.thresholds`). Scans carry their own look-elsewhere
+correction (Bonferroni over the positions or periods scanned).
 """
 
 import dataclasses
@@ -18,7 +20,8 @@ import math
 
 import numpy as np
 
-from .._numerics.stats import chi2_sf
+from .._numerics.stats import chi2_sf, log_chi2_sf
+from . import thresholds
 from .compare import recorded_coordinates
 from .space import ResidualSpace, Scored
 
@@ -108,19 +111,11 @@ def spline_basis(x, mask, knots=KNOTS, signed=False):
     return np.stack([np.where(mask, np.interp(x, k, eye[j]), 0.0) for j in range(k.size)], axis=-1)
 
 
-def _log_p(stat: float, df: int) -> float:
-    """log of chi2(df)'s tail at `stat`, stable where the probability underflows."""
-    p = chi2_sf(stat, df)
-    if p > 1e-290:
-        return math.log(p)
-    a, x = df / 2.0, stat / 2.0
-    return (a - 1.0) * math.log(x) - x - math.lgamma(a)
-
-
 # -- the descriptions ----------------------------------------------------------------------------------------
 def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
     """Every flexible description of `space`'s residuals: (descriptions, notes on coordinates that were not
-    described along, and why); with `pooled=False` no curve shared by every device."""
+    described along, and why); with `pooled=False` no curve shared by every device and no threshold scan (whose
+    threshold is the lot's): the per-device descriptions the guards read."""
     fit, out, notes = space.fit, [], []
     for sweep in fit.data.sweeps:
         block = fit.data.blocks[sweep]
@@ -162,6 +157,10 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
                 if sc.df:
                     out.append(Description(sweep, name, family, cols, sc, sc.p_value, {"within_device": dev / lot},
                                            pooled=True))
+            # a step where the coordinate passes one value, at one threshold for the lot (the lot's, as the
+            # pooled curves' shape is): offset and gain, in every device or in one
+            if fine is not None:
+                out.extend(_thresholds(space, sweep, name, x, mask, pred, dev / lot))
         g = interactions(block, mask)
         for name, cols_g in g.items():
             cols = space.columns({sweep: cols_g})
@@ -189,6 +188,48 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
             out.append(d)
         out.extend(_point_scans(space, sweep, block, mask))
     return out, notes
+
+
+def _thresholds(space, sweep, name, x, mask, pred, within_device) -> list:
+    """The threshold scans along one coordinate (`gyrojax._diagnose.thresholds`) as descriptions."""
+    out = []
+    for family in thresholds.FAMILIES:
+        found = thresholds.scan(space, sweep, x, mask, pred, family)
+        if found is not None:
+            out.append(threshold_description(space, sweep, name, found, within_device))
+    return out
+
+
+def threshold_description(space, sweep, name, found, within_device) -> Description:
+    fit = space.fit
+    where = {"at": found.at, "interval": list(found.interval), "device_index": list(found.devices),
+             "devices": [fit.devices[d] for d in found.devices], "positions": found.positions,
+             "within_device": within_device}
+    return Description(sweep, name, found.family, found.columns, found.scored, found.p_value, where,
+                       pooled=found.pooled)
+
+
+def at_threshold(space, sweep, like: Description) -> Description | None:
+    """The step of `like` (a threshold description) on another sweep `sweep`, at the same threshold in the same
+    devices, where that sweep records its coordinate and has points on both sides; None elsewhere."""
+    block = space.fit.data.blocks[sweep]
+    mask = np.asarray(block.mask)
+    coords = coordinates(block)
+    if like.coordinate not in coords:
+        return None
+    x = np.where(mask, np.asarray(coords[like.coordinate], float), 0.0)
+    above = x[mask] >= like.where["at"]
+    if above.all() or not above.any():
+        return None
+    g = thresholds.changes(x, mask, np.asarray(space.fit.predictions[sweep], float), like.family, like.where["at"],
+                           like.where["device_index"])
+    cols = space.columns({sweep: g})
+    sc = space.score(cols, pooled=like.pooled)
+    if not sc.df:
+        return None
+    found = thresholds.Threshold(like.family, like.where["at"], tuple(like.where["device_index"]), cols, sc,
+                                 sc.p_value, 1, like.pooled, tuple(like.where["interval"]))
+    return threshold_description(space, sweep, like.coordinate, found, like.where["within_device"])
 
 
 INTERACTING = ("temperature_c", "time_s")  # coordinates whose product with a curve along the input is described
@@ -286,7 +327,8 @@ def _periodic_scan(space, sweep, x, mask):
         g = np.stack([np.sin(w), np.cos(w)], axis=-1) * mask[..., None]
         cols = space.columns({sweep: g})
         sc = space.score(cols)
-        if sc.df and (best is None or _log_p(sc.statistic, sc.df) < _log_p(best[0].statistic, best[0].df)):
+        if sc.df and (best is None
+                      or log_chi2_sf(sc.statistic, sc.df) < log_chi2_sf(best[0].statistic, best[0].df)):
             best = (sc, cols, float(period))
     if best is None:
         return None
@@ -340,7 +382,8 @@ def _point_scans(space, sweep, block, mask) -> list:
                 g[dv, ..., dv] = np.where(mask[dv] & (x[dv] == v), 1.0, 0.0)
             cols = space.columns({sweep: g})
             sc = space.score(cols)
-            if sc.df and (best is None or _log_p(sc.statistic, sc.df) < _log_p(best[0].statistic, best[0].df)):
+            if sc.df and (best is None
+                          or log_chi2_sf(sc.statistic, sc.df) < log_chi2_sf(best[0].statistic, best[0].df)):
                 best = (sc, cols, v)
         if best is not None:
             sc, cols, v = best
@@ -349,12 +392,13 @@ def _point_scans(space, sweep, block, mask) -> list:
     return out
 
 
-NARROW = ("step", "single point", "at one input")  # scans whose p carries their own look-elsewhere correction
+# scans whose p carries their own look-elsewhere correction
+NARROW = ("step", "single point", "at one input", *thresholds.FAMILIES)
 
 
 def strength(d: Description) -> float:
     """-log p of a description (with the scan's look-elsewhere correction), for ranking."""
-    lp = _log_p(d.scored.statistic, d.scored.df)
+    lp = log_chi2_sf(d.scored.statistic, d.scored.df)
     if d.family in NARROW:
         lp += math.log(max(d.p_value / max(d.scored.p_value, 1e-300), 1.0))
     elif d.family == "periodic":

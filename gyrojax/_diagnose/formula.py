@@ -28,6 +28,7 @@ import equinox as eqx
 import numpy as np
 
 from .._sweeps.base import AbstractSweep
+from . import thresholds
 from .descriptions import SIGNED, coordinates, spread
 from .locate import PREFERENCE
 from .space import ResidualSpace
@@ -122,13 +123,17 @@ _CODE = {"input": "x", "temperature_c": f"(T - {REFERENCE_C})", "time_s": "t", "
          "order": "n", "dtemperature_dt": "dTdt"}
 
 
-def dictionary(fit, sweeps, *, step_at: float | None = None, period: float | None = None) -> list:
-    """The dictionary of terms on the sweep sets `sweeps` (tuples of sweep names)."""
+def dictionary(fit, sweeps, *, step_at: float | None = None, period: float | None = None,
+               threshold: tuple[str, float] | None = None) -> list:
+    """The dictionary of terms on the sweep sets `sweeps` (tuples of sweep names); `threshold` (coordinate,
+    value): a step there, as an offset and as a gain (where a threshold scan found one)."""
     terms = []
     for group in sweeps:
         g = _Group(fit, tuple(group), terms)
         for c in sorted(g.names - {"order"}):
             _coordinate_terms(g, c, step_at, period)
+            if threshold is not None and threshold[0] == c:
+                _threshold_terms(g, c, threshold[1])
         _output_terms(g)
         _product_terms(g)
         _run_terms(g)
@@ -183,6 +188,18 @@ def _coordinate_terms(g: _Group, c, step_at, period):
         _input_terms(g, x, period)
     if c == "time_s":
         _time_terms(g, x, step_at)
+
+
+def _threshold_terms(g: _Group, c, at):
+    """A step of the output and of the gain where `c` passes `at` (a mode hop at a temperature, a relay at a
+    time); along the input of a short sweep every step between set points is in the dictionary already."""
+    x = g.values(c)
+    ref = _reference(c, x[g.group[0]], g.masks[g.group[0]])
+    if not np.isscalar(ref) or (c == "input" and any(
+            np.unique(x[s][g.masks[s]]).size <= MAX_STEP_LEVELS for s in g.group)):
+        return
+    g.add(f"step({c})", f"where({_CODE[c]} >= {at - ref:.8g}, 1, 0)", lambda s: (x[s] >= at).astype(float), c,
+          unit_power=0)
 
 
 def _input_terms(g: _Group, x, period):
@@ -270,7 +287,10 @@ def _location_dictionary(fit, location, space, step_at, period):
     if len(location.located_on) > 1:
         groups.append(tuple(location.located_on))
     loc = location.location
-    terms = dictionary(fit, groups, step_at=loc.get("at", step_at), period=loc.get("period", period))
+    # a location at one value: a step in time (the time step scan's), or a threshold of its coordinate
+    threshold = (location.coordinate, loc["at"]) if location.family in thresholds.FAMILIES else None
+    terms = dictionary(fit, groups, step_at=loc["at"] if location.family == "step" else step_at,
+                       period=loc.get("period", period), threshold=threshold)
     return terms, {id(t): _columns(space, t) for t in terms}
 
 
@@ -378,6 +398,8 @@ def term_size(formula: Formula | None, location) -> dict | None:
     t = formula.terms[0]
     if t.coordinate != location.coordinate:
         return None
+    if len(location.location.get("devices", ())) == 1:
+        return None  # a misfit of one device: the lot's mean coefficient is not its size
     value, err = float(formula.coefficients[0]), float(formula.stderr[0])
     unit = t.unit
     if t.gain:

@@ -21,10 +21,12 @@ import equinox as eqx
 import numpy as np
 
 from .._text import safe_name as clean
+from . import thresholds
 from .descriptions import (
     SIGNED,
     WITHIN_RUN_SHARE,
     Description,
+    at_threshold,
     coordinates,
     describe,
     interactions,
@@ -122,7 +124,9 @@ def _location_text(loc: dict) -> str:
         lo, hi = loc["interval"]
         parts.append(f"over {loc['coordinate']} {lo:.4g} to {hi:.4g}")
     if "at" in loc:
-        parts.append(f"at {loc['coordinate']} {loc['at']:.4g}")
+        parts.append(f"at {loc['coordinate']} {loc['at']:.4g}"
+                     + (" (the data place it between {:.4g} and {:.4g})".format(*loc["at_range"])
+                        if "at_range" in loc and loc["at_range"][0] < loc["at_range"][1] else ""))
     if "point" in loc:
         parts.append("at " + ", ".join(f"{k} {v:.4g}" for k, v in loc["point"].items()))
     if loc.get("runs"):
@@ -166,18 +170,25 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS, pool
         # coordinate that mostly tells devices apart (a drive frequency) is seen here only through its small
         # excursions within a device, which another coordinate (the temperature behind them) explains as well.
         confounded = _confounded(space, best, descs, cut)
-        primary = min([best] + confounded, key=_preference)
+        # the coordinate named first among those of the best description's kind: a step where one coordinate
+        # passes a value is not replaced by a smooth curve along another (named as confounded all the same)
+        primary = min([best] + [d for d in confounded if _is_step(d) == _is_step(best)], key=_preference)
         confounded = tuple(dict.fromkeys(d.coordinate for d in [best] + confounded if d is not primary))
         best = primary
         if best.coordinate == "run":  # a coordinate constant within runs is described only as the run
             confounded = tuple(dict.fromkeys(confounded + run_properties(fit.data.blocks[best.sweep])))
         members, joined = [best], space.with_columns(best.columns)
+        step = _is_step(best)  # a step joins at the best one's threshold and reading, whatever its own
         for d in sorted(significant, key=strength, reverse=True):
-            if d.sweep in {m.sweep for m in members} or (d.coordinate, d.family, d.pooled) != (
-                    best.coordinate, best.family, best.pooled):
+            if d.sweep in {m.sweep for m in members} or (d.coordinate, d.family, step or d.pooled) != (
+                    best.coordinate, best.family, step or best.pooled):
                 continue
             if d.family in SCANS:
                 continue
+            if d.family in thresholds.FAMILIES:  # joined at the same threshold, in the same devices
+                d = at_threshold(space, d.sweep, best)
+                if d is None:
+                    continue
             if joined.score(d.columns, d.pooled).p_value < cut:
                 members.append(d)
                 joined = joined.with_columns(d.columns)
@@ -230,6 +241,10 @@ def _preference(d: Description):
     return (mostly_between, rank)
 
 
+def _is_step(d: Description) -> bool:
+    return d.family in thresholds.FAMILIES
+
+
 def _confounded(space, best, descs, cut) -> list:
     """The descriptions of `best`'s sweep along other coordinates that the data cannot tell from it: neither is
     significant beyond the other (of each coordinate, its first such description)."""
@@ -267,6 +282,12 @@ def _location(space, fit, members, confounded) -> Location:
 def _shape_words(d: Description) -> str:
     if d.family == "step":
         return "a step of the output partway through a run"
+    if d.family in thresholds.FAMILIES:
+        what = "the output" if d.family == "offset step" else "the gain"
+        devices = d.where["devices"]
+        whom = (f"in {clean(devices[0])} only" if len(devices) == 1 else
+                "the same in every device" if d.pooled else "in every device, each its own height")
+        return f"a step of {what} where {d.coordinate} passes one value ({whom})"
     if d.family == "single point":
         return "a single point off the model (an outlier: a glitch in the recording or a transient)"
     if d.family == "at one input":
@@ -301,6 +322,12 @@ def _measured_shares(space, fit, best: Description, sc) -> tuple:
             g = interactions(block, mask).get(best.coordinate)
             if g is None:
                 continue
+        elif best.family in thresholds.FAMILIES:
+            d = at_threshold(space, sweep, best)
+            if d is None:
+                continue
+            found[sweep] = space.raw_excess(d.columns, sweep)
+            continue
         elif best.coordinate == "run":
             if mask.shape[1] < 2:
                 continue
@@ -348,6 +375,9 @@ def _where(fit, space, best, members, sc) -> dict:
     if best.family == "at one input":
         out.update(at=best.where["at"])
         return out
+    if best.family in thresholds.FAMILIES:
+        out.update(at=best.where["at"], at_range=best.where["interval"], side="at or above",
+                   devices=best.where["devices"])
     fp = sc.fingerprint
     chi_dev_run = []
     values = []
@@ -359,12 +389,12 @@ def _where(fit, space, best, members, sc) -> dict:
         for dv, rn in np.ndindex(mask.shape[:2]):
             chi_dev_run.append((float(np.sum(f[dv, rn][mask[dv, rn]] ** 2)), fit.devices[dv],
                                 fit.data.run_ids(m.sweep)[dv][rn]))
-        if best.coordinate != "run":
+        if best.coordinate != "run" and best.family not in thresholds.FAMILIES:
             x = coordinates(block)[best.coordinate]
             values.append((np.abs(f)[mask], np.asarray(x)[mask]))
     total = sum(c for c, _, _ in chi_dev_run) or 1.0
     runs = sorted(((c / total, d, r) for c, d, r in chi_dev_run), reverse=True)
-    out["runs"] = [[d, r] for s, d, r in runs if s >= 0.1]
+    out["runs"] = [list(k) for k in dict.fromkeys((d, r) for s, d, r in runs if s >= 0.1)]
     if values:
         a = np.concatenate([v[0] for v in values])
         x = np.concatenate([v[1] for v in values])

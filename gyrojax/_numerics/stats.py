@@ -50,6 +50,16 @@ def chi2_sf(x: float, df: int) -> float:
     return float(_upper_gamma(df, max(float(x), 0.0) / 2.0, 1)[0])
 
 
+def log_chi2_sf(stat: float, df: int) -> float:
+    """log of chi2(df)'s tail at `stat`, stable where the probability underflows (the leading term of the
+    upper incomplete gamma function's asymptotic series): for ranking scores far beyond any table."""
+    p = chi2_sf(stat, df)
+    if p > 1e-290:
+        return math.log(p)
+    a, x = df / 2.0, stat / 2.0
+    return (a - 1.0) * math.log(x) - x - math.lgamma(a)
+
+
 def score_p_value(stat: float, df: int, beyond_chi2: float, beyond_dof: float) -> float:
     """p-value of a score statistic `stat` (the chi2 `df` columns would remove), read against the scatter the
     residuals keep beyond them on the rows they touch (`beyond_chi2` over `beyond_dof` degrees of freedom) where

@@ -1,0 +1,117 @@
+r"""Threshold scans: a step of the output, or of its gain, where a recorded coordinate passes one value.
+
+Many physical changes of behaviour happen at a value of a coordinate rather than smoothly along it: a parasitic
+mode that hops when the die passes a temperature, a range relay that switches the gain at a time or a rate, a
+missing code of a DAC word. A spline along the coordinate spreads such a step over its knots; the scan here tries
+the step itself, at every position between two of the coordinate's values (`THRESHOLDS` at most, evenly spread
+over its distinct values, with `MIN_SIDE` points on either side), as an *offset step* (the output moves by a
+height) and a *gain step* (the gain does), read three ways: at one threshold with one height for every device (a
+property of the design), each device its own height, or in one device only (a fault of one part). The threshold
+and the reading with the smallest tail probability are kept; the look-elsewhere correction is the number of
+positions tried times the three readings (Bonferroni). Where the step sits is given with the range of thresholds
+the data do not tell from the best one (its chi2 within `POSITION_CHI2` of the best's: a profile-likelihood
+interval of about 95 %).
+"""
+
+import dataclasses
+
+import numpy as np
+
+from .._numerics.stats import log_chi2_sf
+from .space import ResidualSpace, Scored
+
+
+THRESHOLDS = 32  # positions scanned along a coordinate
+MIN_SIDE = 3  # real points of the lot on either side of a threshold
+FAMILIES = ("offset step", "gain step")
+READINGS = 3  # one height for every device, a height per device, one device: the look-elsewhere count's factor
+POSITION_CHI2 = 3.84  # chi2(1)'s 95 % point: thresholds this close to the best one's chi2 are where it may sit
+
+
+@dataclasses.dataclass(frozen=True)
+class Threshold:
+    """The strongest step of one family along one coordinate of one sweep: where (`at`: the output changes for
+    the coordinate at or above it, and the `interval` of thresholds the data do not tell from it), in which
+    devices (indices; `pooled`: one height for all of them), its columns (device, rows, 1), score, and the
+    p-value after the scan's look-elsewhere correction over `positions` thresholds."""
+
+    family: str
+    at: float
+    devices: tuple[int, ...]
+    columns: np.ndarray
+    scored: Scored
+    p_value: float
+    positions: int
+    pooled: bool = False
+    interval: tuple[float, float] = (float("nan"), float("nan"))
+
+
+def positions(real: np.ndarray) -> np.ndarray:
+    """The thresholds tried along a coordinate whose real points are `real`: midpoints between consecutive
+    distinct values with at least `MIN_SIDE` points on either side, at most `THRESHOLDS` of them, evenly spread
+    over the distinct values."""
+    u = np.unique(real)
+    if u.size < 4:
+        return np.zeros(0)
+    mids = (u[1:] + u[:-1]) / 2.0
+    below = np.searchsorted(np.sort(real), mids)
+    mids = mids[(below >= MIN_SIDE) & (real.size - below >= MIN_SIDE)]
+    if mids.size > THRESHOLDS:
+        mids = mids[np.unique(np.round(np.linspace(0, mids.size - 1, THRESHOLDS)).astype(int))]
+    return mids
+
+
+def changes(x: np.ndarray, mask: np.ndarray, pred: np.ndarray, family: str, at, devices=None) -> np.ndarray:
+    """The step's change of the predictions per unit height (device, run, point, len(at)): 1 (offset step) or
+    the model's prediction (gain step) where the coordinate `x` is at or above each threshold of `at`, on the
+    devices `devices` (all where None)."""
+    at = np.atleast_1d(np.asarray(at, float))
+    base = pred if family == "gain step" else np.ones_like(x)
+    g = np.where(mask[..., None] & (x[..., None] >= at), base[..., None], 0.0)
+    if devices is not None:
+        keep = np.zeros(mask.shape[0], bool)
+        keep[list(devices)] = True
+        g = np.where(keep[:, None, None, None], g, 0.0)
+    return g
+
+
+def scan(space: ResidualSpace, sweep: str, x: np.ndarray, mask: np.ndarray, pred: np.ndarray,
+         family: str) -> Threshold | None:
+    """The strongest step of `family` along the coordinate `x` (device, run, point) of `sweep` (see the module
+    docstring), or None where no threshold carries information beyond the fit's span."""
+    cuts = positions(x[mask])
+    if not cuts.size:
+        return None
+    cols = space.columns({sweep: changes(x, mask, pred, family, cuts)})  # (device, rows, position)
+    pc = space.project(cols)
+    info = np.einsum("dnp,dnp->dp", pc, pc)
+    own = np.einsum("dnp,dnp->dp", cols, cols)
+    ok = (own > 0) & (info > 1e-9 * np.maximum(own, 1e-300))
+    dot = np.where(ok, np.einsum("dnp,dn->dp", pc, space.residuals), 0.0)
+    per_dev = np.where(ok, dot**2 / np.where(ok, info, 1.0), 0.0)
+    tried = np.flatnonzero(ok.any(axis=0))
+    if not tried.size:
+        return None
+    # per threshold, each reading's chi2 and degrees of freedom
+    ones = np.ones(cuts.size, int)
+    readings = {"shared": (dot.sum(axis=0) ** 2 / np.maximum(np.where(ok, info, 0.0).sum(axis=0), 1e-300), ones),
+                "every": (per_dev.sum(axis=0), ok.sum(axis=0)), "one": (per_dev.max(axis=0), ones)}
+    best = None
+    for name, (stat, df) in readings.items():
+        for p in tried:
+            tail = log_chi2_sf(float(stat[p]), int(df[p]))
+            if best is None or tail < best[0]:
+                best = (tail, name, p)
+    _, name, p = best
+    stat = readings[name][0]
+    near = cuts[tried[stat[tried] >= stat[p] - POSITION_CHI2]]
+    devs = np.array([int(np.argmax(per_dev[:, p]))]) if name == "one" else np.flatnonzero(ok[:, p])
+    keep = np.zeros(cols.shape[0], bool)
+    keep[devs] = True
+    chosen = np.where(keep[:, None, None], cols[..., p:p + 1], 0.0)
+    sc = space.score(chosen, pooled=name == "shared")
+    if not sc.df:
+        return None
+    n = int(tried.size)
+    return Threshold(family, float(cuts[p]), tuple(int(d) for d in devs), chosen, sc,
+                     min(1.0, READINGS * n * sc.p_value), n, name == "shared", (float(near.min()), float(near.max())))
