@@ -204,7 +204,7 @@ def threshold_description(space, sweep, name, found, within_device) -> Descripti
     fit = space.fit
     where = {"at": found.at, "interval": list(found.interval), "device_index": list(found.devices),
              "devices": [fit.devices[d] for d in found.devices], "positions": found.positions,
-             "within_device": within_device}
+             "beyond_line_p": found.beyond_line_p, "within_device": within_device}
     return Description(sweep, name, found.family, found.columns, found.scored, found.p_value, where,
                        pooled=found.pooled)
 
@@ -217,6 +217,8 @@ def at_threshold(space, sweep, like: Description) -> Description | None:
     coords = coordinates(block)
     if like.coordinate not in coords:
         return None
+    if like.coordinate == "input" and block.kind.input_unit != space.fit.data.blocks[like.sweep].kind.input_unit:
+        return None  # one value of inputs in other units (deg/s, V) is not one threshold
     x = np.where(mask, np.asarray(coords[like.coordinate], float), 0.0)
     above = x[mask] >= like.where["at"]
     if above.all() or not above.any():
@@ -228,7 +230,7 @@ def at_threshold(space, sweep, like: Description) -> Description | None:
     if not sc.df:
         return None
     found = thresholds.Threshold(like.family, like.where["at"], tuple(like.where["device_index"]), cols, sc,
-                                 sc.p_value, 1, like.pooled, tuple(like.where["interval"]))
+                                 sc.p_value, 1, like.pooled, tuple(like.where["interval"]), 0.0)
     return threshold_description(space, sweep, like.coordinate, found, like.where["within_device"])
 
 

@@ -162,7 +162,8 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS, pool
         if not descs:
             break
         cut = alpha / len(descs)
-        significant = [d for d in descs if d.p_value < cut]
+        # a threshold step also beyond the straight line of its coordinate (not a trend it follows)
+        significant = [d for d in descs if d.p_value < cut and d.where.get("beyond_line_p", 0.0) < cut]
         if not significant:
             break
         best = max(significant, key=strength)

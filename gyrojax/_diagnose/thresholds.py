@@ -3,12 +3,15 @@ r"""Threshold scans: a step of the output, or of its gain, where a recorded coor
 Many physical changes of behaviour happen at a value of a coordinate rather than smoothly along it: a parasitic
 mode that hops when the die passes a temperature, a range relay that switches the gain at a time or a rate, a
 missing code of a DAC word. A spline along the coordinate spreads such a step over its knots; the scan here tries
-the step itself, at every position between two of the coordinate's values (`THRESHOLDS` at most, evenly spread
-over its distinct values, with `MIN_SIDE` points on either side), as an *offset step* (the output moves by a
-height) and a *gain step* (the gain does), read three ways: at one threshold with one height for every device (a
-property of the design), each device its own height, or in one device only (a fault of one part). The threshold
-and the reading with the smallest tail probability are kept; the look-elsewhere correction is the number of
-positions tried times the three readings (Bonferroni). Where the step sits is given with the range of thresholds
+the step itself, at every position between two of the coordinate's values (`THRESHOLDS` at most, evenly spread over
+its distinct values, with `MIN_SIDE` points on either side), as an *offset step* (the output moves by a height) and
+a *gain step* (the gain does), read three ways: at one threshold with one height for every device (a property of
+the design), each device its own height, or in one device only (a fault of one part). The threshold and the reading
+with the smallest tail probability are kept; the look-elsewhere correction is the number of positions tried times
+the three readings (Bonferroni). A step is a location only where it is also significant beyond the straight line of
+its coordinate (the same family, reading and devices: a ramp of the output or of the gain; `beyond_line_p`, at the
+same correction): a monotone trend that one well-placed step follows closely (a gain drifting in time, whose
+largest changes sit on the largest inputs) is not a step. Where the step sits is given with the range of thresholds
 the data do not tell from the best one (its chi2 within `POSITION_CHI2` of the best's: a profile-likelihood
 interval of about 95 %).
 """
@@ -33,7 +36,8 @@ class Threshold:
     """The strongest step of one family along one coordinate of one sweep: where (`at`: the output changes for
     the coordinate at or above it, and the `interval` of thresholds the data do not tell from it), in which
     devices (indices; `pooled`: one height for all of them), its columns (device, rows, 1), score, and the
-    p-value after the scan's look-elsewhere correction over `positions` thresholds."""
+    p-values (alone and beyond the straight line) after the scan's look-elsewhere correction over `positions`
+    thresholds."""
 
     family: str
     at: float
@@ -44,6 +48,7 @@ class Threshold:
     positions: int
     pooled: bool = False
     interval: tuple[float, float] = (float("nan"), float("nan"))
+    beyond_line_p: float = 1.0  # beyond the coordinate's straight line, after the same correction
 
 
 def positions(real: np.ndarray) -> np.ndarray:
@@ -109,9 +114,15 @@ def scan(space: ResidualSpace, sweep: str, x: np.ndarray, mask: np.ndarray, pred
     keep = np.zeros(cols.shape[0], bool)
     keep[devs] = True
     chosen = np.where(keep[:, None, None], cols[..., p:p + 1], 0.0)
-    sc = space.score(chosen, pooled=name == "shared")
+    pooled = name == "shared"
+    sc = space.score(chosen, pooled=pooled)
     if not sc.df:
         return None
+    # beyond the straight line of the coordinate in the same reading: a step, not a trend it follows
+    ramp = space.columns({sweep: np.where(mask, x * (pred if family == "gain step" else 1.0), 0.0)[..., None]})
+    ramp = np.where(keep[:, None, None], ramp, 0.0)
+    beyond = space.with_columns(ramp).score(chosen, pooled=pooled) if np.any(ramp) else sc
     n = int(tried.size)
     return Threshold(family, float(cuts[p]), tuple(int(d) for d in devs), chosen, sc,
-                     min(1.0, READINGS * n * sc.p_value), n, name == "shared", (float(near.min()), float(near.max())))
+                     min(1.0, READINGS * n * sc.p_value), n, pooled, (float(near.min()), float(near.max())),
+                     min(1.0, READINGS * n * beyond.p_value) if beyond.df else 1.0)
