@@ -256,8 +256,8 @@ def _confounded(space, best, descs, cut) -> list:
     for d in descs:
         if d.coordinate in {best.coordinate, *(o.coordinate for o in out)} or d.sweep != best.sweep:
             continue
-        if d.family in SCANS:
-            continue
+        if d.family in SCANS and not (_is_step(best) and d.family == "step"):
+            continue  # a threshold step and a change point in time are both one step: they may be one
         if (beyond_best.score(d.columns, d.pooled).p_value >= cut
                 and space.with_columns(d.columns).score(best.columns, best.pooled).p_value >= cut):
             out.append(d)
