@@ -101,13 +101,8 @@ def scan(space: ResidualSpace, sweep: str, x: np.ndarray, mask: np.ndarray, pred
     ones = np.ones(cuts.size, int)
     readings = {"shared": (dot.sum(axis=0) ** 2 / np.maximum(np.where(ok, info, 0.0).sum(axis=0), 1e-300), ones),
                 "every": (per_dev.sum(axis=0), ok.sum(axis=0)), "one": (per_dev.max(axis=0), ones)}
-    best = None
-    for name, (stat, df) in readings.items():
-        for p in tried:
-            tail = log_chi2_sf(float(stat[p]), int(df[p]))
-            if best is None or tail < best[0]:
-                best = (tail, name, p)
-    _, name, p = best
+    _, name, p = min((log_chi2_sf(float(stat[p]), int(df[p])), name, int(p))
+                     for name, (stat, df) in readings.items() for p in tried)
     stat = readings[name][0]
     near = cuts[tried[stat[tried] >= stat[p] - POSITION_CHI2]]
     devs = np.array([int(np.argmax(per_dev[:, p]))]) if name == "one" else np.flatnonzero(ok[:, p])
