@@ -186,7 +186,7 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS, pool
                 continue
             if d.family in SCANS:
                 continue
-            if d.family in thresholds.FAMILIES:  # joined at the same threshold, in the same devices
+            if step:  # joined at the same threshold, in the same devices
                 d = at_threshold(space, d.sweep, best)
                 if d is None:
                     continue
@@ -283,7 +283,7 @@ def _location(space, fit, members, confounded) -> Location:
 def _shape_words(d: Description) -> str:
     if d.family == "step":
         return "a step of the output partway through a run"
-    if d.family in thresholds.FAMILIES:
+    if _is_step(d):
         what = "the output" if d.family == "offset step" else "the gain"
         devices = d.where["devices"]
         whom = (f"in {clean(devices[0])} only" if len(devices) == 1 else
@@ -323,7 +323,7 @@ def _measured_shares(space, fit, best: Description, sc) -> tuple:
             g = interactions(block, mask).get(best.coordinate)
             if g is None:
                 continue
-        elif best.family in thresholds.FAMILIES:
+        elif _is_step(best):
             d = at_threshold(space, sweep, best)
             if d is None:
                 continue
@@ -376,7 +376,7 @@ def _where(fit, space, best, members, sc) -> dict:
     if best.family == "at one input":
         out.update(at=best.where["at"])
         return out
-    if best.family in thresholds.FAMILIES:
+    if _is_step(best):
         out.update(at=best.where["at"], at_range=best.where["interval"], side="at or above",
                    devices=best.where["devices"])
     fp = sc.fingerprint
@@ -390,7 +390,7 @@ def _where(fit, space, best, members, sc) -> dict:
         for dv, rn in np.ndindex(mask.shape[:2]):
             chi_dev_run.append((float(np.sum(f[dv, rn][mask[dv, rn]] ** 2)), fit.devices[dv],
                                 fit.data.run_ids(m.sweep)[dv][rn]))
-        if best.coordinate != "run" and best.family not in thresholds.FAMILIES:
+        if best.coordinate != "run" and not _is_step(best):
             x = coordinates(block)[best.coordinate]
             values.append((np.abs(f)[mask], np.asarray(x)[mask]))
     total = sum(c for c, _, _ in chi_dev_run) or 1.0
