@@ -217,8 +217,9 @@ def at_threshold(space, sweep, like: Description) -> Description | None:
     coords = coordinates(block)
     if like.coordinate not in coords:
         return None
-    if like.coordinate == "input" and block.kind.input_unit != space.fit.data.blocks[like.sweep].kind.input_unit:
-        return None  # one value of inputs in other units (deg/s, V) is not one threshold
+    if (like.coordinate == "input" and like.where["at"] != 0.0
+            and block.kind.input_unit != space.fit.data.blocks[like.sweep].kind.input_unit):
+        return None  # one value of inputs in other units (deg/s, V) is not one threshold; their zero is
     x = np.where(mask, np.asarray(coords[like.coordinate], float), 0.0)
     above = x[mask] >= like.where["at"]
     if above.all() or not above.any():

@@ -24,7 +24,7 @@ from .discrepancy import look_alikes, score_probes, with_shapes
 from .encompass import encompassing_guard
 from .fdr import bh_q_values, selection_p
 from .formula import formula_coordinate, propose_along, term_size
-from .guards import MAX_TYPICAL_MULTIPLE, Rejection, contradictions, probe_guard, verdict_of
+from .guards import MAX_TYPICAL_MULTIPLE, Rejection, contradictions, one_device_guard, probe_guard, verdict_of
 from .locate import Localisation, locate
 from .probes import PROBES, AbstractProbe, score_columns
 from .record import record_guard
@@ -229,6 +229,11 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
         guard = probe_guard(s.fit, best, s.discrepancy, s.designs, threshold, alpha, s.located)
         if guard is not None:
             s.rejected.append(Rejection(effect=best.effect, reason=guard, kind="not its shape"))
+            remaining.remove(best.effect)
+            continue
+        alone = one_device_guard(s.fit, best.effect, alpha)
+        if alone is not None:
+            s.rejected.append(Rejection(effect=best.effect, reason=alone, kind="in one device only"))
             remaining.remove(best.effect)
             continue
         # alternatives: any candidate significant at alpha alone (ambiguity names explanations, not discoveries)

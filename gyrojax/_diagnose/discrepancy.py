@@ -231,7 +231,7 @@ def with_shapes(fit, locations, discrepancy, designs, scores, rejected, max_mult
             # a one-column shape along a recorded coordinate (a bias or gain per kelvin, per hour) gives the size in
             # its physical unit; a shape along the input keeps the location's peak in output units and ppm of the
             # sweep's full scale (a cubic's coefficient at the DAC's full scale is not what the sweep shows)
-            size = (_probe_size(space, designs[matched.probe], matched)
+            size = (_probe_size(space, designs[matched.probe], matched, one_device(fit, loc.location))
                     if designs[matched.probe].shape[-1] == 1 and matched.coordinate != "input" else None)
             if size is not None:
                 loc = dataclasses.replace(loc, size=size)
@@ -240,17 +240,30 @@ def with_shapes(fit, locations, discrepancy, designs, scores, rejected, max_mult
     return tuple(out)
 
 
-def _probe_size(space, columns, probe) -> dict | None:
+def one_device(fit, location: dict) -> int | None:
+    """The index of the one device a location's misfit lives in (`devices` names one), or None."""
+    names = location.get("devices", ())
+    return fit.devices.index(names[0]) if len(names) == 1 and names[0] in fit.devices else None
+
+
+def _probe_size(space, columns, probe, device: int | None = None) -> dict | None:
     """The size of a location a one-column generic shape has whole: the shape's coefficient over the lot (the
-    inverse-variance mean of the devices'), with its standard error; None where the data do not determine it."""
+    inverse-variance mean of the devices'), or in `device` alone where the misfit lives in that one (the lot's
+    mean would divide it by the number of devices), with its standard error; None where the data do not
+    determine it."""
     sc = space.score(columns)
     if not sc.df:
         return None
-    mean, stderr, _ = lot_mean(sc)  # per device, as the probe is scored; the lot's inverse-variance mean
-    value, err = float(mean[0]), float(stderr[0])
+    if device is None:
+        mean, stderr, _ = lot_mean(sc)  # per device, as the probe is scored; the lot's inverse-variance mean
+        value, err, whom = float(mean[0]), float(stderr[0]), ""
+    else:
+        value = float(sc.coefficients[device][0])
+        err = math.sqrt(max(float(sc.covariance[device][0, 0]), 0.0))
+        whom = f" in {space.fit.devices[device]}"
     if not (math.isfinite(value) and math.isfinite(err)) or err > SIZE_REL_STDERR * abs(value):
         return None
-    return {"value": value, "unit": probe.unit, "stderr": err, "measure": f"coefficient of {probe.probe}"}
+    return {"value": value, "unit": probe.unit, "stderr": err, "measure": f"coefficient of {probe.probe}{whom}"}
 
 
 def _library_text(fit, columns, chi2, scores, rejected, max_multiple, cut) -> str:

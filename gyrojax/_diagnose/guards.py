@@ -5,7 +5,7 @@ import equinox as eqx
 import numpy as np
 
 from .._identify import Fit
-from .._numerics.stats import chi2_isf
+from .._numerics.stats import chi2_isf, chi2_sf
 from .columns import base_columns, effect_columns, excess_chi2
 from .probes import score_columns, span_basis
 from .score import TYPICAL_RANK_TOL, CandidateScore
@@ -113,3 +113,37 @@ def verdict_of(comparison, steps) -> str:
     if not comparison.fails and not comparison.flagged:
         return "explained"
     return "partly explained" if steps else "unexplained"
+
+
+MIN_DEVICES_FOR_LOT = 3  # with fewer devices, "one device only" cannot be told from a lot effect
+ONE_DEVICE_SHARE = 0.9  # the share of the candidate's score one device must carry to be the whole of it
+
+
+def one_device_guard(fit: Fit, effect: str, alpha: float) -> str | None:
+    """A reason not to confirm `effect` for the lot, or None: one device carries its score (>= `ONE_DEVICE_SHARE`
+    of it) and the other devices together are consistent with none of it (p >= `alpha`). A library effect is a
+    property of the design, present in every device with a part-to-part spread; a misfit of its shape in one
+    device of a lot is that device's anomaly (a cracked die attach, a bad reference), reported there, not a
+    discovery about the lot."""
+    n = len(fit.devices)
+    if n < MIN_DEVICES_FOR_LOT:
+        return None
+    res = np.asarray(fit.residual_vector)
+    je = np.asarray(fit.jacobian)[:, :, effect_columns(fit, effect)]
+    own = base_columns(fit)
+    per = [score_columns(own[d:d + 1], je[d:d + 1], res[d:d + 1], rank_tol=TYPICAL_RANK_TOL) for d in range(n)]
+    total = sum(p.statistic for p in per)
+    top = int(np.argmax([p.statistic for p in per]))
+    if total <= 0 or per[top].statistic < ONE_DEVICE_SHARE * total or per[top].p_value >= alpha:
+        return None
+    others = [p for d, p in enumerate(per) if d != top]
+    stat, df = sum(p.statistic for p in others), sum(p.df for p in others)
+    if not df:
+        return None
+    p_others = float(chi2_sf(stat, df))
+    if p_others < alpha:
+        return None
+    return (f"one device carries it: {fit.devices[top]} gives {per[top].statistic / total:.0%} of its score "
+            f"(S = {per[top].statistic:.4g}, p = {per[top].p_value:.2g}); the other {n - 1} together S = {stat:.3g} "
+            f"on {df} df (p = {p_others:.2g}), consistent with none of it: a misfit of its shape in that device "
+            "alone is that device's anomaly, not an effect of the lot")

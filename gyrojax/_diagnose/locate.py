@@ -173,7 +173,7 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS, pool
         confounded = _confounded(space, best, descs, cut)
         # the coordinate named first among those of the best description's kind: a step where one coordinate
         # passes a value is not replaced by a smooth curve along another (named as confounded all the same)
-        primary = min([best] + [d for d in confounded if _is_step(d) == _is_step(best)], key=_preference)
+        primary = _primary([best] + [d for d in confounded if _is_step(d) == _is_step(best)])
         confounded = tuple(dict.fromkeys(d.coordinate for d in [best] + confounded if d is not primary))
         best = primary
         if best.coordinate == "run":  # a coordinate constant within runs is described only as the run
@@ -240,6 +240,23 @@ def _preference(d: Description):
     mostly_between = d.where.get("within_device", 1.0) < 0.5
     rank = PREFERENCE.index(d.coordinate) if d.coordinate in PREFERENCE else len(PREFERENCE)
     return (mostly_between, rank)
+
+
+ONE_DEVICE_SHARE = 0.9  # the share of a location's chi2 in one device that makes it that device's misfit
+SIMPLER = 0.5  # a description with at most this share of the other's degrees of freedom is the simpler one
+
+
+def _primary(candidates: list) -> Description:
+    """The description named first among those the data cannot tell apart: by `_preference`, unless a
+    description of the runs (constant within each) needs at most `SIMPLER` of its degrees of freedom (a gain per
+    run, 1 per device, against a curve along dT/dt in every device, 7 per device): what the data cannot tell from
+    a change between power-ons needs nothing to vary within a run."""
+    first = min(candidates, key=_preference)
+    per_run = [d for d in candidates if d.coordinate == "run"]
+    simplest = min(per_run, key=lambda d: d.scored.df) if per_run else first
+    if _preference(simplest)[0] == _preference(first)[0] and simplest.scored.df <= SIMPLER * first.scored.df:
+        return simplest
+    return first
 
 
 def _is_step(d: Description) -> bool:
@@ -396,6 +413,12 @@ def _where(fit, space, best, members, sc) -> dict:
     total = sum(c for c, _, _ in chi_dev_run) or 1.0
     runs = sorted(((c / total, d, r) for c, d, r in chi_dev_run), reverse=True)
     out["runs"] = [list(k) for k in dict.fromkeys((d, r) for s, d, r in runs if s >= 0.1)]
+    by_device = {}
+    for c, d, _ in chi_dev_run:
+        by_device[d] = by_device.get(d, 0.0) + c / total
+    top = max(by_device, key=by_device.get)
+    if "devices" not in out and len(by_device) > 1 and by_device[top] >= ONE_DEVICE_SHARE:
+        out["devices"] = [top]  # the misfit lives in one device
     if values:
         a = np.concatenate([v[0] for v in values])
         x = np.concatenate([v[1] for v in values])
