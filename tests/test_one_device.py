@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
-from gyrojax._diagnose.guards import one_device_guard
 
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "experiments"))
@@ -39,14 +38,17 @@ def test_a_tempco_of_one_device_is_not_the_lots_reference_drift(one_device_tempc
 
 
 def test_the_guard_leaves_an_effect_of_every_device_alone():
-    # a reference drift with a 50 % part-to-part spread: every device carries it
+    # a reference drift with a 50 % part-to-part spread: every device carries it, and it is confirmed
     table, _ = discovery_lot("vref_drift_spread", snr="mid", design="a", seed=0)
-    fit = gj.identify("paper-qmg", table, progress=False)
-    assert one_device_guard(fit, "vref_drift", 0.01) is None
-    # and the same lot with the effect kept in one device only is refused
+    d = gj.diagnose("paper-qmg", table, progress=False)
+    assert "vref_drift" in d.selected, d.summary()
+    assert not any(r.kind == "in one device only" for r in d.rejected)
+    # the same shape kept in one device (another seed) is refused, naming that device
     one, _ = discovery_lot("gain_tempco_one_device", snr="mid", design="a", seed=1)
-    reason = one_device_guard(gj.identify("paper-qmg", one, progress=False), "vref_drift", 0.01)
-    assert reason is not None and "disc-a-02" in reason
+    d1 = gj.diagnose("paper-qmg", one, progress=False)
+    assert "vref_drift" not in d1.selected
+    (why,) = [r for r in d1.rejected if r.effect == "vref_drift"]
+    assert why.kind == "in one device only" and "disc-a-02" in why.reason
 
 
 def test_a_gain_per_run_on_one_sweep_is_placed_on_the_run():

@@ -415,9 +415,13 @@ def _where(fit, space, best, members, sc) -> dict:
     out["runs"] = [list(k) for k in dict.fromkeys((d, r) for s, d, r in runs if s >= 0.1)]
     by_device = {}
     for c, d, _ in chi_dev_run:
-        by_device[d] = by_device.get(d, 0.0) + c / total
+        by_device[d] = by_device.get(d, 0.0) + c
+    # what each device holds beyond the noise its share of the description's degrees of freedom fits
+    by_device = {d: max(c - sc.df / len(fit.devices), 0.0) for d, c in by_device.items()}
     top = max(by_device, key=by_device.get)
-    if "devices" not in out and len(by_device) > 1 and by_device[top] >= ONE_DEVICE_SHARE:
+    excess_total = sum(by_device.values())
+    if ("devices" not in out and len(by_device) > 1 and excess_total > 0
+            and by_device[top] >= ONE_DEVICE_SHARE * excess_total):
         out["devices"] = [top]  # the misfit lives in one device
     if values:
         a = np.concatenate([v[0] for v in values])
