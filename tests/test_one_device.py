@@ -77,3 +77,17 @@ def test_a_step_at_zero_input_joins_sweeps_of_other_units():
     assert f.complete and [t.name for t in f.terms] == ["sign(input)"]
     assert set(f.terms[0].sweeps) == {"rate_table", "vcf_static"}
     assert np.isfinite(f.stderr[0]) and abs(f.coefficients[0]) > 5 * f.stderr[0]
+
+
+def test_bias_jumps_at_their_own_times_in_two_devices_are_one_location():
+    # run 1 of the second device jumps at 900 s, of the fourth at 2100 s (two charging events), on both sweeps
+    table, _ = discovery_lot("bias_steps_two_devices", snr="mid", design="a", seed=0)
+    d = gj.diagnose("paper-qmg", table, progress=False)
+    assert d.selected == ()
+    top = d.discrepancy[0]
+    assert top.family == "step" and top.coordinate == "time_s" and top.share > 0.9
+    assert set(top.located_on) == {"rate_table", "vcf_static"}
+    steps = dict(zip(map(tuple, top.location["runs"]), top.location["at_each"]))
+    # the first dwell after each jump (dwells every 120 s from 120 s)
+    assert steps == {("disc-a-01", 1): 960.0, ("disc-a-03", 1): 2160.0}
+    assert "960 in disc-a-01 run 1" in top.description

@@ -26,6 +26,7 @@ from .descriptions import (
     SIGNED,
     WITHIN_RUN_SHARE,
     Description,
+    at_change_points,
     at_threshold,
     coordinates,
     describe,
@@ -123,6 +124,11 @@ def _location_text(loc: dict) -> str:
     if "interval" in loc:
         lo, hi = loc["interval"]
         parts.append(f"over {loc['coordinate']} {lo:.4g} to {hi:.4g}")
+    if "at_each" in loc:  # steps at their own times, one per run
+        parts.append(f"at {loc['coordinate']} " + ", ".join(f"{a:.4g} in {clean(d)} run {r}" for (d, r), a in
+                                                            list(zip(loc["runs"], loc["at_each"]))[:4])
+                     + (" ..." if len(loc["runs"]) > 4 else ""))
+        return " ".join(parts)
     if "at" in loc:
         parts.append(f"at {loc['coordinate']} {loc['at']:.4g}"
                      + (" (the data place it between {:.4g} and {:.4g})".format(*loc["at_range"])
@@ -184,9 +190,13 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS, pool
             if d.sweep in {m.sweep for m in members} or (d.coordinate, d.family, step or d.pooled) != (
                     best.coordinate, best.family, step or best.pooled):
                 continue
-            if d.family in SCANS:
+            if d.family == "step":  # joined at the same change points, in the same runs
+                d = at_change_points(space, d.sweep, best)
+                if d is None:
+                    continue
+            elif d.family in SCANS:
                 continue
-            if step:  # joined at the same threshold, in the same devices
+            elif step:  # joined at the same threshold, in the same devices
                 d = at_threshold(space, d.sweep, best)
                 if d is None:
                     continue
@@ -328,7 +338,7 @@ def _measured_shares(space, fit, best: Description, sc) -> tuple:
     Where those fits together find under `MEASURED_FLOOR` of the location's chi2 `sc` (a misfit seen only beyond
     the fit's own span: a gain that changes with a coordinate the fit's gains nearly follow), the shares of the
     location's own description (`sc`'s fingerprint) instead: a sweep's residuals as they are say nothing there."""
-    if best.family in SCANS:
+    if best.family in SCANS and best.family != "step":
         return ((best.sweep, 1.0),)
     found = {}
     for sweep in fit.data.sweeps:
@@ -336,6 +346,11 @@ def _measured_shares(space, fit, best: Description, sc) -> tuple:
         mask = np.asarray(block.mask)
         coords = coordinates(block)
         pred = np.asarray(fit.predictions[sweep], float)
+        if best.family == "step":
+            d = best if sweep == best.sweep else at_change_points(space, sweep, best)
+            if d is not None:
+                found[sweep] = space.raw_excess(d.columns, sweep)
+            continue
         if best.family == "input x":
             g = interactions(block, mask).get(best.coordinate)
             if g is None:
@@ -382,7 +397,13 @@ def _rows_of(space, sweep):
 def _where(fit, space, best, members, sc) -> dict:
     out = {"coordinate": best.coordinate, "sweeps": [m.sweep for m in members]}
     if best.family == "step":
-        out.update(at=best.where["at"], runs=best.where["runs"])
+        first = {}  # (device, run) -> the time of its step
+        for m in members:
+            for r, a in zip(m.where["runs"], m.where["at_each"]):
+                first.setdefault(tuple(r), a)
+        out.update(at=best.where["at"], runs=[list(r) for r in first])
+        if len(set(first.values())) > 1:  # steps at their own times
+            out["at_each"] = list(first.values())
         return out
     if best.family == "periodic":
         out["period"] = best.where["period"]
