@@ -217,20 +217,26 @@ def at_threshold(space, sweep, like: Description) -> Description | None:
     coords = coordinates(block)
     if like.coordinate not in coords:
         return None
-    if (like.coordinate == "input" and like.where["at"] != 0.0
-            and block.kind.input_unit != space.fit.data.blocks[like.sweep].kind.input_unit):
-        return None  # one value of inputs in other units (deg/s, V) is not one threshold; their zero is
     x = np.where(mask, np.asarray(coords[like.coordinate], float), 0.0)
-    above = x[mask] >= like.where["at"]
+    at = like.where["at"]
+    if like.coordinate == "input" and block.kind.input_unit != space.fit.data.blocks[like.sweep].kind.input_unit:
+        # one value of inputs in other units (deg/s, V) is not one threshold; their sign change is
+        like_x = coordinates(space.fit.data.blocks[like.sweep])["input"]
+        like_mask = np.asarray(space.fit.data.blocks[like.sweep].mask)
+        if not (thresholds.is_sign_change(np.asarray(like_x, float)[like_mask], at)
+                and thresholds.is_sign_change(x[mask], thresholds.sign_change(x[mask], at))):
+            return None
+        at = thresholds.sign_change(x[mask], at)
+    above = x[mask] >= at
     if above.all() or not above.any():
         return None
-    g = thresholds.changes(x, mask, np.asarray(space.fit.predictions[sweep], float), like.family, like.where["at"],
+    g = thresholds.changes(x, mask, np.asarray(space.fit.predictions[sweep], float), like.family, at,
                            like.where["device_index"])
     cols = space.columns({sweep: g})
     sc = space.score(cols, pooled=like.pooled)
     if not sc.df:
         return None
-    found = thresholds.Threshold(like.family, like.where["at"], tuple(like.where["device_index"]), cols, sc,
+    found = thresholds.Threshold(like.family, at, tuple(like.where["device_index"]), cols, sc,
                                  sc.p_value, 1, like.pooled, tuple(like.where["interval"]), 0.0)
     return threshold_description(space, sweep, like.coordinate, found, like.where["within_device"])
 

@@ -180,7 +180,8 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS, pool
         # the coordinate named first among those of the best description's kind: a step where one coordinate
         # passes a value is not replaced by a smooth curve along another (named as confounded all the same)
         primary = _primary([best] + [d for d in confounded if _is_step(d) == _is_step(best)])
-        confounded = tuple(dict.fromkeys(d.coordinate for d in [best] + confounded if d is not primary))
+        confounded = tuple(dict.fromkeys(d.coordinate for d in [best] + confounded
+                                         if d.coordinate != primary.coordinate))
         best = primary
         if best.coordinate == "run":  # a coordinate constant within runs is described only as the run
             confounded = tuple(dict.fromkeys(confounded + run_properties(fit.data.blocks[best.sweep])))
@@ -275,13 +276,14 @@ def _is_step(d: Description) -> bool:
 
 def _confounded(space, best, descs, cut) -> list:
     """The descriptions of `best`'s sweep along other coordinates that the data cannot tell from it: neither is
-    significant beyond the other (of each coordinate, its first such description)."""
+    significant beyond the other (of each coordinate, its first such step and its first other description)."""
     out = []
     if best.family in SCANS:
         return out
     beyond_best = space.with_columns(best.columns)
     for d in descs:
-        if d.coordinate in {best.coordinate, *(o.coordinate for o in out)} or d.sweep != best.sweep:
+        if (d.coordinate == best.coordinate or (d.coordinate, _is_step(d)) in {(o.coordinate, _is_step(o)) for o in out}
+                or d.sweep != best.sweep):
             continue
         if d.family in SCANS and not (_is_step(best) and d.family == "step"):
             continue  # a threshold step and a change point in time are both one step: they may be one

@@ -66,6 +66,27 @@ def positions(real: np.ndarray) -> np.ndarray:
     return mids
 
 
+def is_sign_change(values: np.ndarray, at: float) -> bool:
+    """Whether the threshold `at` separates the negative values of a coordinate that takes both signs from its
+    positive ones (zero on either side): the one threshold that means the same in every unit."""
+    values = np.asarray(values, float)
+    if not (values.min() < 0.0 < values.max()):
+        return False
+    lo, hi = min(0.0, at), max(0.0, at)
+    return not np.any((values > lo) & (values < hi))
+
+
+def sign_change(values: np.ndarray, like: float) -> float:
+    """The sign-change threshold of `values` on the side of zero `like` (a sign change of another coordinate)
+    puts zero: zero itself, or the midpoint between zero and the nearest value above (below) it."""
+    values = np.asarray(values, float)
+    if like == 0.0:
+        return 0.0
+    side = values[values > 0.0] if like > 0.0 else values[values < 0.0]
+    edge = side.min() if like > 0.0 else side.max()
+    return edge / 2.0
+
+
 def changes(x: np.ndarray, mask: np.ndarray, pred: np.ndarray, family: str, at, devices=None) -> np.ndarray:
     """The step's change of the predictions per unit height (device, run, point, len(at)): 1 (offset step) or
     the model's prediction (gain step) where the coordinate `x` is at or above each threshold of `at`, on the
@@ -104,7 +125,14 @@ def scan(space: ResidualSpace, sweep: str, x: np.ndarray, mask: np.ndarray, pred
     _, name, p = min((log_chi2_sf(float(stat[p]), int(df[p])), name, int(p))
                      for name, (stat, df) in readings.items() for p in tried)
     stat = readings[name][0]
-    near = cuts[tried[stat[tried] >= stat[p] - POSITION_CHI2]]
+    near_p = tried[stat[tried] >= stat[p] - POSITION_CHI2]
+    near = cuts[near_p]
+    # a threshold the data place anywhere over a range that holds the sign change is named there: a gain that
+    # differs for positive and negative inputs (or warming and cooling) is the simplest step of a signed
+    # coordinate, and points near zero carry no gain to place it by
+    crossing = [q for q in near_p if is_sign_change(x[mask], float(cuts[q]))]
+    if crossing:
+        p = int(crossing[0])
     devs = np.array([int(np.argmax(per_dev[:, p]))]) if name == "one" else np.flatnonzero(ok[:, p])
     keep = np.zeros(cols.shape[0], bool)
     keep[devs] = True
