@@ -71,9 +71,27 @@ def test_held_out_effects_are_apart_from_the_benchmark():
         assert h.sweeps <= set(lotgen.SWEEPS)
 
 
+def test_fresh_effects_are_apart_from_the_other_sets():
+    assert len(lotgen.FRESH) >= 12 and not set(lotgen.FRESH) & (set(lotgen.HIDDEN) | set(lotgen.HELD_OUT))
+    assert all(h.library is None for h in lotgen.FRESH_LIST)
+    for h in lotgen.FRESH_LIST:
+        assert h.coordinate in ("input", "temperature_c", "dtemperature_dt", "time_s", "run")
+        assert h.sweeps <= set(lotgen.SWEEPS)
+
+
+def test_an_effect_a_protocol_turns_into_a_bias_per_run_is_refused_with_the_reason():
+    # on design c each run either warms or cools: a bias that differs warming and cooling is a bias per run
+    with pytest.raises(ValueError, match="'bias_sign_dtdt' leaves no chi2 beyond the baseline's free gains and "
+                                         "biases on design 'c'"):
+        lotgen.discovery_lot("bias_sign_dtdt", design="c", seed=0)
+    _, info = lotgen.discovery_lot("bias_sign_dtdt", design="a", seed=0)
+    assert info["visible_sweeps"] == ["rate_table", "vcf_static"]
+
+
 def test_effects_are_chosen_by_set_or_by_name():
     assert bench.effect_names("all") == list(lotgen.HIDDEN)
     assert bench.effect_names("held-out") == list(lotgen.HELD_OUT)
+    assert bench.effect_names("fresh") == list(lotgen.FRESH)
     assert bench.effect_names("dead_band,zro_tempco") == ["dead_band", "zro_tempco"]
     with pytest.raises(SystemExit, match="--effects: unknown nope; expected some of dac_inl_s_curve"):
         bench.effect_names("nope,zro_tempco")

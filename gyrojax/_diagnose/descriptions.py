@@ -20,8 +20,8 @@ import math
 
 import numpy as np
 
-from .._numerics.stats import chi2_isf, chi2_sf, log_chi2_sf
-from . import thresholds
+from .._numerics.stats import log_chi2_sf
+from . import changepoints, thresholds
 from .compare import recorded_coordinates
 from .space import ResidualSpace, Scored
 
@@ -265,163 +265,23 @@ def interactions(block, mask) -> dict:
 
 
 def _step_scan(space, sweep, t, mask):
-    """The strongest step of the output at one dwell (change point along time): a step at one position (in time
-    order) of one run index, either in every device (each its own height) or in one device; the look-elsewhere
-    correction is the number of positions tried."""
-    n_dev, n_run, n_pt = mask.shape
-    r = space.residuals
-    stats = {}  # (run, position) -> per-device statistics
-    positions = 0
-    for rn in range(n_run):
-        for j in range(2, n_pt - 1):
-            g = np.zeros((n_dev, n_run, n_pt, 1))
-            for dv in range(n_dev):
-                m = mask[dv, rn]
-                if m.sum() < 6 or j >= m.sum() - 1:
-                    continue
-                order = np.argsort(np.where(m, t[dv, rn], np.inf), kind="stable")
-                g[dv, rn, :, 0] = np.where(m & (t[dv, rn] >= t[dv, rn, order[j]]), 1.0, 0.0)
-            if not g.any():
-                continue
-            cols = space.columns({sweep: g})
-            pc = space.project(cols)[..., 0]
-            info = np.einsum("dr,dr->d", pc, pc)
-            own = np.einsum("dr,dr->d", cols[..., 0], cols[..., 0])
-            ok = info > 1e-9 * np.maximum(own, 1e-300)
-            per_dev = np.where(ok, np.einsum("dr,dr->d", pc, r) ** 2 / np.where(ok, info, 1.0), 0.0)
-            if ok.any():
-                stats[(rn, j)] = (per_dev, ok, cols)
-                positions += 1
-    if not stats:
-        return None
-    best = None
-    for (rn, j), (per_dev, ok, cols) in stats.items():
-        all_p = chi2_sf(float(per_dev.sum()), int(ok.sum()))
-        dv = int(np.argmax(per_dev))
-        one_p = chi2_sf(float(per_dev[dv]), 1)
-        for p, devs in ((all_p, np.flatnonzero(ok)), (one_p, np.array([dv]))):
-            if best is None or p < best[0]:
-                best = (p, rn, j, devs, cols)
-    if best is None:
-        return None
-    fit = space.fit
-
-    def own_dwells(pairs):  # the columns of steps in (device, run) pairs, each at its own position
-        g = np.zeros((n_dev, n_run, n_pt, n_run))
-        for dv, rn, j in pairs:
-            m = mask[dv, rn]
-            order = np.argsort(np.where(m, t[dv, rn], np.inf), kind="stable")
-            g[dv, rn, :, rn] = np.where(m & (t[dv, rn] >= t[dv, rn, order[j]]), 1.0, 0.0)
-        return space.columns({sweep: g})
-
-    beyond_smooth = _beyond_smooth(space, sweep, t, mask)
-    several = _steps_each_own_dwell(
-        stats, lambda pairs: space.score(own_dwells(pairs)).statistic,
-        lambda pair: beyond_smooth.score(own_dwells([pair])).p_value < OWN_STEP_ALPHA)
-    if several is not None and several[0] < math.log(max(2 * positions * best[0], 1e-300)):
-        log_p, pairs = several
-        cols = own_dwells(pairs)
-        at = [float(np.sort(t[dv, rn][mask[dv, rn]])[j]) for dv, rn, j in pairs]
-        where = {"runs": [[fit.devices[dv], fit.data.run_ids(sweep)[dv][rn]] for dv, rn, _ in pairs],
-                 "at": float(np.median(at)), "at_each": at, "run_index": None}
-        return Description(sweep, "time_s", "step", cols, space.score(cols), min(1.0, math.exp(log_p)), where)
-    p, rn, j, devs, cols = best
-    keep = np.zeros(n_dev, bool)
-    keep[devs] = True
-    cols = np.where(keep[:, None, None], cols, 0.0)
-    sc = space.score(cols)
-    at = [float(np.sort(t[dv, rn][mask[dv, rn]])[j]) for dv in devs]
-    where = {"runs": [[fit.devices[dv], fit.data.run_ids(sweep)[dv][rn]] for dv in devs],
-             "at": float(np.median(at)), "at_each": at, "run_index": rn}
-    return Description(sweep, "time_s", "step", cols, sc, min(1.0, 2 * positions * p), where)
+    """The strongest change point along time of `sweep` (`gyrojax._diagnose.changepoints`) as a description."""
+    hats = spline_basis(np.where(mask, t, 0.0), mask)
+    found = changepoints.scan(space, sweep, t, mask, hats)
+    return None if found is None else Description(sweep, "time_s", "step", *found)
 
 
 def at_change_points(space, sweep, like: Description) -> Description | None:
     """The steps of `like` (a change-point description) on another sweep `sweep`: in the same (device, run)
     pairs, from the same times on, where that sweep records the time and has points on both sides; None where it
     has none (a jump of a device's bias shows on every sweep recorded after it in that run)."""
-    fit = space.fit
-    block = fit.data.blocks[sweep]
+    block = space.fit.data.blocks[sweep]
     coords = coordinates(block)
     if "time_s" not in coords:
         return None
-    mask = np.asarray(block.mask)
-    t = np.where(mask, np.asarray(coords["time_s"], float), np.nan)
-    run_ids = fit.data.run_ids(sweep)
-    g = np.zeros(mask.shape + (mask.shape[1],))
-    pairs = []
-    for (device, run), at in zip(like.where["runs"], like.where["at_each"]):
-        dv = fit.devices.index(device)
-        if run not in run_ids[dv]:
-            continue
-        rn = run_ids[dv].index(run)
-        above = mask[dv, rn] & (t[dv, rn] >= at)
-        if above.any() and (mask[dv, rn] & ~above).any():
-            g[dv, rn, :, rn] = above
-            pairs.append(([device, run], at))
-    if not pairs:
-        return None
-    cols = space.columns({sweep: g})
-    sc = space.score(cols)
-    if not sc.df:
-        return None
-    where = {"runs": [r for r, _ in pairs], "at": like.where["at"], "at_each": [a for _, a in pairs],
-             "run_index": like.where.get("run_index")}
-    return Description(sweep, "time_s", "step", cols, sc, sc.p_value, where)
-
-
-def _beyond_smooth(space, sweep, t, mask):
-    """`space` beyond a smooth curve along time in each run (the spline of `describe`'s "offset in each run"): a
-    jump is a step only where it stays significant beyond it; a die relaxing after a chamber step is a smooth
-    change that a step at some dwell of each run also follows."""
-    hats = spline_basis(np.where(mask, t, 0.0), mask)
-    if hats is None:
-        return space
-    eye = np.eye(mask.shape[1])[None, :, None, :, None]
-    return space.with_columns(space.columns({sweep: (hats[..., None, :] * eye).reshape(*mask.shape, -1)}))
-
-
-MAX_OWN_STEPS = 8  # the most (device, run) pairs a reading of steps at their own dwells holds
-OWN_STEP_ALPHA = 0.01  # each of them significant alone at this level, over the pairs and positions tried
-
-
-def _steps_each_own_dwell(stats, joint, is_step):
-    """Steps in several (device, run) pairs, each at its own dwell (bias jumps at random times: popcorn
-    charging events): the pairs at their best positions, strongest first, each kept only where it adds chi2
-    significant alone (at `OWN_STEP_ALPHA` over the pairs and positions tried) beyond those before it (`joint`:
-    the chi2 of a list of (device, run, position) together; a jump in one run moves the device's fitted gain,
-    which leaves a step-like trend in its other run that adds nothing beyond the jump) and a step, not a
-    smooth change (`is_step` of the (device, run, position)), at most
-    `MAX_OWN_STEPS`; the look-elsewhere correction is the choice of K of the pairs and a position in each,
-    times the two readings of one dwell. (log of the corrected p-value, [(device, run, position)]) of the best
-    K >= 2, or None."""
-    pair_best, per_run = {}, {}
-    for (rn, j), (per_dev, ok, _) in stats.items():
-        per_run[rn] = per_run.get(rn, 0) + 1
-        for dv in np.flatnonzero(ok):
-            if (dv, rn) not in pair_best or per_dev[dv] > pair_best[(dv, rn)][0]:
-                pair_best[(dv, rn)] = (float(per_dev[dv]), j)
-    n_pairs, n_pos = len(pair_best), max(per_run.values(), default=1)
-    alone = chi2_isf(OWN_STEP_ALPHA / max(n_pairs * n_pos, 1), 1)
-    ranked = sorted(((k, v) for k, v in pair_best.items() if v[0] > alone), key=lambda kv: -kv[1][0])
-    chosen, total, best = [], 0.0, None
-    for (dv, rn), (_, j) in ranked:
-        if len(chosen) == MAX_OWN_STEPS:
-            break
-        if not is_step((dv, rn, j)):
-            continue
-        with_it = joint(chosen + [(dv, rn, j)])
-        if with_it - total <= alone:
-            continue
-        chosen, total = chosen + [(dv, rn, j)], with_it
-        k = len(chosen)
-        if k < 2:
-            continue
-        choose = math.lgamma(n_pairs + 1) - math.lgamma(k + 1) - math.lgamma(n_pairs - k + 1)
-        log_p = log_chi2_sf(total, k) + choose + k * math.log(n_pos) + math.log(2.0)
-        if best is None or log_p < best[0]:
-            best = (log_p, list(chosen))
-    return best
+    found = changepoints.at_same_steps(space, sweep, np.asarray(coords["time_s"], float), np.asarray(block.mask),
+                                       like.where)
+    return None if found is None else Description(sweep, "time_s", "step", *found)
 
 
 def _periodic_scan(space, sweep, x, mask):

@@ -441,7 +441,7 @@ def _where(fit, space, best, members, sc) -> dict:
         by_device[d] = by_device.get(d, 0.0) + c
     # what each device holds beyond the noise its share of the description's degrees of freedom fits
     by_device = {d: max(c - sc.df / len(fit.devices), 0.0) for d, c in by_device.items()}
-    top = max(by_device, key=by_device.get)
+    top = max(by_device, key=lambda d: by_device[d])
     excess_total = sum(by_device.values())
     if ("devices" not in out and len(by_device) > 1 and excess_total > 0
             and by_device[top] >= ONE_DEVICE_SHARE * excess_total):
