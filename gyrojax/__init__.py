@@ -94,7 +94,7 @@ from ._simulate.tiers import (  # noqa: E402
     Steady as Steady,
     settle as settle,
 )
-from ._plugins import load_effects_module as load_effects_module  # noqa: E402
+from ._effects.plugins import load_effects_module as load_effects_module  # noqa: E402
 from ._describe import describe as describe  # noqa: E402
 from ._device.file import load_device as load_device  # noqa: E402
 from ._plan import (  # noqa: E402

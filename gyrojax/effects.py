@@ -16,6 +16,10 @@ from ._effects.damping_coupling import DampingCoupling as DampingCoupling
 from ._effects.duffing_drive import DuffingDrive as DuffingDrive
 from ._effects.duffing_sense import DuffingSense as DuffingSense
 from ._effects.feedback_compression import FeedbackCompression as FeedbackCompression
+from ._effects.plugins import (
+    load_effect_entry_points as load_effect_entry_points,
+    load_effects_module as load_effects_module,
+)
 from ._effects.pushpull_mismatch import PushPullMismatch as PushPullMismatch
 from ._effects.quadrature_phase import QuadraturePhase as QuadraturePhase
 from ._effects.registry import (
@@ -28,7 +32,6 @@ from ._effects.registry import (
 from ._effects.thermal_drift import ThermalDrift as ThermalDrift
 from ._effects.vref_drift import VrefDrift as VrefDrift
 from ._effects.zro_tempco import ZroTempco as ZroTempco
-from ._plugins import load_effect_entry_points as load_effect_entry_points, load_effects_module as load_effects_module
 
 
 __all__ = [

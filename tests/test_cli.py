@@ -243,7 +243,7 @@ def user_effects():
     """Registered effects are global: remove what a test added."""
     import sys
 
-    from gyrojax import _plugins
+    from gyrojax._effects import plugins as _plugins
 
     effects, files, modules = dict(gj.EFFECTS), dict(_plugins._loaded_files), set(sys.modules)
     yield

@@ -10,9 +10,10 @@ import warnings
 import pytest
 
 import gyrojax as gj
-from gyrojax import _plugins, load_effects_module
+from gyrojax import load_effects_module
+from gyrojax._effects import plugins as _plugins
+from gyrojax._effects.plugins import ENTRY_POINT_GROUP
 from gyrojax._model.parameters import zero_effect
-from gyrojax._plugins import ENTRY_POINT_GROUP
 from gyrojax.effects import load_effect_entry_points
 
 

@@ -6,7 +6,7 @@ import textwrap
 import pytest
 
 import gyrojax as gj
-from gyrojax import _plugins
+from gyrojax._effects import plugins as _plugins
 from gyrojax._text import safe_name, safe_text
 from gyrojax.cli import main
 

@@ -31,7 +31,7 @@ def check_outputs(*outputs) -> None:
 
 def load_effects(args) -> None:
     """Register the installed plugins' effects (entry points, once) and those of every --effects-module."""
-    from .._plugins import load_effect_entry_points, load_effects_module
+    from .._effects.plugins import load_effect_entry_points, load_effects_module
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -45,7 +45,7 @@ def load_effects(args) -> None:
 def check_finite_effects(effects, gyro) -> None:
     """Refuse, by name, an effect that gives `gyro` NaN or infinite parameters (a user effect's bug: without
     this it surfaces far away, as a failed SVD or an unsettled loop). `effects`: (name, scale) pairs."""
-    from .._plugins import nonfinite_effect
+    from .._effects.plugins import nonfinite_effect
 
     for name, scale in effects:
         why = nonfinite_effect(name, gyro, scale)

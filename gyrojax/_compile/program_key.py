@@ -11,8 +11,8 @@ neither one of those versioned packages nor Python's standard library (a user's 
 with state it cannot see, a module without a source file, a tracer) means no key: the call takes the plain
 `equinox.filter_jit` path. A gyrojax module-level function or class replaced at run time by one from a user's
 file (a test's monkeypatch) is part of the key. The key also holds
-`gyrojax._plugins.user_code_digest()`, a hash of the sources of the user effect modules loaded and of the modules
-they import from the user's folders: a helper module edited since gives a new key.
+`gyrojax._effects.plugins.user_code_digest()`, a hash of the sources of the user effect modules loaded and of the
+modules they import from the user's folders: a helper module edited since gives a new key.
 A source file (gyrojax's or a user's) changed after gyrojax was imported means no key: the code running may not
 be the code on disk.
 """
@@ -288,7 +288,7 @@ def _trace_context() -> str:
 def program_key(name: str, args: tuple) -> str:
     """The key of program `name` called with `args` (a hex SHA-256); raises `Unhashable` when some part of it
     cannot be described deterministically."""
-    from .._plugins import user_code_digest  # user effect modules and the helpers they import
+    from .._effects.plugins import user_code_digest  # user effect modules and the helpers they import
 
     devices = jax.devices()
     out = [name, repr(_versions()), user_code_digest(), _trace_context(), *_replaced(), jax.default_backend(),

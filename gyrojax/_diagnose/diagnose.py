@@ -8,6 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from .._data.table import Table
+from .._effects.plugins import nonfinite_effect
 from .._gyroscope import Gyroscope
 from .._identify import Fit, MultiStart, identify
 from .._identify.order import DEFAULT_MODEL, model_and_data
@@ -15,7 +16,6 @@ from .._identify.spec import FitSpec, fit_spec
 from .._model.fitdata import FitData, fit_data
 from .._model.parameters import DEFAULT_FREE, Model, as_model
 from .._numerics.stats import chi2_sf
-from .._plugins import nonfinite_effect
 from .._runtime.progress import ProgressArg, as_progress
 from .candidates import baseline_fit, baseline_model, candidate_effects, first_device, is_lot
 from .columns import base_columns, effect_columns

@@ -41,9 +41,9 @@ import numpy as np
 from .._data.arrays import ARRAY_FIELDS, SweepArrays
 from .._data.io import atomic_write_bytes
 from .._data.reading import open_regular, read_exactly
+from .._effects.plugins import user_code_changes, user_effect_code
 from .._model.fitdata import FIT_COLUMNS, FitData
 from .._model.parameters import Entry, Model, batched, zero_effect
-from .._plugins import user_code_changes, user_effect_code
 from .._version import __version__
 from . import Fit, Unidentifiable, chi2_p_value
 
@@ -208,7 +208,7 @@ def _header(fit: Fit, preset_name: str | None) -> dict:
         "sweeps": list(fit.data.blocks), "result_sweeps": list(fit.residuals),
         "data_runs": [[s, [list(r) for r in runs]] for s, runs in fit.data.runs],
         "data_weighted": bool(fit.data.weighted), "data_source": fit.data.source,
-        # the code of the user effects the fit used (gyrojax._plugins): loading with other code warns
+        # the code of the user effects the fit used (gyrojax._effects.plugins): loading with other code warns
         "user_effects": user_effect_code(fit.model.effect_names),
     }
 

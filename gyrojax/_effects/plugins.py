@@ -30,8 +30,8 @@ import types
 import warnings
 from collections.abc import Mapping
 
-from ._effects.base import AbstractEffect
-from ._effects.registry import EFFECTS, register_effect
+from .base import AbstractEffect
+from .registry import EFFECTS, register_effect
 
 
 ENTRY_POINT_GROUP = "gyrojax.effects"
@@ -161,7 +161,7 @@ def nonfinite_effect(name: str, gyro, scale: float = 1.0) -> str | None:
     import jax.numpy as jnp
     import numpy as np
 
-    from ._effects.registry import effect
+    from .registry import effect
 
     typical = effect(name, scale)  # an unknown name: the registry's error
     cls = type(typical)
