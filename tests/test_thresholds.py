@@ -42,6 +42,17 @@ def test_changes_are_the_step_in_the_chosen_devices():
     assert np.array_equal(off[..., 0], (x >= 8.0).astype(float))
 
 
+def test_the_sign_change_is_the_one_threshold_of_every_unit():
+    rates = np.array([-200.0, -1.0, -0.1, 0.1, 1.0, 200.0])
+    assert thresholds.is_sign_change(rates, 0.0) and not thresholds.is_sign_change(rates, 0.5)
+    volts = np.array([-2.0, -0.01, 0.0, 0.01, 2.0])
+    assert thresholds.sign_change(volts, 0.0) == 0.0
+    assert thresholds.sign_change(volts, 0.05) == 0.005  # zero below it, as on the other sweep
+    assert thresholds.sign_change(volts, -0.05) == -0.005
+    # a coordinate of one sign has no sign change (it was an error on an empty side)
+    assert thresholds.sign_change(np.array([0.5, 1.0, 2.0]), -0.05) is None
+
+
 @pytest.fixture(scope="module")
 def step_in_temperature():
     # held-out effect: a bias that jumps by the same deg/s in every device when the die passes 28 C

@@ -32,8 +32,7 @@ def scan(space: ResidualSpace, sweep: str, t: np.ndarray, mask: np.ndarray, hats
                 m = mask[dv, rn]
                 if m.sum() < 6 or j >= m.sum() - 1:
                     continue
-                order = np.argsort(np.where(m, t[dv, rn], np.inf), kind="stable")
-                g[dv, rn, :, 0] = np.where(m & (t[dv, rn] >= t[dv, rn, order[j]]), 1.0, 0.0)
+                g[dv, rn, :, 0] = _from_position(t[dv, rn], m, j)
             if not g.any():
                 continue
             cols = space.columns({sweep: g})
@@ -47,25 +46,21 @@ def scan(space: ResidualSpace, sweep: str, t: np.ndarray, mask: np.ndarray, hats
                 positions += 1
     if not stats:
         return None
-    best = None
-    for (rn, j), (per_dev, ok, cols) in stats.items():
-        all_p = chi2_sf(float(per_dev.sum()), int(ok.sum()))
-        dv = int(np.argmax(per_dev))
-        one_p = chi2_sf(float(per_dev[dv]), 1)
-        for p, devs in ((all_p, np.flatnonzero(ok)), (one_p, np.array([dv]))):
-            if best is None or p < best[0]:
-                best = (p, rn, j, devs, cols)
-    if best is None:
-        return None
+    # each position read in every device (each its own height) and in its strongest device alone; the first best
+    best = min(((p, rn, j, devs, cols) for (rn, j), (per_dev, ok, cols) in stats.items()
+                for p, devs in ((chi2_sf(float(per_dev.sum()), int(ok.sum())), np.flatnonzero(ok)),
+                                (chi2_sf(float(per_dev.max()), 1), np.array([int(np.argmax(per_dev))])))),
+               key=lambda b: b[0])
     fit = space.fit
 
     def own_dwells(pairs):  # the columns of steps in (device, run) pairs, each at its own position
         g = np.zeros((n_dev, n_run, n_pt, n_run))
         for dv, rn, j in pairs:
-            m = mask[dv, rn]
-            order = np.argsort(np.where(m, t[dv, rn], np.inf), kind="stable")
-            g[dv, rn, :, rn] = np.where(m & (t[dv, rn] >= t[dv, rn, order[j]]), 1.0, 0.0)
+            g[dv, rn, :, rn] = _from_position(t[dv, rn], mask[dv, rn], j)
         return space.columns({sweep: g})
+
+    def time_at(dv, rn, j):  # the time of the j-th point of a run
+        return float(np.sort(t[dv, rn][mask[dv, rn]])[j])
 
     beyond_smooth = _beyond_smooth(space, sweep, mask, hats)
     several = _steps_each_own_dwell(
@@ -74,7 +69,7 @@ def scan(space: ResidualSpace, sweep: str, t: np.ndarray, mask: np.ndarray, hats
     if several is not None and several[0] < math.log(max(2 * positions * best[0], 1e-300)):
         log_p, pairs = several
         cols = own_dwells(pairs)
-        at = [float(np.sort(t[dv, rn][mask[dv, rn]])[j]) for dv, rn, j in pairs]
+        at = [time_at(dv, rn, j) for dv, rn, j in pairs]
         where = {"runs": [[fit.devices[dv], fit.data.run_ids(sweep)[dv][rn]] for dv, rn, _ in pairs],
                  "at": float(np.median(at)), "at_each": at, "run_index": None}
         return cols, space.score(cols), min(1.0, math.exp(log_p)), where
@@ -83,10 +78,16 @@ def scan(space: ResidualSpace, sweep: str, t: np.ndarray, mask: np.ndarray, hats
     keep[devs] = True
     cols = np.where(keep[:, None, None], cols, 0.0)
     sc = space.score(cols)
-    at = [float(np.sort(t[dv, rn][mask[dv, rn]])[j]) for dv in devs]
+    at = [time_at(dv, rn, j) for dv in devs]
     where = {"runs": [[fit.devices[dv], fit.data.run_ids(sweep)[dv][rn]] for dv in devs],
              "at": float(np.median(at)), "at_each": at, "run_index": rn}
     return cols, sc, min(1.0, 2 * positions * p), where
+
+
+def _from_position(t_run: np.ndarray, m: np.ndarray, j: int) -> np.ndarray:
+    """1 on the points of one run (times `t_run`, recorded where `m`) from its j-th point in time order on."""
+    order = np.argsort(np.where(m, t_run, np.inf), kind="stable")
+    return np.where(m & (t_run >= t_run[order[j]]), 1.0, 0.0)
 
 
 def at_same_steps(space: ResidualSpace, sweep: str, t: np.ndarray, mask: np.ndarray, like: dict):

@@ -223,10 +223,10 @@ def at_threshold(space, sweep, like: Description) -> Description | None:
         # one value of inputs in other units (deg/s, V) is not one threshold; their sign change is
         like_x = coordinates(space.fit.data.blocks[like.sweep])["input"]
         like_mask = np.asarray(space.fit.data.blocks[like.sweep].mask)
-        if not (thresholds.is_sign_change(np.asarray(like_x, float)[like_mask], at)
-                and thresholds.is_sign_change(x[mask], thresholds.sign_change(x[mask], at))):
+        here = thresholds.sign_change(x[mask], at)
+        if here is None or not thresholds.is_sign_change(np.asarray(like_x, float)[like_mask], at):
             return None
-        at = thresholds.sign_change(x[mask], at)
+        at = here
     above = x[mask] >= at
     if above.all() or not above.any():
         return None

@@ -116,7 +116,7 @@ def verdict_of(comparison, steps) -> str:
 
 
 MIN_DEVICES_FOR_LOT = 3  # with fewer devices, "one device only" cannot be told from a lot effect
-ONE_DEVICE_SHARE = 0.9  # the share of the candidate's score one device must carry to be the whole of it
+ONE_DEVICE_SHARE = 0.9  # the share of a candidate's score (or a location's chi2) one device carries to be its
 
 
 def one_device_guard(fit: Fit, effect: str, alpha: float) -> str | None:

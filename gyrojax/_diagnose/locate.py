@@ -35,6 +35,7 @@ from .descriptions import (
     spread,
     strength,
 )
+from .guards import ONE_DEVICE_SHARE
 from .space import ResidualSpace
 
 
@@ -191,16 +192,12 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS, pool
             if d.sweep in {m.sweep for m in members} or (d.coordinate, d.family, step or d.pooled) != (
                     best.coordinate, best.family, step or best.pooled):
                 continue
-            if d.family == "step":  # joined at the same change points, in the same runs
-                d = at_change_points(space, d.sweep, best)
+            if d.family == "step" or step:  # joined at the same change points or threshold, nowhere else
+                d = _same_step(space, d.sweep, best)
                 if d is None:
                     continue
             elif d.family in SCANS:
                 continue
-            elif step:  # joined at the same threshold, in the same devices
-                d = at_threshold(space, d.sweep, best)
-                if d is None:
-                    continue
             if joined.score(d.columns, d.pooled).p_value < cut:
                 members.append(d)
                 joined = joined.with_columns(d.columns)
@@ -253,7 +250,6 @@ def _preference(d: Description):
     return (mostly_between, rank)
 
 
-ONE_DEVICE_SHARE = 0.9  # the share of a location's chi2 in one device that makes it that device's misfit
 SIMPLER = 0.5  # a description with at most this share of the other's degrees of freedom is the simpler one
 
 
@@ -272,6 +268,14 @@ def _primary(candidates: list) -> Description:
 
 def _is_step(d: Description) -> bool:
     return d.family in thresholds.FAMILIES
+
+
+def _same_step(space, sweep, best: Description) -> Description | None:
+    """The step of `best` on `sweep`: a change point in the same runs from the same times, or a threshold step
+    at the same threshold in the same devices; None where `sweep` cannot hold it."""
+    if best.family == "step":
+        return best if sweep == best.sweep else at_change_points(space, sweep, best)
+    return at_threshold(space, sweep, best)
 
 
 def _confounded(space, best, descs, cut) -> list:
@@ -348,8 +352,8 @@ def _measured_shares(space, fit, best: Description, sc) -> tuple:
         mask = np.asarray(block.mask)
         coords = coordinates(block)
         pred = np.asarray(fit.predictions[sweep], float)
-        if best.family == "step":
-            d = best if sweep == best.sweep else at_change_points(space, sweep, best)
+        if best.family == "step" or _is_step(best):
+            d = _same_step(space, sweep, best)
             if d is not None:
                 found[sweep] = space.raw_excess(d.columns, sweep)
             continue
@@ -357,12 +361,6 @@ def _measured_shares(space, fit, best: Description, sc) -> tuple:
             g = interactions(block, mask).get(best.coordinate)
             if g is None:
                 continue
-        elif _is_step(best):
-            d = at_threshold(space, sweep, best)
-            if d is None:
-                continue
-            found[sweep] = space.raw_excess(d.columns, sweep)
-            continue
         elif best.coordinate == "run":
             if mask.shape[1] < 2:
                 continue

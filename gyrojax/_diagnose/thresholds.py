@@ -76,14 +76,16 @@ def is_sign_change(values: np.ndarray, at: float) -> bool:
     return not np.any((values > lo) & (values < hi))
 
 
-def sign_change(values: np.ndarray, like: float) -> float:
+def sign_change(values: np.ndarray, like: float) -> float | None:
     """The sign-change threshold of `values` on the side of zero `like` (a sign change of another coordinate)
-    puts zero: zero itself, or the midpoint between zero and the nearest value above (below) it."""
+    puts zero: zero itself, or the midpoint between zero and the nearest value above (below) it; None where
+    `values` do not take both signs."""
     values = np.asarray(values, float)
+    if not (values.min() < 0.0 < values.max()):
+        return None
     if like == 0.0:
         return 0.0
-    side = values[values > 0.0] if like > 0.0 else values[values < 0.0]
-    edge = side.min() if like > 0.0 else side.max()
+    edge = values[values > 0.0].min() if like > 0.0 else values[values < 0.0].max()
     return edge / 2.0
 
 
