@@ -24,6 +24,7 @@ finished columns into a `Table` (`Table.from_columns`), as it would read a file 
 """
 
 import dataclasses
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -486,6 +487,92 @@ def visible_chi2(lot: Lot, delta: np.ndarray, sigma: np.ndarray) -> tuple[float,
     return total, {k: (v / total if total > 0 else 0.0) for k, v in shares.items()}
 
 
+def _baseline_columns(lot: Lot, m: np.ndarray) -> list:
+    """The baseline's free columns on the rows `m` of one device: per sweep a gain (the rate gain follows the TCF:
+    `lot.clean`) and, on rate and VCF rows, a bias per run."""
+    c = lot.columns
+    cols = []
+    for sw in SWEEPS:
+        ms = m & (c["sweep"] == sw)
+        if not ms.any():
+            continue
+        cols.append(np.where(ms, lot.clean, 0.0))
+        if sw != "dac":
+            cols += [(ms & (c["run"] == r)).astype(float) for r in np.unique(c["run"][ms])]
+    return cols
+
+
+def look_alike_chi2(lot: Lot, delta: np.ndarray, sigma: np.ndarray, library: str | None = None) -> dict:
+    """How far the data put an output change `delta` from each library effect, as this generator writes it: per
+    library effect (other than `library`), the chi2 of `delta` beyond the baseline's free columns and that
+    effect's own, per device (each device its own coefficient on every case of it in `HIDDEN`, a spread case
+    included): the noise-free separation, the best any method could see. Below ~9 (3 sigma) no method can tell the
+    two apart on this lot. The drive-frequency readings an effect also moves are left out (output rows only)."""
+    out = {}
+    for lib in sorted({h.library for h in HIDDEN.values() if h.library and h.library != library}):
+        shapes = [h.fn(lot) for h in HIDDEN.values() if h.library == lib]
+        chi2 = 0.0
+        for d in np.unique(lot.dev):
+            m = lot.dev == d
+            cols = _baseline_columns(lot, m) + [np.where(m, f, 0.0) for f in shapes]
+            a = (np.stack(cols, axis=1) / sigma[:, None])[m]
+            z = delta[m] / sigma[m]
+            coef = np.linalg.lstsq(a, z, rcond=None)[0]
+            chi2 += float(np.sum((z - a @ coef) ** 2))
+        out[lib] = chi2
+    return out
+
+
+COORDINATE_KNOTS = 6  # as many knots per device as the diagnosis's own curves along a coordinate
+
+
+def _coordinate_values(lot: Lot) -> dict:
+    """The coordinates a misfit may be located along, per row (NaN where a sweep does not record it): the
+    recorded columns, the input, dT/dt and the point's order in its run (the rank of its time)."""
+    c = lot.columns
+    order = np.full(lot.dev.size, np.nan)
+    for key in {(d, r, s) for d, r, s in zip(lot.dev, c["run"], c["sweep"])}:
+        m = (lot.dev == key[0]) & (c["run"] == key[1]) & (c["sweep"] == key[2])
+        t = c["time_s"][m]
+        if np.all(np.isfinite(t)):
+            order[m] = np.argsort(np.argsort(t, kind="stable"), kind="stable")
+    return {"input": _x(lot), "temperature_c": c["temperature_c"], "dtemperature_dt": lot.dtdt,
+            "time_s": c["time_s"], "order": order, "drive_freq_hz": c["drive_freq_hz"]}
+
+
+def coordinate_chi2(lot: Lot, delta: np.ndarray, sigma: np.ndarray) -> dict:
+    """How far the data put an output change `delta` from a curve along each coordinate: per coordinate, the chi2
+    of `delta` beyond the baseline's free columns and a piecewise-linear curve along it (`COORDINATE_KNOTS` knots
+    at its quantiles in each device and sweep, shared by the device's runs), as an offset or as a gain (the
+    smaller). Below ~9 a curve along that coordinate takes the effect up as well as one along its own: with
+    curves of equal freedom the data cannot tell the two coordinates apart."""
+    c = lot.columns
+    out = {}
+    for name, x in _coordinate_values(lot).items():
+        best = math.inf
+        for family in ("offset", "gain"):
+            chi2 = 0.0
+            for d in np.unique(lot.dev):
+                for sw in SWEEPS:
+                    m = (lot.dev == d) & (c["sweep"] == sw)
+                    if not m.any():
+                        continue
+                    z = delta[m] / sigma[m]
+                    cols = [v[m] for v in _baseline_columns(lot, m)]
+                    xs = np.asarray(x, float)[m]
+                    u = np.unique(xs[np.isfinite(xs)])
+                    if u.size >= 2 and np.all(np.isfinite(xs)):
+                        knots = np.unique(np.quantile(u, np.linspace(0.0, 1.0, min(COORDINATE_KNOTS, u.size))))
+                        scale = lot.clean[m] if family == "gain" else np.ones(m.sum())
+                        cols += [scale * np.interp(xs, knots, np.eye(knots.size)[j]) for j in range(knots.size)]
+                    a = np.stack(cols, axis=1) / sigma[m, None]
+                    coef = np.linalg.lstsq(a, z, rcond=None)[0]
+                    chi2 += float(np.sum((z - a @ coef) ** 2))
+            best = min(best, chi2)
+        out[name] = best
+    return out
+
+
 def discovery_lot(hidden: str | None = None, *, snr: str = "mid", design: str = "a", n_devices: int = 6,
                   n_runs: int = 2, seed: int = 0) -> tuple[Table, dict]:
     """A lot with at most one hidden effect.
@@ -528,6 +615,8 @@ def discovery_lot(hidden: str | None = None, *, snr: str = "mid", design: str = 
         size = float(np.sqrt(TARGET_CHI2[snr] / chi2_unit))
         delta = size * unit_delta
         info.update(size=size, unit=h.unit, visible_chi2=TARGET_CHI2[snr], sweep_shares=shares,
+                    look_alike_chi2=look_alike_chi2(lot, delta, rows["sigma"], h.library),
+                    coordinate_chi2=coordinate_chi2(lot, delta, rows["sigma"]),
                     visible_sweeps=sorted(s for s, v in shares.items() if v >= 0.2),
                     sweeps=sorted(h.sweeps), coordinate=h.coordinate, library=h.library,
                     formula=None if h.formula is None else sorted(h.formula), description=h.description)
