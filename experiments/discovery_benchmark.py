@@ -13,18 +13,18 @@ cases of library effects). Each method is a plug-in (`Method`: `name`, `run(tabl
   canonical terms (`TERMS`), per sweep (skipped with a message where pysindy is not installed:
   `pip install -e ".[discovery]"`).
 
-Scores per method, by effect class (library / outside / null) and SNR (`score_rows`): library effects found,
-wrong confirmations, localisation right (the located sweep set names every sweep carrying >= 30 % of the hidden
-effect's visible chi2 and none carrying < 10 %, and the coordinate is right; a library effect found counts as
-localised; a second column also counts a coordinate along which a curve takes the hidden effect up as well as
-along its own (`coordinate_chi2`, noise-free: no method could tell the two apart), a third the hidden coordinate
-named among those the diagnosis says the data confound with the one it gives, as where the sweep order follows
-the input; the JSON rows also score the sweep set against one 20 % cut, `localised_strict`), formula recovered, null lots explained, median final chi2_red, median seconds per lot. Two columns
-read the generator's noise-free separation of the hidden effect from each library effect (`look_alike_chi2`, the
-best any method could see): a library effect confirmed in the hidden one's place and declared ambiguous with it,
-where the two lie within 3 sigma, is "found, or declared ambiguous where no method could tell"; a wrong
-confirmation of an effect >= 3 sigma away is "wrong, where the data separate them". DIR/discovery.json and
-DIR/discovery.md are rewritten (atomically) after every lot.
+Scores per method, by effect class (library / outside / null) and SNR (`score_rows`): library effects found, wrong
+confirmations, localisation right (the located sweep set names every sweep carrying >= 30 % of the hidden effect's
+visible chi2 and none carrying < 10 %, and the coordinate is right; a library effect found counts as localised; a
+second column also counts a coordinate along which a curve takes the hidden effect up as well as along its own
+(`coordinate_chi2`, noise-free: no method could tell the two apart), a third the hidden coordinate named among those
+the diagnosis says the data confound with the one it gives, as where the sweep order follows the input; the JSON
+rows also score the sweep set against one 20 % cut, `localised_strict`), formula recovered, null lots explained,
+median final chi2_red, median seconds per lot. Two columns read the generator's noise-free separation of the hidden
+effect from each library effect (`look_alike_chi2`, the best any method could see): a library effect confirmed in
+the hidden one's place and declared ambiguous with it, where the two lie within 3 sigma, is "found, or declared
+ambiguous where no method could tell"; a wrong confirmation of an effect >= 3 sigma away is "wrong, where the data
+separate them". DIR/discovery.json and DIR/discovery.md are rewritten (atomically) after every lot.
 """
 
 import abc

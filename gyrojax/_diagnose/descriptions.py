@@ -9,7 +9,8 @@ device on finer knots (`pooled`: the lot's coefficients, as most physical terms 
 Beside them: a curve along the input whose size
 grows with the temperature or the time, a *gain per run* (and an offset per run on sweeps read without a turn-on
 bias), an offset along time that differs from run to run, a *change-point scan* along time (a step in the
-output at one dwell), a *spectral scan* along the input (a periodic error of the input or the DAC word) and, with
+output at one dwell), a *spectral scan* along the input (a periodic error of the input or the DAC word) and along
+the time since power-on (a disturbance that cycles: the lab's air conditioning, a thermal oscillation) and, with
 the pooled curves, a *threshold scan* along every coordinate that moves within the devices (a step of the output
 or of the gain where it passes one value: `gyrojax._diagnose.thresholds`). Scans carry their own look-elsewhere
 correction (Bonferroni over the positions or periods scanned).
@@ -183,9 +184,11 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
             d = _step_scan(space, sweep, np.where(mask, coords["time_s"], 0.0), mask)
             if d is not None:
                 out.append(d)
-        d = _periodic_scan(space, sweep, np.asarray(block.inputs, float), mask)
-        if d is not None:
-            out.append(d)
+        for name in ("input", "time_s"):
+            if name in coords:
+                d = _periodic_scan(space, sweep, name, np.where(mask, np.asarray(coords[name], float), 0.0), mask)
+                if d is not None:
+                    out.append(d)
         out.extend(_point_scans(space, sweep, block, mask))
     return out, notes
 
@@ -284,9 +287,9 @@ def at_change_points(space, sweep, like: Description) -> Description | None:
     return None if found is None else Description(sweep, "time_s", "step", *found)
 
 
-def _periodic_scan(space, sweep, x, mask):
-    """The strongest periodic error along the input (sin and cos of one period, per device); the look-elsewhere
-    correction is the number of periods scanned."""
+def _periodic_scan(space, sweep, name, x, mask):
+    """The strongest periodic error along the coordinate `name` (values `x`): sin and cos of one period, per
+    device; the look-elsewhere correction is the number of periods scanned."""
     real = np.unique(x[mask])
     if real.size < 8:
         return None
@@ -310,7 +313,7 @@ def _periodic_scan(space, sweep, x, mask):
     if best is None:
         return None
     sc, cols, period = best
-    return Description(sweep, "input", "periodic", cols, sc, min(1.0, PERIODS * sc.p_value), {"period": period})
+    return Description(sweep, name, "periodic", cols, sc, min(1.0, PERIODS * sc.p_value), {"period": period})
 
 
 POINT_CANDIDATES = 3  # the largest residuals scored exactly as single points (their projections differ little)

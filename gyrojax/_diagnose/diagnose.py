@@ -376,14 +376,16 @@ def _final_discrepancy(s: _Selection, final_scores, max_typical_multiple, alpha)
     discrepancy = with_shapes(fit, located.locations, s.discrepancy, s.designs, final_scores, s.rejected,
                               max_typical_multiple, alpha)
     # a single point off the model (an outlier) has no closed form in the recorded coordinates to propose
-    formula = propose_along(fit, discrepancy[0], step_at=located.step_at, period=located.period, alpha=alpha) \
+    formula = propose_along(fit, discrepancy[0], step_at=located.step_at, periods=located.periods, alpha=alpha) \
         if discrepancy and getattr(discrepancy[0], "family", "") != "single point" else None
     along = formula_coordinate(formula)
     if along is not None and along != discrepancy[0].coordinate and along != "model":
         # a closed form of one coordinate that explains the whole location (fewer degrees of freedom than the
         # flexible description) names its coordinate; the flexible one is said to describe it as well
         top = discrepancy[0]
-        discrepancy = (dataclasses.replace(top, coordinate=along, confounded_with=tuple(
+        terms = " + ".join(dict.fromkeys(t.name for t in formula.terms))
+        discrepancy = (dataclasses.replace(top, coordinate=along, shape=f"{terms} ({top.shape})",
+                                           confounded_with=tuple(
             dict.fromkeys((top.coordinate, *(c for c in top.confounded_with if c != along))))),) + discrepancy[1:]
     # the size as the term's coefficient, unless a generic shape (in physical units) already gives it
     size = term_size(formula, discrepancy[0]) if discrepancy and not discrepancy[0].probe else None

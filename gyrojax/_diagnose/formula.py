@@ -3,7 +3,8 @@ r"""The missing term's formula: a sparse closed form over a dictionary of terms 
 The dictionary holds, for the sweeps a misfit was located on (each alone and together), terms of one coordinate
 (`lin`, `sq`, `cube` of its distance from a reference; `abs` and `sign` of the input and of dT/dt; a `step`
 between two set points of the input and an odd `hinge`, a gain change beyond an input magnitude (a saturation);
-a `step` and an exponential `relax`ation along the time since power-on; a `periodic` error along the input),
+a `step` and an exponential `relax`ation along the time since power-on; a `periodic` error along the input or the
+time, at the period the location's spectral scan found),
 each as an offset of the output and as a gain (times the model's prediction, written `*model`), the products of
 the temperature and the time with the input, the square and cube of the model's output itself (a compression of
 the readout or the amplifier), a gain per run, and, on sweeps of different input units together, the same terms
@@ -123,15 +124,16 @@ _CODE = {"input": "x", "temperature_c": f"(T - {REFERENCE_C})", "time_s": "t", "
          "order": "n", "dtemperature_dt": "dTdt"}
 
 
-def dictionary(fit, sweeps, *, step_at: float | None = None, period: float | None = None,
+def dictionary(fit, sweeps, *, step_at: float | None = None, periods: dict | None = None,
                threshold: tuple[str, float] | None = None) -> list:
-    """The dictionary of terms on the sweep sets `sweeps` (tuples of sweep names); `threshold` (coordinate,
-    value): a step there, as an offset and as a gain (where a threshold scan found one)."""
+    """The dictionary of terms on the sweep sets `sweeps` (tuples of sweep names); `periods` {coordinate:
+    period}: a periodic error along the input or the time with that period; `threshold` (coordinate, value): a
+    step there, as an offset and as a gain (where a threshold scan found one)."""
     terms = []
     for group in sweeps:
         g = _Group(fit, tuple(group), terms)
         for c in sorted(g.names - {"order"}):
-            _coordinate_terms(g, c, step_at, period)
+            _coordinate_terms(g, c, step_at, periods or {})
             if threshold is not None and threshold[0] == c:
                 _threshold_terms(g, c, threshold[1])
         _output_terms(g)
@@ -172,7 +174,7 @@ class _Group:
                                    coordinate="" if coordinate == "order" else coordinate))
 
 
-def _coordinate_terms(g: _Group, c, step_at, period):
+def _coordinate_terms(g: _Group, c, step_at, periods):
     """The terms of one coordinate `c`: powers of its distance from the reference, even and sign terms where its
     sign is physics, and the input's and the time's own families."""
     x = g.values(c)
@@ -185,9 +187,11 @@ def _coordinate_terms(g: _Group, c, step_at, period):
         g.add(f"abs({c})", f"abs({code})", lambda s: np.abs(x[s]), c)
         g.add(f"sign({c})", f"sign({code})", lambda s: np.sign(x[s]), c, unit_power=0)
     if c == "input":
-        _input_terms(g, x, period)
+        _input_terms(g, x)
     if c == "time_s":
         _time_terms(g, x, step_at)
+    if periods.get(c):
+        _periodic_terms(g, c, x, periods[c])
 
 
 def _threshold_terms(g: _Group, c, at):
@@ -202,8 +206,8 @@ def _threshold_terms(g: _Group, c, at):
           unit_power=0)
 
 
-def _input_terms(g: _Group, x, period):
-    """Steps and odd hinges between set points of a short sweep, and a periodic error along the input."""
+def _input_terms(g: _Group, x):
+    """Steps and odd hinges between set points of a short sweep."""
     # a step between two set points (a missing code, a range switch): every position of a short sweep, each a
     # term of the dictionary (its Bonferroni count is the scan's look-elsewhere correction)
     levels = np.unique(np.concatenate([x[s][g.masks[s]] for s in g.group]))
@@ -217,10 +221,13 @@ def _input_terms(g: _Group, x, period):
         for at in (size[1:] + size[:-1]) / 2.0:
             g.add("hinge(input)", f"sign(x) * maximum(abs(x) - {at:.8g}, 0)",
                   lambda s, at=at: np.sign(x[s]) * np.maximum(np.abs(x[s]) - at, 0.0), "input", gain_too=False)
-    if period:
-        for fn, nm in ((np.sin, "sin"), (np.cos, "cos")):
-            g.add("periodic(input)", f"{nm}(2 pi x / {period:.6g})", lambda s, fn=fn: fn(2 * np.pi * x[s] / period),
-                  "input", gain_too=False, unit_power=0)
+
+
+def _periodic_terms(g: _Group, c, x, period):
+    """A periodic error along `c` (the input, the time) at the period its scan found: sin and cos."""
+    for fn, nm in ((np.sin, "sin"), (np.cos, "cos")):
+        g.add(f"periodic({c})", f"{nm}(2 * pi * {_CODE[c]} / {period:.6g})",
+              lambda s, fn=fn: fn(2 * np.pi * x[s] / period), c, gain_too=False, unit_power=0)
 
 
 def _time_terms(g: _Group, x, step_at):
@@ -281,7 +288,7 @@ def _run_terms(g: _Group):
                                              g.masks[s].shape).astype(float), "order", offset=False, unit_power=0)
 
 
-def _location_dictionary(fit, location, space, step_at, period):
+def _location_dictionary(fit, location, space, step_at, periods):
     """The dictionary on `location`'s sweeps (each alone and together) and each term's standardised columns."""
     groups = [(s,) for s in location.located_on]
     if len(location.located_on) > 1:
@@ -290,19 +297,21 @@ def _location_dictionary(fit, location, space, step_at, period):
     # a location at one value: a step in time (the time step scan's), or a threshold of its coordinate
     threshold = (location.coordinate, loc["at"]) if location.family in thresholds.FAMILIES else None
     terms = dictionary(fit, groups, step_at=loc["at"] if location.family == "step" else step_at,
-                       period=loc.get("period", period), threshold=threshold)
+                       periods={**(periods or {}), **({location.coordinate: loc["period"]} if "period" in loc else {})},
+                       threshold=threshold)
     return terms, {id(t): _columns(space, t) for t in terms}
 
 
-def propose(fit, location, *, step_at=None, period=None, alpha: float = 0.01, max_terms: int = MAX_TERMS,
+def propose(fit, location, *, step_at=None, periods=None, alpha: float = 0.01, max_terms: int = MAX_TERMS,
             space: ResidualSpace | None = None, allowed=None, prepared=None):
-    """A sparse formula for the misfit at `location` (a `Location` of `locate`; `step_at`, `period`: where its
-    scans found a step and a period), or None when no term of the dictionary is significant. The formula is
-    `complete` when the location's flexible description is not significant beyond it. `allowed(term, columns)`,
-    where given, says which terms (a `Term` and its standardised columns) the dictionary keeps; `prepared`, the
-    dictionary and columns of `space` already built for this location (`_location_dictionary`)."""
+    """A sparse formula for the misfit at `location` (a `Location` of `locate`; `step_at`, `periods`: where its
+    scans found a step, and the period along each coordinate scanned), or None when no term of the dictionary is
+    significant. The formula is `complete` when the location's flexible description is not significant beyond it.
+    `allowed(term, columns)`, where given, says which terms (a `Term` and its standardised columns) the dictionary
+    keeps; `prepared`, the dictionary and columns of `space` already built for this location
+    (`_location_dictionary`)."""
     space = space or ResidualSpace(fit)
-    terms, cols = prepared or _location_dictionary(fit, location, space, step_at, period)
+    terms, cols = prepared or _location_dictionary(fit, location, space, step_at, periods)
     if not terms:
         return None
     size = len(terms)  # the family the Bonferroni cut counts, whatever `allowed` keeps
@@ -424,7 +433,7 @@ def propose_along(fit, location, **kw):
     own = {location.coordinate} | ({"model"} if location.coordinate == "input" else set()) | (
         {""} if location.coordinate == "run" else set())
     space = ResidualSpace(fit)  # one dictionary and its columns for the three searches
-    prepared = _location_dictionary(fit, location, space, kw.get("step_at"), kw.get("period"))
+    prepared = _location_dictionary(fit, location, space, kw.get("step_at"), kw.get("periods"))
     found = []
     for along in (own, own | set(location.confounded_with), None):
         allowed = None if along is None else (lambda t, _, along=along: t.coordinate in along)

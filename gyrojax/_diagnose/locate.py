@@ -146,13 +146,13 @@ def _location_text(loc: dict) -> str:
 @dataclasses.dataclass(frozen=True)
 class Localisation:
     """`locate`'s result: the `locations`, most significant first; `notes` on coordinates not described along;
-    and what the first round's scans found (`step_at`: the time of the strongest step, `period`: the strongest
-    period along the input), for the formula's dictionary."""
+    and what the first round's scans found (`step_at`: the time of the strongest step, `periods`: the strongest
+    period along each coordinate scanned, the input and the time), for the formula's dictionary."""
 
     locations: tuple
     notes: tuple
     step_at: float | None
-    period: float | None
+    periods: dict
 
 
 def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS, pooled: bool = True) -> Localisation:
@@ -203,7 +203,7 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS, pool
                 joined = joined.with_columns(d.columns)
         found.append(_location(space, fit, members, confounded))
         space = joined
-    hints = hints or (None, None)
+    hints = hints or (None, {})
     return Localisation(tuple(found), notes, *hints)
 
 
@@ -229,10 +229,11 @@ def run_properties(block) -> tuple:
 
 def _hints(descs):
     step = [d for d in descs if d.family == "step"]
-    periodic = [d for d in descs if d.family == "periodic"]
     best_step = min(step, key=lambda d: d.p_value).where["at"] if step else None
-    best_period = min(periodic, key=lambda d: d.p_value).where["period"] if periodic else None
-    return best_step, best_period
+    periods = {}
+    for d in sorted((d for d in descs if d.family == "periodic"), key=lambda d: d.p_value, reverse=True):
+        periods[d.coordinate] = d.where["period"]  # the most significant sweep's, per coordinate
+    return best_step, periods
 
 
 # Of coordinates the data cannot tell apart, the one named first: what the experiment sets (the input), then the
@@ -331,7 +332,9 @@ def _shape_words(d: Description) -> str:
     if d.family == "offset in each run":
         return f"an offset along {d.coordinate} that differs from run to run"
     if d.family == "periodic":
-        return f"a periodic error along the input (period {d.where['period']:.3g})"
+        unit = " s" if d.coordinate == "time_s" else ""
+        return f"a periodic error along {'the input' if d.coordinate == 'input' else d.coordinate} " \
+               f"(period {d.where['period']:.3g}{unit})"
     if d.coordinate == "run":
         return "a gain that changes from run to run" if d.family == "gain per run" else \
             "an offset that changes from run to run"

@@ -96,7 +96,7 @@ def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float
         space_b = space_b.with_columns(oc)
     # the rival is the best closed form of another shape: terms that alone reproduce the effect's change are
     # its own shape in the dictionary's words, not a rival
-    formula = propose(before, loc, step_at=localisation.step_at, period=localisation.period, alpha=alpha,
+    formula = propose(before, loc, step_at=localisation.step_at, periods=localisation.periods, alpha=alpha,
                       space=space_b, allowed=lambda _, c: _inside(space_b, c, f_effect) < SAME_SHAPE)
     if formula is None:
         return None
