@@ -370,7 +370,7 @@ HELD_OUT_LIST = [
     _h("gain_time_drift", RV, "time_s", None, ("lin(time_s)*model", "lin(time_s)*lin(input)"), "relative gain per h",
        "a gain drifting linearly since power-on (charging of the feedback electrodes)")(
         lambda lot: lot.clean * _t(lot) / 3600.0 * _mask(lot, *RV)),
-    _h("bias_periodic_time", RV, "time_s", None, None, "deg/s",
+    _h("bias_periodic_time", RV, "time_s", None, ("periodic(time_s)",), "deg/s",
        "a bias oscillating with the lab's air conditioning, period 20 min, phase locked to power-on")(
         lambda lot: lot.fs_rate / OMEGA_FS_DPS * np.sin(2 * np.pi * _t(lot) / 1200.0) * _mask(lot, *RV)),
     _h("dead_band", ("rate_table",), "input", None, None, "share of the rate lost",
