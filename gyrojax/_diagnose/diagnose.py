@@ -383,7 +383,7 @@ def _final_discrepancy(s: _Selection, final_scores, max_typical_multiple, alpha)
         # a closed form of one coordinate that explains the whole location (fewer degrees of freedom than the
         # flexible description) names its coordinate; the flexible one is said to describe it as well
         top = discrepancy[0]
-        terms = " + ".join(dict.fromkeys(t.name for t in formula.terms))
+        terms = " + ".join(dict.fromkeys(t.name for t in formula.terms)) if formula is not None else along
         discrepancy = (dataclasses.replace(top, coordinate=along, shape=f"{terms} ({top.shape})",
                                            confounded_with=tuple(
             dict.fromkeys((top.coordinate, *(c for c in top.confounded_with if c != along))))),) + discrepancy[1:]
