@@ -24,7 +24,15 @@ from .discrepancy import look_alikes, score_probes, with_shapes
 from .encompass import encompassing_guard
 from .fdr import bh_q_values, selection_p
 from .formula import formula_coordinate, propose_along, term_size
-from .guards import MAX_TYPICAL_MULTIPLE, Rejection, contradictions, one_device_guard, probe_guard, verdict_of
+from .guards import (
+    MAX_TYPICAL_MULTIPLE,
+    Rejection,
+    contradictions,
+    new_structure,
+    one_device_guard,
+    probe_guard,
+    verdict_of,
+)
 from .locate import Localisation, locate
 from .probes import PROBES, AbstractProbe, score_columns
 from .record import record_guard
@@ -364,6 +372,13 @@ def _refit_rejection(s: "_Selection", new, best, df, df_total, p_lr, delta_bic, 
         sweeps = tuple(s for s, _, _, _ in worse)
         return Rejection(effect=best.effect, reason="contradicted by " + "; ".join(
             f"{s} (its misfit rose from chi2 {a:.4g} to {b:.4g} over {n} points)" for s, a, b, n in worse),
+            contradicted_by=sweeps, kind="contradicted by " + ", ".join(sweeps)), q, rival_alike
+    created = new_structure(comparison(fit), comparison(new), alpha)
+    if created:
+        sweeps = tuple(dict.fromkeys(f.sweep for f in created))
+        return Rejection(effect=best.effect, reason="contradicted by " + "; ".join(
+            f"{f.label} (p = {f.p_value:.2g} after the refit, absent before it: {f.meaning})" for f in created)
+            + ": a real effect, fitted, leaves no new structure in a sweep's residuals",
             contradicted_by=sweeps, kind="contradicted by " + ", ".join(sweeps)), q, rival_alike
     return None, q, rival_alike
 

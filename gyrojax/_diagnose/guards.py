@@ -109,6 +109,15 @@ def contradictions(before: Fit, after: Fit, alpha: float, df: int):
     return tuple((s, a[s], b[s], points[s]) for s in a if b[s] - a[s] > limit)
 
 
+def new_structure(before, after, alpha: float) -> tuple:
+    """The structure findings (`gyrojax.compare`'s) flagged in the refit's residuals that the residuals before it
+    did not show at all (p >= `alpha`, not even nominally significant): a real effect, fitted, whitens the
+    residuals; one fitted where it is not takes its shape out of some sweeps and leaves it, reversed, on a sweep
+    that does not have it (an INL fitted to a rate-only saturation writes an odd cubic on the DAC bench)."""
+    p_before = {(f.sweep, f.test, f.coordinate): f.p_value for f in before.findings}
+    return tuple(f for f in after.flagged if p_before.get((f.sweep, f.test, f.coordinate), 0.0) >= alpha)
+
+
 def verdict_of(comparison, steps) -> str:
     if not comparison.fails and not comparison.flagged:
         return "explained"
