@@ -24,7 +24,6 @@ finished columns into a `Table` (`Table.from_columns`), as it would read a file 
 """
 
 import dataclasses
-import math
 from collections.abc import Callable
 
 import numpy as np
@@ -464,32 +463,9 @@ FRESH = {h.name: h for h in FRESH_LIST}
 EFFECTS = {**HIDDEN, **HELD_OUT, **FRESH}  # every effect the generator can hide
 
 
-def visible_chi2(lot: Lot, delta: np.ndarray, sigma: np.ndarray) -> tuple[float, dict]:
-    """The chi2 of an output change `delta` beyond what the baseline's free parameters take up, by a linear
-    projection: per (device, run, sweep) a bias (rate and VCF), per device a gain on each sweep (the rate gain
-    follows the TCF: it is `lot.clean`). Returns the total and the share of each sweep."""
-    c = lot.columns
-    shares = {}
-    for sw in SWEEPS:
-        shares[sw] = 0.0
-        for d in np.unique(lot.dev):
-            m = (c["sweep"] == sw) & (lot.dev == d)
-            if not m.any():
-                continue
-            cols = [lot.clean[m]]
-            if sw != "dac":
-                cols += [(c["run"][m] == r).astype(float) for r in np.unique(c["run"][m])]
-            a = np.stack(cols, axis=1) / sigma[m, None]
-            z = delta[m] / sigma[m]
-            coef = np.linalg.lstsq(a, z, rcond=None)[0]
-            shares[sw] += float(np.sum((z - a @ coef) ** 2))
-    total = sum(shares.values())
-    return total, {k: (v / total if total > 0 else 0.0) for k, v in shares.items()}
-
-
 def _baseline_columns(lot: Lot, m: np.ndarray) -> list:
-    """The baseline's free columns on the rows `m` of one device: per sweep a gain (the rate gain follows the TCF:
-    `lot.clean`) and, on rate and VCF rows, a bias per run."""
+    """The baseline's free columns on the rows `m` (of one device): per sweep a gain (the rate gain follows the
+    TCF: `lot.clean`) and, on rate and VCF rows, a bias per run (each (device, run, sweep) is its own power-on)."""
     c = lot.columns
     cols = []
     for sw in SWEEPS:
@@ -502,6 +478,29 @@ def _baseline_columns(lot: Lot, m: np.ndarray) -> list:
     return cols
 
 
+def _beyond(delta: np.ndarray, sigma: np.ndarray, m: np.ndarray, cols: list) -> float:
+    """The chi2 of `delta` on the rows `m` beyond the span of `cols` (full-length columns), noise-free."""
+    a = np.stack([col[m] for col in cols], axis=1) / sigma[m, None]
+    z = delta[m] / sigma[m]
+    coef = np.linalg.lstsq(a, z, rcond=None)[0]
+    return float(np.sum((z - a @ coef) ** 2))
+
+
+def visible_chi2(lot: Lot, delta: np.ndarray, sigma: np.ndarray) -> tuple[float, dict]:
+    """The chi2 of an output change `delta` beyond what the baseline's free parameters take up, by a linear
+    projection: per (device, run, sweep) a bias (rate and VCF), per device a gain on each sweep (the rate gain
+    follows the TCF: it is `lot.clean`). Returns the total and the share of each sweep."""
+    shares = {}
+    for sw in SWEEPS:
+        shares[sw] = 0.0
+        for d in np.unique(lot.dev):
+            m = (lot.columns["sweep"] == sw) & (lot.dev == d)
+            if m.any():
+                shares[sw] += _beyond(delta, sigma, m, _baseline_columns(lot, m))
+    total = sum(shares.values())
+    return total, {k: (v / total if total > 0 else 0.0) for k, v in shares.items()}
+
+
 def look_alike_chi2(lot: Lot, delta: np.ndarray, sigma: np.ndarray, library: str | None = None) -> dict:
     """How far the data put an output change `delta` from each library effect, as this generator writes it: per
     library effect (other than `library`), the chi2 of `delta` beyond the baseline's free columns and that
@@ -511,15 +510,8 @@ def look_alike_chi2(lot: Lot, delta: np.ndarray, sigma: np.ndarray, library: str
     out = {}
     for lib in sorted({h.library for h in HIDDEN.values() if h.library and h.library != library}):
         shapes = [h.fn(lot) for h in HIDDEN.values() if h.library == lib]
-        chi2 = 0.0
-        for d in np.unique(lot.dev):
-            m = lot.dev == d
-            cols = _baseline_columns(lot, m) + [np.where(m, f, 0.0) for f in shapes]
-            a = (np.stack(cols, axis=1) / sigma[:, None])[m]
-            z = delta[m] / sigma[m]
-            coef = np.linalg.lstsq(a, z, rcond=None)[0]
-            chi2 += float(np.sum((z - a @ coef) ** 2))
-        out[lib] = chi2
+        out[lib] = sum(_beyond(delta, sigma, m, _baseline_columns(lot, m) + shapes)
+                       for m in (lot.dev == d for d in np.unique(lot.dev)))
     return out
 
 
@@ -540,36 +532,33 @@ def _coordinate_values(lot: Lot) -> dict:
             "time_s": c["time_s"], "order": order, "drive_freq_hz": c["drive_freq_hz"]}
 
 
+def _hats(x: np.ndarray, m: np.ndarray) -> list:
+    """Piecewise-linear hats of `x` on `COORDINATE_KNOTS` knots at its quantiles over the rows `m` (full-length
+    columns); none where `x` is not recorded there or takes one value."""
+    xs = np.asarray(x, float)
+    u = np.unique(xs[m][np.isfinite(xs[m])])
+    if u.size < 2 or not np.all(np.isfinite(xs[m])):
+        return []
+    knots = np.unique(np.quantile(u, np.linspace(0.0, 1.0, min(COORDINATE_KNOTS, u.size))))
+    return [np.where(m, np.interp(np.nan_to_num(xs), knots, np.eye(knots.size)[j]), 0.0) for j in range(knots.size)]
+
+
 def coordinate_chi2(lot: Lot, delta: np.ndarray, sigma: np.ndarray) -> dict:
     """How far the data put an output change `delta` from a curve along each coordinate: per coordinate, the chi2
     of `delta` beyond the baseline's free columns and a piecewise-linear curve along it (`COORDINATE_KNOTS` knots
     at its quantiles in each device and sweep, shared by the device's runs), as an offset or as a gain (the
     smaller). Below ~9 a curve along that coordinate takes the effect up as well as one along its own: with
     curves of equal freedom the data cannot tell the two coordinates apart."""
-    c = lot.columns
+    groups = [m for d in np.unique(lot.dev) for sw in SWEEPS
+              if (m := (lot.dev == d) & (lot.columns["sweep"] == sw)).any()]
     out = {}
     for name, x in _coordinate_values(lot).items():
-        best = math.inf
-        for family in ("offset", "gain"):
-            chi2 = 0.0
-            for d in np.unique(lot.dev):
-                for sw in SWEEPS:
-                    m = (lot.dev == d) & (c["sweep"] == sw)
-                    if not m.any():
-                        continue
-                    z = delta[m] / sigma[m]
-                    cols = [v[m] for v in _baseline_columns(lot, m)]
-                    xs = np.asarray(x, float)[m]
-                    u = np.unique(xs[np.isfinite(xs)])
-                    if u.size >= 2 and np.all(np.isfinite(xs)):
-                        knots = np.unique(np.quantile(u, np.linspace(0.0, 1.0, min(COORDINATE_KNOTS, u.size))))
-                        scale = lot.clean[m] if family == "gain" else np.ones(m.sum())
-                        cols += [scale * np.interp(xs, knots, np.eye(knots.size)[j]) for j in range(knots.size)]
-                    a = np.stack(cols, axis=1) / sigma[m, None]
-                    coef = np.linalg.lstsq(a, z, rcond=None)[0]
-                    chi2 += float(np.sum((z - a @ coef) ** 2))
-            best = min(best, chi2)
-        out[name] = best
+        chi2 = {"offset": 0.0, "gain": 0.0}
+        for m in groups:
+            base, hats = _baseline_columns(lot, m), _hats(x, m)
+            chi2["offset"] += _beyond(delta, sigma, m, base + hats)
+            chi2["gain"] += _beyond(delta, sigma, m, base + [h * lot.clean for h in hats])
+        out[name] = min(chi2.values())
     return out
 
 

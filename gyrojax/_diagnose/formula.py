@@ -296,8 +296,10 @@ def _location_dictionary(fit, location, space, step_at, periods):
     loc = location.location
     # a location at one value: a step in time (the time step scan's), or a threshold of its coordinate
     threshold = (location.coordinate, loc["at"]) if location.family in thresholds.FAMILIES else None
-    terms = dictionary(fit, groups, step_at=loc["at"] if location.family == "step" else step_at,
-                       periods={**(periods or {}), **({location.coordinate: loc["period"]} if "period" in loc else {})},
+    periods = dict(periods or {})
+    if "period" in loc:  # a periodic location: its own period along its coordinate
+        periods[location.coordinate] = loc["period"]
+    terms = dictionary(fit, groups, step_at=loc["at"] if location.family == "step" else step_at, periods=periods,
                        threshold=threshold)
     return terms, {id(t): _columns(space, t) for t in terms}
 

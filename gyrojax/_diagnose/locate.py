@@ -230,9 +230,9 @@ def run_properties(block) -> tuple:
 def _hints(descs):
     step = [d for d in descs if d.family == "step"]
     best_step = min(step, key=lambda d: d.p_value).where["at"] if step else None
-    periods = {}
-    for d in sorted((d for d in descs if d.family == "periodic"), key=lambda d: d.p_value, reverse=True):
-        periods[d.coordinate] = d.where["period"]  # the most significant sweep's, per coordinate
+    periods = {}  # per coordinate, the most significant sweep's period
+    for d in sorted((d for d in descs if d.family == "periodic"), key=lambda d: d.p_value):
+        periods.setdefault(d.coordinate, d.where["period"])
     return best_step, periods
 
 
