@@ -460,7 +460,76 @@ FRESH_LIST = [
         lambda lot: lot.clean * (np.abs(_x(lot)) > 1.0) * _mask(lot, "vcf_static")),
 ]
 FRESH = {h.name: h for h in FRESH_LIST}
-EFFECTS = {**HIDDEN, **HELD_OUT, **FRESH}  # every effect the generator can hide
+
+
+def _inl_even(lot):
+    """An even DAC INL: the DAC reads w + W s^2; the rebalance word for a given force is smaller by the same
+    amount, so rate and VCF rows move the other way (as `_inl`)."""
+    s2 = _s(lot) ** 2
+    dac = _mask(lot, "dac")
+    return np.where(dac, lot.full_scale * s2, -lot.fs_rate * s2 * _mask(lot, *RV))
+
+
+def _bias_wander(lot):
+    """A bias following an unrecorded environment (pressure, humidity): per (device, run) two slow sinusoids of
+    their own periods (1500-5000 s) and phases, unit RMS on average."""
+    run = np.asarray(lot.columns["run"])
+    t = _t(lot)
+    out = np.zeros_like(t)
+    rng = np.random.default_rng(3000 + 7 * (int(lot.dev.max()) + 1))
+    for d in range(int(lot.dev.max()) + 1):
+        for r in range(int(run.max()) + 1):
+            p1, p2 = rng.uniform(1500.0, 5000.0, size=2)
+            f1, f2 = rng.uniform(0.0, 2 * np.pi, size=2)
+            m = (lot.dev == d) & (run == r)
+            out[m] = np.sin(2 * np.pi * t[m] / p1 + f1) + 0.6 * np.sin(2 * np.pi * t[m] / p2 + f2)
+    return lot.fs_rate / OMEGA_FS_DPS * out / np.sqrt(0.68) * _mask(lot, *RV)
+
+
+# Unseen effects: a fourth set, written on 2026-12-02 after every change of the fresh set and measured before any
+# change made for them (`discovery_benchmark.py --effects unseen`). All outside the library; several near a
+# library effect's shape (an even DAC INL beside the odd one, a kinked ZRO tempco, a compression that grows with
+# the temperature, a concave rate gain), the others sweep-, device- or run-specific versions of drifts.
+UNSEEN_LIST = [
+    _h("gain_relax_time", RV, "time_s", None, ("relax(time_s)*model",), "relative gain at power-on",
+       "a rate and VCF gain relaxing exp(-t / 900 s) after power-on (the drive amplitude's slow settling)")(
+        lambda lot: lot.clean * np.exp(-_t(lot) / 900.0) * _mask(lot, *RV)),
+    _h("dac_even_inl", SWEEPS, "input", None, ("sq(input)", "sq(model)"), "fraction of full scale at full scale",
+       "an even DAC INL s^2 (a bow of the transfer), on the DAC bench and, reversed, the rebalance words")(_inl_even),
+    _h("bias_env_wander", RV, "time_s", None, None, "deg/s RMS",
+       "a bias following an unrecorded environment: two slow sinusoids of their own period and phase per run")(
+        _bias_wander),
+    _h("temp_x_cube_input", RV, "temperature_c", None, ("lin(temperature_c)*cube(input)",), "fraction of FS per K",
+       "a cubic compression that grows with the die temperature: -c (T - 25) s^3 W")(
+        lambda lot: -lot.fs_rate * _dT(lot) * _s(lot) ** 3 * _mask(lot, *RV)),
+    _h("rate_gain_time_drift", ("rate_table",), "time_s", None, ("lin(time_s)*model", "lin(time_s)*lin(input)"),
+       "relative gain per h", "a rate gain drifting linearly since power-on, on the rate rows only (the table's "
+       "own encoder reference drifts)")(lambda lot: lot.clean * _t(lot) / 3600.0 * _mask(lot, "rate_table")),
+    _h("gain_run_one_device", RV, "run", None, ("per_run(1)*model", "lin(run)*model"), "relative gain",
+       "the fifth device's rate and VCF gain 1 + c in its second run only (a connector reseated)")(
+        lambda lot: lot.clean * (np.asarray(lot.columns["run"]) == 1) * (lot.dev == 4) * _mask(lot, *RV)),
+    _h("vcf_gain_sq_temp", ("vcf_static",), "temperature_c", None, ("sq(temperature_c)*model",), "1/K^2",
+       "a virtual-Coriolis gain quadratic in the die temperature, on the VCF rows only")(
+        lambda lot: lot.clean * _dT(lot) ** 2 * _mask(lot, "vcf_static")),
+    _h("dac_code_pattern", ("dac",), "input", None, None, "fraction of full scale",
+       "a short-period code-dependent DAC error, sin(2 pi w / 2^13 + 0.7): aliased to a fixed pattern at the "
+       "bench's words")(
+        lambda lot: lot.full_scale * np.sin(2 * np.pi * _x(lot) / 2.0**13 + 0.7) * _mask(lot, "dac")),
+    _h("zro_kink", RV, "temperature_c", None, None, "deg/s per K above 27.5 C",
+       "a zero-rate output that sets in above 27.5 C, c max(T - 27.5, 0) (a leakage path that opens when warm)")(
+        lambda lot: lot.fs_rate / OMEGA_FS_DPS * np.maximum(_dT(lot) - 2.5, 0.0) * _mask(lot, *RV)),
+    _h("vcf_bias_time_drift", ("vcf_static",), "time_s", None, ("lin(time_s)",), "deg/s per h",
+       "a bias drifting linearly since power-on on the VCF rows only (the forcer's DC offset charging)")(
+        lambda lot: lot.fs_rate / OMEGA_FS_DPS * _t(lot) / 3600.0 * _mask(lot, "vcf_static")),
+    _h("rate_gain_log_abs", ("rate_table",), "input", None, None, "relative gain per e-fold",
+       "a rate gain growing as ln(1 + |rate| / 10 deg/s), on the rate rows only (a rate-dependent damping)")(
+        lambda lot: lot.clean * np.log1p(np.abs(_x(lot)) / 10.0) * _mask(lot, "rate_table")),
+    _h("bias_time_slope_device", RV, "time_s", None, ("lin(time_s)",), "deg/s per h",
+       "a bias drifting linearly since power-on at a rate of random sign and size per device (aging)")(
+        lambda lot: lot.fs_rate / OMEGA_FS_DPS * _t(lot) / 3600.0 * _device_sign(lot, 12) * _mask(lot, *RV)),
+]
+UNSEEN = {h.name: h for h in UNSEEN_LIST}
+EFFECTS = {**HIDDEN, **HELD_OUT, **FRESH, **UNSEEN}  # every effect the generator can hide
 
 
 def _baseline_columns(lot: Lot, m: np.ndarray) -> list:
