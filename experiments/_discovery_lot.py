@@ -506,8 +506,8 @@ UNSEEN_LIST = [
        "relative gain per h", "a rate gain drifting linearly since power-on, on the rate rows only (the table's "
        "own encoder reference drifts)")(lambda lot: lot.clean * _t(lot) / 3600.0 * _mask(lot, "rate_table")),
     _h("gain_run_one_device", RV, "run", None, ("per_run(1)*model", "lin(run)*model"), "relative gain",
-       "the fifth device's rate and VCF gain 1 + c in its second run only (a connector reseated)")(
-        lambda lot: lot.clean * (np.asarray(lot.columns["run"]) == 1) * (lot.dev == 4) * _mask(lot, *RV)),
+       "the last device's rate and VCF gain 1 + c in its second run only (a connector reseated)")(
+        lambda lot: lot.clean * (np.asarray(lot.columns["run"]) == 1) * (lot.dev == lot.dev.max()) * _mask(lot, *RV)),
     _h("vcf_gain_sq_temp", ("vcf_static",), "temperature_c", None, ("sq(temperature_c)*model",), "1/K^2",
        "a virtual-Coriolis gain quadratic in the die temperature, on the VCF rows only")(
         lambda lot: lot.clean * _dT(lot) ** 2 * _mask(lot, "vcf_static")),

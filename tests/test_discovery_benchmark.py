@@ -79,6 +79,15 @@ def test_fresh_effects_are_apart_from_the_other_sets():
         assert h.sweeps <= set(lotgen.SWEEPS)
 
 
+def test_unseen_effects_are_apart_from_the_other_sets():
+    assert len(lotgen.UNSEEN) >= 12
+    assert not set(lotgen.UNSEEN) & (set(lotgen.HIDDEN) | set(lotgen.HELD_OUT) | set(lotgen.FRESH))
+    assert all(h.library is None for h in lotgen.UNSEEN_LIST)
+    for h in lotgen.UNSEEN_LIST:
+        assert h.coordinate in ("input", "temperature_c", "dtemperature_dt", "time_s", "run")
+        assert h.sweeps <= set(lotgen.SWEEPS)
+
+
 def test_an_effect_a_protocol_turns_into_a_bias_per_run_is_refused_with_the_reason():
     # on design c each run either warms or cools: a bias that differs warming and cooling is a bias per run
     with pytest.raises(ValueError, match="'bias_sign_dtdt' leaves no chi2 beyond the baseline's free gains and "
@@ -92,6 +101,7 @@ def test_effects_are_chosen_by_set_or_by_name():
     assert bench.effect_names("all") == list(lotgen.HIDDEN)
     assert bench.effect_names("held-out") == list(lotgen.HELD_OUT)
     assert bench.effect_names("fresh") == list(lotgen.FRESH)
+    assert bench.effect_names("unseen") == list(lotgen.UNSEEN)
     assert bench.effect_names("dead_band,zro_tempco") == ["dead_band", "zro_tempco"]
     with pytest.raises(SystemExit, match="--effects: unknown nope; expected some of dac_inl_s_curve"):
         bench.effect_names("nope,zro_tempco")
