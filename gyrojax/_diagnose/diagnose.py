@@ -36,6 +36,7 @@ from .guards import (
 from .locate import Localisation, locate
 from .probes import PROBES, AbstractProbe, score_columns
 from .record import record_guard
+from .repeat import repeatability_guard
 from .rival import rival_guard
 from .score import TYPICAL_RANK_TOL, cosine, score_candidates, separating_sweep
 from .solution import Diagnosis, Step
@@ -242,6 +243,11 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
         alone = one_device_guard(s.fit, best.effect, alpha)
         if alone is not None:
             s.rejected.append(Rejection(effect=best.effect, reason=alone, kind="in one device only"))
+            remaining.remove(best.effect)
+            continue
+        unrepeated = repeatability_guard(s.fit, best.effect, best.statistic)
+        if unrepeated is not None:
+            s.rejected.append(Rejection(effect=best.effect, reason=unrepeated, kind="not repeatable"))
             remaining.remove(best.effect)
             continue
         # alternatives: any candidate significant at alpha alone (ambiguity names explanations, not discoveries)

@@ -1,0 +1,81 @@
+"""A guard that does not depend on the list of shapes: a library effect is a property of the device, so fitted on
+some power-ons of a device it must predict another one (leave-one-run-out cross-validation).
+
+A misfit that differs from power-on to power-on (a bias following an unrecorded environment, a zero-rate output
+whose tempco changes at each turn-on) projects on a candidate's columns with a coefficient of its own in each
+run: the score test sees a significant sum, but the coefficient fitted on one run predicts the next no better
+than chance, and usually worse. The test is linear, at the fit before the step, as the score test is: for each
+device and each run r, the candidate's coefficients are fitted (least squares) on the device's other runs beyond
+the fit's own free columns there, and the held-out run's chi2 change beyond its own free columns is
+
+    C_r = |P y_r|^2 - |P (y_r + J_r delta_-r)|^2
+
+(y the standardised residuals, J the candidate's columns, P the projection off the free columns on run r's
+rows). A real effect gives sum C ~ its score (the coefficients are the same in every run); one whose coefficient
+changes from run to run gives sum C <= 0. Independent runs make the test robust to noise correlated within a
+run, which inflates the score test but not the prediction of another run."""
+
+import numpy as np
+
+from .._identify import Fit
+from .columns import base_columns, effect_columns, row_blocks
+
+
+RCOND = 1e-10  # relative singular-value cut of the folds' least squares (an effect's degenerate directions)
+
+
+def _off(b: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """`v` (rows, k) with the span of `b` (rows, m) projected out."""
+    b = b[:, np.any(b != 0, axis=0)]
+    if not b.shape[1]:
+        return v
+    u, s, _ = np.linalg.svd(b, full_matrices=False)
+    u = u[:, s > RCOND * s.max()]
+    return v - u @ (u.T @ v)
+
+
+def run_of_rows(fit: Fit) -> np.ndarray:
+    """The run index (position within the sweep's runs) of each residual row; -1 on rows of no run (priors)."""
+    run = np.full(np.asarray(fit.residual_vector).shape[1], -1)
+    for sweep, i, j in row_blocks(fit.data):
+        _, n_run, n_pt = fit.data.blocks[sweep].inputs.shape
+        run[i:j] = np.repeat(np.arange(n_run), n_pt)
+    return run
+
+
+def held_out_change(fit: Fit, effect: str) -> tuple[float, int]:
+    """(sum over devices and runs of the held-out chi2 decrease C_r, the number of folds): see the module
+    docstring. No fold (one run, or columns that do not move within the runs) gives (0, 0)."""
+    res = np.asarray(fit.residual_vector, float)
+    jac = np.asarray(fit.jacobian, float)[:, :, effect_columns(fit, effect)]
+    base = base_columns(fit)
+    run = run_of_rows(fit)
+    total, folds = 0.0, 0
+    for d in range(res.shape[0]):
+        runs = [r for r in np.unique(run[run >= 0]) if np.any(jac[d][run == r])]
+        if len(runs) < 2:
+            continue
+        for r in runs:
+            train, test = (run >= 0) & (run != r), run == r
+            jt = _off(base[d][train], jac[d][train])
+            if not np.any(jt):
+                continue
+            yt = _off(base[d][train], res[d][train][:, None])[:, 0]
+            delta = np.linalg.lstsq(jt, -yt, rcond=RCOND)[0]
+            ye = _off(base[d][test], res[d][test][:, None])[:, 0]
+            je = _off(base[d][test], jac[d][test])
+            total += float(ye @ ye - np.sum((ye + je @ delta) ** 2))
+            folds += 1
+    return total, folds
+
+
+def repeatability_guard(fit: Fit, effect: str, score: float) -> str | None:
+    """A reason not to confirm `effect` (score test statistic `score` at `fit`), or None: fitted on the other
+    power-ons of each device, it does not predict the held-out one (the held-out chi2 does not fall)."""
+    change, folds = held_out_change(fit, effect)
+    if not folds or change > 0:
+        return None
+    return (f"it does not repeat from power-on to power-on: fitted on each device's other runs, it changes the "
+            f"held-out run's chi2 by {-change:+.4g} over {folds} (device, run) folds, where a property of the "
+            f"device (score S = {score:.4g}) would lower it by about its score; what it takes differs from "
+            "run to run")
