@@ -5,13 +5,14 @@ A misfit that differs from power-on to power-on (a bias following an unrecorded 
 whose tempco changes at each turn-on) projects on a candidate's columns with a coefficient of its own in each
 run: the score test sees a significant sum, but the coefficient fitted on one run predicts the next no better
 than chance, and usually worse. The test is linear, at the fit before the step, as the score test is: for each
-device and each run r, the candidate's coefficients are fitted (least squares) on the device's other runs beyond
-the fit's own free columns there, and the held-out run's chi2 change beyond its own free columns is
+device and each run r, the fit's free columns shared by the runs (a device's gains) are fitted by least squares
+on the device's other runs with and without the candidate's columns, and each predicts run r, whose own columns
+(its turn-on biases) are fitted on it; the held-out chi2 change is
 
-    C_r = |P y_r|^2 - |P (y_r + J_r delta_-r)|^2
+    C_r = chi2_r(without the candidate) - chi2_r(with it)
 
-(y the standardised residuals, J the candidate's columns, P the projection off the free columns on run r's
-rows). A real effect gives sum C ~ its score (the coefficients are the same in every run); one whose coefficient
+on the standardised residuals. A real effect gives sum C ~ its score (the coefficients are the same in every
+run, and what it says between the runs, a gain at another temperature, is predicted too); one whose coefficient
 changes from run to run gives sum C <= 0. Independent runs make the test robust to noise correlated within a
 run, which inflates the score test but not the prediction of another run."""
 
@@ -56,17 +57,23 @@ def held_out_change(fit: Fit, effect: str) -> tuple[float, int]:
         if len(runs) < 2:
             continue
         for r in runs:
-            train, test = (run >= 0) & (run != r), run == r
-            jt = _off(base[d][train], jac[d][train])
-            if not np.any(jt):
-                continue
-            yt = _off(base[d][train], res[d][train][:, None])[:, 0]
-            delta = np.linalg.lstsq(jt, -yt, rcond=RCOND)[0]
-            ye = _off(base[d][test], res[d][test][:, None])[:, 0]
-            je = _off(base[d][test], jac[d][test])
-            total += float(ye @ ye - np.sum((ye + je @ delta) ** 2))
+            train, test = run != r, run == r  # rows of no run (priors) always train
+            on_train = np.any(base[d][train] != 0, axis=0)
+            shared, own = base[d][:, on_train], base[d][:, ~on_train & np.any(base[d][test] != 0, axis=0)]
+            change = _held_out_chi2(shared, own[test], res[d], None, train, test) - _held_out_chi2(
+                shared, own[test], res[d], jac[d], train, test)
+            total += change
             folds += 1
     return total, folds
+
+
+def _held_out_chi2(shared, own_test, y, j, train, test) -> float:
+    """The held-out rows' chi2 beyond their own columns (`own_test`: the run's turn-on biases) of the linear
+    model [shared, j] fitted on the training rows."""
+    a = shared if j is None else np.concatenate([shared, j], axis=1)
+    theta = np.linalg.lstsq(a[train], -y[train], rcond=RCOND)[0]
+    left = y[test] + a[test] @ theta
+    return float(np.sum(_off(own_test, left[:, None]) ** 2))
 
 
 def repeatability_guard(fit: Fit, effect: str, score: float) -> str | None:
