@@ -49,7 +49,7 @@ class CandidateScore(eqx.Module):
             who = ", ".join(self.absorbed_by) or "the free parameters together"
             what = (f"a typical size would change the chi2 by {self.visible_chi2:.3g}; {who} "
                     f"{'absorbs' if len(self.absorbed_by) == 1 else 'absorb'} {100 * share:.4g} % of it, "
-                    f"leaving {self.typical_chi2:.2g}")
+                    f"leaving {max(self.typical_chi2, 0.0):.2g}")  # round-off can be a tiny negative
         reveal = EFFECTS[self.effect].revealed_by
         return what + (f". Revealed by: {reveal}" if reveal else "")
 
