@@ -22,6 +22,7 @@ from .._identify import Fit
 from .columns import base_columns, effect_columns, row_blocks
 
 
+MIN_RUN_INFORMATION = 0.1  # a run whose columns carry less than this share of the richest run's is not a fold
 RCOND = 1e-10  # relative singular-value cut of the folds' least squares (an effect's degenerate directions)
 
 
@@ -54,8 +55,9 @@ def held_out_change(fit: Fit, effect: str) -> tuple[float, int]:
     total, folds = 0.0, 0
     for d in range(res.shape[0]):
         runs = [r for r in np.unique(run[run >= 0]) if np.any(jac[d][run == r])]
-        if len(runs) < 2:
-            continue
+        info = [float(np.sum(jac[d][run == r] ** 2)) for r in runs]
+        if len(runs) < 2 or min(info) < MIN_RUN_INFORMATION * max(info):
+            continue  # what tells the candidate lives in one run (a revealing sweep run once): no other run predicts it
         for r in runs:
             train, test = run != r, run == r  # rows of no run (priors) always train
             on_train = np.any(base[d][train] != 0, axis=0)
