@@ -20,20 +20,11 @@ import numpy as np
 
 from .._identify import Fit
 from .columns import base_columns, effect_columns, row_blocks
+from .probes import project_out
 
 
 MIN_RUN_INFORMATION = 0.1  # a run whose columns carry less than this share of the richest run's is not a fold
 RCOND = 1e-10  # relative singular-value cut of the folds' least squares (an effect's degenerate directions)
-
-
-def _off(b: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """`v` (rows, k) with the span of `b` (rows, m) projected out."""
-    b = b[:, np.any(b != 0, axis=0)]
-    if not b.shape[1]:
-        return v
-    u, s, _ = np.linalg.svd(b, full_matrices=False)
-    u = u[:, s > RCOND * s.max()]
-    return v - u @ (u.T @ v)
 
 
 def run_of_rows(fit: Fit) -> np.ndarray:
@@ -47,7 +38,8 @@ def run_of_rows(fit: Fit) -> np.ndarray:
 
 def held_out_change(fit: Fit, effect: str) -> tuple[float, int]:
     """(sum over devices and runs of the held-out chi2 decrease C_r, the number of folds): see the module
-    docstring. No fold (one run, or columns that do not move within the runs) gives (0, 0)."""
+    docstring. A device gives no fold where fewer than two runs carry the candidate's columns, or where one of
+    them carries less than `MIN_RUN_INFORMATION` of the richest run's information; no fold at all gives (0, 0)."""
     res = np.asarray(fit.residual_vector, float)
     jac = np.asarray(fit.jacobian, float)[:, :, effect_columns(fit, effect)]
     base = base_columns(fit)
@@ -75,7 +67,7 @@ def _held_out_chi2(shared, own_test, y, j, train, test) -> float:
     a = shared if j is None else np.concatenate([shared, j], axis=1)
     theta = np.linalg.lstsq(a[train], -y[train], rcond=RCOND)[0]
     left = y[test] + a[test] @ theta
-    return float(np.sum(_off(own_test, left[:, None]) ** 2))
+    return float(np.sum(project_out(left[:, None], own_test) ** 2))
 
 
 def repeatability_guard(fit: Fit, effect: str, score: float) -> str | None:
