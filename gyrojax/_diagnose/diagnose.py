@@ -245,7 +245,7 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
             s.rejected.append(Rejection(effect=best.effect, reason=alone, kind="in one device only"))
             remaining.remove(best.effect)
             continue
-        unrepeated = repeatability_guard(s.fit, best.effect, best.statistic)
+        unrepeated = repeatability_guard(s.fit, best.effect, best.statistic, alpha)
         if unrepeated is not None:
             s.rejected.append(Rejection(effect=best.effect, reason=unrepeated, kind="not repeatable"))
             remaining.remove(best.effect)

@@ -14,13 +14,25 @@ on the device's other runs with and without the candidate's columns, and each pr
 on the standardised residuals. A real effect gives sum C ~ its score (the coefficients are the same in every
 run, and what it says between the runs, a gain at another temperature, is predicted too); one whose coefficient
 changes from run to run gives sum C <= 0. Independent runs make the test robust to noise correlated within a
-run, which inflates the score test but not the prediction of another run."""
+run, which inflates the score test but not the prediction of another run.
+
+A weak real effect also gives sum C <= 0: its coefficients fitted on the other runs carry their noise into the
+held-out run, and at a score near the threshold that noise costs as much as the signal gains (low-SNR lots, where
+the first version of this guard refused the truth in 26 of 120 library lots). So the guard also asks whether the
+coefficient differs from run to run: a heterogeneity test (as Cochran's Q) of the candidate's columns split per
+run against the columns shared by the runs, linear at the fit before the step,
+
+    Q = chi2([base, J]) - chi2([base, J_run0, J_run1, ...]) ~ chi2(df),  df = the split's added rank,
+
+summed over the devices that give folds. A candidate is refused only when both hold: it does not predict the
+held-out runs (sum C <= 0) and its coefficient differs between them (Q significant at the diagnosis's alpha)."""
 
 import numpy as np
 
 from .._identify import Fit
+from .._numerics.stats import chi2_sf
 from .columns import base_columns, effect_columns, row_blocks
-from .probes import project_out
+from .probes import project_out, span_basis
 
 
 MIN_RUN_INFORMATION = 0.1  # a run whose columns carry less than this share of the richest run's is not a fold
@@ -36,6 +48,15 @@ def run_of_rows(fit: Fit) -> np.ndarray:
     return run
 
 
+def _folds_of(jac_d, run) -> list:
+    """The runs of one device that give folds (see `held_out_change`); [] where the device gives none."""
+    runs = [r for r in np.unique(run[run >= 0]) if np.any(jac_d[run == r])]
+    info = [float(np.sum(jac_d[run == r] ** 2)) for r in runs]
+    if len(runs) < 2 or min(info) < MIN_RUN_INFORMATION * max(info):
+        return []  # what tells the candidate lives in one run (a revealing sweep run once): no other run predicts it
+    return runs
+
+
 def held_out_change(fit: Fit, effect: str) -> tuple[float, int]:
     """(sum over devices and runs of the held-out chi2 decrease C_r, the number of folds): see the module
     docstring. A device gives no fold where fewer than two runs carry the candidate's columns, or where one of
@@ -46,11 +67,7 @@ def held_out_change(fit: Fit, effect: str) -> tuple[float, int]:
     run = run_of_rows(fit)
     total, folds = 0.0, 0
     for d in range(res.shape[0]):
-        runs = [r for r in np.unique(run[run >= 0]) if np.any(jac[d][run == r])]
-        info = [float(np.sum(jac[d][run == r] ** 2)) for r in runs]
-        if len(runs) < 2 or min(info) < MIN_RUN_INFORMATION * max(info):
-            continue  # what tells the candidate lives in one run (a revealing sweep run once): no other run predicts it
-        for r in runs:
+        for r in _folds_of(jac[d], run):
             train, test = run != r, run == r  # rows of no run (priors) always train
             on_train = np.any(base[d][train] != 0, axis=0)
             shared, own = base[d][:, on_train], base[d][:, ~on_train & np.any(base[d][test] != 0, axis=0)]
@@ -70,13 +87,39 @@ def _held_out_chi2(shared, own_test, y, j, train, test) -> float:
     return float(np.sum(project_out(left[:, None], own_test) ** 2))
 
 
-def repeatability_guard(fit: Fit, effect: str, score: float) -> str | None:
+def run_heterogeneity(fit: Fit, effect: str) -> tuple[float, int]:
+    """(Q, df): the chi2 that `effect`'s columns split per run remove beyond the same columns shared by the runs
+    (and the fit's free columns), summed over the devices that give folds (see the module docstring); (0, 0)
+    where none does. Rows of no run (priors) keep a column of their own."""
+    res = np.asarray(fit.residual_vector, float)
+    jac = np.asarray(fit.jacobian, float)[:, :, effect_columns(fit, effect)]
+    base = base_columns(fit)
+    run = run_of_rows(fit)
+    q, df = 0.0, 0
+    for d in range(res.shape[0]):
+        runs = _folds_of(jac[d], run)
+        if not runs:
+            continue
+        split = [jac[d] * (run == r)[:, None] for r in runs] + [jac[d] * ~np.isin(run, runs)[:, None]]
+        shared = span_basis(np.concatenate([base[d], jac[d]], axis=1))
+        per_run = span_basis(np.concatenate([base[d], *split], axis=1))
+        q += float(np.sum((per_run.T @ res[d]) ** 2) - np.sum((shared.T @ res[d]) ** 2))
+        df += per_run.shape[1] - shared.shape[1]
+    return max(q, 0.0), df
+
+
+def repeatability_guard(fit: Fit, effect: str, score: float, alpha: float) -> str | None:
     """A reason not to confirm `effect` (score test statistic `score` at `fit`), or None: fitted on the other
-    power-ons of each device, it does not predict the held-out one (the held-out chi2 does not fall)."""
+    power-ons of each device, it does not predict the held-out one (the held-out chi2 does not fall), and its
+    coefficient differs from run to run (the heterogeneity Q significant at `alpha`)."""
     change, folds = held_out_change(fit, effect)
     if not folds or change > 0:
         return None
+    q, df = run_heterogeneity(fit, effect)
+    p = chi2_sf(q, df) if df else 1.0
+    if p >= alpha:
+        return None  # a weak effect whose noise the other runs cannot predict, not one that changes between them
     return (f"it does not repeat from power-on to power-on: fitted on each device's other runs, it changes the "
             f"held-out run's chi2 by {-change:+.4g} over {folds} (device, run) folds, where a property of the "
-            f"device (score S = {score:.4g}) would lower it by about its score; what it takes differs from "
-            "run to run")
+            f"device (score S = {score:.4g}) would lower it by about its score, and its coefficient differs "
+            f"from run to run (Q = {q:.4g}, df {df}, p = {p:.2g}); what it takes differs from run to run")
