@@ -48,6 +48,13 @@ def run_of_rows(fit: Fit) -> np.ndarray:
     return run
 
 
+def _device_arrays(fit: Fit, effect: str):
+    """(residuals (device, row), `effect`'s columns (device, row, k), the fit's free columns, the run of each
+    row): what both tests read."""
+    return (np.asarray(fit.residual_vector, float), np.asarray(fit.jacobian, float)[:, :, effect_columns(fit, effect)],
+            base_columns(fit), run_of_rows(fit))
+
+
 def _folds_of(jac_d, run) -> list:
     """The runs of one device that give folds (see `held_out_change`); [] where the device gives none."""
     runs = [r for r in np.unique(run[run >= 0]) if np.any(jac_d[run == r])]
@@ -61,10 +68,7 @@ def held_out_change(fit: Fit, effect: str) -> tuple[float, int]:
     """(sum over devices and runs of the held-out chi2 decrease C_r, the number of folds): see the module
     docstring. A device gives no fold where fewer than two runs carry the candidate's columns, or where one of
     them carries less than `MIN_RUN_INFORMATION` of the richest run's information; no fold at all gives (0, 0)."""
-    res = np.asarray(fit.residual_vector, float)
-    jac = np.asarray(fit.jacobian, float)[:, :, effect_columns(fit, effect)]
-    base = base_columns(fit)
-    run = run_of_rows(fit)
+    res, jac, base, run = _device_arrays(fit, effect)
     total, folds = 0.0, 0
     for d in range(res.shape[0]):
         for r in _folds_of(jac[d], run):
@@ -91,10 +95,7 @@ def run_heterogeneity(fit: Fit, effect: str) -> tuple[float, int]:
     """(Q, df): the chi2 that `effect`'s columns split per run remove beyond the same columns shared by the runs
     (and the fit's free columns), summed over the devices that give folds (see the module docstring); (0, 0)
     where none does. Rows of no run (priors) keep a column of their own."""
-    res = np.asarray(fit.residual_vector, float)
-    jac = np.asarray(fit.jacobian, float)[:, :, effect_columns(fit, effect)]
-    base = base_columns(fit)
-    run = run_of_rows(fit)
+    res, jac, base, run = _device_arrays(fit, effect)
     q, df = 0.0, 0
     for d in range(res.shape[0]):
         runs = _folds_of(jac[d], run)
