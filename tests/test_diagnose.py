@@ -243,3 +243,17 @@ def test_a_saved_baseline_fit_is_not_fitted_again(hidden_dac_inl, tmp_path):
     other = table.select(np.flatnonzero(table["device"] != table["device"][0]))
     with pytest.raises(ValueError, match=r"fit: it was fitted to devices \['paper-qmg-000'"):
         gj.diagnose(data=other, fit=d.baseline)
+
+
+def test_an_absorbed_candidate_leaves_zero_not_round_off():
+    # a direction the free parameters take up entirely leaves ~1e-23 of round-off, which differs between
+    # machines: the text says 0 (and a real remainder keeps its digits)
+    from gyrojax._diagnose.score import CandidateScore
+
+    def text(left):
+        return CandidateScore(effect="pushpull_mismatch", statistic=0.0, df=1, p_value=1.0, testable=False,
+                              fingerprint=np.zeros((1, 1)), description="", typical_chi2=left,
+                              visible_chi2=2.1e7, absorbed_by=("k_vf",)).absorption
+    assert "absorbs 100 % of it, leaving 0. Revealed by: " in text(2.5e-23)
+    assert "leaving 0." in text(-3e-24)
+    assert "leaving 0.37. Revealed" in text(0.37)

@@ -43,7 +43,7 @@ def test_there_are_notebooks():
     assert NOTEBOOKS
 
 
-NUMBER = re.compile(r"(?<![\w.-])[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?(?![\w.])")
+NUMBER = re.compile(r"(?<![\w.-])[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?(?!\w|\.\d)")
 """A number as printed (a digit inside a name, such as `qmg-000` or `x10`, is part of the word)."""
 
 
@@ -94,6 +94,9 @@ def test_outputs_are_compared_word_for_word_and_to_the_last_digit():
     assert _differences("a line", "a line\nand one more")[0].startswith("the words differ")
     assert _differences("held q_y, s = 2.8e-30", "held q_y, s = 6.8e-30") == []  # round-off
     assert _differences("s = 2.8e-30", "s = 0.032") == ["2.8e-30 is now 0.032"]
+    # a number that ends a sentence is still a number
+    assert _differences("leaving 2.5e-23. Revealed by", "leaving 2.7e-23. Revealed by") == []
+    assert _differences("chi2 353.8. Next", "chi2 354.1. Next") == ["353.8 is now 354.1"]
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)

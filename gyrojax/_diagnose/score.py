@@ -49,9 +49,15 @@ class CandidateScore(eqx.Module):
             who = ", ".join(self.absorbed_by) or "the free parameters together"
             what = (f"a typical size would change the chi2 by {self.visible_chi2:.3g}; {who} "
                     f"{'absorbs' if len(self.absorbed_by) == 1 else 'absorb'} {100 * share:.4g} % of it, "
-                    f"leaving {max(self.typical_chi2, 0.0):.2g}")  # round-off can be a tiny negative
+                    f"leaving {_left(self.typical_chi2, self.visible_chi2)}")
         reveal = EFFECTS[self.effect].revealed_by
         return what + (f". Revealed by: {reveal}" if reveal else "")
+
+
+def _left(typical_chi2: float, visible_chi2: float) -> str:
+    # What a fully absorbed direction leaves is round-off (~1e-23, a tiny negative too), which differs between
+    # machines: printed as 0, not as a number the data determined.
+    return "0" if typical_chi2 <= 1e-12 * max(visible_chi2, 1.0) else f"{typical_chi2:.2g}"
 
 
 # A candidate direction counts in the score test when a typical size of it changes the chi2 by more than this
