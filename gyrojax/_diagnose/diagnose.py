@@ -20,6 +20,7 @@ from .._runtime.progress import ProgressArg, as_progress
 from .candidates import baseline_fit, baseline_model, candidate_effects, first_device, is_lot
 from .columns import base_columns, effect_columns
 from .compare import compare, nonlinearity_residual_ppm
+from .constancy import constancy_guard
 from .discrepancy import look_alikes, score_probes, with_shapes
 from .encompass import encompassing_guard
 from .fdr import bh_q_values, selection_p
@@ -248,6 +249,11 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
         unrepeated = repeatability_guard(s.fit, best.effect, best.statistic, alpha)
         if unrepeated is not None:
             s.rejected.append(Rejection(effect=best.effect, reason=unrepeated, kind="not repeatable"))
+            remaining.remove(best.effect)
+            continue
+        drifting = constancy_guard(s.fit, best.effect, best.statistic, alpha, s.located)
+        if drifting is not None:
+            s.rejected.append(Rejection(effect=best.effect, reason=drifting, kind="its size drifts"))
             remaining.remove(best.effect)
             continue
         # alternatives: any candidate significant at alpha alone (ambiguity names explanations, not discoveries)

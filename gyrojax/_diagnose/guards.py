@@ -69,15 +69,16 @@ def probe_guard(fit, candidate: CandidateScore, discrepancy, designs, candidate_
             f"beyond it (S = {own.statistic:.3g}, df {own.df}, p = {own.p_value:.2g})")
 
 
-def other_misfit(fit, columns, localisation, alpha) -> np.ndarray:
+def other_misfit(fit, columns, localisation, alpha, taken_by=None) -> np.ndarray:
     """The columns (device, rows, k) of the locations of `localisation` that `columns` (a candidate's, in the
     fit's residual layout) do not take: still significant beyond them, keeping more than `EXPLAINED_SHARE_LEFT` of
-    their chi2 (as the encompassing test reads what a refit leaves)."""
+    their chi2 (as the encompassing test reads what a refit leaves). `taken_by`, where given, decides what is
+    taken instead of `columns` (the candidate with a variant of its own: its coefficient drifting)."""
     empty = np.zeros(np.shape(columns)[:2] + (0,))
     if localisation is None or not localisation.locations:
         return empty
     space = ResidualSpace(fit)
-    joined = space.with_columns(np.asarray(columns, float))
+    joined = space.with_columns(np.asarray(columns if taken_by is None else taken_by, float))
     cut = alpha / len(localisation.locations)
     keep = []
     for loc in localisation.locations:
