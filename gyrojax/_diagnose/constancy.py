@@ -2,8 +2,8 @@
 so it does not follow a recorded coordinate along which its physics does not change (a varying-coefficient test).
 
 A misfit the library does not hold can carry a constant part of a library effect's shape: a cubic compression
-growing with the die temperature, -c (T - 25 C) s^3, holds a compression of c times the mean temperature excess;
-a zero-rate output that sets in above a temperature holds a linear tempco. The score test, the refit and every
+growing with the die temperature, -c (T - 25 C) s^3, holds a compression of c times the mean temperature
+excess. The score test, the refit and every
 guard that compares shapes then see the library effect's own shape, significant, and confirm it. What the data
 also say is that its size changes along the coordinate. For each device the candidate's columns J are joined by
 the same columns times the coordinate, centred on the candidate's information-weighted mean in that device,
@@ -13,10 +13,13 @@ the same columns times the coordinate, centred on the candidate's information-we
 linear at the fit before the step, summed over the devices. `other` holds the flexible descriptions of the
 misfit located at the fit that neither J nor its drift takes (as the probe guard holds them), so that a second,
 unrelated misfit along the coordinate is not read as a drift of this one; a location the drift takes is the drift
-itself, and is not held. Along a coordinate a constant-coefficient effect does not follow, Q is chi2(df) noise;
-the candidate is refused when, on one of the coordinates, Q is significant at `alpha` over the coordinates tested
-and describes at least `MIN_DRIFT_SHARE` of what its constant part does (its score S), with and without the other
-misfit held: a drift that material is the missing effect's, not a second-order difference of shape.
+itself, and is not held. Each other candidate significant at the step is held in turn, and the smallest Q is
+read: a DAC INL beside a reference drift, on a protocol whose temperature follows the time, has a drift along the
+temperature that the reference drift describes. Along a coordinate a constant-coefficient effect does not
+follow, Q is chi2(df) noise; the candidate is refused when, on one of the coordinates, Q is significant at `alpha`
+over the coordinates tested and describes at least `MIN_DRIFT_SHARE` of what its constant part does (its score
+S), read alone, with the other misfit held and beyond each rival: a drift that material is the missing effect's,
+not a second-order difference of shape.
 
 The coordinates are the two along which a property of the device could change within a run: its temperature
 (a tempco of the coefficient) and the time (a warm-up, an ageing). Not the input (its curve is the effect's
@@ -96,10 +99,12 @@ def coefficient_drift(fit: Fit, effect: str, name: str, other: np.ndarray | None
     return max(q, 0.0), df
 
 
-def constancy_guard(fit: Fit, effect: str, score: float, alpha: float, localisation=None) -> str | None:
+def constancy_guard(fit: Fit, effect: str, score: float, alpha: float, localisation=None,
+                    rivals=()) -> str | None:
     """A reason not to confirm `effect` (score test statistic `score` at `fit`), or None: its coefficient
     follows a recorded coordinate (see the module docstring), with and without the misfit located elsewhere
-    (`localisation`) held."""
+    (`localisation`) held, and beyond each of `rivals` (the other candidates significant at this step): a drift
+    that another library effect describes is that effect's misfit beside this one."""
     jac = np.asarray(fit.jacobian, float)[:, :, effect_columns(fit, effect)]
     alone = {name: coefficient_drift(fit, effect, name) for name in DRIFT_COORDINATES}
     alone = {name: qd for name, qd in alone.items() if qd[1]}
@@ -114,6 +119,11 @@ def constancy_guard(fit: Fit, effect: str, score: float, alpha: float, localisat
         drifting = drift_columns(fit, jac, name)
         other = other_misfit(fit, jac, localisation, alpha, taken_by=np.concatenate([jac, drifting], axis=-1))
         q, df = coefficient_drift(fit, effect, name, other) if other.shape[-1] else (q, df)
+        for rival in rivals:
+            held = np.concatenate([other, np.asarray(fit.jacobian, float)[:, :, effect_columns(fit, rival)]], axis=-1)
+            q_r, df_r = coefficient_drift(fit, effect, name, held)
+            if df_r and q_r < q:
+                q, df = q_r, df_r
         p = chi2_sf(q, df) if df else 1.0
         if p < cut and q >= MIN_DRIFT_SHARE * score:
             found.append((p, -q, name, q, df))

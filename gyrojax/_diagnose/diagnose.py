@@ -251,7 +251,8 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
             s.rejected.append(Rejection(effect=best.effect, reason=unrepeated, kind="not repeatable"))
             remaining.remove(best.effect)
             continue
-        drifting = constancy_guard(s.fit, best.effect, best.statistic, alpha, s.located)
+        drifting = constancy_guard(s.fit, best.effect, best.statistic, alpha, s.located,
+                                   rivals=[c.effect for c in significant if c is not best])
         if drifting is not None:
             s.rejected.append(Rejection(effect=best.effect, reason=drifting, kind="its size drifts"))
             remaining.remove(best.effect)
