@@ -80,12 +80,17 @@ def coefficient_drift(fit: Fit, effect: str, name: str, other: np.ndarray | None
     """(Q, df): the chi2 that `effect`'s columns times the coordinate `name` (centred and scaled in each device)
     remove beyond the fit's free columns, `other` (device, rows, k) and the columns themselves, summed over the
     devices; (0, 0) where the coordinate is not recorded or does not move on the rows the candidate touches."""
-    res = np.asarray(fit.residual_vector, float)
     jac = np.asarray(fit.jacobian, float)[:, :, effect_columns(fit, effect)]
-    drifting = drift_columns(fit, jac, name)
-    base = base_columns(fit)
-    if other is not None and other.shape[-1]:
-        base = np.concatenate([base, other], axis=-1)
+    return _drift_chi2(np.asarray(fit.residual_vector, float), _held(base_columns(fit), other), jac,
+                       drift_columns(fit, jac, name))
+
+
+def _held(base: np.ndarray, other: np.ndarray | None) -> np.ndarray:
+    return base if other is None or not other.shape[-1] else np.concatenate([base, other], axis=-1)
+
+
+def _drift_chi2(res, base, jac, drifting) -> tuple[float, int]:
+    """`coefficient_drift` on arrays: residuals (device, rows), the held columns, the candidate's and its drift's."""
     q, df = 0.0, 0
     if not drifting.shape[-1]:
         return q, df
@@ -105,8 +110,10 @@ def constancy_guard(fit: Fit, effect: str, score: float, alpha: float, localisat
     follows a recorded coordinate (see the module docstring), with and without the misfit located elsewhere
     (`localisation`) held, and beyond each of `rivals` (the other candidates significant at this step): a drift
     that another library effect describes is that effect's misfit beside this one."""
-    jac = np.asarray(fit.jacobian, float)[:, :, effect_columns(fit, effect)]
-    alone = {name: coefficient_drift(fit, effect, name) for name in DRIFT_COORDINATES}
+    res, full, base = np.asarray(fit.residual_vector, float), np.asarray(fit.jacobian, float), base_columns(fit)
+    jac = full[:, :, effect_columns(fit, effect)]
+    drifts = {name: drift_columns(fit, jac, name) for name in DRIFT_COORDINATES}
+    alone = {name: _drift_chi2(res, base, jac, drifting) for name, drifting in drifts.items()}
     alone = {name: qd for name, qd in alone.items() if qd[1]}
     if not alone:
         return None
@@ -116,12 +123,12 @@ def constancy_guard(fit: Fit, effect: str, score: float, alpha: float, localisat
         if chi2_sf(q, df) >= cut or q < MIN_DRIFT_SHARE * score:
             continue
         # a location the drift itself takes is the drift; one it does not take is another misfit, held
-        drifting = drift_columns(fit, jac, name)
+        drifting = drifts[name]
         other = other_misfit(fit, jac, localisation, alpha, taken_by=np.concatenate([jac, drifting], axis=-1))
-        q, df = coefficient_drift(fit, effect, name, other) if other.shape[-1] else (q, df)
+        q, df = _drift_chi2(res, _held(base, other), jac, drifting) if other.shape[-1] else (q, df)
         for rival in rivals:
-            held = np.concatenate([other, np.asarray(fit.jacobian, float)[:, :, effect_columns(fit, rival)]], axis=-1)
-            q_r, df_r = coefficient_drift(fit, effect, name, held)
+            held = np.concatenate([other, full[:, :, effect_columns(fit, rival)]], axis=-1)
+            q_r, df_r = _drift_chi2(res, _held(base, held), jac, drifting)
             if df_r and q_r < q:
                 q, df = q_r, df_r
         p = chi2_sf(q, df) if df else 1.0
