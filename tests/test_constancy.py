@@ -1,14 +1,12 @@
 """The constancy guard (gyrojax/_diagnose/constancy.py): a library effect's coefficient is a constant of the device;
 a misfit that holds part of its shape with a size that changes along a recorded coordinate is not that effect."""
 
-import sys
 import types
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _experiments import discovery_diagnosis
 
-import gyrojax as gj
 from gyrojax._diagnose.constancy import (
     MIN_DRIFT_SHARE,
     coefficient_drift,
@@ -82,11 +80,7 @@ def test_a_coefficient_growing_with_temperature_is_refused():
 def test_a_compression_growing_with_temperature_is_not_confirmed():
     # an independent generator's lot (plain NumPy): -c (T - 25) s^3 on the rebalance, T from 25 to 31 C; the
     # score test ranks feedback_compression first (S = 55), which every other guard passed before this one
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
-    from _discovery_lot import discovery_lot
-
-    table, _ = discovery_lot("temp_x_cube_input", snr="mid", design="a", seed=0)
-    d = gj.diagnose("paper-qmg", table, progress=False)
+    d = discovery_diagnosis("temp_x_cube_input", design="a", seed=0)
     assert d.selected == ()
     refused = {r.effect: r for r in d.rejected}
     assert refused["feedback_compression"].kind == "its size drifts"

@@ -1,14 +1,12 @@
 """The power-on repeatability guard (gyrojax/_diagnose/repeat.py): a device property fitted on the other runs of a
 device predicts the held-out run; a misfit whose projection changes from run to run does not."""
 
-import sys
 import types
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _experiments import discovery_diagnosis
 
-import gyrojax as gj
 from gyrojax._diagnose.repeat import held_out_change, repeatability_guard, run_heterogeneity, run_of_rows
 
 
@@ -84,11 +82,7 @@ def test_a_bias_wandering_from_run_to_run_is_not_a_zero_rate_tempco():
     # an independent generator's lot (plain NumPy): a bias following an unrecorded environment, its own slow
     # curve in each (device, run); the score test ranks zro_tempco first (S = 74, p = 3e-9), which the lot's
     # other guards passed before this one
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
-    from _discovery_lot import discovery_lot
-
-    table, _ = discovery_lot("bias_env_wander", snr="mid", design="a", seed=3)
-    d = gj.diagnose("paper-qmg", table, progress=False)
+    d = discovery_diagnosis("bias_env_wander", design="a", seed=3)
     assert d.selected == ()
     refused = {r.effect: r for r in d.rejected}
     assert refused["zro_tempco"].kind == "not repeatable"
