@@ -3,6 +3,7 @@ the generator is independent of gyrojax's models, its noise is as documented, ea
 declared sweeps, and the scores are right on hand-made outcomes."""
 
 import ast
+import sys
 
 import numpy as np
 import pytest
@@ -11,6 +12,9 @@ from _experiments import EXPERIMENTS, load_experiment
 
 lotgen = load_experiment("_discovery_lot")
 bench = load_experiment("discovery_benchmark")
+blind = sys.modules["_discovery_blind"]  # the benchmark's import: it registers the blind set in its generator's EFFECTS
+# each effect with the generator that holds it (the blind set lives in the benchmark's copy of the generator)
+GENERATED = [(lotgen, n) for n in lotgen.EFFECTS] + [(blind._discovery_lot, n) for n in blind.BLIND]
 
 
 def test_generator_imports_no_gyrojax_physics():
@@ -102,13 +106,14 @@ def test_effects_are_chosen_by_set_or_by_name():
     assert bench.effect_names("held-out") == list(lotgen.HELD_OUT)
     assert bench.effect_names("fresh") == list(lotgen.FRESH)
     assert bench.effect_names("unseen") == list(lotgen.UNSEEN)
+    assert bench.effect_names("blind") == list(blind.BLIND) and not set(blind.BLIND) & set(lotgen.EFFECTS)
     assert bench.effect_names("dead_band,zro_tempco") == ["dead_band", "zro_tempco"]
     with pytest.raises(SystemExit, match="--effects: unknown nope; expected some of dac_inl_s_curve"):
         bench.effect_names("nope,zro_tempco")
 
 
-@pytest.mark.parametrize("name", list(lotgen.EFFECTS))
-def test_hidden_effect_changes_only_its_sweeps(name):
+@pytest.mark.parametrize(("lotgen", "name"), GENERATED, ids=[n for _, n in GENERATED])
+def test_hidden_effect_changes_only_its_sweeps(lotgen, name):
     null, _ = lotgen.discovery_lot(None, n_devices=3, n_runs=2, seed=4)
     table, info = lotgen.discovery_lot(name, snr="mid", n_devices=3, n_runs=2, seed=4)
     diff = np.asarray(table.columns["output"]) - np.asarray(null.columns["output"])

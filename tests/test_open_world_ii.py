@@ -107,3 +107,25 @@ def test_a_bias_step_confirms_nothing_and_is_located_in_time(diagnoses, clean):
     assert [t.name for t in d.formula.terms] == [f"step({top.coordinate})"] and d.formula.complete
     sigma = float(np.median(clean.columns["output_sigma"][clean.columns["sweep"] == "rate_table"]))
     assert abs(d.formula.coefficients[0] - STEP_SIGMA * sigma) < 3 * d.formula.stderr[0] + 0.1 * STEP_SIGMA * sigma
+
+
+@pytest.mark.slow
+def test_a_bias_of_the_rates_sign_growing_with_temperature_is_proposed_as_that_product():
+    # the blind set's switch charge injection, +-c (T - 25 C) with the rate's sign, from the independent generator:
+    # on this protocol the input follows the time and the temperature, and the closed form says which it is
+    import sys
+
+    from _experiments import EXPERIMENTS
+
+    if str(EXPERIMENTS) not in sys.path:
+        sys.path.insert(0, str(EXPERIMENTS))
+    import _discovery_blind  # noqa: F401  (registers the blind set)
+    from _discovery_lot import DESIGNS, discovery_lot
+
+    table, info = discovery_lot("zro_sign_rate_tempco", snr="mid", design="a", seed=0)
+    d = gj.diagnose("paper-qmg", table, progress=False)
+    assert d.selected == ()
+    f = d.formula
+    assert [t.name for t in f.terms] == ["lin(temperature_c)*sign(input)"] and f.complete and f.share > 0.9
+    truth = info["size"] * DESIGNS["a"].sf_lsb_per_dps  # LSB per K
+    assert abs(f.coefficients[0] - truth) < 3 * f.stderr[0] + 0.1 * truth

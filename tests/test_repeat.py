@@ -7,7 +7,14 @@ import numpy as np
 import pytest
 from _experiments import discovery_diagnosis
 
-from gyrojax._diagnose.repeat import held_out_change, repeatability_guard, run_heterogeneity, run_of_rows
+from gyrojax._diagnose.repeat import (
+    absent_run,
+    held_out_change,
+    repeatability_guard,
+    run_factors,
+    run_heterogeneity,
+    run_of_rows,
+)
 
 
 def _fake_fit(coef_per_run, *, n_dev=4, n_run=2, n_pt=20, seed=0):
@@ -52,10 +59,31 @@ def test_a_projection_that_changes_sign_between_runs_is_refused():
     change, folds = held_out_change(fit, "c")
     assert change < 0 and folds == 8
     reason = repeatability_guard(fit, "c", 400.0, 0.01)
-    assert reason is not None
-    assert "does not repeat from power-on to power-on" in reason and "over 8 (device, run) folds" in reason
+    assert reason is not None and "does not repeat from power-on to power-on" in reason
     q, df = run_heterogeneity(fit, "c")
     assert df == 4 and q > 100.0  # 4 devices x (2 runs - 1): the +3/-3 split is ~36 sigma^2 per device
+
+
+def test_an_effect_of_one_power_on_is_absent_from_the_other():
+    # the curve in run 0 only: the pooled fit gives it half its size, and run 1 carries none of it
+    fit = _fake_fit([3.0, 0.0])
+    (r0, a0, se0), (r1, a1, se1) = run_factors(fit, "c")
+    assert (r0, r1) == (0, 1)
+    assert a0 + a1 == pytest.approx(2.0, abs=1e-6)  # runs of equal information: the pooled change is their mean
+    assert abs(a1) < 3 * se1 and 0.1 < se1 < 0.3
+    assert absent_run(fit, "c", 0.01)[0] == 1
+    reason = repeatability_guard(fit, "c", 200.0, 0.01)
+    assert "run 1 carries" in reason and "some power-ons only" in reason
+
+
+def test_a_device_property_is_present_in_every_run():
+    # the same coefficient in every run: each run's factor is 1 within its error, at any signal, and a weak one is
+    # refused at about the test's alpha over many seeds
+    factors = run_factors(_fake_fit([3.0, 3.0, 3.0], n_run=3), "c")
+    assert [r for r, _, _ in factors] == [0, 1, 2]
+    assert all(abs(a - 1.0) < 4 * se for _, a, se in factors)
+    refused = sum(absent_run(_fake_fit([0.5, 0.5], seed=seed), "c", 0.01) is not None for seed in range(40))
+    assert refused <= 2
 
 
 def test_one_run_has_no_fold():
@@ -63,6 +91,7 @@ def test_one_run_has_no_fold():
     assert held_out_change(fit, "c") == (0.0, 0)
     assert repeatability_guard(fit, "c", 100.0, 0.01) is None
     assert run_heterogeneity(fit, "c") == (0.0, 0)
+    assert run_factors(fit, "c") == [] and absent_run(fit, "c", 0.01) is None
 
 
 def test_a_weak_device_property_is_not_refused_for_its_noise():

@@ -265,7 +265,8 @@ def _output_terms(g: _Group):
 
 
 def _product_terms(g: _Group):
-    """The temperature's and the time's products with the input (a gain or an even term that drifts)."""
+    """The temperature's and the time's products with the input (a gain, an even term or a bias of the rate's
+    sign that drifts)."""
     if "input" not in g.names:
         return
     xin = g.values("input")
@@ -274,7 +275,7 @@ def _product_terms(g: _Group):
             continue
         xc = g.values(c, centred=True)
         g.add(f"lin({c})*lin(input)", f"{_CODE[c]} * x", lambda s, xc=xc: xc[s] * xin[s], c, gain_too=False)
-        for basis, fn, code in (("abs", np.abs, "abs(x)"), ("sq", np.square, "x**2"),
+        for basis, fn, code in (("abs", np.abs, "abs(x)"), ("sign", np.sign, "sign(x)"), ("sq", np.square, "x**2"),
                                 ("cube", lambda v: v**3, "x**3")):
             g.add(f"lin({c})*{basis}(input)", f"{_CODE[c]} * {code}", lambda s, xc=xc, fn=fn: xc[s] * fn(xin[s]), c,
                   gain_too=False)

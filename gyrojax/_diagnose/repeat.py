@@ -24,17 +24,30 @@ run against the columns shared by the runs, linear at the fit before the step,
 
     Q = chi2([base, J]) - chi2([base, J_run0, J_run1, ...]) ~ chi2(df),  df = the split's added rank,
 
-summed over the devices that give folds. A candidate is refused only when both hold: it does not predict the
-held-out runs (sum C <= 0) and its coefficient differs between them (Q significant at the diagnosis's alpha)."""
+summed over the devices that give folds. A candidate is refused when both hold: it does not predict the
+held-out runs (sum C <= 0) and its coefficient differs between them (Q significant at the diagnosis's alpha).
+
+The held-out change reads the device's shared gains fitted on the other runs, so a misfit of one power-on that
+corrupts them is taken up by any candidate that absorbs it there: a bias relaxing in the first power-on only, on a
+protocol whose set points follow the time, lowers the other run's chi2 through a reference drift fitted beside
+the gain. The guard also refuses a candidate that is absent from a run: per device, the candidate's fitted change
+g (its columns at the one-step coefficients beside the free columns) is split per run, and each run's factor a_r
+(1 for a property of the device) is fitted beside the free columns and pooled over the devices by its
+information. A run whose factor is below `MAX_ABSENT_FACTOR` and below 1 by more than the one-sided normal
+quantile of alpha / runs has less than half the effect the device's other runs carry: a property of the device
+does not switch off between power-ons."""
 
 import numpy as np
 
 from .._identify import Fit
-from .._numerics.stats import chi2_sf
+from .._numerics.stats import chi2_isf, chi2_sf
 from .columns import base_columns, effect_columns, row_blocks
 from .probes import project_out, span_basis
 
 
+# ASSUMPTION: a run carrying less than half the effect the device's other runs carry does not hold that effect;
+# a real effect beside a second misfit keeps factors near 1 (leakage moves them by tens of percent, not half).
+MAX_ABSENT_FACTOR = 0.5
 MIN_RUN_INFORMATION = 0.1  # a run whose columns carry less than this share of the richest run's is not a fold
 RCOND = 1e-10  # relative singular-value cut of the folds' least squares (an effect's degenerate directions)
 
@@ -109,10 +122,62 @@ def run_heterogeneity(fit: Fit, effect: str) -> tuple[float, int]:
     return max(q, 0.0), df
 
 
+def run_factors(fit: Fit, effect: str) -> list[tuple[int, float, float]]:
+    """[(run, factor a_r, its standard error)]: how much of the candidate's fitted change each run carries,
+    pooled over the devices that give folds (see the module docstring); [] where none does."""
+    res, jac, base, run = _device_arrays(fit, effect)
+    info, weighted = {}, {}
+    for d in range(res.shape[0]):
+        runs = _folds_of(jac[d], run)
+        if not runs:
+            continue
+        a = np.concatenate([base[d], jac[d]], axis=1)
+        theta = np.linalg.lstsq(a, -res[d], rcond=RCOND)[0]
+        g = jac[d] @ theta[base[d].shape[1]:]  # the candidate's one-step change in this device
+        split = np.stack([g * (run == r) for r in runs], axis=1)
+        x = np.concatenate([base[d], split, (g * ~np.isin(run, runs))[:, None]], axis=1)
+        coef, cov = _least_squares(x, -res[d])
+        for k, r in enumerate(runs):
+            i = base[d].shape[1] + k
+            if np.isfinite(cov[i, i]) and cov[i, i] > 0:
+                info[r] = info.get(r, 0.0) + 1.0 / cov[i, i]
+                weighted[r] = weighted.get(r, 0.0) + coef[i] / cov[i, i]
+    return [(int(r), weighted[r] / info[r], 1.0 / np.sqrt(info[r])) for r in sorted(info)]
+
+
+def _least_squares(x, y):
+    """Coefficients and their covariance (unit noise) of y ~ x, on the span x resolves (degenerate directions
+    get an infinite variance)."""
+    u, s, vt = np.linalg.svd(x, full_matrices=False)
+    keep = s > RCOND * max(float(s[0]), 1e-300)
+    coef = vt[keep].T @ ((u[:, keep].T @ y) / s[keep])
+    cov = vt[keep].T @ np.diag(1.0 / s[keep] ** 2) @ vt[keep]
+    resolved = np.sum(vt[keep] ** 2, axis=0)  # each coefficient's share in the resolved span
+    cov[np.diag_indices_from(cov)] = np.where(resolved > 1 - 1e-9, np.diag(cov), np.inf)
+    return coef, cov
+
+
+def absent_run(fit: Fit, effect: str, alpha: float) -> tuple[int, float, float] | None:
+    """(run, factor, standard error) of a run that lacks the candidate (see the module docstring), the most
+    significant one; None where every run carries it."""
+    factors = run_factors(fit, effect)
+    if len(factors) < 2:
+        return None
+    z_cut = float(np.sqrt(chi2_isf(2.0 * alpha / len(factors), 1)))  # one-sided normal quantile
+    lacking = [(r, a, se) for r, a, se in factors if a < MAX_ABSENT_FACTOR and (1.0 - a) / se > z_cut]
+    return min(lacking, key=lambda x: -(1.0 - x[1]) / x[2]) if lacking else None
+
+
 def repeatability_guard(fit: Fit, effect: str, score: float, alpha: float) -> str | None:
     """A reason not to confirm `effect` (score test statistic `score` at `fit`), or None: fitted on the other
     power-ons of each device, it does not predict the held-out one (the held-out chi2 does not fall), and its
     coefficient differs from run to run (the heterogeneity Q significant at `alpha`)."""
+    absent = absent_run(fit, effect, alpha)
+    if absent is not None:
+        r, a, se = absent
+        return (f"it does not repeat from power-on to power-on: run {r} carries {a:.2g} +/- {se:.2g} of the "
+                f"change it fits in the device's runs (score S = {score:.4g}), where a property of the device gives "
+                f"1 in every run; what it takes lives in some power-ons only")
     change, folds = held_out_change(fit, effect)
     if not folds or change > 0:
         return None
