@@ -37,7 +37,7 @@ from .guards import (
 from .locate import Localisation, locate
 from .probes import PROBES, AbstractProbe, score_columns
 from .record import record_guard
-from .repeat import repeatability_guard
+from .repeat import absent_run_guard, held_out_guard
 from .rival import rival_guard
 from .score import TYPICAL_RANK_TOL, cosine, score_candidates, separating_sweep
 from .solution import Diagnosis, Step
@@ -246,7 +246,7 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
             s.rejected.append(Rejection(effect=best.effect, reason=alone, kind="in one device only"))
             remaining.remove(best.effect)
             continue
-        unrepeated = repeatability_guard(s.fit, best.effect, best.statistic, alpha)
+        unrepeated = held_out_guard(s.fit, best.effect, best.statistic, alpha)
         if unrepeated is not None:
             s.rejected.append(Rejection(effect=best.effect, reason=unrepeated, kind="not repeatable"))
             remaining.remove(best.effect)
@@ -255,6 +255,12 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
                                    rivals=[c.effect for c in significant if c is not best])
         if drifting is not None:
             s.rejected.append(Rejection(effect=best.effect, reason=drifting, kind="its size drifts"))
+            remaining.remove(best.effect)
+            continue
+        # after the constancy guard: a size following a recorded coordinate is absent where that coordinate is
+        absent = absent_run_guard(s.fit, best.effect, best.statistic, alpha)
+        if absent is not None:
+            s.rejected.append(Rejection(effect=best.effect, reason=absent, kind="not repeatable"))
             remaining.remove(best.effect)
             continue
         # alternatives: any candidate significant at alpha alone (ambiguity names explanations, not discoveries)
