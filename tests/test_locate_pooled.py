@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import gyrojax as gj
-from gyrojax._diagnose.descriptions import coordinates, spline_basis
+from gyrojax._diagnose.descriptions import KNOTS, coordinates, device_spline_basis, spline_basis, spread
 from gyrojax._diagnose.locate import locate
 from gyrojax._diagnose.space import ResidualSpace
 
@@ -64,3 +64,29 @@ def test_a_dead_band_is_located_on_the_input_around_zero(seed):
     assert -0.5 <= lo < 0 < hi <= 0.5
     # most of the misfit in excess of the noise: 0.65-1.0 of it on design a, seeds 0-4
     assert first.share > 0.6 and "the same in every device" in first.description
+
+
+def test_a_coordinate_that_tells_devices_apart_gets_each_devices_own_knots(null_fit):
+    # the drive frequency: ~54 Hz over the lot, under 1 Hz within a device; on the lot's quantiles a device's
+    # curve along it has at most 3 directions (a line, or a line and one kink), on its own knots KNOTS
+    block = null_fit.data.blocks["rate_table"]
+    mask = np.asarray(block.mask)
+    f = np.where(mask, coordinates(block)["drive_freq_hz"], 0.0)
+    _, within_device, lot = spread(f, mask)
+    assert within_device < 0.1 * lot
+    lot_knots, own = spline_basis(f, mask), device_spline_basis(f, mask)
+    assert max(np.linalg.matrix_rank(lot_knots[d][mask[d]]) for d in range(mask.shape[0])) <= 3
+    assert [np.linalg.matrix_rank(own[d][mask[d]]) for d in range(mask.shape[0])] == [KNOTS] * mask.shape[0]
+    assert np.allclose(own.sum(axis=-1)[mask], 1.0) and not np.any(own[~mask])  # hat functions, zero off the data
+
+
+@pytest.mark.slow
+def test_a_ripple_along_the_drive_frequency_is_named_with_the_temperature_it_follows():
+    # the blind set's DDS ripple, a rate gain sin(2 pi f / 0.4 Hz) along the drive frequency: within a device the
+    # frequency follows the die temperature by the TCF, so a curve along one is a curve along the other
+    from _discovery_blind import BLIND  # noqa: F401  (registers the blind set)
+
+    table, _ = discovery_lot("rate_gain_drive_ripple", snr="mid", design="a", seed=0)
+    first = locate(gj.identify("paper-qmg", table, progress=False)).locations[0]
+    assert first.located_on == ("rate_table",) and first.share > 0.5
+    assert {first.coordinate, *first.confounded_with} >= {"temperature_c", "drive_freq_hz"}

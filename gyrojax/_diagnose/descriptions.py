@@ -1,19 +1,20 @@
 r"""Flexible descriptions of the standardised residuals, without a list of shapes: what `locate` chooses from.
 
 For each sweep and each coordinate that moves within its runs (`input`, `temperature_c`, its rate of change
-`dtemperature_dt`, `time_s`, `drive_freq_hz`, `order`) two descriptions are scored per device: an *offset* along
-the coordinate and a *gain* along it (the same basis times the model's prediction), each a piecewise-linear
-function on knots at the coordinate's quantiles (a linear spline whose effective degrees of freedom are the
-directions left after the fit's own columns are projected out), and the same two as one curve shared by every
-device on finer knots (`pooled`: the lot's coefficients, as most physical terms are the same in every device).
-Beside them: a curve along the input whose size
-grows with the temperature or the time, a *gain per run* (and an offset per run on sweeps read without a turn-on
-bias), an offset along time that differs from run to run, a *change-point scan* along time (a step in the
-output at one dwell), a *spectral scan* along the input (a periodic error of the input or the DAC word) and along
-the time since power-on (a disturbance that cycles: the lab's air conditioning, a thermal oscillation) and, with
-the pooled curves, a *threshold scan* along every coordinate that moves within the devices (a step of the output
-or of the gain where it passes one value: `gyrojax._diagnose.thresholds`). Scans carry their own look-elsewhere
-correction (Bonferroni over the positions or periods scanned).
+`dtemperature_dt`, `time_s`, `drive_freq_hz`, `order`) two descriptions are scored per device: an *offset* along the
+coordinate and a *gain* along it (the same basis times the model's prediction), each a piecewise-linear function on
+knots at the coordinate's quantiles (a linear spline whose effective degrees of freedom are the directions left
+after the fit's own columns are projected out; for a coordinate that mostly tells devices apart, also on each
+device's own quantiles, read only to say what a located misfit is confounded with), and the same two as one curve
+shared by every device on finer knots (`pooled`: the lot's coefficients, as most physical terms are the same in
+every device). Beside them: a curve along the input whose size grows with the temperature or the time, a *gain per
+run* (and an offset per run on sweeps read without a turn-on bias), an offset along time that differs from run to
+run, a *change-point scan* along time (a step in the output at one dwell), a *spectral scan* along the input (a
+periodic error of the input or the DAC word) and along the time since power-on (a disturbance that cycles: the lab's
+air conditioning, a thermal oscillation) and, with the pooled curves, a *threshold scan* along every coordinate that
+moves within the devices (a step of the output or of the gain where it passes one value:
+`gyrojax._diagnose.thresholds`). Scans carry their own look-elsewhere correction (Bonferroni over the positions or
+periods scanned).
 """
 
 import dataclasses
@@ -112,6 +113,22 @@ def spline_basis(x, mask, knots=KNOTS, signed=False):
     return np.stack([np.where(mask, np.interp(x, k, eye[j]), 0.0) for j in range(k.size)], axis=-1)
 
 
+def device_spline_basis(x, mask, knots=KNOTS, signed=False):
+    """`spline_basis` with knots at each device's own quantiles, zero-padded to the widest device: (device, run,
+    point, k); None when no device has three values. For a coordinate that mostly tells devices apart (the drive
+    frequency, tens of Hz between devices and 0.2 Hz within one), the lot's quantiles put at most two knots inside
+    a device's range, and its curve there is a line."""
+    per = [spline_basis(x[d:d + 1], mask[d:d + 1], knots, signed) for d in range(mask.shape[0])]
+    k = max((h.shape[-1] for h in per if h is not None), default=0)
+    if k == 0:
+        return None
+    out = np.zeros((*mask.shape, k))
+    for d, h in enumerate(per):
+        if h is not None:
+            out[d, ..., :h.shape[-1]] = h[0]
+    return out
+
+
 # -- the descriptions ----------------------------------------------------------------------------------------
 def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
     """Every flexible description of `space`'s residuals: (descriptions, notes on coordinates that were not
@@ -136,6 +153,8 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
             hats = spline_basis(x, mask, signed=name in SIGNED)
             if hats is None:
                 continue
+            if dev < WITHIN_DEVICE_SHARE * lot:
+                out.extend(_own_knots(space, sweep, name, x, mask, pred, dev / lot))
             # a gain along the input (x g(x), piecewise quadratic) describes an odd curve with fewer knots than
             # an offset along it: with it the input is not outdone by a coordinate swept with it (time, order)
             families = [("offset", hats), ("gain", hats * pred[..., None])]
@@ -191,6 +210,22 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
                     out.append(d)
         out.extend(_point_scans(space, sweep, block, mask))
     return out, notes
+
+
+def _own_knots(space, sweep, name, x, mask, pred, within_device) -> list:
+    """The offset and the gain along a coordinate that mostly tells devices apart, on each device's own knots
+    (`device_spline_basis`), marked `confounding`: a curve along it within a device is a curve along whatever it
+    follows there (the drive frequency, the die temperature by the TCF), so these only say which located misfit
+    the data confound with it; they are never a location of their own (`gyrojax._diagnose.locate`)."""
+    hats = device_spline_basis(x, mask, signed=name in SIGNED)
+    out = []
+    for family, g in (() if hats is None else (("offset", hats), ("gain", hats * pred[..., None]))):
+        cols = space.columns({sweep: g})
+        sc = space.score(cols)
+        if sc.df:
+            out.append(Description(sweep, name, family, cols, sc, sc.p_value,
+                                   {"within_device": within_device, "confounding": True}))
+    return out
 
 
 def _thresholds(space, sweep, name, x, mask, pred, within_device) -> list:

@@ -162,7 +162,10 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS, pool
     found = []
     notes, hints = (), None
     while len(found) < max_locations:
-        descs, new_notes = describe(space, pooled=pooled)
+        described, new_notes = describe(space, pooled=pooled)
+        # curves on each device's own knots along a coordinate that mostly tells devices apart only say what a
+        # location is confounded with (`descriptions._own_knots`)
+        descs = [d for d in described if not d.where.get("confounding")]
         if hints is None:
             hints = _hints(descs)
             notes = tuple(dict.fromkeys(new_notes))
@@ -177,7 +180,7 @@ def locate(fit, *, alpha: float = 0.01, max_locations: int = MAX_LOCATIONS, pool
         # Of coordinates the data cannot tell apart, name the one that moves most within each device: a
         # coordinate that mostly tells devices apart (a drive frequency) is seen here only through its small
         # excursions within a device, which another coordinate (the temperature behind them) explains as well.
-        confounded = _confounded(space, best, descs, cut)
+        confounded = _confounded(space, best, described, cut)
         # the coordinate named first among those of the best description's kind: a step where one coordinate
         # passes a value is not replaced by a smooth curve along another (named as confounded all the same)
         primary = _primary([best] + [d for d in confounded if _is_step(d) == _is_step(best)])
