@@ -116,7 +116,7 @@ def spline_basis(x, mask, knots=KNOTS, signed=False):
 def device_spline_basis(x, mask, knots=KNOTS, signed=False):
     """`spline_basis` with knots at each device's own quantiles, zero-padded to the widest device: (device, run,
     point, k); None when no device has three values. For a coordinate that mostly tells devices apart (the drive
-    frequency, tens of Hz between devices and 0.2 Hz within one), the lot's quantiles put at most two knots inside
+    frequency, tens of Hz between devices and under 1 Hz within one), the lot's quantiles put at most two knots inside
     a device's range, and its curve there is a line."""
     per = [spline_basis(x[d:d + 1], mask[d:d + 1], knots, signed) for d in range(mask.shape[0])]
     k = max((h.shape[-1] for h in per if h is not None), default=0)
@@ -147,13 +147,14 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
             if run <= WITHIN_RUN_SHARE * lot:
                 notes.append(f"{name} on {sweep} is constant within runs: a property of runs (see 'run')")
                 continue
-            if dev < WITHIN_DEVICE_SHARE * lot:
+            between = dev < WITHIN_DEVICE_SHARE * lot  # the coordinate mostly tells devices apart
+            if between:
                 notes.append(f"{name} on {sweep} varies mostly between devices ({dev:.3g} within a device "
                              f"of its {lot:.3g} over the lot): described within each device only")
             hats = spline_basis(x, mask, signed=name in SIGNED)
             if hats is None:
                 continue
-            if dev < WITHIN_DEVICE_SHARE * lot:
+            if between:
                 out.extend(_own_knots(space, sweep, name, x, mask, pred, dev / lot))
             # a gain along the input (x g(x), piecewise quadratic) describes an odd curve with fewer knots than
             # an offset along it: with it the input is not outdone by a coordinate swept with it (time, order)
@@ -162,21 +163,13 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
                 # a shape in time that differs from run to run (a jump, a relaxation after one power-on)
                 eye = np.eye(mask.shape[1])[None, :, None, :, None]
                 families.append(("offset in each run", (hats[..., None, :] * eye).reshape(*mask.shape, -1)))
-            for family, g in families:
-                cols = space.columns({sweep: g})
-                sc = space.score(cols)
-                if sc.df:
-                    out.append(Description(sweep, name, family, cols, sc, sc.p_value, {"within_device": dev / lot}))
+            out.extend(_scored(space, sweep, name, families, {"within_device": dev / lot}))
             # the same curve in every device, on finer knots: what most physical terms are (in output units or
             # as a gain), where a coordinate moves within the devices (not one that mostly tells them apart)
-            fine = (spline_basis(x, mask, knots=POOLED_KNOTS, signed=name in SIGNED)
-                    if pooled and dev >= WITHIN_DEVICE_SHARE * lot else None)
-            for family, g in (() if fine is None else (("offset", fine), ("gain", fine * pred[..., None]))):
-                cols = space.columns({sweep: g})
-                sc = space.score(cols, pooled=True)
-                if sc.df:
-                    out.append(Description(sweep, name, family, cols, sc, sc.p_value, {"within_device": dev / lot},
-                                           pooled=True))
+            fine = spline_basis(x, mask, knots=POOLED_KNOTS, signed=name in SIGNED) if pooled and not between else None
+            if fine is not None:
+                out.extend(_scored(space, sweep, name, (("offset", fine), ("gain", fine * pred[..., None])),
+                                   {"within_device": dev / lot}, pooled=True))
             # a step where the coordinate passes one value, at one threshold for the lot (the lot's, as the
             # pooled curves' shape is): offset and gain, in every device or in one
             if fine is not None:
@@ -218,13 +211,21 @@ def _own_knots(space, sweep, name, x, mask, pred, within_device) -> list:
     follows there (the drive frequency, the die temperature by the TCF), so these only say which located misfit
     the data confound with it; they are never a location of their own (`gyrojax._diagnose.locate`)."""
     hats = device_spline_basis(x, mask, signed=name in SIGNED)
+    if hats is None:
+        return []
+    return _scored(space, sweep, name, (("offset", hats), ("gain", hats * pred[..., None])),
+                   {"within_device": within_device, "confounding": True})
+
+
+def _scored(space, sweep, name, families, where, pooled=False) -> list:
+    """A description of `sweep` along `name` for each (family, basis (device, run, point, k)) of `families` that
+    has a direction beyond the fit's span; `pooled`: one curve for every device."""
     out = []
-    for family, g in (() if hats is None else (("offset", hats), ("gain", hats * pred[..., None]))):
+    for family, g in families:
         cols = space.columns({sweep: g})
-        sc = space.score(cols)
+        sc = space.score(cols, pooled=pooled)
         if sc.df:
-            out.append(Description(sweep, name, family, cols, sc, sc.p_value,
-                                   {"within_device": within_device, "confounding": True}))
+            out.append(Description(sweep, name, family, cols, sc, sc.p_value, dict(where), pooled=pooled))
     return out
 
 

@@ -257,7 +257,8 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
             s.rejected.append(Rejection(effect=best.effect, reason=drifting, kind="its size drifts"))
             remaining.remove(best.effect)
             continue
-        # after the constancy guard: a size following a recorded coordinate is absent where that coordinate is
+        # after the constancy guard: a size that follows a recorded coordinate is also absent from a run where
+        # the coordinate stays small, and the constancy guard names the coordinate
         absent = absent_run_guard(s.fit, best.effect, best.statistic, alpha)
         if absent is not None:
             s.rejected.append(Rejection(effect=best.effect, reason=absent, kind="not repeatable"))
