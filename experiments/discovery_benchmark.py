@@ -45,6 +45,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from _discovery_blind import BLIND  # noqa: E402  (registers the blind set in EFFECTS)
 from _discovery_lot import DESIGNS, EFFECTS, FRESH, HELD_OUT, HIDDEN, TARGET_CHI2, UNSEEN, discovery_lot  # noqa: E402
+from _discovery_sealed import SEALED  # noqa: E402  (registers the sealed set in EFFECTS)
 
 
 LOCATED_SHARE = 0.2  # a sweep carrying at least this share of a misfit is one of the sweeps it is located on
@@ -552,9 +553,10 @@ def _list(text, allowed, what):
 def effect_names(text) -> list:
     """`--effects`: 'all' (the benchmark's 26), 'held-out' (12 written after the guards were tuned), 'fresh' (12
     written after the threshold scans), 'unseen' (12 written after the fresh set's changes), 'blind' (12 written
-    without reading the diagnosis's code) or names."""
+    without reading the diagnosis's code), 'sealed' (12 more, written without reading the diagnosis's code, after
+    the blind set's changes) or names."""
     named = {"all": list(HIDDEN), "held-out": list(HELD_OUT), "fresh": list(FRESH), "unseen": list(UNSEEN),
-             "blind": list(BLIND)}
+             "blind": list(BLIND), "sealed": list(SEALED)}
     return named.get(text) or _list(text, list(EFFECTS), "effects")
 
 
@@ -567,8 +569,9 @@ def main(argv=None):
     p.add_argument("--effects", default="all",
                    help="hidden effect names, 'all' (the benchmark's 26), 'held-out' (12 effects written after "
                         "the guards were tuned), 'fresh' (12 more, written after the threshold scans) or "
-                        "'unseen' (12 more, written after the fresh set's changes) or 'blind' (12 more, written "
-                        "without reading the diagnosis's code); null lots always run")
+                        "'unseen' (12 more, written after the fresh set's changes), 'blind' (12 more, written "
+                        "without reading the diagnosis's code) or 'sealed' (12 more, written without reading the "
+                        "diagnosis's code, after the blind set's changes); null lots always run")
     p.add_argument("--devices", type=int, default=6)
     p.add_argument("--runs", type=int, default=2)
     p.add_argument("--preset", default="paper-qmg", help="the preset every method starts from")

@@ -13,8 +13,10 @@ from _experiments import EXPERIMENTS, load_experiment
 lotgen = load_experiment("_discovery_lot")
 bench = load_experiment("discovery_benchmark")
 blind = sys.modules["_discovery_blind"]  # the benchmark's import: it registers the blind set in its generator's EFFECTS
-# each effect with the generator that holds it (the blind set lives in the benchmark's copy of the generator)
-GENERATED = [(lotgen, n) for n in lotgen.EFFECTS] + [(blind._discovery_lot, n) for n in blind.BLIND]
+sealed = sys.modules["_discovery_sealed"]  # likewise the sealed set
+# each effect with the generator that holds it (the blind and sealed sets live in the benchmark's copy of the generator)
+GENERATED = ([(lotgen, n) for n in lotgen.EFFECTS] + [(blind._discovery_lot, n) for n in blind.BLIND]
+             + [(sealed._discovery_lot, n) for n in sealed.SEALED])
 
 
 def test_generator_imports_no_gyrojax_physics():
@@ -107,6 +109,8 @@ def test_effects_are_chosen_by_set_or_by_name():
     assert bench.effect_names("fresh") == list(lotgen.FRESH)
     assert bench.effect_names("unseen") == list(lotgen.UNSEEN)
     assert bench.effect_names("blind") == list(blind.BLIND) and not set(blind.BLIND) & set(lotgen.EFFECTS)
+    assert bench.effect_names("sealed") == list(sealed.SEALED) and not set(sealed.SEALED) & set(lotgen.EFFECTS)
+    assert not set(sealed.SEALED) & set(blind.BLIND)
     assert bench.effect_names("dead_band,zro_tempco") == ["dead_band", "zro_tempco"]
     with pytest.raises(SystemExit, match="--effects: unknown nope; expected some of dac_inl_s_curve"):
         bench.effect_names("nope,zro_tempco")
