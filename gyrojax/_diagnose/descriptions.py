@@ -161,14 +161,18 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
             families = [("offset", hats), ("gain", hats * pred[..., None])]
             if name == "time_s" and mask.shape[1] >= 2:
                 # a shape in time that differs from run to run (a jump, a relaxation after one power-on)
-                eye = np.eye(mask.shape[1])[None, :, None, :, None]
-                families.append(("offset in each run", (hats[..., None, :] * eye).reshape(*mask.shape, -1)))
+                families.append(in_each_run(hats, pred, mask.shape)[0])
             out.extend(_scored(space, sweep, name, families, {"within_device": dev / lot}))
             # the same curve in every device, on finer knots: what most physical terms are (in output units or
             # as a gain), where a coordinate moves within the devices (not one that mostly tells them apart)
             fine = spline_basis(x, mask, knots=POOLED_KNOTS, signed=name in SIGNED) if pooled and not between else None
             if fine is not None:
                 out.extend(_scored(space, sweep, name, (("offset", fine), ("gain", fine * pred[..., None])),
+                                   {"within_device": dev / lot}, pooled=True))
+            if fine is not None and name == "input" and mask.shape[1] >= 2:
+                # a curve along the input that differs from run to run, the same in every device (a run with
+                # another setup: a sagging supply, another fixture)
+                out.extend(_scored(space, sweep, name, in_each_run(hats, pred, mask.shape),
                                    {"within_device": dev / lot}, pooled=True))
             # a step where the coordinate passes one value, at one threshold for the lot (the lot's, as the
             # pooled curves' shape is): offset and gain, in every device or in one
@@ -180,6 +184,10 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
             sc = space.score(cols)
             if sc.df:
                 out.append(Description(sweep, name, "input x", cols, sc, sc.p_value, {"within_device": 1.0}))
+        if not block.kind.biased:
+            # read without a turn-on bias: an offset of each device's readings, the same in all its runs (a bench
+            # connection's thermal EMF, a device's own offset), a property of the device, not of one run
+            out.extend(_scored(space, sweep, "device", (("offset per device", mask[..., None].astype(float)),), {}))
         runs = mask.shape[1]
         if runs >= 2:
             eye = np.eye(runs)[None, :, None, :] * mask[..., None]
@@ -203,6 +211,13 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
                     out.append(d)
         out.extend(_point_scans(space, sweep, block, mask))
     return out, notes
+
+
+def in_each_run(hats, pred, shape) -> tuple:
+    """The offset and the gain along a coordinate (`hats`, (device, run, point, k)), one curve per run."""
+    eye = np.eye(shape[1])[None, :, None, :, None]
+    each = (hats[..., None, :] * eye).reshape(*shape, -1)
+    return (("offset in each run", each), ("gain in each run", each * pred[..., None]))
 
 
 def _own_knots(space, sweep, name, x, mask, pred, within_device) -> list:

@@ -215,8 +215,8 @@ def with_shapes(fit, locations, discrepancy, designs, scores, rejected, max_mult
     for loc in locations:
         matched = None
         for d in discrepancy:  # most explanatory first
-            if not d.significant or d.within:
-                continue
+            if not d.significant or d.within or designs[d.probe].shape[-1] > loc.columns.shape[-1]:
+                continue  # a shape with more directions than the flexible description is not the simpler one
             left = space.with_columns(designs[d.probe]).score(loc.columns, loc.pooled)
             if left.p_value >= cut or left.statistic <= SHAPE_SHARE_LEFT * loc.chi2_explained:
                 matched = d

@@ -282,11 +282,16 @@ def _product_terms(g: _Group):
 
 
 def _run_terms(g: _Group):
-    """A gain per run beyond the first."""
+    """A gain per run beyond the first; on sweeps read without a turn-on bias also an offset per run, and an offset
+    (each device its own, the same in all its runs: a bench connection's thermal EMF, a device's own offset)."""
+    unbiased = all(not g.kinds[s].biased for s in g.group)
     for r in range(1, min(m.shape[1] for m in g.masks.values())):
         g.add(f"per_run({r})", f"run == {r}",
               lambda s, r=r: np.broadcast_to((np.arange(g.masks[s].shape[1]) == r)[None, :, None],
-                                             g.masks[s].shape).astype(float), "order", offset=False, unit_power=0)
+                                             g.masks[s].shape).astype(float), "order", offset=unbiased,
+              unit_power=0)
+    if unbiased:
+        g.add("offset", "1", lambda s: np.ones(g.masks[s].shape), "device", gain_too=False, unit_power=0)
 
 
 def _location_dictionary(fit, location, space, step_at, periods):
@@ -434,7 +439,7 @@ def propose_along(fit, location, **kw):
     agrees with where the flexible descriptions placed the misfit unless a simpler or a better one elsewhere says
     all of it. Without a complete one, the first formula found."""
     own = {location.coordinate} | ({"model"} if location.coordinate == "input" else set()) | (
-        {""} if location.coordinate == "run" else set())
+        {""} if location.coordinate in ("run", "device") else set())
     space = ResidualSpace(fit)  # one dictionary and its columns for the three searches
     prepared = _location_dictionary(fit, location, space, kw.get("step_at"), kw.get("periods"))
     found = []

@@ -30,6 +30,7 @@ from .descriptions import (
     at_threshold,
     coordinates,
     describe,
+    in_each_run,
     interactions,
     spline_basis,
     spread,
@@ -40,6 +41,10 @@ from .space import ResidualSpace
 
 
 SIZE_REL_STDERR = 0.5
+# Descriptions of what is constant within each run: of the runs, and of the devices (an offset of a sweep read
+# without a turn-on bias, the same in all of a device's runs).
+CONSTANT_IN_RUNS = ("run", "device")
+EACH_RUN = ("offset in each run", "gain in each run")  # a curve along a coordinate, one per run
 MAX_LOCATIONS = 3
 # Scans (one position, one period, one point): described alone, never joined across sweeps or confounded.
 SCANS = ("step", "periodic", "single point", "at one input")
@@ -261,9 +266,11 @@ def _primary(candidates: list) -> Description:
     """The description named first among those the data cannot tell apart: by `_preference`, unless a
     description of the runs (constant within each) needs at most `SIMPLER` of its degrees of freedom (a gain per
     run, 1 per device, against a curve along dT/dt in every device, 7 per device): what the data cannot tell from
-    a change between power-ons needs nothing to vary within a run."""
-    first = min(candidates, key=_preference)
-    per_run = [d for d in candidates if d.coordinate == "run"]
+    a change between power-ons needs nothing to vary within a run; and a curve that differs from run to run only
+    where no curve shared by the runs says the same (one curve for every run is the simpler shape)."""
+    shared = [d for d in candidates if d.family not in EACH_RUN]
+    first = min(shared or candidates, key=_preference)
+    per_run = [d for d in candidates if d.coordinate in CONSTANT_IN_RUNS]
     simplest = min(per_run, key=lambda d: d.scored.df) if per_run else first
     if _preference(simplest)[0] == _preference(first)[0] and simplest.scored.df <= SIMPLER * first.scored.df:
         return simplest
@@ -332,12 +339,16 @@ def _shape_words(d: Description) -> str:
         return "an error at one input value in every device (a narrow feature: a missing code, a resonance)"
     if d.family == "input x":
         return f"an offset along the input whose size changes with {d.coordinate}"
-    if d.family == "offset in each run":
-        return f"an offset along {d.coordinate} that differs from run to run"
+    if d.family in EACH_RUN:
+        what = "an offset" if d.family.startswith("offset") else "a gain"
+        return f"{what} along {d.coordinate} that differs from run to run" + (
+            ", the same in every device" if d.pooled else "")
     if d.family == "periodic":
         unit = " s" if d.coordinate == "time_s" else ""
         return f"a periodic error along {'the input' if d.coordinate == 'input' else d.coordinate} " \
                f"(period {d.where['period']:.3g}{unit})"
+    if d.coordinate == "device":
+        return "an offset of a device's readings, the same in all its runs (a property of the device)"
     if d.coordinate == "run":
         return "a gain that changes from run to run" if d.family == "gain per run" else \
             "an offset that changes from run to run"
@@ -367,6 +378,10 @@ def _measured_shares(space, fit, best: Description, sc) -> tuple:
             g = interactions(block, mask).get(best.coordinate)
             if g is None:
                 continue
+        elif best.coordinate == "device":
+            if block.kind.biased:
+                continue
+            g = mask[..., None].astype(float)
         elif best.coordinate == "run":
             if mask.shape[1] < 2:
                 continue
@@ -378,7 +393,10 @@ def _measured_shares(space, fit, best: Description, sc) -> tuple:
             hats = spline_basis(np.where(mask, coords[best.coordinate], 0.0), mask, signed=best.coordinate in SIGNED)
             if hats is None:
                 continue
-            g = hats * pred[..., None] if best.family == "gain" else hats
+            if best.family in EACH_RUN:
+                g = dict(in_each_run(hats, pred, mask.shape))[best.family]
+            else:
+                g = hats * pred[..., None] if best.family == "gain" else hats
         found[sweep] = space.raw_excess(space.columns({sweep: g}), sweep)
     total = sum(found.values())
     if total < MEASURED_FLOOR * sc.statistic:
@@ -434,7 +452,7 @@ def _where(fit, space, best, members, sc) -> dict:
         for dv, rn in np.ndindex(mask.shape[:2]):
             chi_dev_run.append((float(np.sum(f[dv, rn][mask[dv, rn]] ** 2)), fit.devices[dv],
                                 fit.data.run_ids(m.sweep)[dv][rn]))
-        if best.coordinate != "run" and not _is_step(best):
+        if best.coordinate not in CONSTANT_IN_RUNS and not _is_step(best):
             x = coordinates(block)[best.coordinate]
             values.append((np.abs(f)[mask], np.asarray(x)[mask]))
     total = sum(c for c, _, _ in chi_dev_run) or 1.0
