@@ -8,13 +8,14 @@ after the fit's own columns are projected out; for a coordinate that mostly tell
 device's own quantiles, read only to say what a located misfit is confounded with), and the same two as one curve
 shared by every device on finer knots (`pooled`: the lot's coefficients, as most physical terms are the same in
 every device). Beside them: a curve along the input whose size grows with the temperature or the time, a *gain per
-run* (and an offset per run on sweeps read without a turn-on bias), an offset along time that differs from run to
-run, a *change-point scan* along time (a step in the output at one dwell), a *spectral scan* along the input (a
-periodic error of the input or the DAC word) and along the time since power-on (a disturbance that cycles: the lab's
-air conditioning, a thermal oscillation) and, with the pooled curves, a *threshold scan* along every coordinate that
-moves within the devices (a step of the output or of the gain where it passes one value:
-`gyrojax._diagnose.thresholds`). Scans carry their own look-elsewhere correction (Bonferroni over the positions or
-periods scanned).
+run* (and, on sweeps read without a turn-on bias, an offset per run and an *offset per device*, the same in all of
+a device's runs), an offset along time that differs from run to run, an offset and a gain along the input that
+differ from run to run (the same in every device), a *change-point scan* along time (a step in the output at one
+dwell), a *spectral scan* along the input (a periodic error of the input or the DAC word) and along the time since
+power-on (a disturbance that cycles: the lab's air conditioning, a thermal oscillation) and, with the pooled curves,
+a *threshold scan* along every coordinate that moves within the devices (a step of the output or of the gain where
+it passes one value: `gyrojax._diagnose.thresholds`). Scans carry their own look-elsewhere correction (Bonferroni
+over the positions or periods scanned).
 """
 
 import dataclasses
@@ -44,7 +45,8 @@ PERIODS = 24  # periods scanned along the input, log-spaced from 2.5 point spaci
 @dataclasses.dataclass(frozen=True)
 class Description:
     """One flexible description: its sweep, coordinate, family ("offset", "gain", "gain per run", "offset per
-    run", "step", "periodic"), columns (device, rows, k), score and, for scans, where it sits."""
+    run", "offset per device", "offset in each run", "gain in each run", "step", "periodic", ...), columns (device,
+    rows, k), score and, for scans, where it sits."""
 
     sweep: str
     coordinate: str
