@@ -297,7 +297,9 @@ def _confounded(space, best, descs, cut) -> list:
         return out
     beyond_best = space.with_columns(best.columns)
     for d in descs:
-        if (d.coordinate == best.coordinate or (d.coordinate, _is_step(d)) in {(o.coordinate, _is_step(o)) for o in out}
+        # along best's own coordinate only a curve shared by the runs, where best differs from run to run
+        own = d.coordinate == best.coordinate and not (best.family in EACH_RUN and d.family not in EACH_RUN)
+        if (own or (d.coordinate, _is_step(d)) in {(o.coordinate, _is_step(o)) for o in out}
                 or d.sweep != best.sweep):
             continue
         if d.family in SCANS and not (_is_step(best) and d.family == "step"):
