@@ -39,6 +39,7 @@ WITHIN_RUN_SHARE = 1e-3
 # Within a device less than this share of the lot's spread: the coordinate mostly tells devices apart.
 WITHIN_DEVICE_SHARE = 0.1
 # A size whose standard error is above this share of its value is not determined by the data.
+EACH_RUN = ("offset in each run", "gain in each run")  # a curve along a coordinate, one per run
 PERIODS = 24  # periods scanned along the input, log-spaced from 2.5 point spacings to half the span
 
 
@@ -186,21 +187,7 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
             sc = space.score(cols)
             if sc.df:
                 out.append(Description(sweep, name, "input x", cols, sc, sc.p_value, {"within_device": 1.0}))
-        if not block.kind.biased:
-            # read without a turn-on bias: an offset of each device's readings, the same in all its runs (a bench
-            # connection's thermal EMF, a device's own offset), a property of the device, not of one run
-            out.extend(_scored(space, sweep, "device", (("offset per device", mask[..., None].astype(float)),), {}))
-        runs = mask.shape[1]
-        if runs >= 2:
-            eye = np.eye(runs)[None, :, None, :] * mask[..., None]
-            per_run = [("gain per run", pred[..., None] * eye)]
-            if not block.kind.biased:
-                per_run.append(("offset per run", eye.astype(float)))
-            for family, g in per_run:
-                cols = space.columns({sweep: g})
-                sc = space.score(cols)
-                if sc.df:
-                    out.append(Description(sweep, "run", family, cols, sc, sc.p_value))
+        out.extend(_runs_and_devices(space, sweep, block, mask, pred))
         coords = coordinates(block)
         if "time_s" in coords:
             d = _step_scan(space, sweep, np.where(mask, coords["time_s"], 0.0), mask)
@@ -213,6 +200,22 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
                     out.append(d)
         out.extend(_point_scans(space, sweep, block, mask))
     return out, notes
+
+
+def _runs_and_devices(space, sweep, block, mask, pred) -> list:
+    """What is constant within each run: a gain per run, and on a sweep read without a turn-on bias an offset per
+    run and an offset of each device's readings, the same in all its runs (a bench connection's thermal EMF, a
+    device's own offset: a property of the device, not of one run)."""
+    out = []
+    if not block.kind.biased:
+        out.extend(_scored(space, sweep, "device", (("offset per device", mask[..., None].astype(float)),), {}))
+    if mask.shape[1] >= 2:
+        eye = np.eye(mask.shape[1])[None, :, None, :] * mask[..., None]
+        per_run = [("gain per run", pred[..., None] * eye)]
+        if not block.kind.biased:
+            per_run.append(("offset per run", eye.astype(float)))
+        out.extend(_scored(space, sweep, "run", per_run, {}))
+    return out
 
 
 def in_each_run(hats, pred, shape) -> tuple:

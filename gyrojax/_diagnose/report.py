@@ -3,7 +3,7 @@
 import numpy as np
 
 from .._identify import Fit
-from .locate import Location
+from .location import Location
 
 
 def write_report(diagnosis, out_dir) -> dict:

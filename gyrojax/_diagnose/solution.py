@@ -14,7 +14,7 @@ from .compare import Comparison, nonlinearity_residual_ppm
 from .discrepancy import LookAlike
 from .formula import Formula
 from .guards import MAX_TYPICAL_MULTIPLE, Rejection
-from .locate import Location
+from .location import Location
 from .report import discrepancy_text, markdown_text, nonlinearity_not_determined, write_report
 from .score import CandidateScore
 
