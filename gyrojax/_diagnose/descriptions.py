@@ -172,7 +172,7 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
             if fine is not None:
                 out.extend(_scored(space, sweep, name, (("offset", fine), ("gain", fine * pred[..., None])),
                                    {"within_device": dev / lot}, pooled=True))
-            if fine is not None and name == "input" and mask.shape[1] >= 2:
+            if fine is not None and name == "input" and np.any(mask.any(axis=2).sum(axis=1) >= 2):
                 # a curve along the input that differs from run to run, the same in every device (a run with
                 # another setup: a sagging supply, another fixture)
                 out.extend(_scored(space, sweep, name, in_each_run(hats, pred, mask.shape),
