@@ -188,6 +188,29 @@ def _t(lot):
     return np.nan_to_num(lot.columns["time_s"])
 
 
+def _sf_rate(lot):
+    """The device's rate scale factor (LSB per deg/s), on every row: a deg/s of bias in output units."""
+    return lot.fs_rate / OMEGA_FS_DPS
+
+
+def _n_dev(lot):
+    return int(lot.dev.max()) + 1
+
+
+def _blocks(lot, *sweeps):
+    """Row indices of each (device, run, sweep) block of `sweeps`, in time order (each block is a power-on)."""
+    c = lot.columns
+    run = np.asarray(c["run"])
+    sweep = np.asarray(c["sweep"])
+    t = _t(lot)
+    for sw in sweeps:
+        for d in np.unique(lot.dev):
+            for r in np.unique(run):
+                i = np.flatnonzero((lot.dev == d) & (run == r) & (sweep == sw))
+                if i.size:
+                    yield i[np.argsort(t[i], kind="stable")]
+
+
 def _device_spread(lot, seed_offset, rel):
     """A per-device multiplier 1 + rel N(0, 1), drawn from the lot's own devices (reproducible per lot)."""
     n = int(lot.dev.max()) + 1

@@ -23,30 +23,7 @@ of gyrojax's physics is imported. Importing this module adds the set to `_discov
 
 import _discovery_lot
 import numpy as np
-from _discovery_lot import OMEGA_FS_DPS, RV, _dT, _h, _mask, _s, _t, _x
-
-
-def _sf_rate(lot):
-    """The device's rate scale factor (LSB per deg/s), on every row: a deg/s of bias in output units."""
-    return lot.fs_rate / OMEGA_FS_DPS
-
-
-def _n_dev(lot):
-    return int(lot.dev.max()) + 1
-
-
-def _blocks(lot, *sweeps):
-    """Row indices of each (device, run, sweep) block of `sweeps`, in time order (each block is a power-on)."""
-    c = lot.columns
-    run = np.asarray(c["run"])
-    sweep = np.asarray(c["sweep"])
-    t = _t(lot)
-    for sw in sweeps:
-        for d in np.unique(lot.dev):
-            for r in np.unique(run):
-                i = np.flatnonzero((lot.dev == d) & (run == r) & (sweep == sw))
-                if i.size:
-                    yield i[np.argsort(t[i], kind="stable")]
+from _discovery_lot import OMEGA_FS_DPS, RV, _blocks, _dT, _h, _mask, _s, _sf_rate, _t, _x
 
 
 VCF_FS_V = 2.0  # the largest virtual-Coriolis amplitude of the sweep

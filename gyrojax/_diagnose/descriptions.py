@@ -38,9 +38,8 @@ POOLED_KNOTS = 12
 WITHIN_RUN_SHARE = 1e-3
 # Within a device less than this share of the lot's spread: the coordinate mostly tells devices apart.
 WITHIN_DEVICE_SHARE = 0.1
-# A size whose standard error is above this share of its value is not determined by the data.
-EACH_RUN = ("offset in each run", "gain in each run")  # a curve along a coordinate, one per run
 PERIODS = 24  # periods scanned along the input, log-spaced from 2.5 point spacings to half the span
+EACH_RUN = ("offset in each run", "gain in each run")  # a curve along a coordinate, one per run
 
 
 @dataclasses.dataclass(frozen=True)

@@ -40,6 +40,7 @@ from .location import Location, shape_words
 from .space import ResidualSpace
 
 
+# A size whose standard error is above this share of its value is not determined by the data.
 SIZE_REL_STDERR = 0.5
 # Descriptions of what is constant within each run: of the runs, and of the devices (an offset of a sweep read
 # without a turn-on bias, the same in all of a device's runs).
