@@ -356,7 +356,7 @@ def _same_order(inputs, order, mask):
     return True
 
 
-def compare(fit: Fit, *, alpha: float = 0.01) -> Comparison:
+def compare(fit: Fit, *, alpha: float = 0.01, residuals: dict | None = None) -> Comparison:
     """Compare a fitted model with its data: where the misfit sits (sweep, device, run, input band) and
     whether the residuals have structure along the input (runs, trend, bow, cubic, odd and even parts).
 
@@ -364,11 +364,13 @@ def compare(fit: Fit, *, alpha: float = 0.01) -> Comparison:
 
     - `fit`: a `gyrojax.Fit` (from `identify`, or a `Diagnosis`'s `baseline` / `final`).
     - `alpha`: family-wise false-alarm rate of the structure tests (Bonferroni over all of them).
+    - `residuals`: sweep -> (device, run, point) standardised residuals read in place of the fit's (the fit's with
+      a description of a misfit taken out).
 
     **Returns:** a `Comparison` (`summary()`, `to_json()`, `flagged`).
     """
     data = fit.data
-    residuals = {s: np.asarray(fit.residuals[s]) for s in data.sweeps}
+    residuals = {s: np.asarray((fit.residuals if residuals is None else residuals)[s]) for s in data.sweeps}
     inputs = {s: np.asarray(data.blocks[s].inputs) for s in data.sweeps}
     masks = {s: np.asarray(data.blocks[s].mask) for s in data.sweeps}
     return compare_residuals(residuals, inputs, masks, devices=data.devices,

@@ -29,6 +29,7 @@ from .guards import (
     MAX_TYPICAL_MULTIPLE,
     Rejection,
     contradictions,
+    misfit_beside,
     new_structure,
     one_device_guard,
     probe_guard,
@@ -231,7 +232,7 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
         significant = [c for c in scores if c.testable and c.p_value < threshold]
         if not significant:
             break
-        best = significant[0]
+        best = _first_to_try(s.fit, significant, s.located, alpha)
         if best.implied_multiple > max_typical_multiple:
             s.rejected.append(_implausible(best, max_typical_multiple))
             remaining.remove(best.effect)
@@ -295,6 +296,26 @@ def _select(s: _Selection, remaining: list, fit_with, comparison, data, probes, 
                             q_value=q if q is not None else math.nan))
         s.discrepancy, s.designs = score_probes(s.fit, probes, alpha=alpha)
         s.located = s.located_at(s.fit, alpha)
+
+
+def _first_to_try(fit, significant, localisation, alpha):
+    """The candidate a step tries first: the most significant, unless another significant one removes significant
+    chi2 (at `alpha`) beyond it while it removes none beyond that one, both read beyond the description of the
+    misfit located beside them (`misfit_beside`, as it is). The score ranks a flexible candidate (a DAC INL's
+    S-curve, 12 parameters per device) first where it takes part of a second misfit (a bias quadratic in time)
+    beside the one a less flexible candidate (a compression) describes as well."""
+    best = significant[0]
+    base, res, jac = base_columns(fit), np.asarray(fit.residual_vector), np.asarray(fit.jacobian)
+    jb = jac[:, :, effect_columns(fit, best.effect)]
+    for c in significant[1:]:
+        jc = jac[:, :, effect_columns(fit, c.effect)]
+        held = misfit_beside(fit, np.concatenate([jb, jc], axis=-1), localisation, alpha, projected=False).columns
+        beside = np.concatenate([base, held], axis=-1)
+        c_beyond = score_columns(np.concatenate([beside, jb], axis=-1), jc, res, rank_tol=TYPICAL_RANK_TOL)
+        best_beyond = score_columns(np.concatenate([beside, jc], axis=-1), jb, res, rank_tol=TYPICAL_RANK_TOL)
+        if c_beyond.df and c_beyond.p_value < alpha and best_beyond.p_value >= alpha:
+            return c
+    return best
 
 
 def _implausible(best, max_typical_multiple) -> Rejection:
@@ -387,13 +408,15 @@ def _refit_rejection(s: "_Selection", new, best, df, df_total, p_lr, delta_bic, 
             f"the model before it already describes the data at the noise level, and the information "
             f"criterion does not prefer it (delta BIC {delta_bic:+.3g}; LR p = {p_lr:.2g})"),
             kind="not preferred at the noise level"), q, rival_alike
-    worse = contradictions(fit, new, alpha, df_total)
+    # the misfit beside the candidate, already there before its refit: what the refit moves of it is not evidence
+    held = misfit_beside(fit, np.asarray(fit.jacobian)[:, :, effect_columns(fit, best.effect)], located, alpha)
+    worse = contradictions(fit, new, alpha, df_total, held=held)
     if worse:
         sweeps = tuple(s for s, _, _, _ in worse)
         return Rejection(effect=best.effect, reason="contradicted by " + "; ".join(
             f"{s} (its misfit rose from chi2 {a:.4g} to {b:.4g} over {n} points)" for s, a, b, n in worse),
             contradicted_by=sweeps, kind="contradicted by " + ", ".join(sweeps)), q, rival_alike
-    created = new_structure(comparison(fit), comparison(new), alpha)
+    created = new_structure(comparison(fit), comparison(new), alpha, held=(fit, new, held))
     if created:
         sweeps = tuple(dict.fromkeys(f.sweep for f in created))
         return Rejection(effect=best.effect, reason="contradicted by " + "; ".join(

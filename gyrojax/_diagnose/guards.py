@@ -7,7 +7,8 @@ import numpy as np
 from .._identify import Fit
 from .._numerics.stats import chi2_isf, chi2_sf
 from .columns import base_columns, effect_columns, excess_chi2
-from .probes import score_columns, span_basis
+from .compare import compare
+from .probes import project_out, score_columns, span_basis
 from .score import TYPICAL_RANK_TOL, CandidateScore
 from .space import EXPLAINED_SHARE_LEFT, ResidualSpace
 
@@ -74,7 +75,21 @@ def other_misfit(fit, columns, localisation, alpha, taken_by=None) -> np.ndarray
     fit's residual layout) do not take: still significant beyond them, keeping more than `EXPLAINED_SHARE_LEFT` of
     their chi2 (as the encompassing test reads what a refit leaves). `taken_by`, where given, decides what is
     taken instead of `columns` (the candidate with a variant of its own: its coefficient drifting)."""
-    empty = np.zeros(np.shape(columns)[:2] + (0,))
+    return misfit_beside(fit, columns, localisation, alpha, taken_by).columns
+
+
+class Beside(eqx.Module):
+    """A second misfit beside a candidate: its description's `columns` (device, rows, k) and the `sweeps` it was
+    located on."""
+
+    columns: np.ndarray
+    sweeps: frozenset
+
+
+def misfit_beside(fit, columns, localisation, alpha, taken_by=None, *, projected=True) -> Beside:
+    """`other_misfit`'s columns with the sweeps of the locations they describe; with `projected` False, the
+    descriptions as they are, the candidate's own directions not removed."""
+    empty = Beside(np.zeros(np.shape(columns)[:2] + (0,)), frozenset())
     if localisation is None or not localisation.locations:
         return empty
     space = ResidualSpace(fit)
@@ -84,39 +99,82 @@ def other_misfit(fit, columns, localisation, alpha, taken_by=None) -> np.ndarray
     for loc in localisation.locations:
         now = joined.score(loc.columns)
         if now.p_value < cut and now.statistic > EXPLAINED_SHARE_LEFT * space.score(loc.columns).statistic:
-            keep.append(loc.columns)
+            keep.append(loc)
     if not keep:
         return empty
+    if not projected:
+        return Beside(np.concatenate([loc.columns for loc in keep], axis=-1),
+                      frozenset(s for loc in keep for s in loc.located_on))
     # without the candidate's own directions: a flexible description that also spans the candidate (an offset
-    # along the input growing with temperature, beside a bias in temperature) must not absorb it
-    out = np.concatenate(keep, axis=-1)
+    # along the input growing with temperature, beside a bias in temperature) must not absorb it. Its directions
+    # beyond the fit's own span are what the guards read, so those are removed (the raw columns would leave the
+    # description and the fit's span together spanning the candidate: a gain per run beside a reference drift)
+    out = np.concatenate([loc.columns for loc in keep], axis=-1)
     cand = np.asarray(columns, float)
+    base = base_columns(fit)
     for d in range(out.shape[0]):
-        u = span_basis(cand[d])
+        u = span_basis(project_out(cand[d], base[d]))
         out[d] = out[d] - u @ (u.T @ out[d])
-    return out
+    return Beside(out, frozenset(s for loc in keep for s in loc.located_on))
 
 
 def _sweep_chi2(fit: Fit) -> dict:
     return {s: float(np.sum(np.asarray(fit.residuals[s]) ** 2)) for s in fit.data.sweeps}
 
 
-def contradictions(before: Fit, after: Fit, alpha: float, df: int):
+def contradictions(before: Fit, after: Fit, alpha: float, df: int, held: Beside | None = None):
     """Sweeps whose chi2 the refit raised by more than the (1 - alpha) quantile of chi2(df), df the step's
-    new parameters over the lot: a real effect, fitted, does not make a sweep's misfit significantly worse."""
+    new parameters over the lot: a real effect, fitted, does not make a sweep's misfit significantly worse.
+
+    `held`: a second misfit already there before the refit (`misfit_beside`), described flexibly in both fits. A
+    sweep it was located on counts as made worse only where its chi2 also rises beyond that description: a true
+    effect's refit moves the shared parameters that had bent towards the second misfit, which redistributes that
+    misfit's chi2 between sweeps without contradicting the effect. Another sweep's rise counts as it stands."""
     limit = chi2_isf(alpha, max(df, 1))
     a, b = _sweep_chi2(before), _sweep_chi2(after)
     points = {s: int(np.asarray(before.data.blocks[s].mask).sum()) for s in a}
-    return tuple((s, a[s], b[s], points[s]) for s in a if b[s] - a[s] > limit)
+    worse = [s for s in a if b[s] - a[s] > limit]
+    if worse and held is not None and held.sweeps:
+        a_held, b_held = _sweep_chi2_beyond(before, held.columns), _sweep_chi2_beyond(after, held.columns)
+        worse = [s for s in worse if s not in held.sweeps or b_held[s] - a_held[s] > limit]
+    return tuple((s, a[s], b[s], points[s]) for s in worse)
 
 
-def new_structure(before, after, alpha: float) -> tuple:
+def _sweep_chi2_beyond(fit: Fit, held: np.ndarray) -> dict:
+    """Each sweep's chi2 once the columns `held` (device, rows, k) are fitted beyond the fit's own span."""
+    return {s: float(np.sum(r**2)) for s, r in _residuals_beyond(fit, held).items()}
+
+
+def new_structure(before, after, alpha: float, held=None) -> tuple:
     """The structure findings (`gyrojax.compare`'s) flagged in the refit's residuals that the residuals before it
     did not show at all (p >= `alpha`, not even nominally significant): a real effect, fitted, whitens the
     residuals; one fitted where it is not takes its shape out of some sweeps and leaves it, reversed, on a sweep
-    that does not have it (an INL fitted to a rate-only saturation writes an odd cubic on the DAC bench)."""
+    that does not have it (an INL fitted to a rate-only saturation writes an odd cubic on the DAC bench).
+
+    `before`, `after`: the two fits' comparisons; `held`, where given, (before fit, after fit, `Beside`): a
+    second misfit already there before the refit (`misfit_beside`). A finding on a sweep it was located on counts
+    as created only where it also stands in both fits' residuals beyond that misfit's description: a true effect,
+    fitted, unmasks a second misfit that the fit's own parameters had bent towards (a bias quadratic in time shows
+    as an even bow of an ordered sweep once a reference drift is fitted), which is no structure the effect made."""
     p_before = {(f.sweep, f.test, f.coordinate): f.p_value for f in before.findings}
-    return tuple(f for f in after.flagged if p_before.get((f.sweep, f.test, f.coordinate), 0.0) >= alpha)
+    created = tuple(f for f in after.flagged if p_before.get((f.sweep, f.test, f.coordinate), 0.0) >= alpha)
+    if not created or held is None or not held[2].sweeps:
+        return created
+    fit_b, fit_a, beside = held
+    beyond_b, beyond_a = (compare(f, alpha=alpha, residuals=_residuals_beyond(f, beside.columns))
+                          for f in (fit_b, fit_a))
+    p_b = {(f.sweep, f.test, f.coordinate): f.p_value for f in beyond_b.findings}
+    still = {(f.sweep, f.test, f.coordinate) for f in beyond_a.flagged}
+    return tuple(f for f in created if f.sweep not in beside.sweeps
+                 or ((key := (f.sweep, f.test, f.coordinate)) in still and p_b.get(key, 0.0) >= alpha))
+
+
+def _residuals_beyond(fit: Fit, held: np.ndarray) -> dict:
+    """Each sweep's standardised residuals (device, run, point) once the columns `held` are fitted beyond the fit's
+    own span."""
+    space = ResidualSpace(fit)
+    left = space.residuals - space.score(held).fingerprint
+    return {s: left[:, i:j].reshape(np.shape(fit.residuals[s])) for s, (i, j) in space.blocks.items()}
 
 
 def verdict_of(comparison, steps) -> str:

@@ -93,7 +93,7 @@ def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float
                 oc[d] -= np.outer(f_effect[d], f_effect[d] @ oc[d]) / norm
         chi2_before -= space_b.score(oc).statistic
         chi2_after -= space_a.score(oc).statistic
-        space_b = space_b.with_columns(oc)
+        space_b, space_a = space_b.with_columns(oc), space_a.with_columns(oc)
     # the rival is the best closed form of another shape: terms that alone reproduce the effect's change are
     # its own shape in the dictionary's words, not a rival
     formula = propose(before, loc, step_at=localisation.step_at, periods=localisation.periods, alpha=alpha,
@@ -105,6 +105,15 @@ def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float
     f_formula = sc.fingerprint
     inside = _inside(space_b, cols, f_effect)
     chi2_effect = chi2_after + 2.0 * df_effect
+    rest = _closed_rest(after, space_a, [o for o in left if o.coordinate == loc.coordinate], located_after, alpha)
+    if rest is not None:
+        # what the refit leaves along the misfit's own coordinate has a closed form of its own (a bias quadratic in
+        # time beside a tempco, where the input and the time move together): the effect with that form, both paying
+        # as the rival does, is one complete explanation, the rival another
+        rest_sc, rest_formula = rest
+        chi2_effect += (-rest_sc.statistic + 2.0 * rest_sc.df
+                        + 2.0 * math.log(max(rest_formula.dictionary_size, 1)) * len(rest_formula.terms))
+        f_effect = f_effect + rest_sc.fingerprint
     # the formula's terms were chosen among the dictionary's: each pays 2 ln(size) for that choice (the risk
     # inflation of a best-of-N selection), beside 2 per coefficient
     chi2_formula = (chi2_before - sc.statistic + 2.0 * sc.df
@@ -113,6 +122,20 @@ def rival(before: Fit, after: Fit, df_effect: int, localisation, *, alpha: float
     distance = float(np.sqrt(np.sum((f_effect - f_formula) ** 2)))
     z = delta / (2.0 * distance) if distance > 0 else (math.inf if delta > 0 else -math.inf if delta < 0 else 0.0)
     return Rivalry(formula, float(z), float(delta), distance, float(inside))
+
+
+def _closed_rest(after: Fit, space_a: ResidualSpace, same, located_after, alpha):
+    """(its score at `after`, the formula) of the strongest misfit `same` the refit leaves along the effect's own
+    coordinate, where the dictionary describes it completely; None otherwise (a shape no term has: what is left
+    may be the effect's own misfit, which the rival may explain better)."""
+    if not same or located_after is None:
+        return None
+    top = max(same, key=lambda o: space_a.score(o.columns, o.pooled).statistic)
+    f = propose(after, top, step_at=located_after.step_at, periods=located_after.periods, alpha=alpha,
+                space=space_a)
+    if f is None or not f.complete:
+        return None
+    return space_a.score(formula_columns(space_a, f)), f
 
 
 def _inside(space, cols, f):
