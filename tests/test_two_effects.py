@@ -44,8 +44,8 @@ def test_the_pair_lot_adds_both_effects_to_the_same_noise():
 # Each pair's library effect was refused by one guard that read the second misfit as evidence against it (the
 # guard named beside each lot): the rival formula, given a bias quadratic in time along the same coordinate as
 # the tempco (input and time move together) where the tempco was not; a sweep's chi2 rising, the shared gains
-# having bent towards a sign-dependent gain; the repeatability test, a gain per run read as the reference drift
-# changing between power-ons; a new structure, the even bow of a bias quadratic in time that the drift unmasks.
+# having bent towards a sign-dependent gain; a new structure, the even bow of a bias quadratic in time that the
+# drift unmasks.
 # The last lot's compression was ranked below a DAC INL, whose S-curve takes part of the bias quadratic in time.
 SECOND_MISFIT_LOTS = {
     "rival": ("zro_tempco", "time_quadratic", "a", 0),
@@ -65,7 +65,7 @@ def test_a_library_effect_is_not_refused_for_what_a_second_misfit_does(effect, o
 
 
 @pytest.mark.slow
-def test_a_sweep_the_second_misfit_is_not_on_still_contradicts():
+def test_a_wrong_effect_beside_a_second_misfit_on_another_sweep_is_still_refused():
     # a thermal drift (rate table) beside a sign-dependent rate gain, design c: the reference drift would take the
     # rate table's misfit but raises the VCF's chi2 by ~108, and the second misfit, on the rate table alone, does
     # not account for that
