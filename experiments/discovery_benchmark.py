@@ -419,8 +419,9 @@ def score(outcome: Outcome, info: dict) -> dict:
     one) and found_or_indistinct (found, or a confirmation declared ambiguous with the hidden effect that no method
     could tell from it on this lot); localised_strict (the sweep set exactly those >= LOCATED_SHARE)."""
     hidden = info.get("hidden")
-    cls = effect_class(hidden)
-    lib = EFFECTS[hidden].library if hidden else None
+    # a lot from another generator says its class and library effect itself
+    cls = info["class"] if "class" in info else effect_class(hidden)
+    lib = info["library"] if "library" in info else (EFFECTS[hidden].library if hidden else None)
     found = (lib in outcome.confirmed) if cls == "library" else None
     truth = {lib} if lib else set()
     truth |= set(info.get("formula") or ())  # the closed forms that express the hidden effect

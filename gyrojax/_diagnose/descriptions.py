@@ -193,8 +193,13 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
             if d is not None:
                 out.append(d)
         for name in ("input", "time_s"):
-            if name in coords:
-                d = _periodic_scan(space, sweep, name, np.where(mask, np.asarray(coords[name], float), 0.0), mask)
+            if name not in coords:
+                continue
+            x = np.where(mask, np.asarray(coords[name], float), 0.0)
+            # along time also as a gain: a reference or a pick-off cycling with the lab's air conditioning
+            # multiplies the output; along the input a gain is the output's own shape, which the offset reads
+            for gain in (None, pred) if name == "time_s" else (None,):
+                d = _periodic_scan(space, sweep, name, x, mask, gain)
                 if d is not None:
                     out.append(d)
         out.extend(_point_scans(space, sweep, block, mask))
@@ -342,9 +347,10 @@ def at_change_points(space, sweep, like: Description) -> Description | None:
     return None if found is None else Description(sweep, "time_s", "step", *found)
 
 
-def _periodic_scan(space, sweep, name, x, mask):
+def _periodic_scan(space, sweep, name, x, mask, gain=None):
     """The strongest periodic error along the coordinate `name` (values `x`): sin and cos of one period, per
-    device; the look-elsewhere correction is the number of periods scanned."""
+    device, of the output (`gain` None) or of its gain (times the prediction `gain`); the look-elsewhere
+    correction is the number of periods scanned."""
     real = np.unique(x[mask])
     if real.size < 8:
         return None
@@ -360,6 +366,8 @@ def _periodic_scan(space, sweep, name, x, mask):
     for period in periods:
         w = 2.0 * np.pi * x / period
         g = np.stack([np.sin(w), np.cos(w)], axis=-1) * mask[..., None]
+        if gain is not None:
+            g = g * gain[..., None]
         cols = space.columns({sweep: g})
         sc = space.score(cols)
         if sc.df and (best is None
@@ -368,7 +376,8 @@ def _periodic_scan(space, sweep, name, x, mask):
     if best is None:
         return None
     sc, cols, period = best
-    return Description(sweep, name, "periodic", cols, sc, min(1.0, PERIODS * sc.p_value), {"period": period})
+    return Description(sweep, name, "periodic", cols, sc, min(1.0, PERIODS * sc.p_value),
+                       {"period": period, "gain": gain is not None})
 
 
 POINT_CANDIDATES = 3  # the largest residuals scored exactly as single points (their projections differ little)

@@ -224,10 +224,11 @@ def _input_terms(g: _Group, x):
 
 
 def _periodic_terms(g: _Group, c, x, period):
-    """A periodic error along `c` (the input, the time) at the period its scan found: sin and cos."""
+    """A periodic error along `c` (the input, the time) at the period its scan found: sin and cos; along the time
+    as a gain too (a reference cycling with the lab's air conditioning)."""
     for fn, nm in ((np.sin, "sin"), (np.cos, "cos")):
         g.add(f"periodic({c})", f"{nm}(2 * pi * {_CODE[c]} / {period:.6g})",
-              lambda s, fn=fn: fn(2 * np.pi * x[s] / period), c, gain_too=False, unit_power=0)
+              lambda s, fn=fn: fn(2 * np.pi * x[s] / period), c, gain_too=c == "time_s", unit_power=0)
 
 
 def _time_terms(g: _Group, x, step_at):

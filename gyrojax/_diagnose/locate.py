@@ -294,13 +294,17 @@ def _rows_of(space, sweep):
 def _where(fit, space, best, members, sc) -> dict:
     out = {"coordinate": best.coordinate, "sweeps": [m.sweep for m in members]}
     if best.family == "step":
-        first = {}  # (device, run) -> the time of its step
+        first = {}  # (device, run) -> the time of its step (and of a pulse's end)
         for m in members:
-            for r, a in zip(m.where["runs"], m.where["at_each"]):
-                first.setdefault(tuple(r), a)
+            until = m.where.get("until_each") or [None] * len(m.where["at_each"])
+            for r, a, e in zip(m.where["runs"], m.where["at_each"], until):
+                first.setdefault(tuple(r), (a, e))
         out.update(at=best.where["at"], runs=[list(r) for r in first])
-        if len(set(first.values())) > 1:  # steps at their own times
-            out["at_each"] = list(first.values())
+        if len({a for a, _ in first.values()}) > 1:  # steps at their own times
+            out["at_each"] = [a for a, _ in first.values()]
+        if any(e is not None for _, e in first.values()):  # pulses: back where it was from these times on
+            out["at_each"] = [a for a, _ in first.values()]
+            out["until_each"] = [e for _, e in first.values()]
         return out
     if best.family == "periodic":
         out["period"] = best.where["period"]

@@ -91,9 +91,11 @@ def location_text(loc: dict) -> str:
     if "interval" in loc:
         lo, hi = loc["interval"]
         parts.append(f"over {loc['coordinate']} {lo:.4g} to {hi:.4g}")
-    if "at_each" in loc:  # steps at their own times, one per run
-        parts.append(f"at {loc['coordinate']} " + ", ".join(f"{a:.4g} in {clean(d)} run {r}" for (d, r), a in
-                                                            list(zip(loc["runs"], loc["at_each"]))[:4])
+    if "at_each" in loc:  # steps (or pulses) at their own times, one per run
+        until = loc.get("until_each") or [None] * len(loc["at_each"])
+        parts.append(f"at {loc['coordinate']} " + ", ".join(
+            (f"{a:.4g}" if e is None else f"{a:.4g} to {e:.4g}") + f" in {clean(d)} run {r}"
+            for (d, r), a, e in list(zip(loc["runs"], loc["at_each"], until))[:4])
                      + (" ..." if len(loc["runs"]) > 4 else ""))
         return " ".join(parts)
     if "at" in loc:
@@ -111,6 +113,8 @@ def location_text(loc: dict) -> str:
 def shape_words(d: Description) -> str:
     """How the shape of a location's description reads in the report."""
     if d.family == "step":
+        if d.where.get("until_each"):
+            return "a pulse of the output partway through a run (it switches on, then back off)"
         return "a step of the output partway through a run"
     if d.family in thresholds.FAMILIES:
         what = "the output" if d.family == "offset step" else "the gain"
@@ -130,7 +134,8 @@ def shape_words(d: Description) -> str:
             ", the same in every device" if d.pooled else "")
     if d.family == "periodic":
         unit = " s" if d.coordinate == "time_s" else ""
-        return f"a periodic error along {'the input' if d.coordinate == 'input' else d.coordinate} " \
+        what = "a periodic gain error" if d.where.get("gain") else "a periodic error"
+        return f"{what} along {'the input' if d.coordinate == 'input' else d.coordinate} " \
                f"(period {d.where['period']:.3g}{unit})"
     if d.coordinate == "device":
         return "an offset of a device's readings, the same in all its runs (a property of the device)"
