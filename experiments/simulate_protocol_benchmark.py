@@ -1,6 +1,7 @@
 """The discovery benchmark on the new user's protocol: lots made by `gyrojax simulate`, hidden effects added by hand.
 
-Run: python experiments/simulate_protocol_benchmark.py [--protocols 0-4] [--effects all] [--chi2 300] [--out DIR]
+Run: python experiments/simulate_protocol_benchmark.py [--protocols 0-4] [--effects all] [--chi2 300]
+     [--without-sigma] [--out DIR]
 
 The other discovery sets (`discovery_benchmark.py`) share one generator and its chamber cycles. A lab's first lot
 is more likely what `gyrojax simulate` writes: a die warming after each power-on, the rates listed in one
@@ -249,6 +250,8 @@ def main(argv=None):
     ap.add_argument("--protocols", default="0-4")
     ap.add_argument("--effects", default="all", help="'all', 'hand', 'library', or names")
     ap.add_argument("--chi2", type=float, default=300.0, help="the hand-written effects' chi2 beyond the baseline")
+    ap.add_argument("--without-sigma", action="store_true",
+                    help="drop the output_sigma column (the diagnosis then estimates the noise from the residuals)")
     ap.add_argument("--out", default="simulate-protocol-out")
     args = ap.parse_args(argv)
     protocols = _parse_seeds(args.protocols)
@@ -268,10 +271,16 @@ def main(argv=None):
     os.makedirs(args.out, exist_ok=True)
     method = GyrojaxMethod()
     records = []
+    import gyrojax as gj
+
     meta = {"git": _git_describe(), "date": datetime.date.today().isoformat(), "chi2": args.chi2,
+            "without_sigma": args.without_sigma,
             "protocols": [PROTOCOLS[i] for i in protocols]}
 
     def record(index, info, table):
+        if args.without_sigma:  # the size was set with the stated sigmas; the file then omits them
+            table = gj.Table({k: v for k, v in table.columns.items() if k != "output_sigma"},
+                             source=table.source + ", without output_sigma")
         out = method.run(table)
         # this generator does not compute the noise-free separations of the library effects (`look_alike_chi2`):
         # the scores read from them are left out, not counted as separable
