@@ -285,7 +285,8 @@ def main(argv=None):
         # this generator does not compute the noise-free separations of the library effects (`look_alike_chi2`):
         # the scores read from them are left out, not counted as separable
         s = {**score(out, info), "wrong_separable": None, "found_or_indistinct": None}
-        records.append({"method": method.name, "class": info["class"], "snr": "mid", "protocol": index,
+        snr = "mid" if args.chi2 == 300.0 else f"chi2 {args.chi2:g}"  # the discovery benchmark's middle SNR
+        records.append({"method": method.name, "class": info["class"], "snr": snr, "protocol": index,
                         "hidden": info["hidden"], "scores": s,
                         "outcome": {**dataclasses.asdict(out), "located": sorted(out.located),
                                     "ambiguous": {k: sorted(v) for k, v in out.ambiguous.items()}},
