@@ -1,7 +1,7 @@
 """Change points along time: a step of the output at one dwell of one run (in every device, each its own height,
 or in one device), or steps in several (device, run) pairs each at its own dwell (bias jumps at random times,
-popcorn charging events). Array in, columns and score out; `gyrojax._diagnose.descriptions` makes them
-descriptions."""
+popcorn charging events), or pulses there (the output switching on and back off: a two-level trap). Array in,
+columns and score out; `gyrojax._diagnose.descriptions` makes them descriptions."""
 
 import math
 
@@ -156,11 +156,9 @@ def _per_pair(stats, pulses=None):
             if (dv, rn) not in best or per_dev[dv] > best[(dv, rn)][0]:
                 best[(dv, rn)] = (float(per_dev[dv]), (j, None))
     for (dv, rn), (stat, where, n) in (pulses or {}).items():
+        tried[rn] = max(tried[rn], n)  # the pulses' starts and ends are tried besides the steps
         if stat > best.get((dv, rn), (-1.0,))[0]:
             best[(dv, rn)] = (stat, where)
-    if pulses:
-        for (_, rn), (_, _, n) in pulses.items():
-            tried[rn] = max(tried[rn], n)
     return best, tried
 
 
