@@ -532,6 +532,12 @@ def _write_atomic(path, text):
     os.replace(tmp, path)
 
 
+def write_results(directory, stem, payload: dict, table: str):
+    """DIR/stem.json (`payload`) and DIR/stem.md (`table`), each rewritten atomically (after every lot)."""
+    _write_atomic(os.path.join(directory, stem + ".json"), json.dumps(payload, indent=1, default=str))
+    _write_atomic(os.path.join(directory, stem + ".md"), table)
+
+
 def _parse_seeds(text):
     out = []
     for part in text.split(","):
@@ -637,10 +643,8 @@ def main(argv=None):
                   f"{out.seconds:.1f} s; {rec['scores']} | ETA {el / done * (n_total - done) / 60:.1f} min",
                   flush=True)
             rows = score_rows(records)
-            _write_atomic(os.path.join(a.out, "discovery.json"),
-                          json.dumps({"settings": settings, "rows": rows, "records": records}, indent=1,
-                                     default=str))
-            _write_atomic(os.path.join(a.out, "discovery.md"), "# Discovery benchmark\n\n" + markdown(rows))
+            write_results(a.out, "discovery", {"settings": settings, "rows": rows, "records": records},
+                          "# Discovery benchmark\n\n" + markdown(rows))
     print(markdown(score_rows(records)))
 
 

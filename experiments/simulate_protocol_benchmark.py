@@ -22,7 +22,6 @@ named as confounded, formula (one of the declared canonical terms), null explain
 import argparse
 import dataclasses
 import datetime
-import json
 import math
 import os
 import sys
@@ -38,10 +37,10 @@ from discovery_benchmark import (  # noqa: E402
     GyrojaxMethod,
     _git_describe,
     _parse_seeds,
-    _write_atomic,
     markdown,
     score,
     score_rows,
+    write_results,
 )
 
 
@@ -295,9 +294,8 @@ def main(argv=None):
               f"{out.coordinate} on {sorted(out.located)} formula {out.formula} ({out.seconds:.1f} s) "
               f"wrong={s['wrong']} localised={s['localised']}", flush=True)
         rows = score_rows(records)
-        _write_atomic(os.path.join(args.out, "simulate_protocol.json"),
-                      json.dumps({"meta": meta, "records": records, "rows": rows}, indent=1, default=str))
-        _write_atomic(os.path.join(args.out, "simulate_protocol.md"), markdown(rows))
+        write_results(args.out, "simulate_protocol", {"meta": meta, "records": records, "rows": rows},
+                      markdown(rows))
 
     for index in protocols:
         t0 = time.perf_counter()

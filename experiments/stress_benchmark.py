@@ -27,7 +27,6 @@ DIR/stress.json and DIR/stress.md are rewritten atomically after every lot.
 import argparse
 import dataclasses
 import datetime
-import json
 import math
 import os
 import sys
@@ -45,11 +44,11 @@ from discovery_benchmark import (  # noqa: E402
     _git_describe,
     _list,
     _parse_seeds,
-    _write_atomic,
     effect_class,
     effect_names,
     score,
     score_rows,
+    write_results,
 )
 
 
@@ -183,9 +182,7 @@ def main(argv=None):
               f"confirmed {out.confirmed or '-'}, located {sorted(out.located) or '-'} on {out.coordinate}, "
               f"chi2_red {out.chi2_red:.3f}, {out.seconds:.1f} s; wrong={rec['scores']['wrong']}", flush=True)
         vr = _rows_by_variant(records)
-        _write_atomic(os.path.join(a.out, "stress.json"),
-                      json.dumps({"settings": settings, "rows": vr, "records": records}, indent=1, default=str))
-        _write_atomic(os.path.join(a.out, "stress.md"), markdown(vr))
+        write_results(a.out, "stress", {"settings": settings, "rows": vr, "records": records}, markdown(vr))
     print(markdown(_rows_by_variant(records)))
 
 

@@ -14,7 +14,6 @@ misfit left, seconds per lot. DIR/two_effects.json and DIR/two_effects.md are re
 
 import argparse
 import datetime
-import json
 import os
 import sys
 import time
@@ -25,7 +24,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from _discovery_lot import HIDDEN, discovery_lot  # noqa: E402
-from discovery_benchmark import _git_describe, _parse_seeds, _write_atomic  # noqa: E402
+from discovery_benchmark import _git_describe, _parse_seeds, write_results  # noqa: E402
 
 
 LIBRARY = ("zro_tempco", "feedback_compression", "vref_drift", "thermal_drift", "dac_inl_s_curve")
@@ -118,9 +117,8 @@ def main(argv=None):
         print(f"[{i + 1}/{len(lots)}] design {design} seed {seed} {a} + {b}: selected {list(d.selected)} "
               f"{d.verdict}; {sc}; {seconds:.1f} s", flush=True)
         table_rows = rows(records)
-        _write_atomic(os.path.join(args.out, "two_effects.json"),
-                      json.dumps({"settings": settings, "rows": table_rows, "records": records}, indent=1))
-        _write_atomic(os.path.join(args.out, "two_effects.md"), markdown(table_rows))
+        write_results(args.out, "two_effects", {"settings": settings, "rows": table_rows, "records": records},
+                      markdown(table_rows))
     print(markdown(rows(records)))
 
 
