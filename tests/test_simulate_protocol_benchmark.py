@@ -53,3 +53,16 @@ def test_an_effect_with_no_chi2_beyond_the_baseline_is_refused_by_name(clean):
                     lambda c: np.where(np.asarray(c["sweep"]) == "rate_table", 1.0, 0.0), "a turn-on bias")
     with pytest.raises(ValueError, match="run_offset: leaves no chi2 beyond the baseline"):
         spb.hidden_lot(clean, flat, 300.0)
+
+
+@pytest.mark.slow
+def test_a_vcf_only_tempco_on_a_warming_die_is_proposed_as_the_linear_term(clean):
+    # the die moves 25.4 -> 27 C: a gain quadratic in the temperature removes chi2 ~5 more than the linear one,
+    # neither standing beyond the other; the formula says the simpler, and its size is the truth's
+    table, info = spb.hidden_lot(clean, spb.HAND_BY_NAME["vcf_gain_tempco_only"], 300.0)
+    d = gj.diagnose("paper-qmg", table, progress=False)
+    assert d.selected == () and d.verdict == "unexplained", d.summary()
+    top = d.discrepancy[0]
+    assert top.coordinate == "temperature_c" and top.located_on == ("vcf_static",)
+    assert [t.name for t in d.formula.terms] == ["lin(temperature_c)*model"]
+    assert abs(d.formula.coefficients[0] - info["size"]) < 3.0 * d.formula.stderr[0]

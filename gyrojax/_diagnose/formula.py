@@ -340,7 +340,7 @@ def propose(fit, location, *, step_at=None, periods=None, alpha: float = 0.01, m
         # terms the data cannot tell apart (within TIE_CHI2 or TIE_SHARE of the best: a gain along the temperature
         # and along the drive frequency it moves, or T x input where the output follows the input) go to the
         # coordinate named first, then to the term listed first (a gain before a product)
-        near = [(t, sc) for t, sc in scored if sc.statistic >= top - max(TIE_CHI2, TIE_SHARE * top)]
+        near = _ties(scored, top, current, cols, alpha)
         best = min(near, key=lambda x: (x[0].coordinate in between, _rank(x[0].coordinate)))
         chosen.append(best[0])
         current = current.with_columns(cols[id(best[0])])
@@ -363,6 +363,23 @@ def propose(fit, location, *, step_at=None, periods=None, alpha: float = 0.01, m
     return Formula(terms=tuple(chosen), coefficients=coef, stderr=err, statistic=joint.statistic, df=joint.df,
                    share=share, dictionary_size=size, left_statistic=left.statistic, left_df=left.df,
                    left_p_value=left.p_value, complete=left.p_value >= alpha, spread=spread)
+
+
+def _ties(scored, top, current, cols, alpha):
+    """The scored terms the data cannot tell from the best (statistic `top`), in the dictionary's order: those
+    within TIE_CHI2 or TIE_SHARE of it, and those of its coordinate and kind (offset or gain) neither of which adds
+    chi2 significant at `alpha` beyond the other, so that the lowest power goes first (over a die that moves
+    1.6 K, a gain linear and one quadratic in the temperature differ by chi2 5 and neither stands beyond the
+    other: the linear one is the simpler statement of the same data)."""
+    best = max(scored, key=lambda x: x[1].statistic)[0]
+
+    def interchangeable(t):
+        return (t.coordinate == best.coordinate and t.gain == best.gain
+                and current.with_columns(cols[id(t)]).score(cols[id(best)]).p_value >= alpha
+                and current.with_columns(cols[id(best)]).score(cols[id(t)]).p_value >= alpha)
+
+    return [(t, sc) for t, sc in scored
+            if sc.statistic >= top - max(TIE_CHI2, TIE_SHARE * top) or t is best or interchangeable(t)]
 
 
 def lot_mean(scored):
