@@ -312,13 +312,14 @@ def _location_dictionary(fit, location, space, step_at, periods):
 
 
 def propose(fit, location, *, step_at=None, periods=None, alpha: float = 0.01, max_terms: int = MAX_TERMS,
-            space: ResidualSpace | None = None, allowed=None, prepared=None):
+            space: ResidualSpace | None = None, allowed=None, prepared=None, simplest: bool = False):
     """A sparse formula for the misfit at `location` (a `Location` of `locate`; `step_at`, `periods`: where its
     scans found a step, and the period along each coordinate scanned), or None when no term of the dictionary is
     significant. The formula is `complete` when the location's flexible description is not significant beyond it.
     `allowed(term, columns)`, where given, says which terms (a `Term` and its standardised columns) the dictionary
     keeps; `prepared`, the dictionary and columns of `space` already built for this location
-    (`_location_dictionary`)."""
+    (`_location_dictionary`); `simplest`: of the terms of the best one's coordinate and kind that the data cannot
+    tell from it, the lowest power (the formula reported; a rival of a candidate is the best description)."""
     space = space or ResidualSpace(fit)
     terms, cols = prepared or _location_dictionary(fit, location, space, step_at, periods)
     if not terms:
@@ -340,7 +341,7 @@ def propose(fit, location, *, step_at=None, periods=None, alpha: float = 0.01, m
         # terms the data cannot tell apart (within TIE_CHI2 or TIE_SHARE of the best: a gain along the temperature
         # and along the drive frequency it moves, or T x input where the output follows the input) go to the
         # coordinate named first, then to the term listed first (a gain before a product)
-        near = _ties(scored, top, current, cols, alpha)
+        near = _ties(scored, top, current, cols, alpha if simplest else None)
         best = min(near, key=lambda x: (x[0].coordinate in between, _rank(x[0].coordinate)))
         chosen.append(best[0])
         current = current.with_columns(cols[id(best[0])])
@@ -367,14 +368,14 @@ def propose(fit, location, *, step_at=None, periods=None, alpha: float = 0.01, m
 
 def _ties(scored, top, current, cols, alpha):
     """The scored terms the data cannot tell from the best (statistic `top`), in the dictionary's order: those
-    within TIE_CHI2 or TIE_SHARE of it, and those of its coordinate and kind (offset or gain) neither of which adds
-    chi2 significant at `alpha` beyond the other, so that the lowest power goes first (over a die that moves
-    1.6 K, a gain linear and one quadratic in the temperature differ by chi2 5 and neither stands beyond the
-    other: the linear one is the simpler statement of the same data)."""
+    within TIE_CHI2 or TIE_SHARE of it, and (`alpha` not None) those of its coordinate and kind (offset or
+    gain) neither of which adds chi2 significant at `alpha` beyond the other, so that the lowest power goes
+    first (over a die that moves 1.6 K, a gain linear and one quadratic in the temperature differ by chi2 5
+    and neither stands beyond the other: the linear one is the simpler statement of the same data)."""
     best = max(scored, key=lambda x: x[1].statistic)[0]
 
     def interchangeable(t):
-        return (t.coordinate == best.coordinate and t.gain == best.gain
+        return (alpha is not None and t.coordinate == best.coordinate and t.gain == best.gain
                 and current.with_columns(cols[id(t)]).score(cols[id(best)]).p_value >= alpha
                 and current.with_columns(cols[id(best)]).score(cols[id(t)]).p_value >= alpha)
 
@@ -463,7 +464,7 @@ def propose_along(fit, location, **kw):
     found = []
     for along in (own, own | set(location.confounded_with), None):
         allowed = None if along is None else (lambda t, _, along=along: t.coordinate in along)
-        f = propose(fit, location, allowed=allowed, space=space, prepared=prepared, **kw)
+        f = propose(fit, location, allowed=allowed, space=space, prepared=prepared, simplest=True, **kw)
         if f is not None:
             found.append(f)
     complete = [f for f in found if f.complete]
