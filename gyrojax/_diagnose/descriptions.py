@@ -199,8 +199,8 @@ def describe(space: ResidualSpace, *, pooled: bool = True) -> tuple[list, list]:
             # along time also as a gain: a reference or a pick-off cycling with the lab's air conditioning
             # multiplies the output; along the input a gain is the output's own shape, which the offset reads.
             # Read only for what is reported, as the pooled curves are: a sine of a period near half the span
-            # describes part of a smooth trend in fewer directions than a curve, and read by the guards it let
-            # a tempco stand beyond it (wrong confirmations 1 -> 4 of 87 lots of the discovery benchmark)
+            # describes part of a smooth trend in fewer directions than a curve, and read by the guards it lets
+            # a library effect stand beyond it that the curve would not
             for gain in (None, pred) if name == "time_s" and pooled else (None,):
                 d = _periodic_scan(space, sweep, name, x, mask, gain)
                 if d is not None and (gain is None or _cycles_beyond_trend(space, sweep, d, x, mask, pred)):
