@@ -226,11 +226,27 @@ def hidden_lot(clean, hand: Hand, target_chi2: float):
     size = math.sqrt(target_chi2 / total)
     cols = dict(clean.columns)
     cols["output"] = np.asarray(clean.columns["output"], dtype=float) + size * unit
-    shares = {s: v / total for s, v in per_sweep.items() if v / total >= 0.01}
     info = {"hidden": hand.name, "class": "outside", "library": None, "coordinate": hand.coordinate,
-            "formula": None if hand.formula is None else list(hand.formula), "sweep_shares": shares,
-            "visible_sweeps": sorted(s for s, v in shares.items() if v >= 0.2), "size": size}
+            "formula": None if hand.formula is None else list(hand.formula), **_visible(per_sweep), "size": size}
     return gj.Table(cols, source=f"<simulated lot + {hand.name}, post-processed>"), info
+
+
+def library_lot(index: int, name: str, clean):
+    """Protocol `index`'s lot with the library effect `name` at its typical size, and the answer the scores read
+    (its sweep shares from the change against the `clean` lot of the same seed)."""
+    table = clean_lot(index, name)
+    c = {k: np.asarray(v) for k, v in table.columns.items()}
+    per_sweep = beyond_baseline(c, c["output"] - np.asarray(clean.columns["output"], dtype=float))
+    return table, {"hidden": name, "class": "library", "library": name, "coordinate": LIBRARY_COORDINATE[name],
+                   "formula": None, **_visible(per_sweep)}
+
+
+def _visible(per_sweep: dict) -> dict:
+    """Each sweep's share of an effect's chi2 beyond the baseline (those >= 1 %), and the sweeps carrying >= 20 %
+    (the discovery benchmark's `sweep_shares` and `visible_sweeps`)."""
+    total = sum(per_sweep.values()) or 1.0
+    shares = {s: v / total for s, v in per_sweep.items() if v / total >= 0.01}
+    return {"sweep_shares": shares, "visible_sweeps": sorted(s for s, v in shares.items() if v >= 0.2)}
 
 
 def clean_lot(index: int, effect: str | None = None):
@@ -309,14 +325,7 @@ def main(argv=None):
                     continue
                 table, info = hidden_lot(clean, HAND_BY_NAME[name], args.chi2)
             else:
-                table = clean_lot(index, name)
-                c = {k: np.asarray(v) for k, v in table.columns.items()}
-                shares = beyond_baseline(c, c["output"] - np.asarray(clean.columns["output"], dtype=float))
-                total = sum(shares.values()) or 1.0
-                shares = {s: v / total for s, v in shares.items() if v / total >= 0.01}
-                info = {"hidden": name, "class": "library", "library": name, "coordinate": LIBRARY_COORDINATE[name],
-                        "formula": None, "sweep_shares": shares,
-                        "visible_sweeps": sorted(s for s, v in shares.items() if v >= 0.2)}
+                table, info = library_lot(index, name, clean)
             record(index, info, table)
     print(markdown(score_rows(records)))
 

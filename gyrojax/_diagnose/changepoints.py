@@ -110,8 +110,7 @@ def at_same_steps(space: ResidualSpace, sweep: str, t: np.ndarray, mask: np.ndar
     run_ids = fit.data.run_ids(sweep)
     g = np.zeros(mask.shape + (mask.shape[1],))
     pairs = []
-    until = like.get("until_each") or [None] * len(like["at_each"])
-    for (device, run), at, end in zip(like["runs"], like["at_each"], until):
+    for (device, run), at, end in zip(like["runs"], like["at_each"], ends(like)):
         dv = fit.devices.index(device)
         if run not in run_ids[dv]:
             continue
@@ -141,6 +140,12 @@ def _beyond_smooth(space, sweep, mask, hats):
         return space
     eye = np.eye(mask.shape[1])[None, :, None, :, None]
     return space.with_columns(space.columns({sweep: (hats[..., None, :] * eye).reshape(*mask.shape, -1)}))
+
+
+def ends(where: dict) -> list:
+    """Each (device, run)'s end of a change point's `where` (its `until_each`: the time a pulse is back), None
+    for a step; a location without pulses has no `until_each`."""
+    return where.get("until_each") or [None] * len(where["at_each"])
 
 
 MIN_PULSE_POINTS = 2  # a pulse holds at least this many dwells (one alone is an outlier: the single-point scan)

@@ -325,9 +325,14 @@ def interactions(block, mask) -> dict:
         run, _, lot = spread(x, mask)
         if lot <= 0 or run <= WITHIN_RUN_SHARE * lot:
             continue
-        centre = np.sum(x, axis=(1, 2), keepdims=True) / np.maximum(mask.sum(axis=(1, 2), keepdims=True), 1)
-        out[name] = hats * np.where(mask, x - centre, 0.0)[..., None]
+        out[name] = hats * _device_centred(x, mask)[..., None]
     return out
+
+
+def _device_centred(x, mask):
+    """`x` (device, run, point) less each device's mean over its recorded points, zero where not recorded."""
+    centre = np.sum(x, axis=(1, 2), keepdims=True) / np.maximum(mask.sum(axis=(1, 2), keepdims=True), 1)
+    return np.where(mask, x - centre, 0.0)
 
 
 def _step_scan(space, sweep, t, mask):
@@ -391,9 +396,9 @@ def _cycles_beyond_trend(space, sweep, d, x, mask, pred) -> bool:
     gain quadratic along the same coordinate in each device: a sine whose period is near half the span follows
     part of a trend or of a gain step in one device, which is no cycle (a spline on the curves' knots, which
     follows a cycle of three periods over the span, would refuse the cycle itself)."""
-    centre = np.sum(x, axis=(1, 2), keepdims=True) / np.maximum(mask.sum(axis=(1, 2), keepdims=True), 1)
-    scale = np.max(np.abs(np.where(mask, x - centre, 0.0)), axis=(1, 2), keepdims=True)
-    u = np.where(mask, (x - centre) / np.where(scale > 0, scale, 1.0), 0.0)
+    dx = _device_centred(x, mask)
+    scale = np.max(np.abs(dx), axis=(1, 2), keepdims=True)
+    u = dx / np.where(scale > 0, scale, 1.0)
     trend = np.stack([u, u ** 2], axis=-1) * pred[..., None]
     beyond = space.with_columns(space.columns({sweep: trend}))
     sc = beyond.score(d.columns)

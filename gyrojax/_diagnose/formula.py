@@ -337,11 +337,10 @@ def propose(fit, location, *, step_at=None, periods=None, alpha: float = 0.01, m
         scored = [(t, sc) for t, sc in scored if sc.df and sc.p_value < cut]
         if not scored:
             break
-        top = max(sc.statistic for _, sc in scored)
         # terms the data cannot tell apart (within TIE_CHI2 or TIE_SHARE of the best: a gain along the temperature
         # and along the drive frequency it moves, or T x input where the output follows the input) go to the
         # coordinate named first, then to the term listed first (a gain before a product)
-        near = _ties(scored, top, current, cols, alpha if simplest else None)
+        near = _ties(scored, current, cols, alpha if simplest else None)
         best = min(near, key=lambda x: (x[0].coordinate in between, _rank(x[0].coordinate)))
         chosen.append(best[0])
         current = current.with_columns(cols[id(best[0])])
@@ -366,13 +365,14 @@ def propose(fit, location, *, step_at=None, periods=None, alpha: float = 0.01, m
                    left_p_value=left.p_value, complete=left.p_value >= alpha, spread=spread)
 
 
-def _ties(scored, top, current, cols, alpha):
-    """The scored terms the data cannot tell from the best (statistic `top`), in the dictionary's order: those
+def _ties(scored, current, cols, alpha):
+    """The scored terms the data cannot tell from the best, in the dictionary's order: those
     within TIE_CHI2 or TIE_SHARE of it, and (`alpha` not None) those of its coordinate and kind (offset or
     gain) neither of which adds chi2 significant at `alpha` beyond the other, so that the lowest power goes
     first (over a die that moves 1.6 K, a gain linear and one quadratic in the temperature differ by chi2 5
     and neither stands beyond the other: the linear one is the simpler statement of the same data)."""
-    best = max(scored, key=lambda x: x[1].statistic)[0]
+    best, best_scored = max(scored, key=lambda x: x[1].statistic)
+    top = best_scored.statistic
 
     def interchangeable(t):
         return (alpha is not None and t.coordinate == best.coordinate and t.gain == best.gain

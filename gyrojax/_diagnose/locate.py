@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from . import thresholds
+from . import changepoints, thresholds
 from .descriptions import (
     EACH_RUN,
     SIGNED,
@@ -296,14 +296,13 @@ def _where(fit, space, best, members, sc) -> dict:
     if best.family == "step":
         first = {}  # (device, run) -> the time of its step (and of a pulse's end)
         for m in members:
-            until = m.where.get("until_each") or [None] * len(m.where["at_each"])
-            for r, a, e in zip(m.where["runs"], m.where["at_each"], until):
+            for r, a, e in zip(m.where["runs"], m.where["at_each"], changepoints.ends(m.where)):
                 first.setdefault(tuple(r), (a, e))
         out.update(at=best.where["at"], runs=[list(r) for r in first])
-        if len({a for a, _ in first.values()}) > 1:  # steps at their own times
+        pulses = any(e is not None for _, e in first.values())  # back where it was from these times on
+        if pulses or len({a for a, _ in first.values()}) > 1:  # steps (or pulses) at their own times
             out["at_each"] = [a for a, _ in first.values()]
-        if any(e is not None for _, e in first.values()):  # pulses: back where it was from these times on
-            out["at_each"] = [a for a, _ in first.values()]
+        if pulses:
             out["until_each"] = [e for _, e in first.values()]
         return out
     if best.family == "periodic":

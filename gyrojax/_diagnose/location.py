@@ -7,7 +7,7 @@ import equinox as eqx
 import numpy as np
 
 from .._text import safe_name as clean
-from . import thresholds
+from . import changepoints, thresholds
 from .descriptions import EACH_RUN, Description
 
 
@@ -92,10 +92,9 @@ def location_text(loc: dict) -> str:
         lo, hi = loc["interval"]
         parts.append(f"over {loc['coordinate']} {lo:.4g} to {hi:.4g}")
     if "at_each" in loc:  # steps (or pulses) at their own times, one per run
-        until = loc.get("until_each") or [None] * len(loc["at_each"])
         parts.append(f"at {loc['coordinate']} " + ", ".join(
             (f"{a:.4g}" if e is None else f"{a:.4g} to {e:.4g}") + f" in {clean(d)} run {r}"
-            for (d, r), a, e in list(zip(loc["runs"], loc["at_each"], until))[:4])
+            for (d, r), a, e in list(zip(loc["runs"], loc["at_each"], changepoints.ends(loc)))[:4])
                      + (" ..." if len(loc["runs"]) > 4 else ""))
         return " ".join(parts)
     if "at" in loc:
