@@ -17,6 +17,7 @@ Variants (`VARIANTS`):
   lot's mean scatter, as a lab quotes it);
 - `ar1`: noise correlated along the dwell order within each run (AR(1), rho = 0.6, the stated variance);
 - `sigma_low`: the stated output_sigma 0.8x the true scatter;
+- `no_sigma`: no output_sigma column (the diagnosis estimates each sweep's noise per device from the residuals);
 - `no_dac`: no DAC bench sweep;
 - `rate_only`: the rate table alone;
 - `small`: 3 devices of 2 runs.
@@ -102,6 +103,8 @@ def stress_lot(variant, hidden, *, snr, design, seed):
         cols["output"] = cols["output"] - np.where(force, old, 0.0) + np.where(force, new, 0.0)
     elif variant == "sigma_low":
         cols["output_sigma"] = cols["output_sigma"] * 0.8
+    elif variant == "no_sigma":
+        del cols["output_sigma"]
     elif variant == "no_dac":
         keep = np.asarray(cols["sweep"]) != "dac"
     elif variant == "rate_only":
@@ -122,7 +125,7 @@ def stress_lot(variant, hidden, *, snr, design, seed):
     return gj.Table.from_columns(cols, source=source), info
 
 
-VARIANTS = ("t3", "hetero", "ar1", "sigma_low", "no_dac", "rate_only", "small")
+VARIANTS = ("t3", "hetero", "ar1", "sigma_low", "no_sigma", "no_dac", "rate_only", "small")
 
 
 def markdown(variant_rows):

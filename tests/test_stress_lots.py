@@ -26,6 +26,9 @@ def test_stress_lots_replace_the_noise_and_keep_what_the_sweeps_can_see():
     assert set(np.unique(only.columns["sweep"])) == {"rate_table"} and info["hidden"] is None
     kept, info = stress_lot("no_dac", "zro_tempco", snr="mid", design="a", seed=0)
     assert info["hidden"] == "zro_tempco" and info["visible_sweeps"] == ["rate_table", "vcf_static"]
+    bare, _ = stress_lot("no_sigma", None, snr="mid", design="a", seed=0)
+    assert "output_sigma" not in bare.columns
+    np.testing.assert_array_equal(bare.columns["output"], null.columns["output"])
     with pytest.raises(ValueError, match="unknown variant 'gauss'"):
         stress_lot("gauss", None, snr="mid", design="a", seed=0)
 

@@ -7,6 +7,7 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+from jax.scipy.special import betainc
 
 from .._model.fitdata import FitData
 from .covariance import mc_p_value, pooled_dof
@@ -24,22 +25,32 @@ _SAME_INPUT_RTOL = 1e-9
 # with plain neighbour differences; its effective degrees of freedom fall only from 10.7 (degree 1) to 8.8.
 _LOCAL_DEGREE = 2
 
+_REPEATS = "differences between runs at equal inputs"
 
-def contrasts(x, mask):
+# Where runs repeat inputs, the differences between runs are the estimate unless they exceed the local
+# contrasts' estimate with an F-test p below this: then a misfit that differs from run to run (a drift in time
+# on runs swept in opposite directions, a gain that changes at power-on) has reached them, and the local
+# contrasts, which cancel what is smooth along the input within a run, measure the noise.
+REPEATS_ALPHA = 0.01
+
+
+def contrasts(x, mask, family="repeats"):
     """Contrasts of one device's sweep block (`x`, `mask` of shape (run, point)) whose mean square measures
     the noise while a misfit of the model barely reaches it: rows over the block's flattened (run, point)
     positions, and how they were made.
 
-    - Where two runs repeat an input, the difference of their residuals there: any misfit that repeats from
-      run to run (every error of the model that depends on the input) cancels exactly.
-    - Else, within each run in input order, the combination of every `_LOCAL_DEGREE` + 2 neighbouring
-      residuals that cancels a polynomial of degree `_LOCAL_DEGREE` through them: a misfit smooth over a few
-      neighbouring inputs barely enters, however widely they are spaced."""
+    - `family="repeats"`: where two runs repeat an input, the difference of their residuals there: any misfit
+      that repeats from run to run (every error of the model that depends on the input) cancels exactly.
+    - Else (or with `family="local"`), within each run in input order, the combination of every
+      `_LOCAL_DEGREE` + 2 neighbouring residuals that cancels a polynomial of degree `_LOCAL_DEGREE` through
+      them: a misfit smooth over a few neighbouring inputs barely enters, however widely they are spaced."""
+    if family not in ("repeats", "local"):
+        raise ValueError(f"contrasts: family must be 'repeats' or 'local', got {family!r}")
     n_run, n_pt = x.shape
     runs = [k for k in range(n_run) if mask[k].any()]
     tol = _SAME_INPUT_RTOL * max(float(np.max(np.abs(x[mask]))) if mask.any() else 0.0, np.finfo(float).tiny)
     rows = []
-    for a, b in zip(runs, runs[1:]):
+    for a, b in zip(runs, runs[1:]) if family == "repeats" else ():
         left = list(np.flatnonzero(mask[a]))
         for j in np.flatnonzero(mask[b]):
             same = [i for i in left if abs(x[a, i] - x[b, j]) <= tol]
@@ -49,7 +60,7 @@ def contrasts(x, mask):
                 row[b * n_pt + j], row[a * n_pt + same[0]] = 1.0, -1.0
                 rows.append(row)
     if rows:
-        return np.asarray(rows), "differences between runs at equal inputs"
+        return np.asarray(rows), _REPEATS
     width = _LOCAL_DEGREE + 2
     for k in runs:
         idx = np.flatnonzero(mask[k])
@@ -129,9 +140,15 @@ def noise_scales(residual, jac, blocks, *, draws=0, rng=None):
     kappa, exactly unbiased for the linearised fit (prior rows are left out of M: a prior holds the fit back
     a little, which can only raise the estimate).
 
+    Where runs repeat inputs, the differences between them are the contrasts unless their estimate exceeds
+    the local contrasts' (`_exceeds`, at `REPEATS_ALPHA`): a misfit that differs from run to run has then
+    reached them (measured on two runs swept up then down under a bias drift of 4.2 sigma per run: median
+    kappa 0.96 after the choice; the differences alone 4.4: the drift adds 3.4x the noise variance to them,
+    0.002x to the local ones), and the local ones are taken.
+
     With `draws` > 0, also the chi2 the data give in units of their estimated noise, sum_t |r_t|^2 / kappa_t,
     and `draws` samples of it under white noise of the estimated kappa (the same estimator applied to M e for
-    Gaussian e, with `rng`): its null distribution. The chi2 and the noise estimate share the residuals, so
+    Gaussian e, with `rng`, the choice of contrasts made again in each draw): its null distribution. The chi2 and the noise estimate share the residuals, so
     chi2 / dof is not F-distributed (on a 22-point rate table its 1 % point is 2.8, F's 4.9); the draws are.
 
     **Returns:** `(kappa, nu, methods, null)`: kappa per sweep (NaN where a sweep has no contrast: too few
@@ -140,45 +157,105 @@ def noise_scales(residual, jac, blocks, *, draws=0, rng=None):
     offsets, idx, pos, resid_maker = _residual_maker(jac, blocks)
     n = idx.size
     r = np.asarray(residual, dtype=float)[idx]
-    selects = [(pos[offsets[s]:offsets[s + 1]] >= 0) for s in range(len(blocks))]
-    cm, q, methods, size = [], [], [], []
-    for s, (x, mask, _, _) in enumerate(blocks):
-        rows, method = contrasts(np.asarray(x, dtype=float), np.asarray(mask, dtype=bool))
+    sel = [pos[offsets[t]:offsets[t + 1]][pos[offsets[t]:offsets[t + 1]] >= 0] for t in range(len(blocks))]
+
+    def family(s, name):
+        """Sweep s's contrasts of one family, mapped onto the real points, times M: (C M, |C r|^2, |C|^2,
+        how they were made)."""
+        x, mask = np.asarray(blocks[s][0], dtype=float), np.asarray(blocks[s][1], dtype=bool)
+        rows, method = contrasts(x, mask, name)
         c = np.zeros((rows.shape[0], n))
-        c[:, pos[offsets[s]:offsets[s + 1]][selects[s]]] = rows[:, selects[s]]
-        cm.append(c @ resid_maker)
-        q.append(float(np.sum((c @ r) ** 2)))
-        methods.append(method)
-        size.append(float(np.sum(c**2)))
-    sel = [pos[offsets[t]:offsets[t + 1]][selects[t]] for t in range(len(blocks))]
-    a = np.array([[float(np.sum(cm[s][:, sel[t]] ** 2)) for t in range(len(blocks))] for s in range(len(blocks))])
-    # A sweep whose contrasts the fit absorbs entirely (as many parameters as points) measures nothing; the
-    # cut is far above round-off of M (~1e-15) and far below any contrast that sees noise.
-    has = np.diag(a) > 1e-9 * np.asarray(size)
-    kappa = _solve_kappa(a, np.asarray(q), has)
-    nu = np.full(len(blocks), np.nan)
-    weights = np.zeros(n)
-    for t in range(len(blocks)):
-        weights[sel[t]] = kappa[t] if np.isfinite(kappa[t]) else 0.0
-    for s in range(len(blocks)):
-        if has[s]:
-            cov = (cm[s] * weights) @ cm[s].T
-            tr2 = float(np.sum(cov * cov))
-            nu[s] = float(np.trace(cov)) ** 2 / tr2 if tr2 > 0 else np.nan
+        real = pos[offsets[s]:offsets[s + 1]] >= 0
+        c[:, sel[s]] = rows[:, real]
+        return c @ resid_maker, float(np.sum((c @ r) ** 2)), float(np.sum(c**2)), method
+
+    local = [family(s, "local") for s in range(len(blocks))]
+    repeats = [family(s, "repeats") for s in range(len(blocks))]
+    # where a sweep's runs repeat no input, both families are its local contrasts
+    two = np.array([rep[3] == _REPEATS for rep in repeats])
+    rows_of = {False: [_moment_row(rep, sel, t) for t, rep in enumerate(repeats)],
+               True: [_moment_row(loc, sel, t) for t, loc in enumerate(local)]}
+
+    def solve(use_local, q=None):
+        """kappa (and the moment system) with each sweep's local contrasts where `use_local`, else its
+        differences between runs; `q` (sweep, draws) in place of the data's."""
+        a = np.array([rows_of[bool(u)][t][0] for t, u in enumerate(use_local)])
+        has = np.array([rows_of[bool(u)][t][1] for t, u in enumerate(use_local)])
+        q = np.array([(local if u else repeats)[t][1] for t, u in enumerate(use_local)]) if q is None else q
+        return a, has, _solve_kappa(a, q, has)
+
+    def effective_dof(use_local, kappa, has):
+        weights = np.zeros(n)
+        for t, st in enumerate(sel):
+            weights[st] = kappa[t] if np.isfinite(kappa[t]) else 0.0
+        nu = np.full(len(blocks), np.nan)
+        for t, u in enumerate(use_local):
+            if has[t]:
+                cm = (local if u else repeats)[t][0]
+                cov = (cm * weights) @ cm.T
+                tr2 = float(np.sum(cov * cov))
+                nu[t] = float(np.trace(cov)) ** 2 / tr2 if tr2 > 0 else np.nan
+        return nu, weights
+
+    use_local = ~two
+    if two.any():
+        all_local = np.ones(len(blocks), bool)
+        k_rep, k_loc = solve(~two)[2], solve(all_local)[2]
+        nu_rep = effective_dof(~two, k_rep, solve(~two)[1])[0]
+        nu_loc = effective_dof(all_local, k_loc, solve(all_local)[1])[0]
+        switch = two & _exceeds(k_rep, nu_rep, k_loc, nu_loc)
+        use_local = ~two | switch
+    a, has, kappa = solve(use_local)
+    nu, weights = effective_dof(use_local, kappa, has)
+    methods = [local[t][3] if u else repeats[t][3] for t, u in enumerate(use_local)]
+    for t in np.flatnonzero(two & use_local):
+        methods[t] += (f": the {_REPEATS} estimate {k_rep[t] / k_loc[t]:.3g} times more (F-test p < "
+                       f"{REPEATS_ALPHA:g}), a misfit that differs from run to run")
     null = None
     if draws and np.all(np.isfinite(kappa[has])) and np.all(kappa[has] > 0) and has.any():
         keep = np.concatenate([sel[t] for t in range(len(blocks)) if has[t]])
         chi2 = sum(float(np.sum(r[sel[t]] ** 2)) / kappa[t] for t in range(len(blocks)) if has[t])
         e = np.sqrt(weights)[:, None] * (rng or np.random.default_rng(0)).normal(size=(n, draws))
         rr = resid_maker[keep] @ e
-        q_draws = np.stack([np.sum((cm[s] @ e) ** 2, axis=0) if has[s] else np.zeros(draws)
-                            for s in range(len(blocks))])
-        k_draws = _solve_kappa(a, q_draws, has)
+        q_of = {u: np.stack([np.sum(((local if u else repeats)[t][0] @ e) ** 2, axis=0)
+                             for t in range(len(blocks))]) for u in (False, True)}
+        k_draws = solve(use_local, np.where(use_local[:, None], q_of[True], q_of[False]))[2]
+        if two.any():
+            # the choice between the two families is made again in each draw: the null holds the pre-test
+            kr = solve(~two, np.where(two[:, None], q_of[False], q_of[True]))[2]
+            kl = solve(all_local, q_of[True])[2]
+            chosen = ~two[:, None] | (two[:, None] & _exceeds(kr, nu_rep[:, None], kl, nu_loc[:, None]))
+            for pattern in np.unique(chosen.T, axis=0):
+                cols = np.all(chosen.T == pattern, axis=1)
+                k_draws[:, cols] = solve(pattern, np.where(pattern[:, None], q_of[True], q_of[False])[:, cols])[2]
         offsets_keep = np.cumsum([0] + [sel[t].size for t in range(len(blocks)) if has[t]])
         parts = [np.sum(rr[lo:hi] ** 2, axis=0) for lo, hi in zip(offsets_keep[:-1], offsets_keep[1:])]
         chi2_draws = sum(part / k_draws[t] for part, t in zip(parts, np.flatnonzero(has)))
         null = (chi2, chi2_draws)
     return kappa, nu, methods, null
+
+
+def _moment_row(family, sel, s):
+    """Sweep s's row of the moment equations from its contrasts `family` ((C M, |C r|^2, |C|^2, method);
+    `sel` the sweeps' real points): `(a_s, has_s)`, E |C_s r|^2 = sum_t a_st kappa_t, and whether its
+    contrasts see noise."""
+    a = np.array([float(np.sum(family[0][:, st] ** 2)) for st in sel])
+    # A sweep whose contrasts the fit absorbs entirely (as many parameters as points) measures nothing; the
+    # cut is far above round-off of M (~1e-15) and far below any contrast that sees noise.
+    return a, bool(a[s] > 1e-9 * family[2])
+
+
+def _exceeds(k_rep, nu_rep, k_loc, nu_loc):
+    """Where the differences between runs estimate a variance above the local contrasts' with an F-test p
+    below `REPEATS_ALPHA` (each estimate scaled chi2 with its effective degrees of freedom; they share the
+    residuals, so the test is conservative). Elementwise over arrays."""
+    k_rep, nu_rep, k_loc, nu_loc = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in
+                                                         (k_rep, nu_rep, k_loc, nu_loc)))
+    ok = np.isfinite(k_rep) & np.isfinite(k_loc) & (k_loc > 0) & (k_rep > 0) & (nu_rep > 0) & (nu_loc > 0)
+    ratio = np.where(ok, k_rep / np.where(ok, k_loc, 1.0), 1.0)
+    nr, nl = np.where(ok, nu_rep, 1.0), np.where(ok, nu_loc, 1.0)
+    p = np.asarray(betainc(nl / 2.0, nr / 2.0, nl / (nl + nr * ratio)))
+    return ok & (p < REPEATS_ALPHA)
 
 
 # Draws of the chi2's null distribution per device: the rejection at reject_alpha = 0.01 is then decided to
