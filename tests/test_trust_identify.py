@@ -503,3 +503,29 @@ def test_sign_check_needs_a_model_slope_clear_of_zero():
     with pytest.raises(ValueError, match=r"signs\.csv: the outputs change with the input with the opposite sign .* "
                                          r"device 'd0', run 0: slope -3 \+/- .*, the model's 3"):
         check_signs(data, clear, "paper-qmg")
+
+
+# --- 4. a temperature not recorded --------------------------------------------------------------------------
+
+def test_a_fit_without_temperature_c_that_the_data_reject_says_so(columns):
+    """The simulated die warms 25.4 -> 27 C after power-on; without temperature_c the model holds every point at
+    its power-on temperature, the data reject it, and the warning names the missing column and what follows."""
+    bare = gj.identify("paper-qmg", _table(columns, "no temperature", drop=("temperature_c",)), progress=False)
+    assert bare.status == ("model rejected",)
+    note = [w for w in bare.warnings[0] if "temperature_c" in w]
+    assert len(note) == 1 and "no temperature_c for rate_table" in note[0] and "(25 C)" in note[0], bare.warnings
+    full = gj.identify("paper-qmg", _table(columns, "with temperature"), progress=False)
+    assert not any("temperature_c" in w for w in full.warnings[0])
+
+
+@slow
+def test_the_diagnosis_shows_its_baseline_notes_about_the_data(columns):
+    d = gj.diagnose("paper-qmg", _table(columns, "no temperature", drop=("temperature_c", "output_sigma")),
+                    max_effects=0, progress=False)
+    notes = d.to_json()["baseline"]["notes"]
+    texts = [n["note"] for n in notes]
+    assert any(t.startswith("the data give no temperature_c") for t in texts), texts
+    assert any(t.startswith("no output_sigma: the noise was estimated") for t in texts), texts
+    assert all(n["devices"] == ["paper-qmg-000"] for n in notes)
+    assert not any(t.startswith("the model does not describe") for t in texts)
+    assert "note (paper-qmg-000): the data give no temperature_c" in d.summary()

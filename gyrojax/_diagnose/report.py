@@ -74,6 +74,10 @@ def _markdown(diagnosis, figures) -> list[str]:
     data = diagnosis.baseline.data
     lines = ["# gyrojax diagnosis", "", f"Data: `{data.source}`, {len(diagnosis.baseline.devices)} device(s), "
              f"sweeps {', '.join(sweeps)}.", "", f"**{diagnosis.verdict_text()}**", ""]
+    notes = diagnosis.baseline_notes
+    if notes:
+        lines += ["## About the data", ""] + [f"- {note} ({', '.join(devices)})" for note, devices in notes.items()]
+        lines.append("")
     left = diagnosis.remaining
     found = [d for d in diagnosis.baseline_discrepancy if d.significant and not d.within]
     lines += ["## Where the misfit lives", "",

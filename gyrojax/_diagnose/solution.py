@@ -10,6 +10,7 @@ import numpy as np
 
 from .._effects.registry import EFFECTS
 from .._identify import Fit
+from .._identify.assemble import REJECTED_NOTE
 from .compare import Comparison, nonlinearity_residual_ppm
 from .discrepancy import LookAlike
 from .formula import Formula
@@ -134,6 +135,18 @@ class Diagnosis(eqx.Module):
         return (f"verdict: unexplained: no library effect is confirmed and {fails_now}{tail}{where}"
                 f"{self._formula_text()}")
 
+    @property
+    def baseline_notes(self) -> dict[str, list[str]]:
+        """The baseline fit's warnings about its data (the noise estimated where the data give no output_sigma,
+        a temperature not recorded, ...), each with the devices that carry it; not its rejection of the model,
+        which the diagnosis is about."""
+        notes = {}
+        for device, warnings in zip(self.baseline.data.device_names(), self.baseline.warnings):
+            for w in warnings:
+                if not w.startswith(REJECTED_NOTE):
+                    notes.setdefault(w, []).append(device)
+        return notes
+
     def _formula_text(self) -> str:
         f = self.formula
         if f is None:
@@ -147,6 +160,7 @@ class Diagnosis(eqx.Module):
         and the final fit."""
         lines = [f"baseline: chi2_red {self.baseline.chi2_red_total:.3f}, model-vs-measurement nonlinearity "
                  f"{ppm_text(self.baseline_nonlinearity_ppm, self.baseline)}"]
+        lines += [f"  note ({', '.join(devices)}): {note}" for note, devices in self.baseline_notes.items()]
         if self.comparisons and comparisons:
             lines += ["  " + x for x in self.comparisons[0].summary().splitlines()]
         found = [d for d in self.baseline_discrepancy if d.significant and not d.within]
@@ -214,7 +228,9 @@ class Diagnosis(eqx.Module):
         verdict, discrepancy (what is left, most explanatory first), baseline_discrepancy, compare."""
         return {
             "baseline": {"chi2_red": self.baseline.chi2_red_total,
-                         **_ppm_json(self.baseline_nonlinearity_ppm, self.baseline)},
+                         **_ppm_json(self.baseline_nonlinearity_ppm, self.baseline),
+                         "notes": [{"note": note, "devices": devices}
+                                   for note, devices in self.baseline_notes.items()]},
             "ranking": [{"effect": c.effect, "statistic": c.statistic, "df": c.df, "p_value": c.p_value,
                          "testable": c.testable, "typical_chi2": c.typical_chi2, "visible_chi2": c.visible_chi2,
                          "implied_multiple": _finite(c.implied_multiple),

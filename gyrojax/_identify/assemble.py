@@ -19,7 +19,7 @@ from .covariance import chi2_p_value, covariance, joint_jacobian
 from .fit import Fit, p_text
 from .identifiability import sf_determinacy, undetermined_reason, weak_at_solution
 from .noise import null_p_values
-from .plausibility import ASTRONOMICAL_CHI2_RED, implausible_values, scale_hint
+from .plausibility import ASTRONOMICAL_CHI2_RED, implausible_values, scale_hint, temperature_hint
 from .problem import Layout, Problem
 from .recovery import Solution
 
@@ -58,6 +58,11 @@ def _sf_stderr(g, g_lot, cov_dev, cov_lot, cross, n_lot: int):
     return np.sqrt(np.maximum(var, 0.0))
 
 
+# How the warning of a device whose chi2 rejects the model begins (`diagnose` reports the misfit itself, and shows
+# only the other warnings of its baseline).
+REJECTED_NOTE = "the model does not describe the data"
+
+
 def _statuses(data, predictions, ok, failed, determined, noise_ok, noise_notes, rejected, implausible, chi2, dof,
               chi2_red, p_value, reject_alpha, cand_names, weak_part, n_free, threshold):
     """Each device's status (not converged, not determined, model rejected, ok) and its warnings, with the
@@ -79,7 +84,7 @@ def _statuses(data, predictions, ok, failed, determined, noise_ok, noise_notes, 
         else:
             status.append("ok")
         if rejected[d] and status[d] != "not converged":
-            notes_d.append(f"the model does not describe the data: chi2 {chi2[d]:.4g} over {int(dof[d])} degrees of "
+            notes_d.append(f"{REJECTED_NOTE}: chi2 {chi2[d]:.4g} over {int(dof[d])} degrees of "
                            f"freedom has {p_text(p_value[d])} < reject_alpha = {reject_alpha:g}; the standard errors "
                            f"are also given scaled by sqrt(chi2_red) = {math.sqrt(chi2_red[d]):.3g} (stderr_scaled). "
                            "gyrojax.compare shows where the misfit sits")
@@ -169,6 +174,10 @@ def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index
     status, warnings = _statuses(data, final.predictions, ok, failed, determined, noise_ok, noise_notes, rejected,
                                  implausible, chi2, dof, chi2_red, p_value, reject_alpha,
                                  [names_dev[i] for i in cand] + list(names_lot), weak_part, f.size, threshold)
+    for d in np.flatnonzero(rejected):
+        hint = temperature_hint(data, problem_all.model.device, int(d))
+        if hint:
+            warnings[d] = warnings[d] + (hint,)
     undetermined = np.array([s == "not determined" for s in status])
     messages = tuple(f"{m}, but far from the data (chi2_red {chi2_red[d]:.3g})"
                      if m == "converged" and chi2_red[d] > ASTRONOMICAL_CHI2_RED else m for d, m in enumerate(messages))

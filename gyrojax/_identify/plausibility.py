@@ -196,3 +196,23 @@ def scale_hint(data: FitData, predictions, d: int) -> str:
         return ""
     return ("; ".join(f"the {s} outputs are ~{r:.3g}x the model's" for s, r in off)
             + ": check the unit of output and output_sigma (or use a model of this device)")
+
+
+def temperature_hint(data: FitData, gyro, d: int) -> str:
+    """For device `d` of a fit the data reject: the sweeps with no `temperature_c` on any of the device's
+    points, whose points the model then holds at the device's power-on die temperature (`gyro`, the model's
+    device, batched over the lot or not), or "" if every sweep records it."""
+    def unrecorded(block):
+        mask = np.asarray(block.mask[d])
+        return mask.any() and (block.temperatures is None
+                               or not np.isfinite(np.asarray(block.temperatures[d])[mask]).any())
+
+    missing = [s for s in data.sweeps if unrecorded(data.blocks[s])]
+    if not missing:
+        return ""
+    own = np.ravel(np.asarray(gyro.temperature(0.0), dtype=float))
+    at = own[d] if own.size > d else own[0]
+    return (f"the data give no temperature_c for {', '.join(missing)}: the model holds every point of it at the "
+            f"device's power-on die temperature ({at:.4g} C); a die that warms or is cycled during the runs leaves "
+            "a misfit that follows the time since power-on or the drive frequency (a thermometer through the "
+            "resonator's frequency tempco). Record temperature_c (deg C) if the setup reads it")
