@@ -73,7 +73,7 @@ def candidate_effects(base: Model, candidates, who: str) -> tuple[str, ...]:
 
 
 def baseline_fit(base: Model, data: FitData, candidates: tuple[str, ...], spec: FitSpec, *,
-                 also_held: tuple[str, ...] = (), evaluate_only: bool = False, estimate_noise: bool | None = None,
+                 also_held: tuple[str, ...] = (), evaluate_only: bool = False, estimate_noise: bool | str | None = None,
                  say) -> tuple[Model, Fit]:
     """The baseline with every candidate at zero, as `diagnose` and `plan` fit it: `base` with each of
     `candidates` added at zero (the model every later fit of the diagnosis starts from) and its fit to `data`

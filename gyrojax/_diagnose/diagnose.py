@@ -171,7 +171,10 @@ def _baseline_and_refits(base, data, candidates, fit, spec, say):
 
     if fit is not None:  # the saved fit is the baseline: evaluated where it ended, with the candidates at zero
         say("evaluating the given baseline fit with every candidate at zero")
-    full, fit = baseline_fit(base, data, candidates, spec, evaluate_only=fit is not None, say=say)
+    # Without output_sigma the noise is the lot's per sweep where the devices agree: a device whose own estimate
+    # came out low would carry residuals that every scan reads as structure.
+    full, fit = baseline_fit(base, data, candidates, spec, evaluate_only=fit is not None,
+                             estimate_noise=None if data.weighted else "lot", say=say)
     baseline = fit
     if not data.weighted:
         # The noise was estimated from the baseline's residuals: every refit keeps those weights, so that the

@@ -160,7 +160,7 @@ class Diagnosis(eqx.Module):
         and the final fit."""
         lines = [f"baseline: chi2_red {self.baseline.chi2_red_total:.3f}, model-vs-measurement nonlinearity "
                  f"{ppm_text(self.baseline_nonlinearity_ppm, self.baseline)}"]
-        lines += [f"  note ({', '.join(devices)}): {note}" for note, devices in self.baseline_notes.items()]
+        lines += _notes_text(self.baseline_notes)
         if self.comparisons and comparisons:
             lines += ["  " + x for x in self.comparisons[0].summary().splitlines()]
         found = [d for d in self.baseline_discrepancy if d.significant and not d.within]
@@ -328,3 +328,19 @@ def _ppm_json(value: float, fit: Fit, key: str = "nonlinearity_ppm") -> dict:
     if math.isfinite(value):
         return {key: float(value)}
     return {key: None, "not_determined": {key: nonlinearity_not_determined(fit)}}
+
+
+def _notes_text(notes: dict[str, list[str]]) -> list[str]:
+    """The summary's lines of the baseline's notes: each note once with its devices; notes of one kind (the same
+    words before the first ':') that differ only in their values per device, the first in full and how many
+    more there are (every one is in the JSON's `baseline.notes`)."""
+    kinds: dict[str, list[tuple[str, list[str]]]] = {}
+    for note, devices in notes.items():
+        kinds.setdefault(note.split(":")[0], []).append((note, devices))
+    lines = []
+    for group in kinds.values():
+        note, devices = group[0]
+        more = sum(len(d) for _, d in group[1:])
+        tail = f" (and {more} more device(s) alike, each with its own values: baseline.notes in the JSON)" if more else ""
+        lines.append(f"  note ({', '.join(devices)}): {note}{tail}")
+    return lines

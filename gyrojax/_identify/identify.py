@@ -54,8 +54,9 @@ def identify(model: Model | Gyroscope | str, data: Table | FitData, *, spec: Fit
              priors: dict | None = None, tier: AbstractTier = Steady(), solver: str | Solver = "levenberg-marquardt",
              rtol: float = 1e-8, atol: float = 1e-8, max_steps: int = 200, start: MultiStart = MultiStart(),
              lot_solve: str | AbstractLotSolve = "vmap", recovery: tuple[AbstractRecovery, ...] = RECOVERY,
-             identifiability_threshold: float = 1.0, reject_alpha: float = 0.01, estimate_noise: bool | None = None,
-             evaluate_only: bool = False, progress: ProgressArg = True) -> Fit | PopulationFit:
+             identifiability_threshold: float = 1.0, reject_alpha: float = 0.01,
+             estimate_noise: bool | str | None = None, evaluate_only: bool = False,
+             progress: ProgressArg = True) -> Fit | PopulationFit:
     r"""Fit the free parameters of `model` to every sweep in `data`, per device (vmapped) or jointly.
 
     **Arguments:**
@@ -104,7 +105,11 @@ def identify(model: Model | Gyroscope | str, data: Table | FitData, *, spec: Fit
       within a run; unbiased for white noise; its chi2 null distribution drawn with `start.seed`). `None`
       (default): when the data have no `output_sigma`. `False` takes the data's sigmas as the noise (unit
       weights for a table without `output_sigma`, so the chi2 then tests nothing; e.g. for `fit.data` of an
-      earlier fit, whose sigmas were estimated already).
+      earlier fit, whose sigmas were estimated already). `"lot"`: estimated as with `True`, then each sweep's
+      noise pooled over the lot's devices where their estimates agree (Bartlett's test at 1 %): devices of one
+      design on one bench share their noise, and one device's estimate from ~20 points scatters +/-30 % in
+      variance (`diagnose` estimates it so for data without `output_sigma`). A distributed lot's chunks pool
+      over their own devices, so per-device (`True`) is the default.
     - `evaluate_only`: do not solve; return the `Fit` at the start (residuals, Jacobian, covariance there),
       e.g. to test a candidate effect at zero against an already fitted model.
     - `progress`: `True` (default) reports the fit's steps on standard error (what it fits, when it compiles,
@@ -123,8 +128,8 @@ def identify(model: Model | Gyroscope | str, data: Table | FitData, *, spec: Fit
     spec = fit_spec(spec, "identify", free=free, shared=shared, hold=hold, priors=priors, tier=tier, solver=solver,
                     rtol=rtol, atol=atol, max_steps=max_steps, start=start, lot_solve=lot_solve, recovery=recovery,
                     identifiability_threshold=identifiability_threshold, reject_alpha=reject_alpha)
-    if estimate_noise not in (None, True, False):
-        raise ValueError(f"estimate_noise must be None, True or False, got {estimate_noise!r}.")
+    if not any(estimate_noise is v for v in (None, True, False)) and estimate_noise != "lot":
+        raise ValueError(f"estimate_noise must be None, True, False or 'lot', got {estimate_noise!r}.")
     check_absurd_outputs(data)
     if isinstance(spec.lot_solve, PopulationSolve):
         return _population(model, data, spec, spec.lot_solve, estimate_noise, evaluate_only, progress)
@@ -180,7 +185,7 @@ def _identify(model, data, spec: FitSpec, estimate_noise, evaluate_only, progres
         first_fit = _fit_once(model, data, noise=None, **options)
         say("estimating the noise from the first fit's residuals (the data give no output_sigma); fitting again "
             "with those weights")
-        kappa, noise = estimated_noise(first_fit, start.seed, start.first_device)
+        kappa, noise = estimated_noise(first_fit, start.seed, start.first_device, pool=estimate_noise == "lot")
         fit = _fit_once(model, reweighted(data, kappa), noise=noise, **options)
     counts = {st: fit.status.count(st) for st in dict.fromkeys(fit.status)}
     say("done: " + ", ".join(f"{k} device(s) {st}" for st, k in counts.items()))

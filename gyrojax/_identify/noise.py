@@ -10,6 +10,7 @@ import numpy as np
 from jax.scipy.special import betainc
 
 from .._model.fitdata import FitData
+from .._numerics.stats import chi2_sf
 from .covariance import mc_p_value, pooled_dof
 from .fit import Fit
 from .plausibility import output_scale_ratio
@@ -127,7 +128,7 @@ def _residual_maker(jac, blocks):
     return offsets, idx, pos, proj
 
 
-def noise_scales(residual, jac, blocks, *, draws=0, rng=None):
+def noise_scales(residual, jac, blocks, *, draws=0, rng=None, fixed=None):
     """Per sweep of one device, the factor kappa by which the variance of its standardised residuals exceeds
     1 (for unit weights: the noise variance in output units), unbiased for white noise.
 
@@ -150,6 +151,11 @@ def noise_scales(residual, jac, blocks, *, draws=0, rng=None):
     and `draws` samples of it under white noise of the estimated kappa (the same estimator applied to M e for
     Gaussian e, with `rng`, the choice of contrasts made again in each draw): its null distribution. The chi2 and the noise estimate share the residuals, so
     chi2 / dof is not F-distributed (on a 22-point rate table its 1 % point is 2.8, F's 4.9); the draws are.
+
+    `fixed`: `(kappa, nu, how)` per sweep, NaN where the sweep's own estimate stands: a noise estimated
+    elsewhere (the lot's pooled one, `estimated_noise`), taken as it is, its estimate drawn in the null as a
+    scaled chi2 with `nu` degrees of freedom independent of this device's residuals (they are part of it:
+    conservative).
 
     **Returns:** `(kappa, nu, methods, null)`: kappa per sweep (NaN where a sweep has no contrast: too few
     points), the effective degrees of freedom of each estimate (Satterthwaite: tr(S)^2 / tr(S^2) with S the
@@ -211,11 +217,20 @@ def noise_scales(residual, jac, blocks, *, draws=0, rng=None):
     for t in np.flatnonzero(two & use_local):
         methods[t] += (f": the {_REPEATS} estimate {k_rep[t] / k_loc[t]:.3g} times more (F-test p < "
                        f"{REPEATS_ALPHA:g}), a misfit that differs from run to run")
+    given = np.zeros(len(blocks), bool)
+    if fixed is not None:
+        given = np.isfinite(np.asarray(fixed[0], dtype=float)) & has
+        kappa = np.where(given, np.asarray(fixed[0], dtype=float), kappa)
+        nu = np.where(given, np.asarray(fixed[1], dtype=float), nu)
+        methods = [f"{m}; {fixed[2][t]}" if given[t] else m for t, m in enumerate(methods)]
+        for t, st in enumerate(sel):
+            weights[st] = kappa[t] if np.isfinite(kappa[t]) else 0.0
     null = None
     if draws and np.all(np.isfinite(kappa[has])) and np.all(kappa[has] > 0) and has.any():
         keep = np.concatenate([sel[t] for t in range(len(blocks)) if has[t]])
         chi2 = sum(float(np.sum(r[sel[t]] ** 2)) / kappa[t] for t in range(len(blocks)) if has[t])
-        e = np.sqrt(weights)[:, None] * (rng or np.random.default_rng(0)).normal(size=(n, draws))
+        rng_draw = rng or np.random.default_rng(0)
+        e = np.sqrt(weights)[:, None] * rng_draw.normal(size=(n, draws))
         rr = resid_maker[keep] @ e
         q_of = {u: np.stack([np.sum(((local if u else repeats)[t][0] @ e) ** 2, axis=0)
                              for t in range(len(blocks))]) for u in (False, True)}
@@ -228,6 +243,8 @@ def noise_scales(residual, jac, blocks, *, draws=0, rng=None):
             for pattern in np.unique(chosen.T, axis=0):
                 cols = np.all(chosen.T == pattern, axis=1)
                 k_draws[:, cols] = solve(pattern, np.where(pattern[:, None], q_of[True], q_of[False])[:, cols])[2]
+        for t in np.flatnonzero(given):
+            k_draws[t] = kappa[t] * rng_draw.chisquare(nu[t], size=draws) / nu[t]
         offsets_keep = np.cumsum([0] + [sel[t].size for t in range(len(blocks)) if has[t]])
         parts = [np.sum(rr[lo:hi] ** 2, axis=0) for lo, hi in zip(offsets_keep[:-1], offsets_keep[1:])]
         chi2_draws = sum(part / k_draws[t] for part, t in zip(parts, np.flatnonzero(has)))
@@ -263,43 +280,56 @@ def _exceeds(k_rep, nu_rep, k_loc, nu_loc):
 _NULL_DRAWS = 4000
 
 
-def estimated_noise(fit: Fit, seed: int, first_device: int = 0):
+def estimated_noise(fit: Fit, seed: int, first_device: int = 0, *, pool: bool = False):
     """Per device, the noise of each sweep estimated from `fit` (`noise_scales`): `(kappa (device, sweep),
     (noise_dof (device,), warnings per device, determined per device, null draws per device))`, the draws of the
     chi2 in units of the estimated noise under its null distribution (None where not tested; `null_p_values`
     reads the refit's chi2 against them), drawn per device with `seed` and its position in the lot
-    (`first_device` + its index: a chunk of a lot draws what the whole lot draws for the same devices)."""
+    (`first_device` + its index: a chunk of a lot draws what the whole lot draws for the same devices).
+
+    With `pool`, each sweep's noise is one for the lot where the devices' estimates agree (`_pooled`): each
+    device's estimate from ~20 degrees of freedom scatters +/-30 % in variance, and a device whose noise came
+    out low carries residuals that look like structure to every scan that reads them. A chunk of a lot then
+    pools over its own devices only."""
     data = fit.data
     sweeps = data.sweeps
     rows = sum(int(np.prod(data.blocks[s].inputs.shape[1:])) for s in sweeps)
     free = np.asarray(fit.free)
     dof = np.asarray(fit.dof)
     n = len(data.device_names())
-    kappa = np.ones((n, len(sweeps)))
-    noise_dof = np.full(n, np.inf)
-    notes, determined, draws = [], [], []
-    for d in range(n):
+    # Without output_sigma the first fit's sigmas are a scale (`first_fit_scale`): the noise is kappa times it.
+    base = np.array([[1.0 if data.weighted else float(np.max(np.where(np.asarray(data.blocks[s].mask[d]),
+                                                                       np.asarray(data.blocks[s].fit_sigmas()[d]),
+                                                                       0.0)))
+                      for s in sweeps] for d in range(n)])
+
+    def device(d, fixed=None):
         blocks = [(np.asarray(data.blocks[s].inputs[d]), np.asarray(data.blocks[s].mask[d]),
                    1.0 / np.asarray(data.blocks[s].fit_sigmas()[d]), data.kind(s).biased) for s in sweeps]
         res = np.asarray(fit.residual_vector[d])[:rows]
         jac = np.asarray(fit.jacobian[d])[:rows][:, free]
-        if not (np.all(np.isfinite(res)) and np.all(np.isfinite(jac))):
-            k, nu, methods, null = np.full(len(sweeps), np.nan), np.full(len(sweeps), np.nan), [""] * len(sweeps), None
-        else:
-            k, nu, methods, null = noise_scales(res, jac, blocks, draws=_NULL_DRAWS,
-                                                 rng=np.random.default_rng([seed, first_device + d]))
         points = np.array([int(np.sum(b[1])) for b in blocks], dtype=float)
+        if not (np.all(np.isfinite(res)) and np.all(np.isfinite(jac))):
+            return np.full(len(sweeps), np.nan), np.full(len(sweeps), np.nan), [""] * len(sweeps), None, points
+        out = noise_scales(res, jac, blocks, draws=_NULL_DRAWS if fixed is not None or not pool else 0,
+                           rng=np.random.default_rng([seed, first_device + d]), fixed=fixed)
+        return (*out, points)
+
+    per_device = [device(d) for d in range(n)]
+    if pool:
+        fixed = _pooled(np.array([r[0] for r in per_device]), np.array([r[1] for r in per_device]), base)
+        per_device = [device(d, fixed=tuple(f[d] for f in fixed)) for d in range(n)]
+    kappa = np.ones((n, len(sweeps)))
+    noise_dof = np.full(n, np.inf)
+    notes, determined, draws = [], [], []
+    unit = "x the given output_sigma" if data.weighted else "output units"
+    for d, (k, nu, methods, null, points) in enumerate(per_device):
         present = points > 0
         ok = present & np.isfinite(k) & (k > 0) & np.isfinite(nu)
         kappa[d] = np.where(ok, k, 1.0)
         noise_dof[d] = pooled_dof(np.where(ok, nu, 0.0)[present], points[present])
         draws.append(null[1] if null is not None and ok[present].all() and dof[d] > 0 else None)
-        unit = "x the given output_sigma" if data.weighted else "output units"
-        # Without output_sigma the first fit's sigmas are a scale (`first_fit_scale`): the noise is k times it.
-        base = [1.0 if data.weighted else float(np.max(np.where(np.asarray(data.blocks[s].mask[d]),
-                                                                 np.asarray(data.blocks[s].fit_sigmas()[d]), 0.0)))
-                for s in sweeps]
-        parts = [f"{s} {math.sqrt(k[i]) * base[i]:.3g} {unit} from {nu[i]:.3g} effective degrees of freedom "
+        parts = [f"{s} {math.sqrt(k[i]) * base[d, i]:.3g} {unit} from {nu[i]:.3g} effective degrees of freedom "
                  f"({methods[i]})" for i, s in enumerate(sweeps) if ok[i]]
         bad = [s for i, s in enumerate(sweeps) if present[i] and not ok[i]]
         text = []
@@ -314,6 +344,38 @@ def estimated_noise(fit: Fit, seed: int, first_device: int = 0):
         notes.append(tuple(text))
         determined.append(not bad)
     return kappa, (noise_dof, notes, determined, tuple(draws))
+
+
+# A sweep's noise estimates are pooled over the lot's devices unless Bartlett's test of their equality has p below
+# this: devices of one design on one bench share their noise, and a test at 1 % keeps a real difference apart.
+POOL_ALPHA = 0.01
+
+
+def _pooled(kappa, nu, base):
+    """For each sweep (columns of `kappa`, `nu` (device, sweep)), the lot's pooled estimate where the devices'
+    variances (kappa x `base`^2, in output units) pass Bartlett's test at `POOL_ALPHA`: per sweep `(kappa per
+    device (NaN: not pooled), the pooled degrees of freedom, how)`, a tuple over sweeps of those three arrays'
+    columns, as `noise_scales(fixed=...)` takes them per device."""
+    n, n_sweeps = kappa.shape
+    fixed_k, fixed_nu, how = np.full((n, n_sweeps), np.nan), np.full((n, n_sweeps), np.nan), np.full((n, n_sweeps), "",
+                                                                                                         dtype=object)
+    for s in range(n_sweeps):
+        ok = np.isfinite(kappa[:, s]) & (kappa[:, s] > 0) & np.isfinite(nu[:, s]) & (nu[:, s] > 0)
+        if ok.sum() < 2:
+            continue
+        v, f = kappa[ok, s] * base[ok, s] ** 2, nu[ok, s]
+        total = float(f.sum())
+        pooled = float(np.sum(f * v) / total)
+        k = int(ok.sum())
+        stat = (total * math.log(pooled) - float(np.sum(f * np.log(v)))) / (
+            1.0 + (float(np.sum(1.0 / f)) - 1.0 / total) / (3.0 * (k - 1)))
+        p = chi2_sf(stat, k - 1)
+        if p < POOL_ALPHA:
+            continue
+        fixed_k[ok, s] = pooled / base[ok, s] ** 2
+        fixed_nu[ok, s] = total
+        how[ok, s] = f"pooled over {k} devices, whose estimates agree (Bartlett p = {p:.2g})"
+    return fixed_k, fixed_nu, how
 
 
 def null_p_values(chi2, dof, noise_dof, draws) -> tuple[np.ndarray, float]:
