@@ -298,6 +298,41 @@ def test_a_misfit_that_differs_between_runs_does_not_become_noise():
     assert abs(np.mean(k_null) - 1.0) < 4 * np.std(k_null) / np.sqrt(1000)
 
 
+def test_the_lot_pools_a_sweeps_noise_where_its_devices_agree():
+    """Bartlett's test across devices: six estimates of one variance (21 degrees of freedom each) are pooled into
+    one with 126; one device at 5x the variance keeps the sweep per device (at 3x Bartlett's p is ~0.02: the
+    pooling keeps such a device in, with 21 degrees of freedom each). In 2000 draws of equal variances the
+    pooling is refused at about its 1 % level."""
+    from gyrojax._identify.noise import POOL_ALPHA, _pooled
+
+    rng = np.random.default_rng(3)
+    nu = np.full((6, 2), 21.0)
+    base = np.ones((6, 2))
+    kappa = np.column_stack([4.0 * rng.chisquare(21, 6) / 21, 4.0 * rng.chisquare(21, 6) / 21])
+    kappa[:, 1] = [20.0, 4.0, 4.0, 4.0, 4.0, 4.0]  # one device's noise 2.2x in sigma on the second sweep
+    k, dof, how = _pooled(kappa, nu, base)
+    np.testing.assert_allclose(k[:, 0], np.mean(kappa[:, 0]))
+    np.testing.assert_allclose(dof[:, 0], 126.0)
+    assert how[0, 0].startswith("pooled over 6 devices")
+    assert np.all(np.isnan(k[:, 1])) and how[0, 1] == ""
+    # a device in other units (its first-fit scale 10x) is compared in output units
+    scaled = kappa[:, :1].copy()
+    scaled[2] /= 100.0
+    base10 = np.ones((6, 1))
+    base10[2] = 10.0
+    k10, _, _ = _pooled(scaled, nu[:, :1], base10)
+    np.testing.assert_allclose(k10[2, 0] * 100.0, k[2, 0])
+    refused = [np.isnan(_pooled(4.0 * rng.chisquare(21, (6, 1)) / 21, nu[:, :1], base[:, :1])[0][0, 0])
+               for _ in range(2000)]
+    assert abs(np.mean(refused) - POOL_ALPHA) < 4 * np.sqrt(POOL_ALPHA * (1 - POOL_ALPHA) / 2000)
+
+
+def test_estimate_noise_is_checked():
+    with pytest.raises(ValueError, match="estimate_noise must be None, True, False or 'lot', got 'pooled'"):
+        gj.identify("paper-qmg", gj.Table({"device": ["a"], "run": [0], "sweep": ["rate_table"], "input": [1.0],
+                                           "output": [1.0]}), estimate_noise="pooled", progress=False)
+
+
 @pytest.fixture(scope="module")
 def unweighted(columns):
     def fit(source, output=None):
@@ -529,3 +564,20 @@ def test_the_diagnosis_shows_its_baseline_notes_about_the_data(columns):
     assert all(n["devices"] == ["paper-qmg-000"] for n in notes)
     assert not any(t.startswith("the model does not describe") for t in texts)
     assert "note (paper-qmg-000): the data give no temperature_c" in d.summary()
+
+
+@slow
+def test_identify_pools_the_noise_of_a_lot_when_asked():
+    table = gj.simulate_table(gj.paper_qmg(), devices=3, runs=2, sweeps=("rate_table",), seed=4, progress=False)
+    bare = gj.Table({k: table[k] for k in table.column_names if k != "output_sigma"}, source="3 devices")
+    own = gj.identify("paper-qmg", bare, progress=False)
+    lot = gj.identify("paper-qmg", bare, estimate_noise="lot", progress=False)
+    assert own.status == lot.status == ("ok",) * 3, (own.summary(), lot.summary())
+    assert all("pooled over 3 devices" in lot.warnings[d][0] for d in range(3))
+    np.testing.assert_allclose(np.asarray(lot.noise_dof), np.sum(np.asarray(own.noise_dof)), rtol=1e-6)
+    sigmas = [np.asarray(lot.data.blocks["rate_table"].sigmas)[d][np.asarray(lot.data.blocks["rate_table"].mask)[d]]
+              for d in range(3)]
+    np.testing.assert_allclose([s.max() for s in sigmas], sigmas[0].max(), rtol=1e-9)
+    true_sigma = float(np.median(np.asarray(table["output_sigma"])))
+    assert abs(sigmas[0].max() ** 2 / true_sigma**2 - 1) < 3 * np.sqrt(2 / float(lot.noise_dof[0]))
+    assert np.all(np.isfinite(np.asarray(lot.p_value)))
