@@ -146,7 +146,8 @@ def _synthetic_diagnosis(chi2, points, share, flagged=True, verdict="partly expl
     left = Discrepancy("offset_per_run", "run", "an offset that changes from run to run", (("dac", 1.0),), 40.0, 3,
                        share, 1e-9, True, 5.6e-6, 9.8e-6, "output unit", np.zeros(1))
     step = Step("dac_inl", 900.0, 0.0, 900.0, 4, 0.0, -850.0, 0.9, 2.0, (), (), None)
-    fit = SimpleNamespace(chi2_total=1e6, dof_total=2e5, chi2_red_total=5.0, residuals={})
+    fit = SimpleNamespace(chi2_total=1e6, dof_total=2e5, chi2_red_total=5.0, residuals={}, devices=("d",),
+                          warnings=((),))
     final = SimpleNamespace(chi2_total=chi2, dof_total=points)
     return Diagnosis(baseline=fit, final=final, fits=(fit, final), ranking=(), steps=(step,), ambiguous=(),
                      untestable=(), rejected=(), alpha=0.01, baseline_nonlinearity_ppm=1.0,
@@ -188,7 +189,7 @@ def test_diagnosis_without_a_rate_table_writes_null_nonlinearity_with_the_reason
 
     diag = _synthetic_diagnosis(42.4, 44, 0.0, flagged=False, verdict="explained")
     fit = SimpleNamespace(chi2_red_total=1.06, chi2_total=42.4, dof_total=40, residuals={"vcf_static": np.zeros(3)},
-                          scale_factor=np.array([np.nan, np.nan]))
+                          scale_factor=np.array([np.nan, np.nan]), devices=("d",), warnings=((),))
     comparison = SimpleNamespace(chi2=42.4, points=44, p_value=0.54, fails=False, flagged=(), to_json=lambda: {})
     diag = type(diag)(**{**diag.__dict__, "baseline": fit, "final": fit, "fits": (fit,), "steps": (),
                          "baseline_nonlinearity_ppm": float("nan"), "comparisons": (comparison,)})

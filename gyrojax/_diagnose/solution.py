@@ -141,7 +141,7 @@ class Diagnosis(eqx.Module):
         a temperature not recorded, ...), each with the devices that carry it; not its rejection of the model,
         which the diagnosis is about."""
         notes = {}
-        for device, warnings in zip(self.baseline.data.device_names(), self.baseline.warnings):
+        for device, warnings in zip(self.baseline.devices, self.baseline.warnings):
             for w in warnings:
                 if not w.startswith(REJECTED_NOTE):
                     notes.setdefault(w, []).append(device)
@@ -341,6 +341,7 @@ def _notes_text(notes: dict[str, list[str]]) -> list[str]:
     for group in kinds.values():
         note, devices = group[0]
         more = sum(len(d) for _, d in group[1:])
-        tail = f" (and {more} more device(s) alike, each with its own values: baseline.notes in the JSON)" if more else ""
+        tail = (f" (and {more} more device(s) alike, each with its own values: baseline.notes in the JSON)"
+                if more else "")
         lines.append(f"  note ({', '.join(devices)}): {note}{tail}")
     return lines

@@ -175,7 +175,7 @@ def assemble_fit(problem_all: Problem, data: FitData, layout: Layout, free_index
                                  implausible, chi2, dof, chi2_red, p_value, reject_alpha,
                                  [names_dev[i] for i in cand] + list(names_lot), weak_part, f.size, threshold)
     for d in np.flatnonzero(rejected):
-        hint = temperature_hint(data, problem_all.model.device, int(d))
+        hint = temperature_hint(problem_all.model.device, data, int(d))
         if hint:
             warnings[d] = warnings[d] + (hint,)
     undetermined = np.array([s == "not determined" for s in status])

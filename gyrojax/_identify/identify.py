@@ -100,16 +100,12 @@ def identify(model: Model | Gyroscope | str, data: Table | FitData, *, spec: Fit
       device `"model rejected"` and scales its standard errors by sqrt(chi2_red) in `stderr_scaled`. Each
       device is tested at this level, so a lot of N devices with a right model has about N x reject_alpha
       rejected by chance.
-    - `estimate_noise`: estimate each sweep's noise per device from the residuals of a first fit, re-weight
-      and fit again (from differences between runs at repeated inputs, else of neighbouring inputs
-      within a run; unbiased for white noise; its chi2 null distribution drawn with `start.seed`). `None`
-      (default): when the data have no `output_sigma`. `False` takes the data's sigmas as the noise (unit
-      weights for a table without `output_sigma`, so the chi2 then tests nothing; e.g. for `fit.data` of an
-      earlier fit, whose sigmas were estimated already). `"lot"`: estimated as with `True`, then each sweep's
-      noise pooled over the lot's devices where their estimates agree (Bartlett's test at 1 %): devices of one
-      design on one bench share their noise, and one device's estimate from ~20 points scatters +/-30 % in
-      variance (`diagnose` estimates it so for data without `output_sigma`). A distributed lot's chunks pool
-      over their own devices, so per-device (`True`) is the default.
+    - `estimate_noise`: estimate each sweep's noise per device from a first fit's residuals (differences
+      between runs at repeated inputs, else of neighbouring inputs in a run; unbiased for white noise; its chi2
+      null drawn with `start.seed`), re-weight, fit again. `None` (default): when the data have no
+      `output_sigma`. `False` takes the data's sigmas as the noise (unit weights without `output_sigma`: the
+      chi2 then tests nothing; e.g. an earlier fit's `fit.data`, its sigmas estimated already). `"lot"`
+      (`diagnose`'s): each sweep's pooled over the devices where Bartlett's test at 1 % does not tell them apart.
     - `evaluate_only`: do not solve; return the `Fit` at the start (residuals, Jacobian, covariance there),
       e.g. to test a candidate effect at zero against an already fitted model.
     - `progress`: `True` (default) reports the fit's steps on standard error (what it fits, when it compiles,
@@ -123,8 +119,7 @@ def identify(model: Model | Gyroscope | str, data: Table | FitData, *, spec: Fit
     1e8 times the largest other output of its run, or outputs whose slope has the opposite sign of
     the model's (both named by device, run and input).
     """
-    model = as_model(model)
-    data = _as_fit_data(data)
+    model, data = as_model(model), _as_fit_data(data)
     spec = fit_spec(spec, "identify", free=free, shared=shared, hold=hold, priors=priors, tier=tier, solver=solver,
                     rtol=rtol, atol=atol, max_steps=max_steps, start=start, lot_solve=lot_solve, recovery=recovery,
                     identifiability_threshold=identifiability_threshold, reject_alpha=reject_alpha)

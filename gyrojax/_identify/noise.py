@@ -149,8 +149,9 @@ def noise_scales(residual, jac, blocks, *, draws=0, rng=None, fixed=None):
 
     With `draws` > 0, also the chi2 the data give in units of their estimated noise, sum_t |r_t|^2 / kappa_t,
     and `draws` samples of it under white noise of the estimated kappa (the same estimator applied to M e for
-    Gaussian e, with `rng`, the choice of contrasts made again in each draw): its null distribution. The chi2 and the noise estimate share the residuals, so
-    chi2 / dof is not F-distributed (on a 22-point rate table its 1 % point is 2.8, F's 4.9); the draws are.
+    Gaussian e, with `rng`, the choice of contrasts made again in each draw): its null distribution. The chi2
+    and the noise estimate share the residuals, so chi2 / dof is not F-distributed (on a 22-point rate table
+    its 1 % point is 2.8, F's 4.9); the draws are.
 
     `fixed`: `(kappa, nu, how)` per sweep, NaN where the sweep's own estimate stands: a noise estimated
     elsewhere (the lot's pooled one, `estimated_noise`), taken as it is, its estimate drawn in the null as a
@@ -161,61 +162,13 @@ def noise_scales(residual, jac, blocks, *, draws=0, rng=None, fixed=None):
     points), the effective degrees of freedom of each estimate (Satterthwaite: tr(S)^2 / tr(S^2) with S the
     covariance of the contrasts), how each was made, and `(chi2, chi2 draws)` or None."""
     offsets, idx, pos, resid_maker = _residual_maker(jac, blocks)
-    n = idx.size
-    r = np.asarray(residual, dtype=float)[idx]
-    sel = [pos[offsets[t]:offsets[t + 1]][pos[offsets[t]:offsets[t + 1]] >= 0] for t in range(len(blocks))]
-
-    def family(s, name):
-        """Sweep s's contrasts of one family, mapped onto the real points, times M: (C M, |C r|^2, |C|^2,
-        how they were made)."""
-        x, mask = np.asarray(blocks[s][0], dtype=float), np.asarray(blocks[s][1], dtype=bool)
-        rows, method = contrasts(x, mask, name)
-        c = np.zeros((rows.shape[0], n))
-        real = pos[offsets[s]:offsets[s + 1]] >= 0
-        c[:, sel[s]] = rows[:, real]
-        return c @ resid_maker, float(np.sum((c @ r) ** 2)), float(np.sum(c**2)), method
-
-    local = [family(s, "local") for s in range(len(blocks))]
-    repeats = [family(s, "repeats") for s in range(len(blocks))]
-    # where a sweep's runs repeat no input, both families are its local contrasts
-    two = np.array([rep[3] == _REPEATS for rep in repeats])
-    rows_of = {False: [_moment_row(rep, sel, t) for t, rep in enumerate(repeats)],
-               True: [_moment_row(loc, sel, t) for t, loc in enumerate(local)]}
-
-    def solve(use_local, q=None):
-        """kappa (and the moment system) with each sweep's local contrasts where `use_local`, else its
-        differences between runs; `q` (sweep, draws) in place of the data's."""
-        a = np.array([rows_of[bool(u)][t][0] for t, u in enumerate(use_local)])
-        has = np.array([rows_of[bool(u)][t][1] for t, u in enumerate(use_local)])
-        q = np.array([(local if u else repeats)[t][1] for t, u in enumerate(use_local)]) if q is None else q
-        return a, has, _solve_kappa(a, q, has)
-
-    def effective_dof(use_local, kappa, has):
-        weights = np.zeros(n)
-        for t, st in enumerate(sel):
-            weights[st] = kappa[t] if np.isfinite(kappa[t]) else 0.0
-        nu = np.full(len(blocks), np.nan)
-        for t, u in enumerate(use_local):
-            if has[t]:
-                cm = (local if u else repeats)[t][0]
-                cov = (cm * weights) @ cm.T
-                tr2 = float(np.sum(cov * cov))
-                nu[t] = float(np.trace(cov)) ** 2 / tr2 if tr2 > 0 else np.nan
-        return nu, weights
-
-    use_local = ~two
-    if two.any():
-        all_local = np.ones(len(blocks), bool)
-        k_rep, k_loc = solve(~two)[2], solve(all_local)[2]
-        nu_rep = effective_dof(~two, k_rep, solve(~two)[1])[0]
-        nu_loc = effective_dof(all_local, k_loc, solve(all_local)[1])[0]
-        switch = two & _exceeds(k_rep, nu_rep, k_loc, nu_loc)
-        use_local = ~two | switch
-    a, has, kappa = solve(use_local)
-    nu, weights = effective_dof(use_local, kappa, has)
-    methods = [local[t][3] if u else repeats[t][3] for t, u in enumerate(use_local)]
-    for t in np.flatnonzero(two & use_local):
-        methods[t] += (f": the {_REPEATS} estimate {k_rep[t] / k_loc[t]:.3g} times more (F-test p < "
+    fam = _Families(np.asarray(residual, dtype=float)[idx], resid_maker, blocks, offsets, pos)
+    use_local, test = fam.choice()
+    _, has, kappa = fam.solve(use_local)
+    nu, weights = fam.effective_dof(use_local, kappa, has)
+    methods = [fam.family(t, u)[3] for t, u in enumerate(use_local)]
+    for t in np.flatnonzero(fam.two & use_local):
+        methods[t] += (f": the {_REPEATS} estimate {test[0][t] / test[1][t]:.3g} times more (F-test p < "
                        f"{REPEATS_ALPHA:g}), a misfit that differs from run to run")
     given = np.zeros(len(blocks), bool)
     if fixed is not None:
@@ -223,33 +176,108 @@ def noise_scales(residual, jac, blocks, *, draws=0, rng=None, fixed=None):
         kappa = np.where(given, np.asarray(fixed[0], dtype=float), kappa)
         nu = np.where(given, np.asarray(fixed[1], dtype=float), nu)
         methods = [f"{m}; {fixed[2][t]}" if given[t] else m for t, m in enumerate(methods)]
-        for t, st in enumerate(sel):
-            weights[st] = kappa[t] if np.isfinite(kappa[t]) else 0.0
+        weights = fam.weights(kappa)
     null = None
     if draws and np.all(np.isfinite(kappa[has])) and np.all(kappa[has] > 0) and has.any():
-        keep = np.concatenate([sel[t] for t in range(len(blocks)) if has[t]])
-        chi2 = sum(float(np.sum(r[sel[t]] ** 2)) / kappa[t] for t in range(len(blocks)) if has[t])
-        rng_draw = rng or np.random.default_rng(0)
-        e = np.sqrt(weights)[:, None] * rng_draw.normal(size=(n, draws))
-        rr = resid_maker[keep] @ e
-        q_of = {u: np.stack([np.sum(((local if u else repeats)[t][0] @ e) ** 2, axis=0)
-                             for t in range(len(blocks))]) for u in (False, True)}
-        k_draws = solve(use_local, np.where(use_local[:, None], q_of[True], q_of[False]))[2]
-        if two.any():
-            # the choice between the two families is made again in each draw: the null holds the pre-test
-            kr = solve(~two, np.where(two[:, None], q_of[False], q_of[True]))[2]
-            kl = solve(all_local, q_of[True])[2]
-            chosen = ~two[:, None] | (two[:, None] & _exceeds(kr, nu_rep[:, None], kl, nu_loc[:, None]))
+        null = fam.null(kappa, nu, weights, has, use_local, test, given, draws, rng or np.random.default_rng(0))
+    return kappa, nu, methods, null
+
+
+class _Families:
+    """One device's contrasts of each sweep in both families (`contrasts`), over its real points, with the
+    residuals `r` and the residual maker M: the moment equations, their solution for a choice of family per
+    sweep, and the null draws."""
+
+    def __init__(self, r, resid_maker, blocks, offsets, pos):
+        self.r, self.resid_maker, self.n = r, resid_maker, r.size
+        self.sel = [pos[offsets[t]:offsets[t + 1]][pos[offsets[t]:offsets[t + 1]] >= 0] for t in range(len(blocks))]
+
+        def family(s, name):
+            # (C M, |C r|^2, |C|^2, how they were made) of sweep s's contrasts mapped onto the real points
+            x, mask = np.asarray(blocks[s][0], dtype=float), np.asarray(blocks[s][1], dtype=bool)
+            rows, method = contrasts(x, mask, name)
+            c = np.zeros((rows.shape[0], self.n))
+            c[:, self.sel[s]] = rows[:, pos[offsets[s]:offsets[s + 1]] >= 0]
+            return c @ resid_maker, float(np.sum((c @ r) ** 2)), float(np.sum(c**2)), method
+
+        self.local = [family(s, "local") for s in range(len(blocks))]
+        self.repeats = [family(s, "repeats") for s in range(len(blocks))]
+        # where a sweep's runs repeat no input, both families are its local contrasts
+        self.two = np.array([rep[3] == _REPEATS for rep in self.repeats])
+        self.rows = {u: [_moment_row(f, self.sel, t) for t, f in enumerate(self.local if u else self.repeats)]
+                     for u in (False, True)}
+
+    def family(self, t, use_local):
+        return (self.local if use_local else self.repeats)[t]
+
+    def solve(self, use_local, q=None):
+        """(a, has, kappa) with each sweep's local contrasts where `use_local`, else its differences between
+        runs; `q` (sweep, draws) in place of the data's."""
+        a = np.array([self.rows[bool(u)][t][0] for t, u in enumerate(use_local)])
+        has = np.array([self.rows[bool(u)][t][1] for t, u in enumerate(use_local)])
+        q = np.array([self.family(t, u)[1] for t, u in enumerate(use_local)]) if q is None else q
+        return a, has, _solve_kappa(a, q, has)
+
+    def weights(self, kappa):
+        """kappa on each real point (0 where not finite)."""
+        w = np.zeros(self.n)
+        for t, st in enumerate(self.sel):
+            w[st] = kappa[t] if np.isfinite(kappa[t]) else 0.0
+        return w
+
+    def effective_dof(self, use_local, kappa, has):
+        """Satterthwaite's degrees of freedom of each sweep's estimate, and the weights they assume."""
+        weights = self.weights(kappa)
+        nu = np.full(len(self.sel), np.nan)
+        for t, u in enumerate(use_local):
+            if has[t]:
+                cm = self.family(t, u)[0]
+                cov = (cm * weights) @ cm.T
+                tr2 = float(np.sum(cov * cov))
+                nu[t] = float(np.trace(cov)) ** 2 / tr2 if tr2 > 0 else np.nan
+        return nu, weights
+
+    def choice(self):
+        """Which family each sweep takes (True: local), and `(kappa, nu)` of both for the test, or None."""
+        if not self.two.any():
+            return ~self.two, None
+        both = []
+        for use_local in (~self.two, np.ones(len(self.sel), bool)):
+            _, has, k = self.solve(use_local)
+            both += [k, self.effective_dof(use_local, k, has)[0]]
+        k_rep, nu_rep, k_loc, nu_loc = both
+        return ~self.two | (self.two & _exceeds(k_rep, nu_rep, k_loc, nu_loc)), (k_rep, k_loc, nu_rep, nu_loc)
+
+    def null(self, kappa, nu, weights, has, use_local, test, given, draws, rng):
+        """`(chi2, chi2 draws)`: the data's chi2 in units of kappa and its null distribution (see
+        `noise_scales`); the choice of family made again in each draw, the `given` sweeps' kappa drawn as a
+        scaled chi2 of `nu`."""
+        sel, n_sweeps = self.sel, len(self.sel)
+        chi2 = sum(float(np.sum(self.r[sel[t]] ** 2)) / kappa[t] for t in range(n_sweeps) if has[t])
+        e = np.sqrt(weights)[:, None] * rng.normal(size=(self.n, draws))
+        q_of = {u: np.stack([np.sum((self.family(t, u)[0] @ e) ** 2, axis=0) for t in range(n_sweeps)])
+                for u in (False, True)}
+
+        def pick(pattern):
+            return np.where(np.asarray(pattern)[:, None], q_of[True], q_of[False])
+
+        k_draws = self.solve(use_local, pick(use_local))[2]
+        if test is not None:
+            _, _, nu_rep, nu_loc = test
+            kr = self.solve(~self.two, pick(~self.two))[2]
+            kl = self.solve(np.ones(n_sweeps, bool), q_of[True])[2]
+            chosen = ~self.two[:, None] | (self.two[:, None] & _exceeds(kr, nu_rep[:, None], kl, nu_loc[:, None]))
             for pattern in np.unique(chosen.T, axis=0):
                 cols = np.all(chosen.T == pattern, axis=1)
-                k_draws[:, cols] = solve(pattern, np.where(pattern[:, None], q_of[True], q_of[False])[:, cols])[2]
+                k_draws[:, cols] = self.solve(pattern, pick(pattern)[:, cols])[2]
         for t in np.flatnonzero(given):
-            k_draws[t] = kappa[t] * rng_draw.chisquare(nu[t], size=draws) / nu[t]
-        offsets_keep = np.cumsum([0] + [sel[t].size for t in range(len(blocks)) if has[t]])
-        parts = [np.sum(rr[lo:hi] ** 2, axis=0) for lo, hi in zip(offsets_keep[:-1], offsets_keep[1:])]
-        chi2_draws = sum(part / k_draws[t] for part, t in zip(parts, np.flatnonzero(has)))
-        null = (chi2, chi2_draws)
-    return kappa, nu, methods, null
+            k_draws[t] = kappa[t] * rng.chisquare(nu[t], size=draws) / nu[t]
+        keep = [t for t in range(n_sweeps) if has[t]]
+        rr = self.resid_maker[np.concatenate([sel[t] for t in keep])] @ e
+        bounds = np.cumsum([0] + [sel[t].size for t in keep])
+        chi2_draws = sum(np.sum(rr[lo:hi] ** 2, axis=0) / k_draws[t]
+                         for lo, hi, t in zip(bounds[:-1], bounds[1:], keep))
+        return chi2, chi2_draws
 
 
 def _moment_row(family, sel, s):

@@ -198,7 +198,7 @@ def scale_hint(data: FitData, predictions, d: int) -> str:
             + ": check the unit of output and output_sigma (or use a model of this device)")
 
 
-def temperature_hint(data: FitData, gyro, d: int) -> str:
+def temperature_hint(gyro, data: FitData, d: int) -> str:
     """For device `d` of a fit the data reject: the sweeps with no `temperature_c` on any of the device's
     points, whose points the model then holds at the device's power-on die temperature (`gyro`, the model's
     device, batched over the lot or not), or "" if every sweep records it."""
