@@ -167,9 +167,10 @@ def noise_scales(residual, jac, blocks, *, draws=0, rng=None, fixed=None):
     _, has, kappa = fam.solve(use_local)
     nu, weights = fam.effective_dof(use_local, kappa, has)
     methods = [fam.family(t, u)[3] for t, u in enumerate(use_local)]
-    for t in np.flatnonzero(fam.two & use_local):
-        methods[t] += (f": the {_REPEATS} estimate {test[0][t] / test[1][t]:.3g} times more (F-test p < "
-                       f"{REPEATS_ALPHA:g}), a misfit that differs from run to run")
+    if test is not None:
+        for t in np.flatnonzero(fam.two & use_local):
+            methods[t] += (f": the {_REPEATS} estimate {test[0][t] / test[1][t]:.3g} times more (F-test p < "
+                           f"{REPEATS_ALPHA:g}), a misfit that differs from run to run")
     given = np.zeros(len(blocks), bool)
     if fixed is not None:
         given = np.isfinite(np.asarray(fixed[0], dtype=float)) & has
