@@ -199,15 +199,16 @@ def scale_hint(data: FitData, predictions, d: int) -> str:
 
 
 def temperature_hint(gyro, data: FitData, d: int) -> str:
-    """For device `d` of a fit the data reject: the sweeps with no `temperature_c` on any of the device's
-    points, whose points the model then holds at the device's power-on die temperature (`gyro`, the model's
-    device, batched over the lot or not), or "" if every sweep records it."""
+    """For device `d` of a fit the data reject: the sweeps of the rate channel with no `temperature_c` on any of
+    the device's points, whose points the model then holds at the device's power-on die temperature (`gyro`, the
+    model's device, batched over the lot or not), or "" if every sweep records it."""
     def unrecorded(block):
         mask = np.asarray(block.mask[d])
         return mask.any() and (block.temperatures is None
                                or not np.isfinite(np.asarray(block.temperatures[d])[mask]).any())
 
-    missing = [s for s in data.sweeps if unrecorded(data.blocks[s])]
+    # the rate channel's sweeps: a bench reading of the DAC does not follow the die temperature
+    missing = [s for s in data.sweeps if data.kind(s).rate_output and unrecorded(data.blocks[s])]
     if not missing:
         return ""
     own = np.ravel(np.asarray(gyro.temperature(0.0), dtype=float))
