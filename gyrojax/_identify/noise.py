@@ -1,6 +1,7 @@
 """The noise of data without `output_sigma`: estimated per sweep and device from the residuals of a first fit
-(contrasts that cancel the model's misfit, solved by the method of moments), with the chi2's null distribution
-under that estimate; the data are then re-weighted by it and fitted again (`identify`)."""
+(contrasts that cancel the model's misfit, solved by the method of moments; optionally pooled over the lot's
+devices where they agree), with the chi2's null distribution under that estimate; the data are then re-weighted
+by it and fitted again (`identify`)."""
 
 import math
 
