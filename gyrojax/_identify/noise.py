@@ -263,12 +263,14 @@ class _Families:
         def pick(pattern):
             return np.where(np.asarray(pattern)[:, None], q_of[True], q_of[False])
 
-        k_draws = self.solve(use_local, pick(use_local))[2]
-        if test is not None:
+        if test is None:
+            k_draws = self.solve(use_local, pick(use_local))[2]
+        else:
             _, _, nu_rep, nu_loc = test
             kr = self.solve(~self.two, pick(~self.two))[2]
             kl = self.solve(np.ones(n_sweeps, bool), q_of[True])[2]
             chosen = ~self.two[:, None] | (self.two[:, None] & _exceeds(kr, nu_rep[:, None], kl, nu_loc[:, None]))
+            k_draws = np.full((n_sweeps, draws), np.nan)  # every draw's pattern below
             for pattern in np.unique(chosen.T, axis=0):
                 cols = np.all(chosen.T == pattern, axis=1)
                 k_draws[:, cols] = self.solve(pattern, pick(pattern)[:, cols])[2]
@@ -383,12 +385,12 @@ POOL_ALPHA = 0.01
 
 def _pooled(kappa, nu, base):
     """For each sweep (columns of `kappa`, `nu` (device, sweep)), the lot's pooled estimate where the devices'
-    variances (kappa x `base`^2, in output units) pass Bartlett's test at `POOL_ALPHA`: per sweep `(kappa per
-    device (NaN: not pooled), the pooled degrees of freedom, how)`, a tuple over sweeps of those three arrays'
-    columns, as `noise_scales(fixed=...)` takes them per device."""
-    n, n_sweeps = kappa.shape
-    fixed_k, fixed_nu, how = np.full((n, n_sweeps), np.nan), np.full((n, n_sweeps), np.nan), np.full((n, n_sweeps), "",
-                                                                                                         dtype=object)
+    variances (kappa x `base`^2, in output units) pass Bartlett's test at `POOL_ALPHA`: `(kappa, nu, how)`, each
+    (device, sweep), NaN (and "") where a sweep is not pooled; row d is what `noise_scales(fixed=...)` takes for
+    device d."""
+    fixed_k, fixed_nu = np.full(kappa.shape, np.nan), np.full(kappa.shape, np.nan)
+    how = np.full(kappa.shape, "", dtype=object)
+    n_sweeps = kappa.shape[1]
     for s in range(n_sweeps):
         ok = np.isfinite(kappa[:, s]) & (kappa[:, s] > 0) & np.isfinite(nu[:, s]) & (nu[:, s] > 0)
         if ok.sum() < 2:
