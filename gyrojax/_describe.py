@@ -195,7 +195,7 @@ def describe(model: Model | Gyroscope | str = "paper-qmg") -> tuple[LeafRecord, 
 def write_toml(model, path) -> None:
     """Write `model` (a preset name, a device file, or one `Gyroscope`) as a device file at `path`: every leaf with
     its unit, description and provenance (`describe`'s), and `free = true` on the parameters a fit frees by
-    default (`gyrojax.DEFAULT_FREE`, those the device has), or on a device file's own free ones."""
+    default (`gyrojax.identification.DEFAULT_FREE`, those the device has), or on a device file's own free ones."""
     records = describe(model)
     if isinstance(model, str) and is_device_file(model):
         device_file = read_device_file(model)

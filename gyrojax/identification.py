@@ -1,4 +1,5 @@
 """Identification: how a fit is made, beside `gyrojax.identify` itself. `FitSpec` (the whole specification), the
+baseline's free parameters (`DEFAULT_FREE`, and `default_free(data)` with those the data's sweeps read), the
 first solve (`MultiStart`), the recovery policies tried after it (`AbstractRecovery`, the built-in ones and their
 default tuple `RECOVERY`) with what a policy receives and returns (`Solving`, `Solution`, its `Evaluation`, the
 integer codes of `result_code`), the lot strategies (`AbstractLotSolve` and its kinds) and the population records
@@ -25,18 +26,20 @@ from ._identify.recovery import (
     Solving as Solving,
 )
 from ._identify.report import IdentifyReport as IdentifyReport
-from ._identify.spec import FitSpec as FitSpec
+from ._identify.spec import FitSpec as FitSpec, default_free as default_free
 from ._identify.strategies import (
     AbstractLotSolve as AbstractLotSolve,
     JointSolve as JointSolve,
     LoopSolve as LoopSolve,
     VmapSolve as VmapSolve,
 )
+from ._model.catalog import DEFAULT_FREE as DEFAULT_FREE
 from ._solution import result_code as result_code
 
 
 __all__ = [
     "AbstractLotSolve",
+    "DEFAULT_FREE",
     "AbstractRecovery",
     "DecrementCertificate",
     "Evaluation",
@@ -54,5 +57,6 @@ __all__ = [
     "Solution",
     "Solving",
     "VmapSolve",
+    "default_free",
     "result_code",
 ]

@@ -39,7 +39,7 @@ def test_registry_holds_the_data_formats_kinds_in_order():
     # each kind's random stream is its own number (the registry's positions when streams were positions, so
     # simulated tables did not change), not where it stands in a list
     assert [k.stream for k in kinds] == list(range(9))
-    assert [k.reads for k in kinds] == [()] * 6 + [("omega_x",)] + [()] * 2
+    assert [k.reads for k in kinds] == [(), (), ("angular_gain",)] + [()] * 3 + [("omega_x",)] + [()] * 2
     with pytest.raises(ValueError, match="unknown sweep 'rate-table' \\(did you mean 'rate_table'\\?\\)"):
         gj.sweeps.sweep_kind("rate-table")
 

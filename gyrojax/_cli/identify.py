@@ -32,7 +32,7 @@ def handle(args):
     from .._identify import PopulationFit, PopulationSolve, identify
     from .._identify.fitio import save_fit
     from .._identify.report import IdentifyReport
-    from .._model.parameters import DEFAULT_FREE, Model, zero_effect
+    from .._model.parameters import Model, zero_effect
 
     check_result_outputs(args, ("--save", args.save, False))
     load_effects(args)
@@ -45,7 +45,7 @@ def handle(args):
     model = Model(device, tuple(zero_effect(name) for name in args.effect))
     # --population: a population fit (random effects: the lot's mean and spread estimated with the devices).
     lot_solve = "vmap" if args.population is None else PopulationSolve(random=args.population or None)
-    result = identify(model, table, free=args.free or free or DEFAULT_FREE, lot_solve=lot_solve)
+    result = identify(model, table, free=args.free or free or None, lot_solve=lot_solve)
     population, fit = (result, result.fit) if isinstance(result, PopulationFit) else (None, result)
     report = IdentifyReport(fit=fit, population=population)
     print(safe_text(report.summary(), device_names(table)))
@@ -67,7 +67,7 @@ def _identify_distributed(args):
     """identify --workers/--scheduler: the lot in chunks of devices on Dask (gyrojax/_distributed), resumable
     from --json's results folder."""
     from .._distributed import DistributedSolve, identify_lot
-    from .._model.parameters import DEFAULT_FREE, Model, zero_effect
+    from .._model.parameters import Model, zero_effect
 
     option = "--workers" if args.workers is not None else "--scheduler"
     refused = [(args.workers is not None and args.scheduler is not None, "--scheduler (give one of the two)"),
@@ -86,7 +86,7 @@ def _identify_distributed(args):
     model = Model(device, tuple(zero_effect(name) for name in args.effect))
     try:
         strategy = DistributedSolve(workers=args.workers, scheduler=args.scheduler, chunk=args.chunk)
-        report = identify_lot(model, args.data, args.json, strategy, free=args.free or free or DEFAULT_FREE)
+        report = identify_lot(model, args.data, args.json, strategy, free=args.free or free or None)
     except ImportError as e:
         raise ValueError(str(e)) from None
     counts = {}

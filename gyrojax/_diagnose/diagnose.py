@@ -14,7 +14,7 @@ from .._identify import Fit, MultiStart, identify
 from .._identify.order import DEFAULT_MODEL, model_and_data
 from .._identify.spec import FitSpec, fit_spec
 from .._model.fitdata import FitData, fit_data
-from .._model.parameters import DEFAULT_FREE, Model, as_model
+from .._model.parameters import Model, as_model
 from .._numerics.stats import chi2_sf
 from .._runtime.progress import ProgressArg, as_progress
 from .candidates import baseline_fit, baseline_model, candidate_effects, first_device, is_lot
@@ -45,7 +45,7 @@ from .solution import Diagnosis, Step
 
 
 def diagnose(model: Model | Gyroscope | str = DEFAULT_MODEL, data: Table | FitData | None = None, *,
-             candidates: Sequence[str] | None = None, free: Sequence[str] = DEFAULT_FREE, alpha: float = 0.01,
+             candidates: Sequence[str] | None = None, free: Sequence[str] | None = None, alpha: float = 0.01,
              max_effects: int = 4, ambiguity: float = 0.95, min_typical_chi2: float = 1.0,
              max_typical_multiple: float = MAX_TYPICAL_MULTIPLE, probes: Sequence[AbstractProbe] = PROBES,
              start: MultiStart = MultiStart(), fit: Fit | None = None, spec: FitSpec | None = None,

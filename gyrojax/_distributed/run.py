@@ -15,7 +15,7 @@ from .._data.io import atomic_write_json
 from .._gyroscope import Gyroscope
 from .._identify.covariance import chi2_p_value
 from .._identify.fit import EXIT_CODES, EXIT_PRECEDENCE
-from .._model.parameters import DEFAULT_FREE, Model, as_model
+from .._model.parameters import Model, as_model
 from .._runtime.progress import ProgressArg, as_progress
 from .engine import DistributedSolve
 from .plan import Plan
@@ -27,7 +27,7 @@ _COUPLED = ("shared", "lot_solve")
 
 
 def identify_lot(model: Model | Gyroscope | str, data: str, out: str, strategy: DistributedSolve,
-                 *, free: Sequence[str] = DEFAULT_FREE, progress: ProgressArg = True, **options: Any) -> dict:
+                 *, free: Sequence[str] | None = None, progress: ProgressArg = True, **options: Any) -> dict:
     """Fit every device of the table file `data` (CSV or Parquet, read a chunk of devices at a time) with
     `identify`'s independent per-device fit, in chunks on the Dask cluster of `strategy`, and write the merged
     identify report (docs/cli.md's keys) to `out` (JSON).
@@ -62,7 +62,7 @@ def identify_lot(model: Model | Gyroscope | str, data: str, out: str, strategy: 
     strategy.require()  # before the file is planned and split
     model = as_model(model)
     say = as_progress(progress, "gyrojax identify")
-    options = {**options, "free": tuple(free)}
+    options = {**options, "free": None if free is None else tuple(free)}
     plan = Plan(data, out, strategy.chunk, {k: repr(v) for k, v in sorted(options.items())} | {"model": repr(model)})
     todo = [k for k in range(len(plan.groups)) if k not in set(plan.done())]
     n_done_before = sum(len(plan.groups[k]) for k in range(len(plan.groups)) if k not in todo)

@@ -32,7 +32,7 @@ import numpy as np
 from .._data.table import Table
 from .._gyroscope import Gyroscope
 from .._model.fitdata import FitData, fit_data
-from .._model.parameters import DEFAULT_FREE, Model, as_model
+from .._model.parameters import Model, as_model
 from .._runtime.progress import ProgressArg, as_progress
 from .._simulate.tiers import AbstractTier, Steady
 from .._solution import RESULTS, result_code
@@ -45,12 +45,12 @@ from .population import PopulationFit, PopulationSolve, population_fit
 from .problem import make_problem, with_free
 from .recovery import RECOVERY, AbstractRecovery, DecrementCertificate, MultiStart, RetryWithSolver, Solution, Solving
 from .shortcuts import lot_solve_from, solver_from
-from .spec import FitSpec, fit_spec
+from .spec import FitSpec, default_free, fit_spec
 from .strategies import AbstractLotSolve, Lot, Solver
 
 
 def identify(model: Model | Gyroscope | str, data: Table | FitData, *, spec: FitSpec | None = None,
-             free: Sequence[str] = DEFAULT_FREE, shared: Sequence[str] = (), hold: Sequence[str] = (),
+             free: Sequence[str] | None = None, shared: Sequence[str] = (), hold: Sequence[str] = (),
              priors: dict | None = None, tier: AbstractTier = Steady(), solver: str | Solver = "levenberg-marquardt",
              rtol: float = 1e-8, atol: float = 1e-8, max_steps: int = 200, start: MultiStart = MultiStart(),
              lot_solve: str | AbstractLotSolve = "vmap", recovery: tuple[AbstractRecovery, ...] = RECOVERY,
@@ -67,7 +67,8 @@ def identify(model: Model | Gyroscope | str, data: Table | FitData, *, spec: Fit
     - `spec`: a `gyrojax.FitSpec`: every argument below from `free` to `reject_alpha` at once (give those
       either there or as keywords, not both).
     - `free`: names of `gyrojax.PARAMETERS` to fit per device (those the device lacks are skipped). Every
-      parameter of every effect in the model is fitted too.
+      parameter of every effect in the model is fitted too. `None`: `gyrojax.identification.default_free(data)`,
+      the default ones and those the data's sweep kinds read (a dynamic VCF's angular gain).
     - `shared`: names (physical, or effect fields like `"dac_inl.coefficients"`) fitted as one value for the
       whole lot: the lot is then fitted jointly.
     - `hold`: names held at their start values regardless.
@@ -97,9 +98,8 @@ def identify(model: Model | Gyroscope | str, data: Table | FitData, *, spec: Fit
     - `identifiability_threshold`: directions with a singular value of the weighted Jacobian below this (in
       internal units: relative change for positive parameters, typical size for effects) are held.
     - `reject_alpha`: significance level of each device's chi2 test (and the lot's): p below it marks the
-      device `"model rejected"` and scales its standard errors by sqrt(chi2_red) in `stderr_scaled`. Each
-      device is tested at this level, so a lot of N devices with a right model has about N x reject_alpha
-      rejected by chance.
+      device `"model rejected"` and scales its standard errors by sqrt(chi2_red) in `stderr_scaled` (a lot of
+      N devices with a right model has about N x reject_alpha rejected by chance).
     - `estimate_noise`: estimate each sweep's noise per device from a first fit's residuals (differences
       between runs at repeated inputs, else of neighbouring inputs in a run; unbiased for white noise; its chi2
       null drawn with `start.seed`), re-weight, fit again. `None` (default): when the data have no
@@ -157,14 +157,15 @@ def _identify(model, data, spec: FitSpec, estimate_noise, evaluate_only, progres
     recoveries = tuple(_with_tolerances(r, spec.rtol, spec.atol) for r in spec.recovery
                        if not (isinstance(r, RetryWithSolver) and not (isinstance(solver, str) and solver != r.solver))
                        and not (evaluate_only and not isinstance(r, DecrementCertificate)))
-    options = dict(free=spec.free, shared=spec.shared, priors=spec.priors, hold=spec.hold, tier=spec.tier,
+    free = default_free(data) if spec.free is None else tuple(spec.free)
+    options = dict(free=free, shared=spec.shared, priors=spec.priors, hold=spec.hold, tier=spec.tier,
                    solver=solver_from(solver, spec.rtol, spec.atol), solver_name=solver, lot_solve=spec.lot_solve,
                    first=None if evaluate_only else start, recoveries=recoveries, max_steps=spec.max_steps,
                    threshold=spec.identifiability_threshold, reject_alpha=spec.reject_alpha)
     say = as_progress(progress, "gyrojax.identify")
     say(f"{'evaluating' if evaluate_only else 'fitting'} {len(data.devices)} device(s), {data.num_points()} points "
         f"({', '.join(data.sweeps)})")
-    say.compiling(("identify", jax.tree.structure(eqx.filter(model, eqx.is_array)), tuple(spec.free),
+    say.compiling(("identify", jax.tree.structure(eqx.filter(model, eqx.is_array)), free,
                    tuple(spec.shared),
                    tuple((s, tuple(np.shape(data.blocks[s].inputs))) for s in data.sweeps)), "the fit")
     if not (not data.weighted if estimate_noise is None else estimate_noise):

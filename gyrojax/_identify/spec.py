@@ -8,6 +8,7 @@ from collections.abc import Iterable
 import equinox as eqx
 import numpy as np
 
+from .._model.fitdata import FitData
 from .._model.parameters import DEFAULT_FREE
 from .._simulate.tiers import Steady
 from .recovery import RECOVERY, AbstractRecovery, MultiStart
@@ -17,7 +18,8 @@ class FitSpec(eqx.Module):
     """How a fit is made; each field as the `identify` keyword of the same name (its default too).
 
     - `free`, `shared`, `hold`, `priors`: what is fitted per device, fitted once for the lot, held at its
-      start, and the Gaussian priors.
+      start, and the Gaussian priors. `free=None`: `gyrojax.identification.default_free(data)`, the default
+      free parameters and those the data's sweep kinds read.
     - `tier`: the settling tier of rate-table and static-VCF points.
     - `solver`, `rtol`, `atol`, `max_steps`: the solver (a name or an optimistix solver) and its stopping.
     - `start`: the first solve (`gyrojax.MultiStart`).
@@ -29,7 +31,7 @@ class FitSpec(eqx.Module):
     parameters its experiments read.
     """
 
-    free: tuple = DEFAULT_FREE
+    free: tuple | None = None
     shared: tuple = ()
     hold: tuple = ()
     priors: dict | None = None
@@ -63,6 +65,14 @@ class FitSpec(eqx.Module):
     def options(self) -> dict:
         """The fields as `identify` keywords."""
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+
+def default_free(data: FitData) -> tuple[str, ...]:
+    """The baseline's free parameters for `data`: `DEFAULT_FREE`, then each parameter a sweep kind of the data
+    reads (`AbstractSweep.reads`: the drive frequency's omega_x, the dynamic VCF's angular gain) that the
+    standard sweeps leave to the design. The identifiability check holds any the data still cannot fix."""
+    read = (p for s in data.sweeps for p in data.kind(s).reads)
+    return tuple(dict.fromkeys((*DEFAULT_FREE, *read)))
 
 
 _DEFAULTS = {f.name: f.default for f in dataclasses.fields(FitSpec)}

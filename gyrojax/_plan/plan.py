@@ -37,10 +37,10 @@ from .._identify import Fit
 from .._identify.fit import p_text
 from .._identify.order import DEFAULT_MODEL, model_and_data
 from .._identify.problem import sf_temperature
-from .._identify.spec import FitSpec, fit_spec
+from .._identify.spec import FitSpec, default_free, fit_spec
 from .._lots.noise import RateNoise
 from .._model.fitdata import FitData, fit_data
-from .._model.parameters import DEFAULT_FREE, Model, as_model
+from .._model.parameters import Model, as_model
 from .._runtime.progress import ProgressArg, as_progress
 from .._sweeps.protocol import Protocol
 from .._sweeps.rate_table import RateTable
@@ -94,7 +94,10 @@ def _baseline(data, model, fit, candidates, spec, reads, say):
         data = data if isinstance(data, FitData) else fit_data(data)
         base = as_model(model)
     candidates = candidate_effects(base, candidates, "plan")
-    free = spec.free if fit is None else tuple(e.label for e in fit.entries if e.effect_index is None)
+    if fit is None:
+        free = default_free(data) if spec.free is None else spec.free
+    else:
+        free = tuple(e.label for e in fit.entries if e.effect_index is None)
     added = tuple(p for p in reads if p not in free)
     if fit is not None:
         have = set(fit.names)
@@ -113,7 +116,7 @@ def plan(model: Model | Gyroscope | str = DEFAULT_MODEL, data: Table | FitData |
          fit: Fit | None = None, candidates: Sequence[str] | None = None,
          experiments: Sequence[CandidateExperiment] | None = None, budget_min: float | None = None,
          alpha: float = 0.01, target_power: float = 0.9, max_repeats: int = 3, protocol: Protocol = Protocol(),
-         free: Sequence[str] = DEFAULT_FREE, identifiability_threshold: float = 1.0, scale_factor: bool = True,
+         free: Sequence[str] | None = None, identifiability_threshold: float = 1.0, scale_factor: bool = True,
          spec: FitSpec | None = None, progress: ProgressArg = True) -> Plan:
     r"""Plan the measurements that make each candidate effect testable, and the scale factor's calibration.
 
@@ -136,7 +139,7 @@ def plan(model: Model | Gyroscope | str = DEFAULT_MODEL, data: Table | FitData |
     - `max_repeats`: the search tries 0 to `max_repeats` runs of each experiment.
     - `protocol`: timing of the default experiments and of seed 000's reference (its rate table: the
       `experiments`' own `rate_table`, else seed 000's 22 rates).
-    - `free`: the baseline's free parameters when it is fitted here.
+    - `free`: the baseline's free parameters when it is fitted here (`None`: as `gyrojax.identify`'s).
     - `identifiability_threshold`: identification's threshold (what a joint fit would hold).
     - `scale_factor`: False to plan the effects only (`Plan.scale_factor` is then None; the design's greedy
       search is the slow part of a plan on a lot).
