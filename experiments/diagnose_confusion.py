@@ -40,7 +40,6 @@ Markdown), so a long run can be read while it goes on.
 """
 
 import argparse
-import inspect
 import os
 import sys
 import time
@@ -65,7 +64,7 @@ SWEEPS = {
 # sense motion its gains allow (19 nm at 200 deg/s), where comb_gap's typical size is a few ppm of odd cubic
 # (gyrojax/_effects/comb_gap.py; tests/test_effects.py uses the same device).
 LEAKY_LEAK = 1e4
-BASE_FREE = inspect.signature(gj.diagnose).parameters["free"].default  # the baseline's free parameters
+BASE_FREE = gj.identification.DEFAULT_FREE  # the baseline's free parameters on the standard sweeps
 PAIR = ("dac_inl", "vref_drift")  # issue 5: "two effects hidden at once"
 CHI2_BAND = (0.7, 1.4)  # issue 5's acceptance band for the final reduced chi2
 
