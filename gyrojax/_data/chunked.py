@@ -21,35 +21,41 @@ _FLUSH_ROWS = 200_000
 _FLUSH_CHARS = 64 * 2**20
 
 
-def _device_column(source: str, header: list[str]) -> int:
+def _column_index(source: str, header: list[str], column: str) -> int:
     names = [h.strip() for h in header]
-    if "device" not in names:
-        raise DataError(f"{source}: the header (line 1) has no 'device' column (columns: {', '.join(names)}).",
-                        source=source, column="device")
-    return names.index("device")
+    if column not in names:
+        raise DataError(f"{source}: the header (line 1) has no {column!r} column (columns: {', '.join(names)}).",
+                        source=source, column=column)
+    return names.index(column)
 
 
 def device_order(path: str | os.PathLike) -> list[str]:
     """The devices of a table file in order of first appearance, read in one streamed pass (CSV) or from the
     `device` column alone (Parquet): memory in the number of devices, not of rows."""
+    return column_values(path, "device")
+
+
+def column_values(path: str | os.PathLike, column: str) -> list[str]:
+    """The distinct values of one column of a table file (stripped text) in order of first appearance, read in
+    one streamed pass (CSV) or from that column alone (Parquet): memory in the number of values, not of rows."""
     source = os.fspath(path)
-    if table_format(source, "device_order") == ".parquet":
+    if table_format(source, "column_values") == ".parquet":
         import pyarrow.parquet as pq
 
         with open_regular(source, _EXPECTED) as f:
             pf = pq.ParquetFile(f)
-            if "device" not in pf.schema_arrow.names:
-                raise DataError(f"{source}: no 'device' column (columns: {', '.join(pf.schema_arrow.names)}).",
-                                source=source, column="device")
+            if column not in pf.schema_arrow.names:
+                raise DataError(f"{source}: no {column!r} column (columns: {', '.join(pf.schema_arrow.names)}).",
+                                source=source, column=column)
             seen: dict[str, None] = {}
-            for batch in pf.iter_batches(columns=["device"]):
+            for batch in pf.iter_batches(columns=[column]):
                 seen.update(dict.fromkeys(str(d) for d in batch.column(0).to_pylist()))
             return list(seen)
     rows = csv_records(source)
     header = next((row for _, row in rows if any(c.strip() for c in row)), None)
     if header is None:
         raise DataError(f"{source}: empty file: no header line.", source=source)
-    k = _device_column(source, header)
+    k = _column_index(source, header, column)
     seen = {}
     for _, row in rows:
         if len(row) > k and row[k].strip():
@@ -83,7 +89,7 @@ def split_csv(path: str | os.PathLike, groups: list[list[str]], targets: list[st
     header = next((row for _, row in rows if any(c.strip() for c in row)), None)
     if header is None:
         raise DataError(f"{source}: empty file: no header line.", source=source)
-    col = _device_column(source, header)
+    col = _column_index(source, header, "device")
     for t in temps:
         with open(t, "w", newline="", encoding="utf-8") as f:
             csv.writer(f, lineterminator="\n").writerow(header)

@@ -11,6 +11,7 @@ import numpy as np
 from .._model.fitdata import FitData
 from .._model.parameters import DEFAULT_FREE
 from .._simulate.tiers import Steady
+from .._sweeps.base import AbstractSweep
 from .recovery import RECOVERY, AbstractRecovery, MultiStart
 
 
@@ -71,7 +72,12 @@ def default_free(data: FitData) -> tuple[str, ...]:
     """The baseline's free parameters for `data`: `DEFAULT_FREE`, then each parameter a sweep kind of the data
     reads (`AbstractSweep.reads`: the drive frequency's omega_x, the dynamic VCF's angular gain) that the
     standard sweeps leave to the design. The identifiability check holds any the data still cannot fix."""
-    read = (p for s in data.sweeps for p in data.kind(s).reads)
+    return free_reading(data.kind(s) for s in data.sweeps)
+
+
+def free_reading(kinds: Iterable[AbstractSweep]) -> tuple[str, ...]:
+    """`DEFAULT_FREE` and what the sweep kinds `kinds` read (`default_free` of data with those sweeps)."""
+    read = (p for kind in kinds for p in kind.reads)
     return tuple(dict.fromkeys((*DEFAULT_FREE, *read)))
 
 
