@@ -114,7 +114,8 @@ def add_parser(sub) -> None:
                           "the file's free = true parameters are freed unless --free is given)")
     idf.add_argument("--free", type=_name_list, default=None, metavar="LIST",
                      help="comma-separated names of gyrojax.PARAMETERS to fit per device (default: "
-                          "k_vf,sense_gain,vcf_gain,dac_gain_error,omega_y,q_y, those the device has)")
+                          "k_vf,sense_gain,vcf_gain,dac_gain_error,omega_y,q_y, those the device has, and what "
+                          "the data's sweeps read: omega_x with drive_frequency, angular_gain with vcf_dynamic)")
     idf.add_argument("--effect", action="append", default=[], metavar="NAME",
                      help="add an effect (from zero) and fit its parameters too (repeatable), e.g. dac_inl")
     idf.add_argument("--population", type=_name_list, nargs="?", const=(), default=None, metavar="LIST",
