@@ -163,11 +163,12 @@ class Plan(eqx.Module):
                 out[r.experiment.name] = (e, max(k, r.runs), who + (c.effect,))
         return out
 
-    def free(self, free: Sequence[str] = DEFAULT_FREE) -> tuple:
+    def free(self, free: Sequence[str] | None = DEFAULT_FREE) -> tuple:
         """The `free` argument of `gyrojax.diagnose` (or `identify`) for the data given plus `runs()`: `free`
-        and the parameters those runs read (`CandidateExperiment.reads`), as the plan's expected chi2 assumes."""
+        (None: `DEFAULT_FREE`, as `diagnose`'s default starts) and the parameters those runs read
+        (`CandidateExperiment.reads`), as the plan's expected chi2 assumes."""
         read = (p for e, _, _ in self.runs().values() for p in e.reads)
-        return tuple(dict.fromkeys(tuple(free) + tuple(read)))
+        return tuple(dict.fromkeys(tuple(DEFAULT_FREE if free is None else free) + tuple(read)))
 
     def simulate(self, gyro: Gyroscope, table: Table | None = None, *, devices: int = 1, runs: int = 1, seed: int = 0,
                  noise_seed: int = 1000) -> Table:
