@@ -9,6 +9,8 @@ import csv
 import os
 import re
 
+from .._sweeps.base import AbstractSweep
+from .._sweeps.registry import sweep_kind
 from .cells import DataError
 from .files import csv_records, read_parquet_devices, read_table, table_format
 from .reading import open_regular
@@ -33,6 +35,11 @@ def device_order(path: str | os.PathLike) -> list[str]:
     """The devices of a table file in order of first appearance, read in one streamed pass (CSV) or from the
     `device` column alone (Parquet): memory in the number of devices, not of rows."""
     return column_values(path, "device")
+
+
+def file_sweep_kinds(path: str | os.PathLike) -> list[AbstractSweep]:
+    """The sweep kinds a table file's rows name (`column_values` of `sweep`), in order of first appearance."""
+    return [sweep_kind(name) for name in column_values(path, "sweep")]
 
 
 def column_values(path: str | os.PathLike, column: str) -> list[str]:

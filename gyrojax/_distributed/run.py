@@ -11,7 +11,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from .._data.chunked import column_values
+from .._data.chunked import file_sweep_kinds
 from .._data.io import atomic_write_json
 from .._gyroscope import Gyroscope
 from .._identify.covariance import chi2_p_value
@@ -19,7 +19,6 @@ from .._identify.fit import EXIT_CODES, EXIT_PRECEDENCE
 from .._identify.spec import free_reading
 from .._model.parameters import Model, as_model
 from .._runtime.progress import ProgressArg, as_progress
-from .._sweeps.registry import sweep_kind
 from .engine import DistributedSolve
 from .plan import Plan
 from .task import fit_chunk
@@ -66,7 +65,7 @@ def identify_lot(model: Model | Gyroscope | str, data: str, out: str, strategy: 
     model = as_model(model)
     say = as_progress(progress, "gyrojax identify")
     # The file's sweep kinds, not each chunk's: a chunk without a kind's runs would free less than the others.
-    free = free_reading(sweep_kind(s) for s in column_values(data, "sweep")) if free is None else tuple(free)
+    free = free_reading(file_sweep_kinds(data)) if free is None else tuple(free)
     options = {**options, "free": free}
     plan = Plan(data, out, strategy.chunk, {k: repr(v) for k, v in sorted(options.items())} | {"model": repr(model)})
     todo = [k for k in range(len(plan.groups)) if k not in set(plan.done())]
