@@ -1,6 +1,7 @@
 """The measurement planner: its statistics against brute force and scipy, its arguments, and (slow) its
 scale-factor standard error against the fit's own covariance and the command's JSON."""
 
+import dataclasses
 import json
 
 import equinox as eqx
@@ -395,6 +396,16 @@ def test_the_plans_runs_are_the_union_and_free_what_they_read():
     assert p.free(("omega_x", "k_vf")) == ("omega_x", "k_vf")
     only_agc = _plan_of({"agc_finite_gain": ((by["drive_amplitude"], 1),)})
     assert only_agc.free(("k_vf",)) == ("k_vf",)
+    # free=None starts from the data's default: what the given sweeps read (a dynamic VCF's angular gain) too
+    from types import SimpleNamespace
+
+    from gyrojax._model.fitdata import fit_data
+
+    given = gj.Table.from_columns({"device": ["d0"] * 3, "run": [0] * 3, "sweep": ["rate_table", "vcf_dynamic",
+                                   "vcf_dynamic"], "input": [10.0, 10.0, 20.0], "output": [1e3, 3e4, 3.1e4],
+                                   "output_sigma": [1.0] * 3, "temperature_c": [25.0] * 3})
+    with_data = dataclasses.replace(p, baseline=SimpleNamespace(data=fit_data(given)))
+    assert with_data.free() == gj.identification.DEFAULT_FREE + ("angular_gain", "omega_x")
 
 
 def test_a_reading_experiment_adds_its_columns_to_the_joint_fit_only_with_its_runs():

@@ -11,7 +11,7 @@ import numpy as np
 from .._data.table import Table
 from .._gyroscope import Gyroscope
 from .._identify import Fit
-from .._model.parameters import DEFAULT_FREE
+from .._identify.spec import default_free
 from .._numerics.testability import MIN_TYPICAL_CHI2
 from .._sweeps.rate_table import RateTable
 from .experiment import (
@@ -163,12 +163,13 @@ class Plan(eqx.Module):
                 out[r.experiment.name] = (e, max(k, r.runs), who + (c.effect,))
         return out
 
-    def free(self, free: Sequence[str] | None = DEFAULT_FREE) -> tuple:
+    def free(self, free: Sequence[str] | None = None) -> tuple:
         """The `free` argument of `gyrojax.diagnose` (or `identify`) for the data given plus `runs()`: `free`
-        (None: `DEFAULT_FREE`, as `diagnose`'s default starts) and the parameters those runs read
-        (`CandidateExperiment.reads`), as the plan's expected chi2 assumes."""
+        (None: `gyrojax.identification.default_free` of the data given, as `diagnose`'s default) and the
+        parameters those runs read (`CandidateExperiment.reads`), as the plan's expected chi2 assumes."""
         read = (p for e, _, _ in self.runs().values() for p in e.reads)
-        return tuple(dict.fromkeys(tuple(DEFAULT_FREE if free is None else free) + tuple(read)))
+        given = default_free(self.baseline.data) if free is None else tuple(free)
+        return tuple(dict.fromkeys(given + tuple(read)))
 
     def simulate(self, gyro: Gyroscope, table: Table | None = None, *, devices: int = 1, runs: int = 1, seed: int = 0,
                  noise_seed: int = 1000) -> Table:
