@@ -40,7 +40,8 @@ def identify_lot(model: Model | Gyroscope | str, data: str, out: str, strategy: 
     (`failed` in the report, with the error) and run again by the next restart. The report lists every device
     of the input exactly once: in `devices`, or in `failed`.
 
-    **Arguments:** `model` as for `identify` (one device: the start of every device); `free` and `options`
+    **Arguments:** `model` as for `identify` (one device: the start of every device); `free` (None: the
+    default free parameters and what the sweep kinds of the whole file read, the same for every chunk) and `options`
     (`hold`, `priors`, `tier`, `solver`, `rtol`, `atol`, `max_steps`, `start`, `recovery`,
     `identifiability_threshold`, `reject_alpha`, `estimate_noise`) as for `identify`. `shared` parameters,
     `lot_solve` and `start` with more than one start are refused: they couple the devices of a lot, which chunks
