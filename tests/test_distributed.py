@@ -52,7 +52,7 @@ def test_device_order_and_csv_split_by_device(tmp_path):
 def test_the_sweeps_of_a_file_set_every_chunk_s_free_parameters(tmp_path):
     """`identify_lot` frees what the whole file's sweep kinds read (a chunk without the dynamic VCF frees it too):
     the distinct values of a column, in order, from CSV and Parquet alike; a missing column is named."""
-    from gyrojax._data.chunked import column_values
+    from gyrojax._data.chunked import column_values, file_sweep_kinds
     from gyrojax._identify.spec import free_reading
 
     rows = ["a,0,rate_table,1.0,101,0.1", "b,0,rate_table,1.0,102,0.1", "b,0,vcf_dynamic,10.0,3e4,5",
@@ -62,8 +62,9 @@ def test_the_sweeps_of_a_file_set_every_chunk_s_free_parameters(tmp_path):
     pq = str(tmp_path / "mixed.parquet")
     gj.write_table(gj.read_table(path), pq)
     assert column_values(pq, "sweep") == ["rate_table", "vcf_dynamic"]
-    kinds = [gj.sweeps.sweep_kind(s) for s in column_values(pq, "sweep")]
-    assert free_reading(kinds) == gj.identification.DEFAULT_FREE + ("angular_gain",)
+    kinds = file_sweep_kinds(pq)
+    assert free_reading(kinds, gj.paper_qmg()) == gj.identification.DEFAULT_FREE + ("angular_gain",)
+    assert free_reading(kinds, gj.vcf_2018()) == gj.identification.DEFAULT_FREE  # open loop: no rebalance loop
     with pytest.raises(DataError, match=r"mixed\.csv: the header \(line 1\) has no 'temperature_c' column"):
         column_values(path, "temperature_c")
 

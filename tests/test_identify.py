@@ -579,7 +579,8 @@ def test_a_recovery_policy_is_a_small_object_on_the_solution_so_far():
 
 def test_the_default_free_parameters_add_what_the_data_sweeps_read():
     """`free=None` frees `DEFAULT_FREE` and each parameter a sweep kind of the data reads beyond it: the dynamic
-    VCF's angular gain, the drive frequency's omega_x; a rate table alone reads nothing more."""
+    VCF's angular gain on a closed-loop device (not on an open-loop one: no rebalance loop), the drive frequency's
+    omega_x; a rate table alone reads nothing more."""
     from gyrojax._model.fitdata import fit_data
 
     def table(sweeps):
@@ -590,10 +591,12 @@ def test_the_default_free_parameters_add_what_the_data_sweeps_read():
             "temperature_c": [25.0] * n})
 
     base = gj.identification.DEFAULT_FREE
+    qmg, open_loop = gj.paper_qmg(), gj.vcf_2018()
     default_free = gj.identification.default_free
-    assert default_free(fit_data(table(["rate_table"] * 3))) == base
-    assert default_free(fit_data(table(["rate_table"] * 2 + ["vcf_dynamic"] * 2))) == base + ("angular_gain",)
-    assert "omega_x" in default_free(fit_data(table(["rate_table", "drive_frequency", "drive_frequency"])))
+    assert default_free(fit_data(table(["rate_table"] * 3)), qmg) == base
+    dynamic = fit_data(table(["rate_table"] * 2 + ["vcf_dynamic"] * 2))
+    assert default_free(dynamic, qmg) == base + ("angular_gain",) and default_free(dynamic, open_loop) == base
+    assert "omega_x" in default_free(fit_data(table(["rate_table", "drive_frequency", "drive_frequency"])), qmg)
     assert gj.FitSpec().free is None
 
 

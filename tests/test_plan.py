@@ -404,7 +404,8 @@ def test_the_plans_runs_are_the_union_and_free_what_they_read():
     given = gj.Table.from_columns({"device": ["d0"] * 3, "run": [0] * 3, "sweep": ["rate_table", "vcf_dynamic",
                                    "vcf_dynamic"], "input": [10.0, 10.0, 20.0], "output": [1e3, 3e4, 3.1e4],
                                    "output_sigma": [1.0] * 3, "temperature_c": [25.0] * 3})
-    with_data = dataclasses.replace(p, baseline=SimpleNamespace(data=fit_data(given)))
+    fitted = SimpleNamespace(data=fit_data(given), model=gj.Model(g, ()))
+    with_data = dataclasses.replace(p, baseline=fitted)
     assert with_data.free() == gj.identification.DEFAULT_FREE + ("angular_gain", "omega_x")
 
 

@@ -66,7 +66,7 @@ def identify_lot(model: Model | Gyroscope | str, data: str, out: str, strategy: 
     model = as_model(model)
     say = as_progress(progress, "gyrojax identify")
     # The file's sweep kinds, not each chunk's: a chunk without a kind's runs would free less than the others.
-    free = free_reading(file_sweep_kinds(data)) if free is None else tuple(free)
+    free = free_reading(file_sweep_kinds(data), model.device) if free is None else tuple(free)
     options = {**options, "free": free}
     plan = Plan(data, out, strategy.chunk, {k: repr(v) for k, v in sorted(options.items())} | {"model": repr(model)})
     todo = [k for k in range(len(plan.groups)) if k not in set(plan.done())]

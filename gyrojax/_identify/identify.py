@@ -157,7 +157,7 @@ def _identify(model, data, spec: FitSpec, estimate_noise, evaluate_only, progres
     recoveries = tuple(_with_tolerances(r, spec.rtol, spec.atol) for r in spec.recovery
                        if not (isinstance(r, RetryWithSolver) and not (isinstance(solver, str) and solver != r.solver))
                        and not (evaluate_only and not isinstance(r, DecrementCertificate)))
-    free = default_free(data) if spec.free is None else tuple(spec.free)
+    free = default_free(data, model.device) if spec.free is None else tuple(spec.free)
     options = dict(free=free, shared=spec.shared, priors=spec.priors, hold=spec.hold, tier=spec.tier,
                    solver=solver_from(solver, spec.rtol, spec.atol), solver_name=solver, lot_solve=spec.lot_solve,
                    first=None if evaluate_only else start, recoveries=recoveries, max_steps=spec.max_steps,

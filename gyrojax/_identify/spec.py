@@ -8,6 +8,7 @@ from collections.abc import Iterable
 import equinox as eqx
 import numpy as np
 
+from .._gyroscope import Gyroscope
 from .._model.fitdata import FitData
 from .._model.parameters import DEFAULT_FREE
 from .._simulate.tiers import Steady
@@ -68,16 +69,17 @@ class FitSpec(eqx.Module):
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
 
-def default_free(data: FitData) -> tuple[str, ...]:
-    """The baseline's free parameters for `data`: `DEFAULT_FREE`, then each parameter a sweep kind of the data
-    reads (`AbstractSweep.reads`: the drive frequency's omega_x, the dynamic VCF's angular gain) that the
-    standard sweeps leave to the design. The identifiability check holds any the data still cannot fix."""
-    return free_reading(data.kind(s) for s in data.sweeps)
+def default_free(data: FitData, gyro: Gyroscope) -> tuple[str, ...]:
+    """The baseline's free parameters for `data` on the device `gyro`: `DEFAULT_FREE`, then each parameter a
+    sweep kind of the data reads there (`AbstractSweep.reads_on`: the drive frequency's omega_x, a closed-loop
+    dynamic VCF's angular gain) that the standard sweeps leave to the design. The identifiability check holds
+    any the data still cannot fix."""
+    return free_reading((data.kind(s) for s in data.sweeps), gyro)
 
 
-def free_reading(kinds: Iterable[AbstractSweep]) -> tuple[str, ...]:
-    """`DEFAULT_FREE` and what the sweep kinds `kinds` read (`default_free` of data with those sweeps)."""
-    read = (p for kind in kinds for p in kind.reads)
+def free_reading(kinds: Iterable[AbstractSweep], gyro: Gyroscope) -> tuple[str, ...]:
+    """`DEFAULT_FREE` and what the sweep kinds `kinds` read on `gyro` (`default_free` of data with them)."""
+    read = (p for kind in kinds for p in kind.reads_on(gyro))
     return tuple(dict.fromkeys((*DEFAULT_FREE, *read)))
 
 

@@ -95,7 +95,7 @@ def _baseline(data, model, fit, candidates, spec, reads, say):
         base = as_model(model)
     candidates = candidate_effects(base, candidates, "plan")
     if fit is None:
-        free = default_free(data) if spec.free is None else spec.free
+        free = default_free(data, base.device) if spec.free is None else spec.free
     else:
         free = tuple(e.label for e in fit.entries if e.effect_index is None)
     added = tuple(p for p in reads if p not in free)

@@ -168,7 +168,7 @@ class Plan(eqx.Module):
         (None: `gyrojax.identification.default_free` of the data given, as `diagnose`'s default) and the
         parameters those runs read (`CandidateExperiment.reads`), as the plan's expected chi2 assumes."""
         read = (p for e, _, _ in self.runs().values() for p in e.reads)
-        given = default_free(self.baseline.data) if free is None else tuple(free)
+        given = default_free(self.baseline.data, self.baseline.model.device) if free is None else tuple(free)
         return tuple(dict.fromkeys(given + tuple(read)))
 
     def simulate(self, gyro: Gyroscope, table: Table | None = None, *, devices: int = 1, runs: int = 1, seed: int = 0,

@@ -62,7 +62,8 @@ class AbstractSweep(eqx.Module):
       order), unique among the registered kinds: a kind's draws do not depend on which other kinds exist or
       are simulated with it.
     - `reads`: physical parameters (names of `gyrojax.PARAMETERS`) this kind determines that a baseline of the
-      standard sweeps holds; a fit of data with runs of the kind frees them (the planner's `Plan.free`).
+      standard sweeps holds; a fit of data with runs of the kind frees them (`reads_on(gyro)`: those it
+      determines on that device).
     - `title`: the kind in words, for messages ("rate-table").
     - `input_quantity`, `input_unit`: what the `input` column holds, e.g. "table rate", "deg/s" (plot labels
       and the scale factor's unit).
@@ -154,6 +155,10 @@ class AbstractSweep(eqx.Module):
             return f"a {self.name} sweep gives a straight-line fit, not a bandwidth"
         return (f"not a measurement on a {self.name} sweep: its output is not proportional to its input by design "
                 "(the slope is a small effect, not a gain), so figures relative to the slope are noise")
+
+    def reads_on(self, gyro: Gyroscope) -> tuple[str, ...]:
+        """What of `reads` this kind determines on `gyro` (all of it, unless the kind says otherwise)."""
+        return tuple(self.reads)
 
     # -- protocol ------------------------------------------------------------------------------------------------
 

@@ -99,6 +99,11 @@ class VcfDynamic(AbstractSweep):
     def sample_rate_hz(self, protocol: Protocol) -> float:
         return self.lockin_sample_rate_hz
 
+    def reads_on(self, gyro: Gyroscope) -> tuple[str, ...]:
+        # Open loop there is no rebalance loop: the response is the sense resonance's through sense_gain x K_svf,
+        # and Ag reaches it only at second order (freed, a vcf-2018 device's fit crawled to max_steps).
+        return tuple(self.reads) if gyro.closed_loop else ()
+
     def check_device(self, gyro: Gyroscope) -> None:
         if float(np.asarray(gyro.vcf_electrode.force_per_volt2)) == 0.0:
             raise ValueError(f"a vcf_dynamic sweep needs a virtual-Coriolis electrode; {gyro.name!r} has "
