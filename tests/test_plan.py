@@ -3,6 +3,7 @@ scale-factor standard error against the fit's own covariance and the command's J
 
 import dataclasses
 import json
+from types import SimpleNamespace
 
 import equinox as eqx
 import jax
@@ -375,12 +376,13 @@ def test_a_drive_frequency_run_frees_omega_x_and_leaves_duffing_its_shape():
     assert 1.0 < lam_freed < 0.5 * lam_held, (lam_freed, lam_held)
 
 
-def _plan_of(recommended):
+def _plan_of(recommended, device="paper-qmg"):
     """A Plan whose candidates ask for `recommended`: {effect: ((experiment, runs), ...)} (None: testable)."""
     cands = tuple(gj.CandidatePlan(effect, 1, 0.0, 0.0, recs is None, (), (),
                                    tuple(Recommendation(e, k, 50.0, 0.99) for e, k in (recs or ())), 0.0, 0.0, "")
                   for effect, recs in recommended.items())
-    return gj.Plan(cands, None, (), None, 0.01, 0.9, 3, ("d0",))
+    baseline = SimpleNamespace(model=gj.Model(gj.preset(device), ()))  # Plan.free reads its device
+    return gj.Plan(cands, None, (), baseline, 0.01, 0.9, 3, ("d0",))
 
 
 def test_the_plans_runs_are_the_union_and_free_what_they_read():
@@ -396,9 +398,11 @@ def test_the_plans_runs_are_the_union_and_free_what_they_read():
     assert p.free(("omega_x", "k_vf")) == ("omega_x", "k_vf")
     only_agc = _plan_of({"agc_finite_gain": ((by["drive_amplitude"], 1),)})
     assert only_agc.free(("k_vf",)) == ("k_vf",)
+    # a dynamic VCF run reads the angular gain through the rebalance loop: closed loop only
+    dynamic = {"vref_drift": ((by["vcf_dynamic"], 1),)}
+    assert _plan_of(dynamic).free(("k_vf",)) == ("k_vf", "angular_gain")
+    assert _plan_of(dynamic, "vcf-2018").free(("sense_gain",)) == ("sense_gain",)
     # free=None starts from the data's default: what the given sweeps read (a dynamic VCF's angular gain) too
-    from types import SimpleNamespace
-
     from gyrojax._model.fitdata import fit_data
 
     given = gj.Table.from_columns({"device": ["d0"] * 3, "run": [0] * 3, "sweep": ["rate_table", "vcf_dynamic",

@@ -157,8 +157,10 @@ def plan(model: Model | Gyroscope | str = DEFAULT_MODEL, data: Table | FitData |
     budget_min = _budget(experiments, protocol, budget_min)
     say = as_progress(progress, "gyrojax.plan")
     # what the experiments read beyond the baseline (default experiments: whatever a kind may read)
-    reads = tuple(dict.fromkeys(p for cls in SWEEP_KINDS.values() for p in cls.reads)) if experiments is None else \
-        tuple(dict.fromkeys(p for e in experiments if isinstance(e, CandidateExperiment) for p in e.reads))
+    device = as_model(model).device
+    kinds = [cls() for cls in SWEEP_KINDS.values()] if experiments is None else \
+        [e.sweep for e in experiments if isinstance(e, CandidateExperiment)]
+    reads = tuple(dict.fromkeys(p for kind in kinds for p in kind.reads_on(device)))
     fit, candidates, added = _baseline(data, model, fit, candidates, spec, reads, say)
     one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, fit.model.device)
     experiments = _experiments(experiments, one, protocol, fit, say)

@@ -166,8 +166,10 @@ class Plan(eqx.Module):
     def free(self, free: Sequence[str] | None = None) -> tuple:
         """The `free` argument of `gyrojax.diagnose` (or `identify`) for the data given plus `runs()`: `free`
         (None: `gyrojax.identification.default_free` of the data given, as `diagnose`'s default) and the
-        parameters those runs read (`CandidateExperiment.reads`), as the plan's expected chi2 assumes."""
-        read = (p for e, _, _ in self.runs().values() for p in e.reads)
+        parameters those runs read on the plan's device (`AbstractSweep.reads_on`), as the plan's expected chi2
+        assumes."""
+        device = self.baseline.model.device
+        read = (p for e, _, _ in self.runs().values() for p in e.sweep.reads_on(device))
         given = default_free(self.baseline.data, self.baseline.model.device) if free is None else tuple(free)
         return tuple(dict.fromkeys(given + tuple(read)))
 
