@@ -67,8 +67,8 @@ def identify(model: Model | Gyroscope | str, data: Table | FitData, *, spec: Fit
     - `spec`: a `gyrojax.FitSpec`: every argument below from `free` to `reject_alpha` at once (give those
       either there or as keywords, not both).
     - `free`: names of `gyrojax.PARAMETERS` to fit per device (those the device lacks are skipped). Every
-      parameter of every effect in the model is fitted too. `None`: `gyrojax.identification.default_free(data)`,
-      the default ones and those the data's sweep kinds read (a dynamic VCF's angular gain).
+      parameter of every effect in the model is fitted too. `None`: `identification.default_free(data, device)`,
+      the default ones and those the data's sweep kinds read (a closed-loop dynamic VCF's angular gain).
     - `shared`: names (physical, or effect fields like `"dac_inl.coefficients"`) fitted as one value for the
       whole lot: the lot is then fitted jointly.
     - `hold`: names held at their start values regardless.

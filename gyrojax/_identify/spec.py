@@ -20,8 +20,8 @@ class FitSpec(eqx.Module):
     """How a fit is made; each field as the `identify` keyword of the same name (its default too).
 
     - `free`, `shared`, `hold`, `priors`: what is fitted per device, fitted once for the lot, held at its
-      start, and the Gaussian priors. `free=None`: `gyrojax.identification.default_free(data)`, the default
-      free parameters and those the data's sweep kinds read.
+      start, and the Gaussian priors. `free=None`: `gyrojax.identification.default_free(data, device)`, the
+      default free parameters and those the data's sweep kinds read on the device.
     - `tier`: the settling tier of rate-table and static-VCF points.
     - `solver`, `rtol`, `atol`, `max_steps`: the solver (a name or an optimistix solver) and its stopping.
     - `start`: the first solve (`gyrojax.MultiStart`).
