@@ -1,5 +1,5 @@
 """Identification: how a fit is made, beside `gyrojax.identify` itself. `FitSpec` (the whole specification), the
-baseline's free parameters (`DEFAULT_FREE`, and `default_free(data, gyro)` with those the data's sweeps read), the
+baseline's free parameters (`DEFAULT_FREE`, and `default_free(gyro, data)` with those the data's sweeps read), the
 first solve (`MultiStart`), the recovery policies tried after it (`AbstractRecovery`, the built-in ones and their
 default tuple `RECOVERY`) with what a policy receives and returns (`Solving`, `Solution`, its `Evaluation`, the
 integer codes of `result_code`), the lot strategies (`AbstractLotSolve` and its kinds) and the population records

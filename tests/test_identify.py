@@ -593,10 +593,10 @@ def test_the_default_free_parameters_add_what_the_data_sweeps_read():
     base = gj.identification.DEFAULT_FREE
     qmg, open_loop = gj.paper_qmg(), gj.vcf_2018()
     default_free = gj.identification.default_free
-    assert default_free(fit_data(table(["rate_table"] * 3)), qmg) == base
+    assert default_free(qmg, fit_data(table(["rate_table"] * 3))) == base
     dynamic = fit_data(table(["rate_table"] * 2 + ["vcf_dynamic"] * 2))
-    assert default_free(dynamic, qmg) == base + ("angular_gain",) and default_free(dynamic, open_loop) == base
-    assert "omega_x" in default_free(fit_data(table(["rate_table", "drive_frequency", "drive_frequency"])), qmg)
+    assert default_free(qmg, dynamic) == base + ("angular_gain",) and default_free(open_loop, dynamic) == base
+    assert "omega_x" in default_free(qmg, fit_data(table(["rate_table", "drive_frequency", "drive_frequency"])))
     assert gj.FitSpec().free is None
 
 

@@ -67,7 +67,7 @@ def identify(model: Model | Gyroscope | str, data: Table | FitData, *, spec: Fit
     - `spec`: a `gyrojax.FitSpec`: every argument below from `free` to `reject_alpha` at once (give those
       either there or as keywords, not both).
     - `free`: names of `gyrojax.PARAMETERS` to fit per device (those the device lacks are skipped). Every
-      parameter of every effect in the model is fitted too. `None`: `identification.default_free(data, device)`,
+      parameter of every effect in the model is fitted too. `None`: `identification.default_free(device, data)`,
       the default ones and those the data's sweep kinds read (a closed-loop dynamic VCF's angular gain).
     - `shared`: names (physical, or effect fields like `"dac_inl.coefficients"`) fitted as one value for the
       whole lot: the lot is then fitted jointly.
@@ -157,7 +157,7 @@ def _identify(model, data, spec: FitSpec, estimate_noise, evaluate_only, progres
     recoveries = tuple(_with_tolerances(r, spec.rtol, spec.atol) for r in spec.recovery
                        if not (isinstance(r, RetryWithSolver) and not (isinstance(solver, str) and solver != r.solver))
                        and not (evaluate_only and not isinstance(r, DecrementCertificate)))
-    free = default_free(data, model.device) if spec.free is None else tuple(spec.free)
+    free = default_free(model.device, data) if spec.free is None else tuple(spec.free)
     options = dict(free=free, shared=spec.shared, priors=spec.priors, hold=spec.hold, tier=spec.tier,
                    solver=solver_from(solver, spec.rtol, spec.atol), solver_name=solver, lot_solve=spec.lot_solve,
                    first=None if evaluate_only else start, recoveries=recoveries, max_steps=spec.max_steps,

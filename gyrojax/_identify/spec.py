@@ -20,7 +20,7 @@ class FitSpec(eqx.Module):
     """How a fit is made; each field as the `identify` keyword of the same name (its default too).
 
     - `free`, `shared`, `hold`, `priors`: what is fitted per device, fitted once for the lot, held at its
-      start, and the Gaussian priors. `free=None`: `gyrojax.identification.default_free(data, device)`, the
+      start, and the Gaussian priors. `free=None`: `gyrojax.identification.default_free(device, data)`, the
       default free parameters and those the data's sweep kinds read on the device.
     - `tier`: the settling tier of rate-table and static-VCF points.
     - `solver`, `rtol`, `atol`, `max_steps`: the solver (a name or an optimistix solver) and its stopping.
@@ -69,7 +69,7 @@ class FitSpec(eqx.Module):
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
 
-def default_free(data: FitData, gyro: Gyroscope) -> tuple[str, ...]:
+def default_free(gyro: Gyroscope, data: FitData) -> tuple[str, ...]:
     """The baseline's free parameters for `data` on the device `gyro`: `DEFAULT_FREE`, then each parameter a
     sweep kind of the data reads there (`AbstractSweep.reads_on`: the drive frequency's omega_x, a closed-loop
     dynamic VCF's angular gain) that the standard sweeps leave to the design. The identifiability check holds

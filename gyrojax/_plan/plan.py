@@ -95,7 +95,7 @@ def _baseline(data, model, fit, candidates, spec, reads, say):
         base = as_model(model)
     candidates = candidate_effects(base, candidates, "plan")
     if fit is None:
-        free = default_free(data, base.device) if spec.free is None else spec.free
+        free = default_free(base.device, data) if spec.free is None else spec.free
     else:
         free = tuple(e.label for e in fit.entries if e.effect_index is None)
     added = tuple(p for p in reads if p not in free)
@@ -110,6 +110,15 @@ def _baseline(data, model, fit, candidates, spec, reads, say):
                           dataclasses.replace(spec, free=tuple(free) + added), also_held=added,
                           evaluate_only=fit is not None, estimate_noise=None if fit is None else False, say=say)
     return fit, candidates, added
+
+
+def _reads(experiments, model) -> tuple[str, ...]:
+    """What the experiments read beyond the baseline on the model's device (default experiments: whatever a
+    kind may read there)."""
+    kinds = [cls() for cls in SWEEP_KINDS.values()] if experiments is None else \
+        [e.sweep for e in experiments if isinstance(e, CandidateExperiment)]
+    device = as_model(model).device
+    return tuple(dict.fromkeys(p for kind in kinds for p in kind.reads_on(device)))
 
 
 def plan(model: Model | Gyroscope | str = DEFAULT_MODEL, data: Table | FitData | None = None, *,
@@ -156,12 +165,7 @@ def plan(model: Model | Gyroscope | str = DEFAULT_MODEL, data: Table | FitData |
     experiments = None if experiments is None else tuple(experiments)
     budget_min = _budget(experiments, protocol, budget_min)
     say = as_progress(progress, "gyrojax.plan")
-    # what the experiments read beyond the baseline (default experiments: whatever a kind may read)
-    device = as_model(model).device
-    kinds = [cls() for cls in SWEEP_KINDS.values()] if experiments is None else \
-        [e.sweep for e in experiments if isinstance(e, CandidateExperiment)]
-    reads = tuple(dict.fromkeys(p for kind in kinds for p in kind.reads_on(device)))
-    fit, candidates, added = _baseline(data, model, fit, candidates, spec, reads, say)
+    fit, candidates, added = _baseline(data, model, fit, candidates, spec, _reads(experiments, model), say)
     one = jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, fit.model.device)
     experiments = _experiments(experiments, one, protocol, fit, say)
     names = [e.name for e in experiments]
