@@ -170,7 +170,7 @@ class Plan(eqx.Module):
         assumes."""
         device = self.baseline.model.device
         read = (p for e, _, _ in self.runs().values() for p in e.sweep.reads_on(device))
-        given = default_free(self.baseline.model.device, self.baseline.data) if free is None else tuple(free)
+        given = default_free(device, self.baseline.data) if free is None else tuple(free)
         return tuple(dict.fromkeys(given + tuple(read)))
 
     def simulate(self, gyro: Gyroscope, table: Table | None = None, *, devices: int = 1, runs: int = 1, seed: int = 0,
